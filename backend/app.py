@@ -1,0 +1,30 @@
+"""The FastAPI application: routers, error rendering, static pages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
+
+from backend.accounts.router import router as auth_router
+from backend.captures.router import router as captures_router
+from backend.errors import install_error_handlers
+
+FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
+
+
+def create_app() -> FastAPI:
+    app = FastAPI(title="dexlabel", version="0.1.0",
+                  description="Crowd-labelled multi-view video to 3D hand and object poses.")
+    install_error_handlers(app)
+    app.include_router(auth_router)
+    app.include_router(captures_router)
+
+    @app.get("/healthz", tags=["ops"])
+    def healthz() -> dict[str, str]:
+        return {"status": "ok"}
+
+    if FRONTEND_DIR.is_dir():
+        app.mount("/", StaticFiles(directory=FRONTEND_DIR, html=True), name="frontend")
+    return app

@@ -1,0 +1,393 @@
+"""Reading a capture in the DexYCB raw layout into a validated plan, before anything is written.
+
+Layout (paths relative to the capture root)::
+
+    calibration/intrinsics/<serial>_<W>x<H>.yml     color: {fx, fy, ppx, ppy[, width, height, coeffs]}
+    calibration/extrinsics_<name>/extrinsics.yml    extrinsics: {<serial>: 12 floats}, master: <serial>
+    calibration/mano_<calib>/mano.yml               betas: 10 floats
+    models/<ycb name>/textured_simple.obj           (or any .obj / .ply in that folder)
+    <subject>/<sequence>/meta.yml                   serials, num_frames, ycb_ids, ycb_grasp_ind,
+                                                    mano_sides, mano_calib, extrinsics
+    <subject>/<sequence>/<serial>/color_%06d.jpg, aligned_depth_to_color_%06d.png (uint16 mm)
+    <subject>/<sequence>/<serial>.mp4|.avi|.mov|.mkv  (instead of the folder: colour only)
+    <subject>/<sequence>/pose.npz                   optional; pose_y[0] gives initial object poses
+
+Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres. Every problem raises
+InvalidCapture naming the file (relative to the root) and the field or frame at fault.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from backend.captures.imagefiles import check_jpeg, check_png16
+from backend.errors import InvalidCapture
+from worker.dataset import YCB_CLASSES
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv")
+MESH_SUFFIXES = (".obj", ".ply")
+
+
+@dataclass
+class FramePlan:
+    index: int
+    color_path: Path
+    depth_path: Path | None
+
+
+@dataclass
+class CameraPlan:
+    serial: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    ppx: float
+    ppy: float
+    distortion: list[float]
+    extrinsics: list[list[float]]
+    frames: list[FramePlan] = field(default_factory=list)
+    video_path: Path | None = None
+    video_frames: list[bytes] = field(default_factory=list)  # JPEG bytes, decoded from video_path
+
+
+@dataclass
+class ObjectPlan:
+    index: int
+    ycb_id: int
+    name: str
+    mesh_path: Path
+    model_files: list[Path]
+    num_vertices: int
+    num_faces: int
+    grasped: bool
+    initial_pose: list[list[float]] | None
+
+
+@dataclass
+class HandPlan:
+    index: int
+    side: str
+    calib_name: str | None
+    betas: list[float] | None
+
+
+@dataclass
+class SequencePlan:
+    root: Path
+    seq_dir: Path
+    subject: str
+    name: str
+    num_frames: int
+    master_serial: str | None
+    cameras: list[CameraPlan]
+    objects: list[ObjectPlan]
+    hands: list[HandPlan]
+    fingerprint: str
+
+    @property
+    def source_kind(self) -> str:
+        return "video" if any(c.video_path for c in self.cameras) else "images"
+
+
+class _Reader:
+    """Reads files under one root, naming them relative to it in every error."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.digest = hashlib.sha256()
+
+    def rel(self, path: Path) -> str:
+        try:
+            return path.relative_to(self.root).as_posix()
+        except ValueError:
+            return str(path)
+
+    def fail(self, path: Path, problem: str) -> InvalidCapture:
+        return InvalidCapture(self.rel(path), problem)
+
+    def yaml(self, path: Path) -> dict[str, Any]:
+        if not path.is_file():
+            raise self.fail(path, "file is missing")
+        data = path.read_bytes()
+        self.digest.update(self.rel(path).encode() + b"\0" + data)
+        try:
+            doc = yaml.safe_load(data)
+        except yaml.YAMLError as exc:
+            where = getattr(exc, "problem_mark", None)
+            line = f" at line {where.line + 1}" if where is not None else ""
+            raise self.fail(path, f"not valid YAML{line}: {getattr(exc, 'problem', exc)}") from None
+        if not isinstance(doc, dict):
+            raise self.fail(path, "expected a mapping at the top level")
+        return doc
+
+    def field(self, doc: dict[str, Any], path: Path, name: str, kind: type | tuple[type, ...]) -> Any:
+        if name not in doc:
+            raise self.fail(path, f"field '{name}' is missing")
+        value = doc[name]
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+            raise self.fail(path, f"field '{name}' must be {_kind_name(kind)}, got {value!r:.60}")
+        return value
+
+    def numbers(self, value: Any, path: Path, name: str, count: int) -> list[float]:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise self.fail(path, f"field '{name}' must be a list of {count} numbers") from None
+        if arr.size != count or arr.ndim > 2:
+            raise self.fail(
+                path, f"field '{name}' must hold {count} numbers, got shape {list(arr.shape)}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise self.fail(path, f"field '{name}' holds a non-finite number")
+        return [float(v) for v in arr.ravel()]
+
+
+def _kind_name(kind: type | tuple[type, ...]) -> str:
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    names = {list: "a list", dict: "a mapping", str: "a string", int: "an integer", float: "a number"}
+    return " or ".join(names.get(k, k.__name__) for k in kinds)
+
+
+def find_sequence_dirs(path: Path) -> list[Path]:
+    """The sequence folders (holding meta.yml) under ``path``, or ``path`` itself."""
+    path = path.resolve()
+    if not path.exists():
+        raise InvalidCapture(str(path), "path does not exist")
+    if (path / "meta.yml").is_file():
+        return [path]
+    found = sorted(p.parent for p in path.glob("*/*/meta.yml"))
+    if not found:
+        raise InvalidCapture(str(path), "no <subject>/<sequence>/meta.yml found under this folder")
+    return found
+
+
+def capture_root_of(seq_dir: Path) -> Path:
+    return seq_dir.parent.parent
+
+
+def read_sequence(seq_dir: Path) -> SequencePlan:
+    """Parse and check one sequence and everything it refers to; touches nothing."""
+    root = capture_root_of(seq_dir)
+    rd = _Reader(root)
+    meta_path = seq_dir / "meta.yml"
+    meta = rd.yaml(meta_path)
+    serials = [str(s) for s in rd.field(meta, meta_path, "serials", list)]
+    if not serials or len(set(serials)) != len(serials):
+        raise rd.fail(meta_path, "field 'serials' must list distinct camera serials")
+    num_frames = meta.get("num_frames")
+    if num_frames is not None and (not isinstance(num_frames, int) or num_frames <= 0):
+        raise rd.fail(meta_path, f"field 'num_frames' must be a positive integer, got {num_frames!r}")
+    extr_name = str(rd.field(meta, meta_path, "extrinsics", (str, int)))
+    extrinsics, master = _read_extrinsics(rd, root, extr_name, serials)
+    cameras = [_read_camera(rd, root, seq_dir, s, extrinsics[s]) for s in serials]
+    num_frames = _attach_frames(rd, seq_dir, cameras, num_frames)
+    objects = _read_objects(rd, root, seq_dir, meta, meta_path, num_frames)
+    hands = _read_hands(rd, root, meta, meta_path)
+    return SequencePlan(
+        root=root, seq_dir=seq_dir, subject=seq_dir.parent.name, name=seq_dir.name,
+        num_frames=num_frames, master_serial=master, cameras=cameras, objects=objects,
+        hands=hands, fingerprint=rd.digest.hexdigest(),
+    )
+
+
+def _read_extrinsics(
+    rd: _Reader, root: Path, name: str, serials: list[str]
+) -> tuple[dict[str, list[list[float]]], str | None]:
+    path = root / "calibration" / f"extrinsics_{name}" / "extrinsics.yml"
+    doc = rd.yaml(path)
+    table = rd.field(doc, path, "extrinsics", dict)
+    table = {str(k): v for k, v in table.items()}
+    out: dict[str, list[list[float]]] = {}
+    for serial in serials:
+        if serial not in table:
+            raise rd.fail(path, f"field 'extrinsics.{serial}' is missing")
+        flat = rd.numbers(table[serial], path, f"extrinsics.{serial}", 12)
+        mat = np.asarray(flat).reshape(3, 4)
+        if abs(np.linalg.det(mat[:, :3]) - 1.0) > 1e-3:
+            raise rd.fail(path, f"field 'extrinsics.{serial}' rotation part is not a rotation")
+        out[serial] = mat.tolist()
+    master = doc.get("master")
+    return out, None if master is None else str(master)
+
+
+def _read_camera(
+    rd: _Reader, root: Path, seq_dir: Path, serial: str, extrinsics: list[list[float]]
+) -> CameraPlan:
+    candidates = sorted((root / "calibration" / "intrinsics").glob(f"{serial}_*.yml"))
+    if not candidates:
+        raise rd.fail(root / "calibration" / "intrinsics" / f"{serial}_640x480.yml", "file is missing")
+    path = candidates[0]
+    doc = rd.yaml(path)
+    color = rd.field(doc, path, "color", dict)
+    vals = {k: rd.numbers([rd.field(color, path, k, (int, float))], path, f"color.{k}", 1)[0]
+            for k in ("fx", "fy", "ppx", "ppy")}
+    size = path.stem.rsplit("_", 1)[-1]
+    try:
+        size_w, size_h = (int(v) for v in size.split("x"))
+    except ValueError:
+        size_w, size_h = 640, 480
+    width = int(color.get("width", size_w))
+    height = int(color.get("height", size_h))
+    coeffs = color.get("coeffs", [0.0] * 5)
+    dist = rd.numbers(coeffs, path, "color.coeffs", len(coeffs) if isinstance(coeffs, list) else 5)
+    if len(dist) not in (4, 5, 8):
+        raise rd.fail(path, f"field 'color.coeffs' must hold 4, 5 or 8 numbers, got {len(dist)}")
+    if vals["fx"] <= 0 or vals["fy"] <= 0:
+        raise rd.fail(path, "fields 'color.fx' and 'color.fy' must be positive")
+    return CameraPlan(serial=serial, width=width, height=height, distortion=dist,
+                      extrinsics=extrinsics, **vals)
+
+
+def _attach_frames(
+    rd: _Reader, seq_dir: Path, cameras: list[CameraPlan], num_frames: int | None
+) -> int:
+    for cam in cameras:
+        folder = seq_dir / cam.serial
+        if folder.is_dir():
+            count = num_frames if num_frames is not None else len(list(folder.glob("color_*.jpg")))
+            cam.frames = [_check_frame(rd, folder, cam, i) for i in range(count)]
+        else:
+            videos = [seq_dir / f"{cam.serial}{s}" for s in VIDEO_SUFFIXES]
+            video = next((v for v in videos if v.is_file()), None)
+            if video is None:
+                raise rd.fail(folder, "camera folder (or <serial>.mp4 video) is missing")
+            cam.video_path = video
+            cam.video_frames = _decode_video(rd, cam)
+            rd.digest.update(f"{rd.rel(video)}:{video.stat().st_size}".encode())
+    counts = {len(c.frames) if c.video_path is None else len(c.video_frames) for c in cameras}
+    if len(counts) > 1 or (num_frames is not None and counts != {num_frames}):
+        raise rd.fail(seq_dir / "meta.yml",
+                      f"num_frames is {num_frames} but the views hold {sorted(counts)} frames")
+    num_frames = counts.pop()
+    if num_frames <= 0:
+        raise rd.fail(seq_dir / "meta.yml", "the views hold no frames")
+    return num_frames
+
+
+def _decode_video(rd: _Reader, cam: CameraPlan) -> list[bytes]:
+    """Every frame of a camera's video, re-encoded as JPEG (the stored frame format)."""
+    import cv2
+
+    assert cam.video_path is not None
+    cap = cv2.VideoCapture(str(cam.video_path))
+    if not cap.isOpened():
+        raise rd.fail(cam.video_path, "video cannot be opened by OpenCV")
+    frames = []
+    try:
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                break
+            if img.shape[1] != cam.width or img.shape[0] != cam.height:
+                raise rd.fail(cam.video_path, f"video is {img.shape[1]}x{img.shape[0]}, "
+                                              f"the intrinsics say {cam.width}x{cam.height}")
+            frames.append(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes())
+    finally:
+        cap.release()
+    if not frames:
+        raise rd.fail(cam.video_path, "video has no decodable frames")
+    return frames
+
+
+def _check_frame(rd: _Reader, folder: Path, cam: CameraPlan, index: int) -> FramePlan:
+    color = folder / f"color_{index:06d}.jpg"
+    depth = folder / f"aligned_depth_to_color_{index:06d}.png"
+    if not color.is_file():
+        raise rd.fail(color, f"frame {index} is missing")
+    problem = check_jpeg(color, cam.width, cam.height)
+    if problem:
+        raise rd.fail(color, problem)
+    rd.digest.update(f"{rd.rel(color)}:{color.stat().st_size}".encode())
+    if not depth.is_file():
+        raise rd.fail(depth, f"depth of frame {index} is missing")
+    problem = check_png16(depth, cam.width, cam.height)
+    if problem:
+        raise rd.fail(depth, problem)
+    rd.digest.update(f"{rd.rel(depth)}:{depth.stat().st_size}".encode())
+    return FramePlan(index=index, color_path=color, depth_path=depth)
+
+
+def _read_objects(
+    rd: _Reader, root: Path, seq_dir: Path, meta: dict[str, Any], meta_path: Path, num_frames: int
+) -> list[ObjectPlan]:
+    from worker.geometry.mesh_io import read_mesh
+
+    ycb_ids = rd.field(meta, meta_path, "ycb_ids", list)
+    grasp = meta.get("ycb_grasp_ind")
+    if grasp is not None and (not isinstance(grasp, int) or not 0 <= grasp < len(ycb_ids)):
+        raise rd.fail(meta_path, f"field 'ycb_grasp_ind' must index ycb_ids, got {grasp!r}")
+    poses = _initial_poses(rd, seq_dir / "pose.npz", len(ycb_ids), num_frames)
+    out = []
+    for i, ycb_id in enumerate(ycb_ids):
+        if not isinstance(ycb_id, int) or ycb_id not in YCB_CLASSES:
+            raise rd.fail(meta_path, f"field 'ycb_ids[{i}]' is not a known YCB id: {ycb_id!r}")
+        name = YCB_CLASSES[ycb_id]
+        folder = root / "models" / name
+        meshes = sorted(p for p in folder.glob("*") if p.suffix.lower() in MESH_SUFFIXES)
+        preferred = folder / "textured_simple.obj"
+        mesh_path = preferred if preferred.is_file() else (meshes[0] if meshes else preferred)
+        if not mesh_path.is_file():
+            raise rd.fail(preferred, f"object model of {name} is missing")
+        try:
+            mesh = read_mesh(mesh_path)
+        except (ValueError, OSError) as exc:
+            raise rd.fail(mesh_path, f"unreadable mesh: {exc}") from None
+        rd.digest.update(rd.rel(mesh_path).encode() + mesh_path.read_bytes())
+        out.append(ObjectPlan(
+            index=i, ycb_id=ycb_id, name=name, mesh_path=mesh_path,
+            model_files=sorted(p for p in folder.iterdir() if p.is_file()),
+            num_vertices=len(mesh.vertices), num_faces=len(mesh.faces),
+            grasped=grasp == i, initial_pose=None if poses is None else poses[i],
+        ))
+    return out
+
+
+def _initial_poses(
+    rd: _Reader, path: Path, num_objects: int, num_frames: int
+) -> list[list[list[float]]] | None:
+    """Object-to-world 3x4 poses at frame 0 from pose.npz (qx, qy, qz, qw, tx, ty, tz)."""
+    from scipy.spatial.transform import Rotation
+
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as npz:
+            pose_y = np.asarray(npz["pose_y"], dtype=np.float64)
+    except KeyError:
+        raise rd.fail(path, "field 'pose_y' is missing") from None
+    except (OSError, ValueError) as exc:
+        raise rd.fail(path, f"not a readable npz file: {exc}") from None
+    if pose_y.ndim != 3 or pose_y.shape[1:] != (num_objects, 7) or pose_y.shape[0] < 1:
+        raise rd.fail(path, f"field 'pose_y' must have shape [frames, {num_objects}, 7], "
+                            f"got {list(pose_y.shape)}")
+    out = []
+    for q in pose_y[0]:
+        rot = Rotation.from_quat(q[:4]).as_matrix()
+        out.append(np.concatenate([rot, q[4:, None]], axis=1).tolist())
+    return out
+
+
+def _read_hands(rd: _Reader, root: Path, meta: dict[str, Any], meta_path: Path) -> list[HandPlan]:
+    sides = meta.get("mano_sides") or []
+    calibs = meta.get("mano_calib") or []
+    if not isinstance(sides, list) or not isinstance(calibs, list):
+        raise rd.fail(meta_path, "fields 'mano_sides' and 'mano_calib' must be lists")
+    hands = []
+    for i, side in enumerate(sides):
+        if side not in ("right", "left"):
+            raise rd.fail(meta_path, f"field 'mano_sides[{i}]' must be 'right' or 'left', got {side!r}")
+        calib = str(calibs[i]) if i < len(calibs) else None
+        betas = None
+        if calib is not None:
+            path = root / "calibration" / f"mano_{calib}" / "mano.yml"
+            betas = rd.numbers(rd.field(rd.yaml(path), path, "betas", list), path, "betas", 10)
+        hands.append(HandPlan(index=i, side=side, calib_name=calib, betas=betas))
+    return hands

@@ -1,0 +1,195 @@
+"""The `dexlabel` command line."""
+
+from __future__ import annotations
+
+import secrets
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from backend.config import get_settings
+from backend.errors import DexlabelError
+
+app = typer.Typer(help="dexlabel: crowd-labelled multi-view video to 3D hand and object poses.",
+                  no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+
+
+def _fail(exc: DexlabelError) -> None:
+    typer.secho(f"error: {exc.detail}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+@app.command()
+def migrate(
+    to: Annotated[str, typer.Option(help="target revision ('head', or an id)")] = "head",
+    down: Annotated[bool, typer.Option("--down", help="downgrade to --to (e.g. base)")] = False,
+) -> None:
+    """Create or update the database schema (Alembic migrations)."""
+    from backend import migrate as m
+
+    url = get_settings().database_url
+    (m.downgrade if down else m.upgrade)(url, to)
+    typer.echo(f"database at {to} ({_safe_url(url)})")
+
+
+def _safe_url(url: str) -> str:
+    from sqlalchemy.engine import make_url
+
+    return make_url(url).render_as_string(hide_password=True)
+
+
+@app.command()
+def synth(
+    out: Annotated[Path, typer.Argument(help="folder to write the capture to")],
+    seed: Annotated[int, typer.Option(help="random seed; same seed, same bytes")] = 0,
+    frames: Annotated[int, typer.Option(min=2, max=10000)] = 72,
+    views: Annotated[int, typer.Option(min=1, max=64)] = 8,
+    objects: Annotated[int, typer.Option(min=1, max=10)] = 3,
+) -> None:
+    """Write a synthetic capture (DexYCB layout) with its ground-truth labels."""
+    from worker.synth import generate_capture
+
+    summary = generate_capture(out, seed=seed, frames=frames, views=views, objects=objects)
+    typer.echo(f"wrote {summary.subject}/{summary.sequence}: {len(summary.serials)} views x "
+               f"{summary.num_frames} frames, objects {summary.ycb_ids} -> {out}")
+
+
+@app.command("import")
+def import_(path: Annotated[Path, typer.Argument(help="capture root or one sequence folder")]) -> None:
+    """Import a capture (DexYCB raw layout, or one video per camera)."""
+    from backend.captures.flows import import_path
+
+    try:
+        results = import_path(path)
+    except DexlabelError as exc:
+        _fail(exc)
+        return
+    for r in results:
+        state = "imported" if r.created else "already imported, unchanged:"
+        typer.echo(f"{state} {r.subject}/{r.name} (id {r.sequence_id}): "
+                   f"{r.num_cameras} cameras x {r.num_frames} frames")
+
+
+@app.command("create-admin")
+def create_admin(
+    email: Annotated[str, typer.Argument()],
+    password: Annotated[str | None, typer.Option(help="read from a prompt when not given")] = None,
+    reset: Annotated[bool, typer.Option(help="set a new password for an existing admin")] = False,
+) -> None:
+    """Create an admin account (or reset its password)."""
+    from backend.accounts.service import create_admin as create
+    from backend.db import session_scope
+
+    if password is None:
+        password = typer.prompt("password", hide_input=True, confirmation_prompt=True)
+    try:
+        with session_scope() as session:
+            admin = create(session, email, password, reset=reset)
+            typer.echo(f"admin {admin.email} ready (id {admin.id})")
+    except DexlabelError as exc:
+        _fail(exc)
+
+
+@app.command()
+def serve(
+    host: Annotated[str, typer.Option()] = "127.0.0.1",
+    port: Annotated[int, typer.Option()] = 8000,
+) -> None:
+    """Run the API and pages (plus an in-process queue consumer on the embedded default)."""
+    _serve(host, port)
+
+
+def _serve(host: str, port: int) -> None:
+    import uvicorn
+
+    from backend.queue import start_inprocess_consumer
+
+    settings = get_settings()
+    consumer = None
+    if settings.inprocess_worker and not settings.redis_url:
+        consumer = start_inprocess_consumer(settings.worker_threads)
+    try:
+        uvicorn.run("backend.app:create_app", factory=True, host=host, port=port)
+    finally:
+        if consumer is not None:
+            consumer.stop(graceful=True)
+
+
+@app.command()
+def worker(
+    workers: Annotated[int, typer.Option(min=1, max=64, help="worker threads")] = 2,
+) -> None:
+    """Run a queue consumer (one per machine when scaling out)."""
+    from backend.queue import make_consumer
+
+    settings = get_settings()
+    typer.echo(f"queue consumer on {'redis' if settings.redis_url else settings.queue_path}")
+    make_consumer(workers).run()
+
+
+@app.command()
+def demo(
+    host: Annotated[str, typer.Option()] = "127.0.0.1",
+    port: Annotated[int, typer.Option()] = 8000,
+    serve_: Annotated[bool, typer.Option("--serve/--no-serve", help="start the server")] = True,
+) -> None:
+    """Migrate, synthesise a capture if none, import it, serve, and print the URLs."""
+    from backend import migrate as m
+    from backend.captures.flows import import_path
+
+    settings = get_settings()
+    m.upgrade(settings.database_url)
+    capture = settings.var_dir / "demo-capture"
+    if not any(capture.glob("*/*/meta.yml")):
+        typer.echo(f"synthesising a demo capture in {capture} ...")
+        synth(capture, seed=7)
+    try:
+        results = import_path(capture)
+    except DexlabelError as exc:
+        _fail(exc)
+        return
+    password = _demo_admin()
+    base = f"http://{host}:{port}"
+    seq = results[0]
+    typer.echo(f"\nsequence {seq.subject}/{seq.name} (id {seq.sequence_id}): "
+               f"{seq.num_cameras} cameras x {seq.num_frames} frames")
+    typer.echo(f"API docs:        {base}/docs")
+    typer.echo(f"health:          {base}/healthz")
+    typer.echo(f"sequences:       {base}/api/sequences  (admin bearer token)")
+    typer.echo(f"admin login:     POST {base}/api/auth/token  email=demo@dexlabel.local "
+               f"password={password}")
+    typer.echo(f"first view:      {base}{_demo_view_url(seq.sequence_id)}")
+    if serve_:
+        typer.echo("serving; Ctrl+C stops")
+        sys.stdout.flush()
+        _serve(host, port)
+
+
+def _demo_admin() -> str:
+    """(Re)set the demo admin's password and return it."""
+    from backend.accounts.service import create_admin as create
+    from backend.db import session_scope
+
+    password = secrets.token_urlsafe(12)
+    with session_scope() as session:
+        create(session, "demo@dexlabel.local", password, reset=True)
+    return password
+
+
+def _demo_view_url(sequence_id: int) -> str:
+    from backend.accounts.deps import VIEW_SCOPE
+    from backend.captures.service import get_sequence_or_raise
+    from backend.db import session_scope
+    from backend.security import sign_token
+
+    with session_scope() as session:
+        serial = get_sequence_or_raise(session, sequence_id).cameras[0].serial
+    token = sign_token({"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial},
+                       get_settings().secret_key, 7 * 24 * 3600)
+    return f"/api/sequences/{sequence_id}/views/{serial}/frames?token={token}"
+
+
+if __name__ == "__main__":
+    app()

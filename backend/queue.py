@@ -1,0 +1,68 @@
+"""The job queue: Huey on SQLite by default, on Redis when DEXLABEL_REDIS_URL is set.
+
+Jobs are enqueued only after the unit of work that created their inputs has committed, and
+they take ids, never ORM objects, so a consumer on another machine can run them.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from huey import Huey, RedisHuey, SqliteHuey
+from huey.consumer import Consumer
+from sqlalchemy import event
+from sqlalchemy.orm import Session
+
+from backend.config import Settings, get_settings
+
+log = logging.getLogger(__name__)
+
+
+def make_huey(settings: Settings) -> Huey:
+    if settings.redis_url:
+        return RedisHuey("dexlabel", url=settings.redis_url, results=False)
+    settings.var_dir.mkdir(parents=True, exist_ok=True)
+    return SqliteHuey("dexlabel", filename=str(settings.queue_path), results=False)
+
+
+huey: Huey = make_huey(get_settings())
+
+
+def enqueue_after_commit(session: Session, task: Callable[..., Any], *args: Any) -> None:
+    """Run ``task(*args)`` (a Huey task) once ``session`` commits; drop it on rollback."""
+    pending: list[tuple[Callable[..., Any], tuple[Any, ...]]] = session.info.setdefault(
+        "after_commit_jobs", []
+    )
+    pending.append((task, args))
+
+
+@event.listens_for(Session, "after_commit")
+def _flush_jobs(session: Session) -> None:
+    # The data is committed by now; a queue that is down must not make the caller believe the
+    # unit of work failed, so the error is logged and the job can be re-run by hand.
+    for task, args in session.info.pop("after_commit_jobs", []):
+        try:
+            task(*args)
+        except Exception:
+            log.exception("could not enqueue %s%r after commit", getattr(task, "name", task), args)
+
+
+@event.listens_for(Session, "after_rollback")
+def _drop_jobs(session: Session) -> None:
+    session.info.pop("after_commit_jobs", None)
+
+
+def make_consumer(workers: int) -> Consumer:
+    import worker.tasks  # noqa: F401  (registers the tasks on ``huey``)
+
+    return huey.create_consumer(workers=workers, worker_type="thread", periodic=False)
+
+
+def start_inprocess_consumer(workers: int) -> Consumer:
+    """Start a consumer in background threads of this process (the embedded deployment)."""
+    consumer = make_consumer(workers)
+    consumer.start()  # spawns the scheduler and worker threads, then returns
+    log.info("in-process queue consumer started with %d workers", workers)
+    return consumer
