@@ -1,0 +1,137 @@
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.captures.flows import import_path
+from backend.captures.frames import parse_bundle
+from backend.db import session_scope
+from tests.backend import capture_edits as edit
+
+PASSWORD = "correct horse battery"
+
+
+@pytest.fixture
+def client(app_env: dict) -> Iterator[TestClient]:
+    from backend.accounts.service import create_admin
+    from backend.app import create_app
+
+    with session_scope() as s:
+        create_admin(s, "admin@example.org", PASSWORD)
+    with TestClient(create_app()) as c:
+        yield c
+
+
+@pytest.fixture
+def admin_headers(client: TestClient) -> dict[str, str]:
+    resp = client.post("/api/auth/token", json={"email": "admin@example.org", "password": PASSWORD})
+    assert resp.status_code == 200, resp.text
+    return {"Authorization": f"Bearer {resp.json()['access_token']}"}
+
+
+@pytest.fixture
+def imported(client: TestClient, small_capture: Path) -> dict:
+    result = import_path(small_capture)[0]
+    return {"id": result.sequence_id, "serials": [str(s) for s in edit.meta(small_capture)["serials"]]}
+
+
+def test_login_with_a_wrong_password_is_refused(client: TestClient) -> None:
+    resp = client.post("/api/auth/token", json={"email": "admin@example.org", "password": "nope"})
+    assert resp.status_code == 401
+    assert resp.json()["error"] == "unauthorized"
+
+
+def test_sequences_need_an_admin(client: TestClient, imported: dict) -> None:
+    assert client.get("/api/sequences").status_code == 401
+    bad = client.get("/api/sequences", headers={"Authorization": "Bearer forged.token"})
+    assert bad.status_code == 401 and "signature" in bad.json()["detail"]
+
+
+def test_sequence_lists_cameras_objects_and_hands(
+    client: TestClient, admin_headers: dict, imported: dict
+) -> None:
+    listing = client.get("/api/sequences", headers=admin_headers).json()
+    assert [s["id"] for s in listing] == [imported["id"]]
+    seq = client.get(f"/api/sequences/{imported['id']}", headers=admin_headers).json()
+    assert [c["serial"] for c in seq["cameras"]] == imported["serials"]
+    assert len(seq["cameras"][0]["extrinsics"]) == 3 and len(seq["cameras"][0]["extrinsics"][0]) == 4
+    assert seq["num_frames"] == 6 and len(seq["objects"]) == 2 and seq["hands"][0]["side"] == "right"
+
+
+def test_unknown_sequence_is_404_with_the_id_named(client: TestClient, admin_headers: dict) -> None:
+    resp = client.get("/api/sequences/999", headers=admin_headers)
+    assert resp.status_code == 404 and "999" in resp.json()["detail"]
+
+
+def test_frame_bundle_holds_every_frame_of_the_view_in_order(
+    client: TestClient, admin_headers: dict, imported: dict, small_capture: Path
+) -> None:
+    serial = imported["serials"][1]
+    resp = client.get(f"/api/sequences/{imported['id']}/views/{serial}/frames.bin",
+                      headers=admin_headers)
+    assert resp.status_code == 200
+    assert resp.headers["content-type"] == "application/x-dexlabel-frames"
+    header, blobs = parse_bundle(resp.content)
+    assert [f["index"] for f in header["frames"]] == list(range(6))
+    folder = edit.sequence_dir(small_capture) / serial
+    assert blobs == [(folder / f"color_{i:06d}.jpg").read_bytes() for i in range(6)]
+    again = client.get(f"/api/sequences/{imported['id']}/views/{serial}/frames.bin",
+                       headers={**admin_headers, "If-None-Match": resp.headers["etag"]})
+    assert again.status_code == 304
+
+
+def test_manifest_urls_serve_colour_and_depth(
+    client: TestClient, admin_headers: dict, imported: dict
+) -> None:
+    serial = imported["serials"][0]
+    manifest = client.get(f"/api/sequences/{imported['id']}/views/{serial}/frames",
+                          headers=admin_headers).json()
+    assert manifest["num_frames"] == 6 and manifest["width"] > 0
+    colour = client.get(manifest["frames"][3]["url"], headers=admin_headers)
+    assert colour.headers["content-type"] == "image/jpeg"
+    assert len(colour.content) == manifest["frames"][3]["bytes"]
+    depth = client.get(manifest["frames"][3]["depth_url"], headers=admin_headers)
+    assert depth.content[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_view_token_opens_its_own_view_only(
+    client: TestClient, admin_headers: dict, imported: dict
+) -> None:
+    seq_id, (s0, s1, _) = imported["id"], imported["serials"]
+    assert client.get(f"/api/sequences/{seq_id}/views/{s0}/frames.bin").status_code == 401
+    token = client.post(f"/api/sequences/{seq_id}/views/{s0}/token", headers=admin_headers).json()
+    own = client.get(f"/api/sequences/{seq_id}/views/{s0}/frames?token={token['token']}")
+    assert own.status_code == 200
+    # URLs in the manifest carry the token on, so the page can follow them as they are.
+    assert client.get(own.json()["bundle_url"]).status_code == 200
+    other = client.get(f"/api/sequences/{seq_id}/views/{s1}/frames.bin?token={token['token']}")
+    assert other.status_code == 403
+
+
+def test_frame_out_of_range_and_unknown_camera_are_404(
+    client: TestClient, admin_headers: dict, imported: dict
+) -> None:
+    seq_id, serial = imported["id"], imported["serials"][0]
+    resp = client.get(f"/api/sequences/{seq_id}/views/{serial}/frames/6.jpg", headers=admin_headers)
+    assert resp.status_code == 404 and "0..5" in resp.json()["detail"]
+    resp = client.get(f"/api/sequences/{seq_id}/views/nope/frames", headers=admin_headers)
+    assert resp.status_code == 404 and "nope" in resp.json()["detail"]
+
+
+def test_import_endpoint_reports_the_broken_file(
+    client: TestClient, admin_headers: dict, small_capture: Path, tmp_path: Path
+) -> None:
+    cap = edit.copy_capture(small_capture, tmp_path / "cap")
+    (edit.sequence_dir(cap) / "meta.yml").write_text("serials: [")
+    resp = client.post("/api/captures/import", json={"path": str(cap)}, headers=admin_headers)
+    assert resp.status_code == 422
+    body = resp.json()
+    assert body["error"] == "invalid_capture" and body["path"].endswith("meta.yml")
+
+
+def test_import_endpoint_needs_a_path(client: TestClient, admin_headers: dict) -> None:
+    resp = client.post("/api/captures/import", json={}, headers=admin_headers)
+    assert resp.status_code == 422 and resp.json()["fields"][0]["field"] == "path"

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Installs what the tests need (a virtualenv with the project and its test extras; PostgreSQL
+# and Redis started if they are installed but down) and runs the whole suite.
+# Usage: bash tests/run.sh [pytest args...]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PY=${PYTHON:-python3}
+VENV=${DEXLABEL_VENV:-.venv}
+if [ ! -x "$VENV/bin/python" ]; then
+  "$PY" -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install --quiet --upgrade pip
+"$VENV/bin/python" -m pip install --quiet -e '.[test]'
+
+start_services() {
+  if command -v pg_isready >/dev/null && ! pg_isready -q -h 127.0.0.1 -p 5432; then
+    if command -v pg_ctlcluster >/dev/null && [ -d /etc/postgresql ]; then
+      echo "starting PostgreSQL"
+      pg_ctlcluster --skip-systemctl-redirect "$(ls /etc/postgresql | head -n1)" main start || true
+    fi
+  fi
+  if command -v redis-cli >/dev/null && ! redis-cli -h 127.0.0.1 -p 6379 ping >/dev/null 2>&1; then
+    if command -v redis-server >/dev/null; then
+      echo "starting Redis"
+      mkdir -p /var/lib/redis /var/log/redis 2>/dev/null || true
+      redis-server --daemonize yes --bind 127.0.0.1 --port 6379 --save "" --appendonly no \
+        --dir /var/lib/redis --logfile /var/log/redis/ci.log || true
+    fi
+  fi
+  for _ in $(seq 1 30); do
+    pg_ok=1; redis_ok=1
+    command -v pg_isready >/dev/null && { pg_isready -q -h 127.0.0.1 -p 5432 || pg_ok=0; }
+    command -v redis-cli >/dev/null && { redis-cli -h 127.0.0.1 -p 6379 ping >/dev/null 2>&1 || redis_ok=0; }
+    [ "$pg_ok" = 1 ] && [ "$redis_ok" = 1 ] && return 0
+    sleep 1
+  done
+}
+start_services
+
+# In CI a missing PostgreSQL or Redis is a failure, not a skip.
+if [ "${CI:-}" = "true" ]; then
+  export DEXLABEL_TEST_REQUIRE_SERVICES=1
+fi
+exec "$VENV/bin/python" -m pytest "$@"
