@@ -1,0 +1,100 @@
+"""Linear blend skinning in PyTorch, with MANO/SMPL semantics.
+
+All functions are batched (batch dimension first), differentiable, and keep the dtype and device
+of their inputs. Lengths are metres; rotations are axis-angle vectors in radians (direction = the
+axis, norm = the angle) or 3x3 rotation matrices acting on column vectors.
+"""
+
+from __future__ import annotations
+
+import torch
+
+# Below this squared angle (rad^2) the Rodrigues coefficients use their Taylor series: at
+# theta^2 = 1e-6 the first dropped term is ~1e-20, far below float64 resolution of the result.
+_SMALL_ANGLE_SQ = 1e-6
+
+
+def skew(vectors: torch.Tensor) -> torch.Tensor:
+    """(..., 3) vectors -> (..., 3, 3) cross-product matrices [v]x with [v]x @ u = v x u."""
+    x, y, z = vectors.unbind(-1)
+    zero = torch.zeros_like(x)
+    rows = (
+        torch.stack((zero, -z, y), dim=-1),
+        torch.stack((z, zero, -x), dim=-1),
+        torch.stack((-y, x, zero), dim=-1),
+    )
+    return torch.stack(rows, dim=-2)
+
+
+def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
+    """Rodrigues' formula: (..., 3) axis-angle, radians -> (..., 3, 3) rotation matrices.
+
+    R = I + a K + b K^2 with K = [r]x, a = sin(t)/t, b = (1 - cos t)/t^2, t = |r|. Near t = 0
+    the coefficients come from their Taylor series, so the value and the gradient are exact and
+    finite at (and around) zero rotation.
+    """
+    if axis_angle.shape[-1] != 3:
+        raise ValueError(f"axis_angle must have shape (..., 3), got {tuple(axis_angle.shape)}")
+    theta_sq = (axis_angle * axis_angle).sum(-1)
+    small = theta_sq < _SMALL_ANGLE_SQ
+    # Keep the unused branch finite so that torch.where does not leak NaN gradients.
+    safe_sq = torch.where(small, torch.ones_like(theta_sq), theta_sq)
+    theta = safe_sq.sqrt()
+    a = torch.where(small, 1.0 - theta_sq / 6.0 + theta_sq**2 / 120.0, torch.sin(theta) / theta)
+    b = torch.where(
+        small, 0.5 - theta_sq / 24.0 + theta_sq**2 / 720.0, (1.0 - torch.cos(theta)) / safe_sq
+    )
+    k = skew(axis_angle)
+    eye = torch.eye(3, dtype=axis_angle.dtype, device=axis_angle.device)
+    return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
+
+
+def blend_shapes(betas: torch.Tensor, shapedirs: torch.Tensor) -> torch.Tensor:
+    """Shape offsets: betas (B, K) and shapedirs (V, 3, K) -> (B, V, 3) metres."""
+    return torch.einsum("bk,vck->bvc", betas, shapedirs)
+
+
+def rigid_transforms(
+    rotations: torch.Tensor, joints: torch.Tensor, parents: list[int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pose a kinematic chain.
+
+    rotations: (B, J, 3, 3) each joint's rotation relative to its parent.
+    joints: (B, J, 3) rest joint positions, metres, model frame.
+    parents: J parent indices, -1 for the root, every parent before its children.
+    Returns posed joints (B, J, 3) metres, and (B, J, 4, 4) transforms that map a rest-frame
+    point attached to joint j to its posed position (world transform of j composed with the
+    inverse of j's rest placement), as linear blend skinning needs.
+    """
+    rel = joints.clone()
+    rel[:, 1:] = joints[:, 1:] - joints[:, parents[1:]]
+    bottom = rotations.new_zeros(rotations.shape[:2] + (1, 4))
+    bottom[..., 0, 3] = 1.0
+    local = torch.cat((torch.cat((rotations, rel[..., None]), dim=-1), bottom), dim=-2)
+    chain = [local[:, 0]]
+    for j in range(1, len(parents)):
+        chain.append(chain[parents[j]] @ local[:, j])
+    world = torch.stack(chain, dim=1)
+    posed_joints = world[:, :, :3, 3]
+    # Subtract R_world @ J_rest so that the transform acts on rest-frame coordinates.
+    offset = (world[:, :, :3, :3] @ joints[..., None])[..., 0]
+    skinning = world.clone()
+    skinning[:, :, :3, 3] = posed_joints - offset
+    return posed_joints, skinning
+
+
+def linear_blend_skinning(
+    vertices: torch.Tensor, transforms: torch.Tensor, weights: torch.Tensor
+) -> torch.Tensor:
+    """Skin vertices (B, V, 3) with per-joint transforms (B, J, 4, 4) and weights (V, J).
+
+    Returns (B, V, 3): sum_j w_vj (R_j v + t_j), metres.
+    """
+    blended = torch.einsum("vj,bjrc->bvrc", weights, transforms[:, :, :3, :])
+    return (blended[..., :3] @ vertices[..., None])[..., 0] + blended[..., 3]
+
+
+def pose_features(rotations: torch.Tensor) -> torch.Tensor:
+    """(B, 16, 3, 3) joint rotations -> (B, 135) pose-corrective features (R_j - I), j = 1..15."""
+    eye = torch.eye(3, dtype=rotations.dtype, device=rotations.device)
+    return (rotations[:, 1:] - eye).flatten(1)
