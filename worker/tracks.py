@@ -1,0 +1,354 @@
+"""Annotation tracks: interpolation, completeness and plausibility checks, keyframe validation.
+
+A track is one point of a task (a hand joint or an object landmark) through a clip of F frames,
+stored as keyframes sorted by frame with positions in image pixels (x right, y down, 0 <= x <
+width, 0 <= y < height). An occluded keyframe may carry a guessed position or none.
+
+This is the twin of frontend/annotate/core/interpolate.js: same rules, same formula, same
+messages. Both are checked against tests/fixtures/interpolation_golden.json.
+
+Dense value at frame f:
+    before the first keyframe (or no keyframes): unplaced, no position, not visible;
+    at a keyframe: that keyframe;
+    between keyframes k0 < f < k1: interpolated; visibility of k0; linear position when both have
+        one, k0's position when only k0 has one, else none;
+    after the last keyframe: the last keyframe's position and visibility, interpolated.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from numbers import Real
+from typing import Any, Literal, TypedDict
+
+import numpy as np
+
+STATE_UNPLACED = 0
+STATE_KEYFRAME = 1
+STATE_INTERPOLATED = 2
+STATE_NAMES: tuple[str, ...] = ("unplaced", "keyframe", "interpolated")
+
+# Radius (image px) within which all visible points of a frame count as one spot.
+COLLAPSE_RADIUS_PX = 3.0
+# Below this largest displacement (image px) over the clip, no point counts as moving.
+STATIC_DISPLACEMENT_PX = 1.0
+# A frame counts as collapsed only with at least this many visible points (fewer for 2-point
+# tasks), so that two fingertips touching in a pinch do not trigger it.
+COLLAPSE_MIN_POINTS = 3
+
+
+class KeyframeError(ValueError):
+    """A keyframe that is not {frame, x, y, visible} / [frame, x, y, visible01] with valid types."""
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """One keyframe: frame index, position in image px (None when occluded without a guess)."""
+
+    frame: int
+    x: float | None
+    y: float | None
+    visible: bool
+
+    @property
+    def has_position(self) -> bool:
+        return self.x is not None and self.y is not None
+
+
+@dataclass(frozen=True)
+class DenseTrack:
+    """A track's value at every frame.
+
+    values: (F, 3) float64 [x, y, visible] with x, y in image px, NaN where there is no position,
+        visible 1.0 or 0.0.
+    state: (F,) int8, one of STATE_UNPLACED, STATE_KEYFRAME, STATE_INTERPOLATED.
+    """
+
+    values: np.ndarray
+    state: np.ndarray
+
+    @property
+    def xy(self) -> np.ndarray:
+        """(F, 2) image px, NaN where there is no position."""
+        return self.values[:, :2]
+
+    @property
+    def visible(self) -> np.ndarray:
+        """(F,) bool."""
+        return self.values[:, 2] > 0.5
+
+    def state_names(self) -> list[str]:
+        return [STATE_NAMES[s] for s in self.state]
+
+
+class Problem(TypedDict):
+    point: int
+    frames: list[list[int]]
+    message: str
+
+
+class Completeness(TypedDict):
+    complete: bool
+    problems: list[Problem]
+
+
+class TrackWarning(TypedDict):
+    kind: Literal["collapsed", "static"]
+    frames: list[list[int]]
+    message: str
+
+
+def _number_or_none(value: Any, field: str) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise KeyframeError(f"{field} must be a number or null, got {value!r}")
+    return float(value)
+
+
+def parse_keyframe(raw: Any) -> Keyframe:
+    """A keyframe from a dict {frame, x, y, visible} or a compact [frame, x, y, visible01] list.
+
+    Raises:
+        KeyframeError: naming the malformed field.
+    """
+    if isinstance(raw, Keyframe):
+        return raw
+    if isinstance(raw, dict):
+        missing = [k for k in ("frame", "visible") if k not in raw]
+        if missing:
+            raise KeyframeError(f"missing {', '.join(missing)}")
+        # An occluded keyframe without a guess may leave out x and y.
+        frame, x, y, visible = raw["frame"], raw.get("x"), raw.get("y"), raw["visible"]
+    elif isinstance(raw, (list, tuple)) and len(raw) == 4:
+        frame, x, y, visible = raw
+    else:
+        expected = "{frame, x, y, visible} or [frame, x, y, visible01]"
+        raise KeyframeError(f"expected {expected}, got {raw!r}")
+    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
+        raise KeyframeError(f"frame must be an integer, got {frame!r}")
+    if visible not in (True, False, 0, 1):
+        raise KeyframeError(f"visible must be a boolean or 0/1, got {visible!r}")
+    x_value, y_value = _number_or_none(x, "x"), _number_or_none(y, "y")
+    if (x_value is None) != (y_value is None):
+        raise KeyframeError("x and y must both be numbers or both be null")
+    return Keyframe(int(frame), x_value, y_value, bool(visible))
+
+
+def as_keyframes(raw: Iterable[Any]) -> list[Keyframe]:
+    """Parses keyframes (dicts or compact lists) and sorts them by frame."""
+    return sorted((parse_keyframe(k) for k in raw), key=lambda k: k.frame)
+
+
+def dense_track(keyframes: Iterable[Any], num_frames: int) -> DenseTrack:
+    """The value of a track at every frame 0..num_frames-1 (see the module docstring).
+
+    Args:
+        keyframes: dicts {frame, x, y, visible} or compact [frame, x, y, visible01] lists, image px.
+        num_frames: F, the clip length.
+    """
+    kfs = as_keyframes(keyframes)
+    values = np.full((num_frames, 3), np.nan)
+    values[:, 2] = 0.0
+    state = np.full(num_frames, STATE_UNPLACED, dtype=np.int8)
+    if not kfs or num_frames <= 0:
+        return DenseTrack(values, state)
+    k_frame = np.array([k.frame for k in kfs], dtype=np.float64)
+    k_x = np.array([np.nan if k.x is None else k.x for k in kfs])
+    k_y = np.array([np.nan if k.y is None else k.y for k in kfs])
+    k_vis = np.array([1.0 if k.visible else 0.0 for k in kfs])
+
+    frames = np.arange(num_frames, dtype=np.float64)
+    i0 = np.searchsorted(k_frame, frames, side="right") - 1
+    placed = i0 >= 0
+    i0c = np.clip(i0, 0, len(kfs) - 1)
+    i1c = np.clip(i0 + 1, 0, len(kfs) - 1)
+    at_key = placed & (k_frame[i0c] == frames)
+    has_next = placed & ~at_key & (i0 + 1 < len(kfs))
+
+    x0, y0, x1, y1 = k_x[i0c], k_y[i0c], k_x[i1c], k_y[i1c]
+    f0, f1 = k_frame[i0c], k_frame[i1c]
+    lerp = has_next & ~np.isnan(x0) & ~np.isnan(x1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # Same formula and operation order as interpolate.js, for bit-identical results.
+        t = (frames - f0) / (f1 - f0)
+        x_lerp = x0 + (x1 - x0) * t
+        y_lerp = y0 + (y1 - y0) * t
+    values[placed, 0] = np.where(lerp, x_lerp, x0)[placed]
+    values[placed, 1] = np.where(lerp, y_lerp, y0)[placed]
+    values[placed, 2] = k_vis[i0c][placed]
+    state[placed] = STATE_INTERPOLATED
+    state[at_key] = STATE_KEYFRAME
+    return DenseTrack(values, state)
+
+
+def frame_spans(flags: Sequence[bool] | np.ndarray) -> list[list[int]]:
+    """Inclusive [start, end] spans of the frames where flags is true."""
+    spans: list[list[int]] = []
+    for f, flag in enumerate(flags):
+        if not flag:
+            continue
+        if spans and spans[-1][1] == f - 1:
+            spans[-1][1] = f
+        else:
+            spans.append([f, f])
+    return spans
+
+
+def format_spans(spans: list[list[int]]) -> str:
+    """'frame 5' or 'frames 0-11, 20'."""
+    single = len(spans) == 1 and spans[0][0] == spans[0][1]
+    text = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
+    return f"{'frame' if single else 'frames'} {text}"
+
+
+def _point_name(point_names: Sequence[str] | None, index: int) -> str:
+    if point_names is not None and index < len(point_names):
+        return point_names[index]
+    return f"point {index}"
+
+
+def _num_points(tracks: Sequence[Any], point_names: Sequence[str] | None) -> int:
+    return len(point_names) if point_names is not None else len(tracks)
+
+
+def completeness(
+    tracks: Sequence[Iterable[Any]], num_frames: int, point_names: Sequence[str] | None = None
+) -> Completeness:
+    """Whether a task's tracks are ready to submit.
+
+    Every point needs a keyframe, and each of its frames must be placed (a position, not
+    unplaced) or occluded. Problems are reported per point with inclusive frame spans.
+
+    Args:
+        tracks: one keyframe list per point (dicts or compact lists), image px.
+        num_frames: F.
+        point_names: the task's point names; its length is the number of points.
+    """
+    problems: list[Problem] = []
+    for p in range(_num_points(tracks, point_names)):
+        keyframes = list(tracks[p]) if p < len(tracks) else []
+        name = _point_name(point_names, p)
+        if not keyframes:
+            frames = [[0, num_frames - 1]] if num_frames > 0 else []
+            problems.append({"point": p, "frames": frames, "message": f"{name}: no keyframes"})
+            continue
+        dense = dense_track(keyframes, num_frames)
+        no_position = np.isnan(dense.values[:, 0]) | np.isnan(dense.values[:, 1])
+        missing = (dense.state == STATE_UNPLACED) | (dense.visible & no_position)
+        spans = frame_spans(missing)
+        if spans:
+            message = f"{name}: {format_spans(spans)} not placed"
+            problems.append({"point": p, "frames": spans, "message": message})
+    return {"complete": not problems, "problems": problems}
+
+
+def _collapsed_frames(xy: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """(F,) bool: frames whose visible points all lie within COLLAPSE_RADIUS_PX of their centroid.
+
+    xy: (N, F, 2) image px (NaN = no position); visible: (N, F) bool.
+    """
+    num_points, num_frames = visible.shape
+    flags = np.zeros(num_frames, dtype=bool)
+    if num_points < 2:
+        return flags
+    min_points = min(COLLAPSE_MIN_POINTS, num_points)
+    usable = visible & ~np.isnan(xy).any(axis=2)
+    for f in range(num_frames):
+        pts = xy[usable[:, f], f]
+        if len(pts) < min_points:
+            continue
+        centre = pts.mean(axis=0)
+        flags[f] = bool(np.all(np.hypot(*(pts - centre).T) <= COLLAPSE_RADIUS_PX))
+    return flags
+
+
+def _largest_displacement(xy: np.ndarray) -> float | None:
+    """Largest distance (image px) of a point's placed positions from its first placed one."""
+    largest: float | None = None
+    for track in xy:
+        placed = track[~np.isnan(track).any(axis=1)]
+        if len(placed) == 0:
+            continue
+        moved = float(np.max(np.hypot(*(placed - placed[0]).T)))
+        largest = moved if largest is None else max(largest, moved)
+    return largest
+
+
+def suspicious(
+    tracks: Sequence[Iterable[Any]], num_frames: int, point_names: Sequence[str] | None = None
+) -> list[TrackWarning]:
+    """Signs of careless work: frames where all visible points sit on one spot, or a clip where
+    no point moves at all (when F > 1). Same arguments as completeness()."""
+    num_points = _num_points(tracks, point_names)
+    dense = [
+        dense_track(list(tracks[p]) if p < len(tracks) else [], num_frames)
+        for p in range(num_points)
+    ]
+    xy = np.stack([d.xy for d in dense]) if dense else np.zeros((0, num_frames, 2))
+    visible = np.stack([d.visible for d in dense]) if dense else np.zeros((0, num_frames), bool)
+    warnings: list[TrackWarning] = []
+    spans = frame_spans(_collapsed_frames(xy, visible))
+    if spans:
+        radius = f"{COLLAPSE_RADIUS_PX:g}"
+        message = f"all visible points within {radius} px of one spot in {format_spans(spans)}"
+        warnings.append({"kind": "collapsed", "frames": spans, "message": message})
+    moved = _largest_displacement(xy)
+    if num_frames > 1 and moved is not None and moved < STATIC_DISPLACEMENT_PX:
+        message = f"no point moves across the clip (all within {STATIC_DISPLACEMENT_PX:g} px)"
+        warnings.append({"kind": "static", "frames": [[0, num_frames - 1]], "message": message})
+    return warnings
+
+
+def _keyframe_label(index: int, raw: Any) -> str:
+    if isinstance(raw, dict):
+        frame = raw.get("frame")
+    else:
+        frame = raw[0] if isinstance(raw, (list, tuple)) and raw else None
+    return f"keyframe {index} (frame {frame!r})" if frame is not None else f"keyframe {index}"
+
+
+def _position_problems(kf: Keyframe, width: int, height: int) -> list[str]:
+    x, y = kf.x, kf.y
+    if x is None or y is None:
+        return ["visible keyframe has no position"] if kf.visible else []
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return [f"position ({x}, {y}) is not finite"]
+    problems = []
+    if not 0 <= x < width:
+        problems.append(f"x = {x:g} outside the image (0 <= x < {width})")
+    if not 0 <= y < height:
+        problems.append(f"y = {y:g} outside the image (0 <= y < {height})")
+    return problems
+
+
+def validate_keyframes(
+    keyframes: Sequence[Any], num_frames: int, width: int, height: int
+) -> list[str]:
+    """Problems with one track's keyframes, each naming the offending keyframe; [] when valid.
+
+    Checks: well-formed entries, frames in 0..num_frames-1, unique and sorted frames, finite
+    positions inside the width x height image (px), and a position on every visible keyframe.
+    """
+    problems: list[str] = []
+    seen: dict[int, int] = {}
+    previous: int | None = None
+    for index, raw in enumerate(keyframes):
+        label = _keyframe_label(index, raw)
+        try:
+            kf = parse_keyframe(raw)
+        except KeyframeError as exc:
+            problems.append(f"{label}: {exc}")
+            continue
+        if not 0 <= kf.frame < num_frames:
+            problems.append(f"{label}: frame out of range 0-{num_frames - 1}")
+        if kf.frame in seen:
+            problems.append(f"{label}: duplicate of keyframe {seen[kf.frame]} at the same frame")
+        elif previous is not None and kf.frame < previous:
+            problems.append(f"{label}: not sorted by frame (follows frame {previous})")
+        seen.setdefault(kf.frame, index)
+        previous = kf.frame if previous is None else max(previous, kf.frame)
+        problems.extend(f"{label}: {p}" for p in _position_problems(kf, width, height))
+    return problems
