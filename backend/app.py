@@ -8,6 +8,7 @@ from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
 from backend.accounts.router import router as auth_router
+from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.errors import install_error_handlers
 
@@ -20,6 +21,7 @@ def create_app() -> FastAPI:
     install_error_handlers(app)
     app.include_router(auth_router)
     app.include_router(captures_router)
+    app.include_router(annotation_router)
 
     @app.get("/healthz", tags=["ops"])
     def healthz() -> dict[str, str]:

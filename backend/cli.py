@@ -191,5 +191,40 @@ def _demo_view_url(sequence_id: int) -> str:
     return f"/api/sequences/{sequence_id}/views/{serial}/frames?token={token}"
 
 
+tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).", no_args_is_help=True)
+app.add_typer(tasks_app, name="tasks")
+
+
+def _resolve_sequence(session, ref: str) -> int:  # type: ignore[no-untyped-def]
+    from backend.captures.service import find_sequence, get_sequence_or_raise
+
+    if ref.isdigit():
+        return get_sequence_or_raise(session, int(ref)).id
+    subject, _, name = ref.partition("/")
+    seq = find_sequence(session, subject, name) if name else None
+    if seq is None:
+        raise DexlabelError(f"no sequence {ref!r} (give an id or SUBJECT/SEQUENCE)")
+    return seq.id
+
+
+@tasks_app.command("create")
+def tasks_create(
+    sequence: Annotated[str, typer.Argument(help="sequence id or SUBJECT/SEQUENCE")],
+) -> None:
+    """Create one task per view and target of a sequence (idempotent)."""
+    from backend.annotation.service import create_tasks
+    from backend.db import session_scope
+    from backend.storage import get_storage
+
+    try:
+        with session_scope() as session:
+            tasks = create_tasks(session, get_storage(), _resolve_sequence(session, sequence))
+            hands = sum(t.kind == "hand" for t in tasks)
+            typer.echo(f"{len(tasks)} tasks: {hands} hand, {len(tasks) - hands} object "
+                       f"(ids {tasks[0].id}-{tasks[-1].id})")
+    except DexlabelError as exc:
+        _fail(exc)
+
+
 if __name__ == "__main__":
     app()

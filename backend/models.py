@@ -1,7 +1,8 @@
 """Every ORM model, imported in one place so Alembic and the app see the whole schema."""
 
 from backend.accounts.models import Admin
+from backend.annotation.models import Assignment, Task, Track
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.db import Base
 
-__all__ = ["Admin", "Base", "Camera", "Frame", "Hand", "SceneObject", "Sequence", "Subject"]
+__all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject", "Sequence", "Subject"]

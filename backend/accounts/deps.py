@@ -15,6 +15,8 @@ from backend.security import verify_token
 
 ADMIN_SCOPE = "admin"
 VIEW_SCOPE = "view"
+# Tokens of these scopes carry a sequence_id and serial and may read that view's frames.
+FRAME_SCOPES = ("view", "task", "assignment")
 
 
 def bearer_token(request: Request) -> str | None:
@@ -42,9 +44,21 @@ def require_view_access(request: Request, session: SessionDep, sequence_id: int,
     token = request.query_params.get("token")
     if not token:
         raise Unauthorized("send an admin bearer token or a view token (?token=...)")
-    payload = verify_token(token, get_settings().secret_key, VIEW_SCOPE)
+    payload = _frame_token(token)
     if payload.get("sequence_id") != sequence_id or payload.get("serial") != serial:
         raise Forbidden("this view token is for another sequence or camera")
 
 
-ViewAccess = Depends(require_view_access)
+def _frame_token(token: str) -> dict:
+    """The payload of a token that may read one view's frames: view, task or assignment."""
+    secret = get_settings().secret_key
+    last: Unauthorized | None = None
+    for scope in FRAME_SCOPES:
+        try:
+            return verify_token(token, secret, scope)
+        except Unauthorized as exc:
+            if "not valid for" not in exc.detail:
+                raise
+            last = exc
+    assert last is not None
+    raise last

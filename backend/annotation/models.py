@@ -1,0 +1,85 @@
+"""Annotation: tasks (sequence x view x target), assignments (one worker's go at a task), tracks.
+
+Track keyframes are stored in image pixels (x right, y down) with a frame index, as compact
+rows ``[frame, x, y, visible]`` (x and y may be null on an occluded keyframe).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import JSON, CheckConstraint, DateTime, Float, ForeignKey, Integer, String
+from sqlalchemy import UniqueConstraint
+from sqlalchemy.orm import Mapped, mapped_column, relationship
+
+from backend.captures.models import Camera, Sequence
+from backend.db import Base, TimestampMixin
+
+
+class Task(TimestampMixin, Base):
+    __tablename__ = "tasks"
+    __table_args__ = (
+        UniqueConstraint("camera_id", "target_key"),
+        CheckConstraint("kind IN ('hand', 'object')", name="kind_valid"),
+        CheckConstraint("num_points > 0", name="num_points_positive"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"))
+    camera_id: Mapped[int] = mapped_column(ForeignKey("cameras.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(8))
+    # "hand:<index>" or "object:<index>": the target within the sequence.
+    target_key: Mapped[str] = mapped_column(String(32))
+    hand_id: Mapped[int | None] = mapped_column(ForeignKey("hands.id", ondelete="CASCADE"))
+    object_id: Mapped[int | None] = mapped_column(ForeignKey("scene_objects.id", ondelete="CASCADE"))
+    num_points: Mapped[int] = mapped_column(Integer)
+    # Object tasks: {"polygon": [[x, y], ...]} from the projected initial pose, or {"box": [...]}.
+    highlight: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    status: Mapped[str] = mapped_column(String(16), default="open")
+
+    sequence: Mapped[Sequence] = relationship()
+    camera: Mapped[Camera] = relationship()
+    assignments: Mapped[list[Assignment]] = relationship(back_populates="task")
+
+
+class Assignment(TimestampMixin, Base):
+    """One worker's labels for one task, saved in versions (optimistic concurrency)."""
+
+    __tablename__ = "assignments"
+    __table_args__ = (
+        CheckConstraint("version >= 0", name="version_nonnegative"),
+        CheckConstraint(
+            "status IN ('working', 'submitted', 'approved', 'rejected')", name="status_valid"
+        ),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"))
+    worker_id: Mapped[str] = mapped_column(String(64))
+    # The marketplace's AssignmentId (or one we made for a direct link); unique everywhere.
+    external_id: Mapped[str] = mapped_column(String(64), unique=True)
+    hit_id: Mapped[str | None] = mapped_column(String(64))
+    status: Mapped[str] = mapped_column(String(16), default="working")
+    version: Mapped[int] = mapped_column(Integer, default=0)
+    edit_count: Mapped[int] = mapped_column(Integer, default=0)
+    working_time_s: Mapped[float] = mapped_column(Float, default=0.0)
+    saved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    submitted_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+    task: Mapped[Task] = relationship(back_populates="assignments")
+    tracks: Mapped[list[Track]] = relationship(
+        back_populates="assignment", cascade="all, delete-orphan", order_by="Track.point_index"
+    )
+
+
+class Track(Base):
+    __tablename__ = "tracks"
+    __table_args__ = (UniqueConstraint("assignment_id", "point_index"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    assignment_id: Mapped[int] = mapped_column(ForeignKey("assignments.id", ondelete="CASCADE"))
+    point_index: Mapped[int] = mapped_column(Integer)
+    keyframes: Mapped[list[list[Any]]] = mapped_column(JSON)
+
+    assignment: Mapped[Assignment] = relationship(back_populates="tracks")

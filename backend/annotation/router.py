@@ -1,0 +1,187 @@
+"""Annotation endpoints: admin task set-up, and the worker-facing page API.
+
+Workers are identified only by a signed token (in the page URL, sent as a bearer header):
+an assignment token opens exactly one assignment; a task token opens a read-only preview
+and can be exchanged for an assignment token when the marketplace names the assignment.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+from urllib.parse import urlencode
+
+from fastapi import APIRouter, Depends, Request
+
+from backend.accounts.deps import CurrentAdmin, bearer_token
+from backend.annotation import service
+from backend.annotation.models import Assignment, Task
+from backend.annotation.points import point_colours, point_names, skeleton
+from backend.annotation.schemas import (
+    MAX_SAVE_BYTES, AnnotateTaskRead, AssignmentCreate, AssignmentLink, AssignmentRead,
+    FramesLinks, HighlightUpdate, PreviewLink, SaveResult, StartRequest, TaskRead, TokenRead,
+    TracksPayload, TracksSave,
+)
+from backend.config import get_settings
+from backend.db import SessionDep
+from backend.errors import DexlabelError, Unauthorized
+from backend.security import sign_token, verify_token
+from backend.storage import get_storage
+
+router = APIRouter(prefix="/api", tags=["annotation"])
+
+TASK_SCOPE = "task"
+ASSIGNMENT_SCOPE = "assignment"
+TOKEN_TTL_S = 14 * 24 * 3600
+PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE"
+
+
+class PayloadTooLarge(DexlabelError):
+    status_code = 413
+    code = "payload_too_large"
+
+
+def task_token(task: Task) -> str:
+    payload = {"scope": TASK_SCOPE, "task_id": task.id, "sequence_id": task.sequence_id,
+               "serial": task.camera.serial}
+    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
+
+
+def assignment_token(task: Task, assignment: Assignment) -> str:
+    payload = {"scope": ASSIGNMENT_SCOPE, "assignment_id": assignment.id, "task_id": task.id,
+               "sequence_id": task.sequence_id, "serial": task.camera.serial}
+    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
+
+
+def _worker_claims(request: Request) -> dict[str, Any]:
+    token = bearer_token(request)
+    if token is None:
+        raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")
+    secret = get_settings().secret_key
+    try:
+        return verify_token(token, secret, ASSIGNMENT_SCOPE)
+    except Unauthorized as exc:
+        if "not valid for" not in exc.detail:
+            raise
+    return verify_token(token, secret, TASK_SCOPE)
+
+
+WorkerClaims = Annotated[dict[str, Any], Depends(_worker_claims)]
+
+
+def _assignment_of(session: SessionDep, claims: dict[str, Any]) -> Assignment:
+    if claims["scope"] != ASSIGNMENT_SCOPE:
+        raise Unauthorized("a preview link cannot change labels; accept the HIT first")
+    return service.get_assignment_or_raise(session, int(claims["assignment_id"]))
+
+
+async def _limit_body(request: Request) -> None:
+    length = request.headers.get("content-length")
+    if length is not None and int(length) > MAX_SAVE_BYTES:
+        raise PayloadTooLarge(f"a save may be at most {MAX_SAVE_BYTES} bytes, got {length}")
+
+
+def _task_read(task: Task) -> TaskRead:
+    return TaskRead(
+        id=task.id, kind=task.kind, sequence_id=task.sequence_id, serial=task.camera.serial,
+        target_key=task.target_key, num_points=task.num_points,
+        num_frames=task.sequence.num_frames, width=task.camera.width, height=task.camera.height,
+        fps=task.sequence.fps, point_names=point_names(task.kind),
+        point_colors=point_colours(task.kind), skeleton=skeleton(task.kind),
+        highlight=task.highlight, status=task.status,
+    )
+
+
+def _page_url(params: dict[str, str]) -> str:
+    return f"{get_settings().public_url.rstrip('/')}/annotate/?{urlencode(params)}"
+
+
+# ----- admin -----------------------------------------------------------------------------
+
+@router.post("/sequences/{sequence_id}/tasks", response_model=list[TaskRead])
+def create_tasks(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> list[TaskRead]:
+    """One task per view and target; running it again creates only what is missing."""
+    tasks = service.create_tasks(session, get_storage(), sequence_id)
+    return [_task_read(service.get_task_or_raise(session, t.id)) for t in tasks]
+
+
+@router.get("/tasks", response_model=list[TaskRead])
+def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: int | None = None) -> list[TaskRead]:
+    return [_task_read(service.get_task_or_raise(session, t.id))
+            for t in service.list_tasks(session, sequence_id)]
+
+
+@router.put("/tasks/{task_id}/highlight", response_model=TaskRead)
+def set_highlight(task_id: int, body: HighlightUpdate, session: SessionDep,
+                  _: CurrentAdmin) -> TaskRead:
+    """Draw the object's box by hand (when its projected initial pose is missing or wrong)."""
+    task = service.set_highlight_box(session, service.get_task_or_raise(session, task_id), body.box)
+    return _task_read(task)
+
+
+@router.post("/tasks/{task_id}/assignments", response_model=AssignmentLink)
+def create_assignment(task_id: int, body: AssignmentCreate, session: SessionDep,
+                      _: CurrentAdmin) -> AssignmentLink:
+    """A direct assignment link for a named worker (outside any marketplace)."""
+    task = service.get_task_or_raise(session, task_id)
+    assignment = service.create_assignment(session, task, body.worker_id)
+    token = assignment_token(task, assignment)
+    url = _page_url({"token": token, "assignmentId": assignment.external_id,
+                     "workerId": assignment.worker_id})
+    return AssignmentLink(assignment_id=assignment.id, external_id=assignment.external_id,
+                          token=token, page_url=url)
+
+
+@router.post("/tasks/{task_id}/preview-token", response_model=PreviewLink)
+def create_preview_token(task_id: int, session: SessionDep, _: CurrentAdmin) -> PreviewLink:
+    task = service.get_task_or_raise(session, task_id)
+    token = task_token(task)
+    return PreviewLink(token=token,
+                       page_url=_page_url({"token": token, "assignmentId": PREVIEW_ASSIGNMENT_ID}))
+
+
+# ----- worker-facing ---------------------------------------------------------------------
+
+@router.post("/annotate/start", response_model=TokenRead)
+def start(body: StartRequest, session: SessionDep) -> TokenRead:
+    """Exchange a HIT's task token and the marketplace's ids for an assignment token."""
+    if body.assignment_id == PREVIEW_ASSIGNMENT_ID:
+        raise Unauthorized("the HIT is not accepted yet (preview)")
+    claims = verify_token(body.task_token, get_settings().secret_key, TASK_SCOPE)
+    task = service.get_task_or_raise(session, int(claims["task_id"]))
+    assignment = service.start_assignment(session, task, body.assignment_id, body.worker_id,
+                                          body.hit_id)
+    return TokenRead(token=assignment_token(task, assignment))
+
+
+@router.get("/annotate/task", response_model=AnnotateTaskRead)
+def read_task(request: Request, claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
+    task = service.get_task_or_raise(session, int(claims["task_id"]))
+    base = f"/api/sequences/{task.sequence_id}/views/{task.camera.serial}"
+    token = bearer_token(request)
+    frames = FramesLinks(bundle_url=f"{base}/frames.bin?token={token}",
+                         manifest_url=f"{base}/frames?token={token}")
+    if claims["scope"] == TASK_SCOPE:
+        return AnnotateTaskRead(mode="preview", task=_task_read(task), frames=frames,
+                                assignment=None)
+    assignment = _assignment_of(session, claims)
+    payload = service.tracks_payload(assignment)
+    read = AssignmentRead(
+        id=assignment.id, external_id=assignment.external_id, worker_id=assignment.worker_id,
+        status=assignment.status, version=assignment.version, edit_count=assignment.edit_count,
+        working_time_s=assignment.working_time_s,
+        tracks=TracksPayload.model_validate(payload) if payload else None,
+    )
+    mode = "edit" if assignment.status == "working" else "submitted"
+    return AnnotateTaskRead(mode=mode, task=_task_read(task), frames=frames, assignment=read)
+
+
+@router.put("/annotate/tracks", response_model=SaveResult, dependencies=[Depends(_limit_body)])
+def save_tracks(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
+    assignment = service.save_tracks(session, _assignment_of(session, claims), body)
+    return SaveResult(version=assignment.version, status=assignment.status)
+
+
+@router.post("/annotate/submit", response_model=SaveResult, dependencies=[Depends(_limit_body)])
+def submit(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
+    assignment = service.submit(session, _assignment_of(session, claims), body)
+    return SaveResult(version=assignment.version, status=assignment.status)

@@ -1,0 +1,112 @@
+"""API shapes of tasks, assignments and track saves."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+# A keyframe row: [frame, x, y, visible01]; x and y in image pixels or null when occluded.
+KeyframeRow = list[Any]
+# Generous bounds: a clip of up to 2000 frames, every frame keyed, 64 points.
+MAX_KEYFRAMES_PER_TRACK = 2000
+MAX_POINTS = 64
+MAX_SAVE_BYTES = 1_000_000
+
+
+class TrackIn(BaseModel):
+    point: int = Field(ge=0, lt=MAX_POINTS)
+    keyframes: list[KeyframeRow] = Field(max_length=MAX_KEYFRAMES_PER_TRACK)
+
+
+class TracksSave(BaseModel):
+    """A whole-assignment save: based on ``version``, replacing every track."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    version: int = Field(ge=0)
+    tracks: list[TrackIn] = Field(max_length=MAX_POINTS)
+    edit_count: int = Field(default=0, ge=0, le=10_000_000)
+    working_time_s: float = Field(default=0.0, ge=0, le=7 * 24 * 3600, allow_inf_nan=False)
+
+
+class SaveResult(BaseModel):
+    version: int
+    status: str
+
+
+class TaskRead(BaseModel):
+    id: int
+    kind: Literal["hand", "object"]
+    sequence_id: int
+    serial: str
+    target_key: str
+    num_points: int
+    num_frames: int
+    width: int
+    height: int
+    fps: float
+    point_names: list[str]
+    point_colors: list[str]
+    skeleton: list[list[int]]
+    highlight: dict[str, Any] | None
+    status: str
+
+
+class TracksPayload(BaseModel):
+    version: int
+    tracks: list[TrackIn]
+
+
+class AssignmentRead(BaseModel):
+    id: int
+    external_id: str
+    worker_id: str
+    status: str
+    version: int
+    edit_count: int
+    working_time_s: float
+    tracks: TracksPayload | None
+
+
+class FramesLinks(BaseModel):
+    bundle_url: str
+    manifest_url: str
+
+
+class AnnotateTaskRead(BaseModel):
+    mode: Literal["edit", "preview", "submitted"]
+    task: TaskRead
+    frames: FramesLinks
+    assignment: AssignmentRead | None
+
+
+class StartRequest(BaseModel):
+    task_token: str = Field(min_length=10)
+    assignment_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
+    hit_id: str | None = Field(default=None, max_length=64)
+    worker_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
+
+
+class TokenRead(BaseModel):
+    token: str
+
+
+class AssignmentCreate(BaseModel):
+    worker_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
+
+
+class AssignmentLink(BaseModel):
+    assignment_id: int
+    external_id: str
+    token: str
+    page_url: str
+
+
+class PreviewLink(BaseModel):
+    token: str
+    page_url: str
+
+
+class HighlightUpdate(BaseModel):
+    box: list[float] = Field(min_length=4, max_length=4, description="x0, y0, x1, y1 image px")

@@ -1,0 +1,209 @@
+"""Annotation rules: creating tasks, starting assignments, versioned track saves, submit.
+
+Services flush and never commit; the request is the unit of work.
+"""
+
+from __future__ import annotations
+
+import secrets
+from typing import Any
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session, selectinload
+
+from backend.annotation.highlight import object_highlight
+from backend.annotation.models import Assignment, Task, Track
+from backend.annotation.points import HAND_POINTS, OBJECT_POINTS, point_names
+from backend.annotation.schemas import TracksSave
+from backend.captures.models import Sequence
+from backend.captures.service import get_sequence_or_raise
+from backend.db import utcnow
+from backend.errors import Conflict, DexlabelError, Forbidden, NotFound
+from backend.storage import Storage
+from worker.tracks import completeness, validate_keyframes
+
+
+class InvalidTracks(DexlabelError):
+    status_code = 422
+    code = "invalid_tracks"
+
+
+class Incomplete(DexlabelError):
+    status_code = 422
+    code = "incomplete"
+
+
+class StaleVersion(Conflict):
+    code = "conflict"
+
+
+def create_tasks(session: Session, storage: Storage, sequence_id: int) -> list[Task]:
+    """One task per view and target (each hand, each object); existing ones are kept."""
+    seq = get_sequence_or_raise(session, sequence_id)
+    existing = {(t.camera_id, t.target_key): t for t in list_tasks(session, sequence_id)}
+    tasks = []
+    for camera in seq.cameras:
+        for hand in seq.hands:
+            key = f"hand:{hand.index}"
+            task = existing.get((camera.id, key)) or Task(
+                sequence_id=seq.id, camera_id=camera.id, kind="hand", target_key=key,
+                hand_id=hand.id, num_points=HAND_POINTS)
+            tasks.append(task)
+        for obj in seq.objects:
+            key = f"object:{obj.index}"
+            task = existing.get((camera.id, key))
+            if task is None:
+                task = Task(sequence_id=seq.id, camera_id=camera.id, kind="object",
+                            target_key=key, object_id=obj.id, num_points=OBJECT_POINTS,
+                            highlight=object_highlight(storage, obj, camera))
+            tasks.append(task)
+    session.add_all(tasks)
+    session.flush()
+    return tasks
+
+
+def list_tasks(session: Session, sequence_id: int | None = None) -> list[Task]:
+    stmt = select(Task).options(selectinload(Task.camera)).order_by(Task.id)
+    if sequence_id is not None:
+        stmt = stmt.where(Task.sequence_id == sequence_id)
+    return list(session.scalars(stmt))
+
+
+def get_task_or_raise(session: Session, task_id: int) -> Task:
+    stmt = (select(Task).where(Task.id == task_id)
+            .options(selectinload(Task.camera), selectinload(Task.sequence)))
+    task = session.scalars(stmt).one_or_none()
+    if task is None:
+        raise NotFound(f"task {task_id} does not exist")
+    return task
+
+
+def set_highlight_box(session: Session, task: Task, box: list[float]) -> Task:
+    x0, y0, x1, y1 = box
+    if task.kind != "object":
+        raise DexlabelError("only object tasks have a highlight")
+    if not (0 <= x0 < x1 <= task.camera.width and 0 <= y0 < y1 <= task.camera.height):
+        raise DexlabelError(
+            f"box must satisfy 0 <= x0 < x1 <= {task.camera.width} and "
+            f"0 <= y0 < y1 <= {task.camera.height}, got {box}")
+    task.highlight = {"box": [float(v) for v in box]}
+    session.flush()
+    return task
+
+
+def get_assignment_or_raise(session: Session, assignment_id: int) -> Assignment:
+    stmt = (select(Assignment).where(Assignment.id == assignment_id)
+            .options(selectinload(Assignment.tracks)))
+    assignment = session.scalars(stmt).one_or_none()
+    if assignment is None:
+        raise NotFound(f"assignment {assignment_id} does not exist")
+    return assignment
+
+
+def create_assignment(
+    session: Session, task: Task, worker_id: str, external_id: str | None = None,
+    hit_id: str | None = None,
+) -> Assignment:
+    assignment = Assignment(task_id=task.id, worker_id=worker_id, hit_id=hit_id,
+                            external_id=external_id or f"DX{secrets.token_hex(12).upper()}")
+    session.add(assignment)
+    session.flush()
+    return assignment
+
+
+def start_assignment(
+    session: Session, task: Task, external_id: str, worker_id: str, hit_id: str | None
+) -> Assignment:
+    """The assignment a marketplace handed to ``worker_id``: found again, or created once."""
+    stmt = select(Assignment).where(Assignment.external_id == external_id)
+    assignment = session.scalars(stmt).one_or_none()
+    if assignment is None:
+        return create_assignment(session, task, worker_id, external_id, hit_id)
+    if assignment.task_id != task.id or assignment.worker_id != worker_id:
+        raise Forbidden(f"assignment {external_id} belongs to another task or worker")
+    return assignment
+
+
+def tracks_payload(assignment: Assignment) -> dict[str, Any] | None:
+    if assignment.version == 0:
+        return None
+    return {"version": assignment.version,
+            "tracks": [{"point": t.point_index, "keyframes": t.keyframes}
+                       for t in assignment.tracks]}
+
+
+def _check_tracks(task: Task, body: TracksSave) -> list[list[list[Any]]]:
+    """Per point keyframe rows, validated against the task's clip and image; 422 otherwise."""
+    seq: Sequence = task.sequence
+    problems, by_point = [], {}
+    for track in body.tracks:
+        name = point_names(task.kind)[track.point] if track.point < task.num_points else None
+        if name is None:
+            problems.append(f"tracks: point {track.point} does not exist "
+                            f"(this task has points 0-{task.num_points - 1})")
+            continue
+        if track.point in by_point:
+            problems.append(f"tracks: point {track.point} ({name}) appears twice")
+            continue
+        issues = validate_keyframes(track.keyframes, seq.num_frames, task.camera.width,
+                                    task.camera.height)
+        problems.extend(f"{name}: {issue}" for issue in issues)
+        by_point[track.point] = [_compact(row) for row in track.keyframes]
+    if problems:
+        raise InvalidTracks("; ".join(problems[:20]), problems=problems)
+    return [by_point.get(p, []) for p in range(task.num_points)]
+
+
+def _compact(row: list[Any]) -> list[Any]:
+    frame, x, y, visible = row
+    return [int(frame), None if x is None else float(x), None if y is None else float(y),
+            1 if visible else 0]
+
+
+def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
+    """Replace the assignment's tracks if ``body.version`` is current; bump the version."""
+    if assignment.status != "working":
+        raise Conflict(f"assignment is {assignment.status}; its labels can no longer change")
+    task = get_task_or_raise(session, assignment.task_id)
+    rows = _check_tracks(task, body)
+    # Compare-and-set on the version: of two tabs saving from one version, one wins.
+    result = session.execute(
+        update(Assignment)
+        .where(Assignment.id == assignment.id, Assignment.version == body.version)
+        .values(version=Assignment.version + 1, edit_count=body.edit_count,
+                working_time_s=body.working_time_s, saved_at=utcnow())
+        .execution_options(synchronize_session=False)
+    )
+    if result.rowcount != 1:
+        session.refresh(assignment)
+        raise StaleVersion(
+            f"these labels were saved from version {body.version}, but the assignment is at "
+            f"version {assignment.version} (changed in another tab or window)",
+            current_version=assignment.version,
+        )
+    session.refresh(assignment)
+    existing = {t.point_index: t for t in assignment.tracks}
+    for point, keyframes in enumerate(rows):
+        track = existing.get(point)
+        if track is None:
+            assignment.tracks.append(Track(point_index=point, keyframes=keyframes))
+        else:
+            track.keyframes = keyframes
+    session.flush()
+    return assignment
+
+
+def submit(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
+    """Save, then accept the work only if every point is placed or occluded in every frame."""
+    save_tracks(session, assignment, body)
+    task = get_task_or_raise(session, assignment.task_id)
+    tracks = [t.keyframes for t in sorted(assignment.tracks, key=lambda t: t.point_index)]
+    report = completeness(tracks, task.sequence.num_frames, point_names(task.kind))
+    if not report["complete"]:
+        messages = [p["message"] for p in report["problems"]]
+        raise Incomplete("not ready to submit: " + "; ".join(messages[:10]),
+                         problems=report["problems"])
+    assignment.status = "submitted"
+    assignment.submitted_at = utcnow()
+    session.flush()
+    return assignment
