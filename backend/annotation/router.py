@@ -139,6 +139,25 @@ def create_preview_token(task_id: int, session: SessionDep, _: CurrentAdmin) -> 
                        page_url=_page_url({"token": token, "assignmentId": PREVIEW_ASSIGNMENT_ID}))
 
 
+@router.get("/assignments/{assignment_id}/dense")
+def dense_tracks(assignment_id: int, session: SessionDep, _: CurrentAdmin) -> dict[str, Any]:
+    """Every point of an assignment at every frame: x, y (image px, null where unplaced or
+    occluded without a position), visible, and state (keyframe / interpolated / unplaced)."""
+    from worker.tracks import dense_track
+
+    assignment = service.get_assignment_or_raise(session, assignment_id)
+    task = service.get_task_or_raise(session, assignment.task_id)
+    names = point_names(task.kind)
+    points = []
+    for track in assignment.tracks:
+        dense = dense_track(track.keyframes, task.sequence.num_frames)
+        xy = [[None if v != v else round(v, 4) for v in row] for row in dense.xy.tolist()]
+        points.append({"point": track.point_index, "name": names[track.point_index],
+                       "xy": xy, "visible": dense.visible.tolist(), "state": dense.state_names()})
+    return {"assignment_id": assignment.id, "version": assignment.version,
+            "num_frames": task.sequence.num_frames, "points": points}
+
+
 # ----- worker-facing ---------------------------------------------------------------------
 
 @router.post("/annotate/start", response_model=TokenRead)

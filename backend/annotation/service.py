@@ -20,7 +20,7 @@ from backend.captures.service import get_sequence_or_raise
 from backend.db import utcnow
 from backend.errors import Conflict, DexlabelError, Forbidden, NotFound
 from backend.storage import Storage
-from worker.tracks import completeness, validate_keyframes
+from worker.tracks import completeness, parse_keyframe, validate_keyframes
 
 
 class InvalidTracks(DexlabelError):
@@ -148,16 +148,16 @@ def _check_tracks(task: Task, body: TracksSave) -> list[list[list[Any]]]:
         issues = validate_keyframes(track.keyframes, seq.num_frames, task.camera.width,
                                     task.camera.height)
         problems.extend(f"{name}: {issue}" for issue in issues)
-        by_point[track.point] = [_compact(row) for row in track.keyframes]
+        if not issues:
+            by_point[track.point] = [_compact(row) for row in track.keyframes]
     if problems:
         raise InvalidTracks("; ".join(problems[:20]), problems=problems)
     return [by_point.get(p, []) for p in range(task.num_points)]
 
 
-def _compact(row: list[Any]) -> list[Any]:
-    frame, x, y, visible = row
-    return [int(frame), None if x is None else float(x), None if y is None else float(y),
-            1 if visible else 0]
+def _compact(row: Any) -> list[Any]:
+    kf = parse_keyframe(row)
+    return [kf.frame, kf.x, kf.y, 1 if kf.visible else 0]
 
 
 def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
