@@ -38,6 +38,22 @@ start_services() {
 }
 start_services
 
+# Browser tests drive Debian's Chromium (a test tool's own browser download is not used).
+if [ -z "${DEXLABEL_CHROMIUM:-}" ] && ! command -v chromium >/dev/null; then
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    echo "installing Debian's chromium for the browser tests"
+    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  fi
+fi
+
+# The page's pure core and its golden vectors, in Node's own test runner.
+if command -v node >/dev/null; then
+  node --test tests/js/
+elif [ "${CI:-}" = "true" ]; then
+  echo "node is required for the JavaScript tests" >&2
+  exit 1
+fi
+
 # In CI a missing PostgreSQL or Redis is a failure, not a skip.
 if [ "${CI:-}" = "true" ]; then
   export DEXLABEL_TEST_REQUIRE_SERVICES=1

@@ -1,38 +1,16 @@
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
-from backend.db import session_scope
-
-PASSWORD = "correct horse battery"
-
 
 @pytest.fixture
-def client(app_env: dict) -> Iterator[TestClient]:
-    from backend.accounts.service import create_admin
-    from backend.app import create_app
-
-    with session_scope() as s:
-        create_admin(s, "admin@example.org", PASSWORD)
-    with TestClient(create_app()) as c:
-        yield c
-
-
-@pytest.fixture
-def admin(client: TestClient) -> dict[str, str]:
-    resp = client.post("/api/auth/token", json={"email": "admin@example.org", "password": PASSWORD})
-    return {"Authorization": f"Bearer {resp.json()['access_token']}"}
-
-
-@pytest.fixture
-def tasks(client: TestClient, admin: dict, small_capture: Path) -> list[dict]:
+def tasks(client: TestClient, admin_headers: dict, small_capture: Path) -> list[dict]:
     seq_id = import_path(small_capture)[0].sequence_id
-    resp = client.post(f"/api/sequences/{seq_id}/tasks", headers=admin)
+    resp = client.post(f"/api/sequences/{seq_id}/tasks", headers=admin_headers)
     assert resp.status_code == 200, resp.text
     return resp.json()
 
@@ -54,7 +32,7 @@ def _full_tracks(num_points: int, num_frames: int) -> list[dict]:
 
 
 def test_tasks_are_one_per_view_and_target_and_creating_again_adds_none(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
     # 3 views x (1 hand + 2 objects)
     assert len(tasks) == 9
@@ -65,13 +43,13 @@ def test_tasks_are_one_per_view_and_target_and_creating_again_adds_none(
     objects = [t for t in tasks if t["kind"] == "object"]
     assert all(t["num_points"] == 2 for t in objects)
     assert any(t["highlight"] and len(t["highlight"]["polygon"]) >= 3 for t in objects)
-    again = client.post(f"/api/sequences/{tasks[0]['sequence_id']}/tasks", headers=admin).json()
+    again = client.post(f"/api/sequences/{tasks[0]['sequence_id']}/tasks", headers=admin_headers).json()
     assert sorted(t["id"] for t in again) == sorted(t["id"] for t in tasks)
 
 
-def test_save_then_read_back_with_versions(client: TestClient, admin: dict, tasks: list[dict]) -> None:
+def test_save_then_read_back_with_versions(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
     task = tasks[0]
-    link = _assign(client, admin, task["id"])
+    link = _assign(client, admin_headers, task["id"])
     page = client.get("/api/annotate/task", headers=_bearer(link["token"])).json()
     assert page["mode"] == "edit" and page["assignment"]["version"] == 0
     assert page["assignment"]["tracks"] is None
@@ -84,9 +62,9 @@ def test_save_then_read_back_with_versions(client: TestClient, admin: dict, task
 
 
 def test_a_stale_save_gets_409_and_changes_nothing(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+    link = _assign(client, admin_headers, tasks[0]["id"])
     first = {"version": 0, "tracks": _full_tracks(21, 6)}
     assert client.put("/api/annotate/tracks", json=first, headers=_bearer(link["token"])).status_code == 200
     stale = {"version": 0, "tracks": [{"point": 0, "keyframes": [[0, 1.0, 1.0, 1]]}]}
@@ -104,9 +82,9 @@ def test_a_stale_save_gets_409_and_changes_nothing(
     ([[0, 10.0, 20.0]], "expected"),
 ])
 def test_invalid_keyframes_are_refused_with_the_point_named_and_nothing_stored(
-    client: TestClient, admin: dict, tasks: list[dict], keyframes: list, problem: str
+    client: TestClient, admin_headers: dict, tasks: list[dict], keyframes: list, problem: str
 ) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+    link = _assign(client, admin_headers, tasks[0]["id"])
     body = {"version": 0, "tracks": [{"point": 8, "keyframes": keyframes}]}
     resp = client.put("/api/annotate/tracks", json=body, headers=_bearer(link["token"]))
     assert resp.status_code == 422, resp.text
@@ -115,8 +93,8 @@ def test_invalid_keyframes_are_refused_with_the_point_named_and_nothing_stored(
     assert page["assignment"]["version"] == 0
 
 
-def test_non_finite_coordinates_are_refused(client: TestClient, admin: dict, tasks: list[dict]) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+def test_non_finite_coordinates_are_refused(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+    link = _assign(client, admin_headers, tasks[0]["id"])
     raw = '{"version": 0, "tracks": [{"point": 0, "keyframes": [[0, NaN, 3.0, 1]]}]}'
     resp = client.put("/api/annotate/tracks", content=raw,
                       headers={**_bearer(link["token"]), "Content-Type": "application/json"})
@@ -124,17 +102,17 @@ def test_non_finite_coordinates_are_refused(client: TestClient, admin: dict, tas
 
 
 def test_a_point_the_task_does_not_have_is_refused(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
     obj = next(t for t in tasks if t["kind"] == "object")
-    link = _assign(client, admin, obj["id"])
+    link = _assign(client, admin_headers, obj["id"])
     body = {"version": 0, "tracks": _full_tracks(3, 6)}
     resp = client.put("/api/annotate/tracks", json=body, headers=_bearer(link["token"]))
     assert resp.status_code == 422 and "point 2 does not exist" in resp.json()["detail"]
 
 
-def test_oversized_payload_is_413(client: TestClient, admin: dict, tasks: list[dict]) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+def test_oversized_payload_is_413(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+    link = _assign(client, admin_headers, tasks[0]["id"])
     raw = '{"version": 0, "tracks": [], "pad": "' + "x" * 1_100_000 + '"}'
     resp = client.put("/api/annotate/tracks", content=raw,
                       headers={**_bearer(link["token"]), "Content-Type": "application/json"})
@@ -142,9 +120,9 @@ def test_oversized_payload_is_413(client: TestClient, admin: dict, tasks: list[d
 
 
 def test_submit_refuses_incomplete_work_frame_by_frame(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+    link = _assign(client, admin_headers, tasks[0]["id"])
     tracks = _full_tracks(21, 6)
     tracks[4]["keyframes"] = [[3, 50.0, 50.0, 1]]  # thumb_tip placed from frame 3 only
     resp = client.post("/api/annotate/submit", json={"version": 0, "tracks": tracks},
@@ -157,9 +135,9 @@ def test_submit_refuses_incomplete_work_frame_by_frame(
 
 
 def test_submit_accepts_complete_work_and_then_freezes_it(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+    link = _assign(client, admin_headers, tasks[0]["id"])
     tracks = _full_tracks(21, 6)
     tracks[7]["keyframes"] = [[0, 10.0, 20.0, 1], [2, None, None, 0], [4, 12.0, 22.0, 1]]
     resp = client.post("/api/annotate/submit", json={"version": 0, "tracks": tracks},
@@ -173,9 +151,9 @@ def test_submit_accepts_complete_work_and_then_freezes_it(
 
 
 def test_an_assignment_token_opens_nothing_else(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    mine = _assign(client, admin, tasks[0]["id"], "W1")
+    mine = _assign(client, admin_headers, tasks[0]["id"], "W1")
     other_task = next(t for t in tasks if t["serial"] != tasks[0]["serial"])
     bundle = f"/api/sequences/{other_task['sequence_id']}/views/{other_task['serial']}/frames.bin"
     assert client.get(f"{bundle}?token={mine['token']}").status_code == 403
@@ -184,16 +162,16 @@ def test_an_assignment_token_opens_nothing_else(
     assert client.get("/api/sequences", headers=_bearer(mine["token"])).status_code == 401
 
 
-def test_a_forged_token_is_refused(client: TestClient, admin: dict, tasks: list[dict]) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+def test_a_forged_token_is_refused(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+    link = _assign(client, admin_headers, tasks[0]["id"])
     raw, sig = link["token"].split(".")
     forged = raw[:-4] + ("AAAA" if raw[-4:] != "AAAA" else "BBBB") + "." + sig
     resp = client.get("/api/annotate/task", headers=_bearer(forged))
     assert resp.status_code == 401
 
 
-def test_preview_token_reads_but_cannot_save(client: TestClient, admin: dict, tasks: list[dict]) -> None:
-    preview = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin).json()
+def test_preview_token_reads_but_cannot_save(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+    preview = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin_headers).json()
     assert "ASSIGNMENT_ID_NOT_AVAILABLE" in preview["page_url"]
     page = client.get("/api/annotate/task", headers=_bearer(preview["token"])).json()
     assert page["mode"] == "preview" and page["assignment"] is None
@@ -203,9 +181,9 @@ def test_preview_token_reads_but_cannot_save(client: TestClient, admin: dict, ta
 
 
 def test_start_exchanges_a_task_token_once_per_assignment(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin).json()["token"]
+    task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin_headers).json()["token"]
     body = {"task_token": task_token, "assignment_id": "A1", "hit_id": "H1", "worker_id": "W9"}
     first = client.post("/api/annotate/start", json=body)
     assert first.status_code == 200
@@ -221,24 +199,24 @@ def test_start_exchanges_a_task_token_once_per_assignment(
 
 
 def test_admin_box_highlight_is_checked_against_the_image(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
     obj = next(t for t in tasks if t["kind"] == "object")
-    ok = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 100, 120]}, headers=admin)
+    ok = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 100, 120]}, headers=admin_headers)
     assert ok.status_code == 200 and ok.json()["highlight"] == {"box": [10.0, 20.0, 100.0, 120.0]}
-    bad = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 5000, 120]}, headers=admin)
+    bad = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 5000, 120]}, headers=admin_headers)
     assert bad.status_code == 400 and "box must satisfy" in bad.json()["detail"]
 
 
 def test_server_produces_the_dense_per_frame_track(
-    client: TestClient, admin: dict, tasks: list[dict]
+    client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    link = _assign(client, admin, tasks[0]["id"])
+    link = _assign(client, admin_headers, tasks[0]["id"])
     tracks = _full_tracks(21, 6)
     tracks[0]["keyframes"] = [[1, 10.0, 20.0, 1], [3, 20.0, 40.0, 0]]
     client.put("/api/annotate/tracks", json={"version": 0, "tracks": tracks},
                headers=_bearer(link["token"]))
-    dense = client.get(f"/api/assignments/{link['assignment_id']}/dense", headers=admin).json()
+    dense = client.get(f"/api/assignments/{link['assignment_id']}/dense", headers=admin_headers).json()
     wrist = dense["points"][0]
     assert wrist["state"] == ["unplaced", "keyframe", "interpolated", "keyframe",
                               "interpolated", "interpolated"]

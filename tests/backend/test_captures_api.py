@@ -1,6 +1,5 @@
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -8,29 +7,7 @@ from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
 from backend.captures.frames import parse_bundle
-from backend.db import session_scope
 from tests.backend import capture_edits as edit
-
-PASSWORD = "correct horse battery"
-
-
-@pytest.fixture
-def client(app_env: dict) -> Iterator[TestClient]:
-    from backend.accounts.service import create_admin
-    from backend.app import create_app
-
-    with session_scope() as s:
-        create_admin(s, "admin@example.org", PASSWORD)
-    with TestClient(create_app()) as c:
-        yield c
-
-
-@pytest.fixture
-def admin_headers(client: TestClient) -> dict[str, str]:
-    resp = client.post("/api/auth/token", json={"email": "admin@example.org", "password": PASSWORD})
-    assert resp.status_code == 200, resp.text
-    return {"Authorization": f"Bearer {resp.json()['access_token']}"}
-
 
 @pytest.fixture
 def imported(client: TestClient, small_capture: Path) -> dict:
