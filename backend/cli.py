@@ -161,6 +161,9 @@ def demo(
     typer.echo(f"admin login:     POST {base}/api/auth/token  email=demo@dexlabel.local "
                f"password={password}")
     typer.echo(f"first view:      {base}{_demo_view_url(seq.sequence_id)}")
+    annotate, preview = _demo_annotation_links(seq.sequence_id, base)
+    typer.echo(f"annotate (hand): {annotate}")
+    typer.echo(f"HIT preview:     {preview}")
     if serve_:
         typer.echo("serving; Ctrl+C stops")
         sys.stdout.flush()
@@ -176,6 +179,28 @@ def _demo_admin() -> str:
     with session_scope() as session:
         create(session, "demo@dexlabel.local", password, reset=True)
     return password
+
+
+def _demo_annotation_links(sequence_id: int, base: str) -> tuple[str, str]:
+    """Tasks for the demo sequence, and page links for the first hand task: a demo worker's
+    assignment, and the read-only preview a worker sees before accepting a HIT."""
+    from urllib.parse import urlencode
+
+    from backend.annotation import service
+    from backend.annotation.router import PREVIEW_ASSIGNMENT_ID, assignment_token, task_token
+    from backend.db import session_scope
+    from backend.storage import get_storage
+
+    with session_scope() as session:
+        tasks = service.create_tasks(session, get_storage(), sequence_id)
+        task = service.get_task_or_raise(session, next(t.id for t in tasks if t.kind == "hand"))
+        assignment = next((a for a in task.assignments if a.worker_id == "demo-worker"), None)
+        if assignment is None:
+            assignment = service.create_assignment(session, task, "demo-worker")
+        work = {"token": assignment_token(task, assignment),
+                "assignmentId": assignment.external_id, "workerId": assignment.worker_id}
+        look = {"token": task_token(task), "assignmentId": PREVIEW_ASSIGNMENT_ID}
+    return f"{base}/annotate/?{urlencode(work)}", f"{base}/annotate/?{urlencode(look)}"
 
 
 def _demo_view_url(sequence_id: int) -> str:
