@@ -234,8 +234,10 @@ def _read_camera(
         size_w, size_h = (int(v) for v in size.split("x"))
     except ValueError:
         size_w, size_h = 640, 480
-    width = int(color.get("width", size_w))
-    height = int(color.get("height", size_h))
+    width, height = (int(rd.numbers([color.get(k, default)], path, f"color.{k}", 1)[0])
+                     for k, default in (("width", size_w), ("height", size_h)))
+    if width <= 0 or height <= 0:
+        raise rd.fail(path, f"image size must be positive, got {width}x{height}")
     coeffs = color.get("coeffs", [0.0] * 5)
     dist = rd.numbers(coeffs, path, "color.coeffs", len(coeffs) if isinstance(coeffs, list) else 5)
     if len(dist) not in (4, 5, 8):
