@@ -1,0 +1,176 @@
+/**
+ * The worker-facing API of the annotation page.
+ *
+ * Identity is the signed assignment (or, in preview, task) token from the page URL, sent as a
+ * Bearer header. No cookies: the page runs inside a sandboxed MTurk iframe where third-party
+ * cookies are blocked.
+ */
+
+/** Marketplace placeholder for an assignment that has not been accepted yet (preview). */
+export const PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE";
+
+/** A save or read that the network never answered gets this long (ms) before it counts as lost. */
+const REQUEST_TIMEOUT_MS = 15000;
+
+/** An HTTP error answer; `status` is 0 when the network failed (offline, timeout). */
+export class ApiError extends Error {
+  /**
+   * @param {number} status  HTTP status, 0 for a network failure
+   * @param {{error?: string, detail?: string}} body  the server's JSON error, if any
+   */
+  constructor(status, body) {
+    const detail = body && body.detail ? body.detail : `request failed (${status || "network"})`;
+    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    this.status = status;
+    this.body = body || {};
+    this.code = this.body.error || (status === 0 ? "network" : "http");
+  }
+
+  /** True when retrying later may succeed (offline, timeout, server overloaded). */
+  get retryable() {
+    return this.status === 0 || this.status === 408 || this.status === 429 || this.status >= 500;
+  }
+}
+
+/**
+ * @typedef {Object} PageParams
+ * @property {string|null} token         assignment token (or task token in preview)
+ * @property {string|null} taskToken     task token of an MTurk-style link (?task=)
+ * @property {string|null} assignmentId
+ * @property {string|null} hitId
+ * @property {string|null} workerId
+ * @property {string|null} turkSubmitTo
+ * @property {boolean} preview           the HIT has not been accepted yet
+ */
+
+/**
+ * Reads the page's query string.
+ * @param {string} search  location.search
+ * @returns {PageParams}
+ */
+export function readPageParams(search) {
+  const q = new URLSearchParams(search);
+  const assignmentId = q.get("assignmentId");
+  return {
+    token: q.get("token"),
+    taskToken: q.get("task"),
+    assignmentId,
+    hitId: q.get("hitId"),
+    workerId: q.get("workerId"),
+    turkSubmitTo: q.get("turkSubmitTo"),
+    preview: assignmentId === PREVIEW_ASSIGNMENT_ID,
+  };
+}
+
+/**
+ * Runs fetch with a timeout; network failures become ApiError(0).
+ * @param {typeof fetch} fetchFn @param {string} url @param {RequestInit} init
+ */
+async function fetchOrNetworkError(fetchFn, url, init) {
+  const controller = new AbortController();
+  const timer = setTimeout(() => controller.abort(), REQUEST_TIMEOUT_MS);
+  try {
+    return await fetchFn(url, { ...init, signal: controller.signal });
+  } catch (err) {
+    throw new ApiError(0, { error: "network", detail: `network error: ${err.message || err}` });
+  } finally {
+    clearTimeout(timer);
+  }
+}
+
+export class AnnotateApi {
+  /**
+   * @param {string|null} token  bearer token
+   * @param {{fetchFn?: typeof fetch, base?: string}} [options]
+   */
+  constructor(token, { fetchFn, base = "" } = {}) {
+    this.token = token;
+    this.base = base;
+    this._fetch = fetchFn || ((...args) => fetch(...args));
+  }
+
+  /**
+   * JSON request; resolves to the parsed body, rejects with ApiError.
+   * @param {string} method @param {string} path @param {object} [body]
+   */
+  async request(method, path, body) {
+    const headers = { Accept: "application/json" };
+    if (this.token) headers.Authorization = `Bearer ${this.token}`;
+    if (body !== undefined) headers["Content-Type"] = "application/json";
+    const init = { method, headers, credentials: "omit", cache: "no-store" };
+    if (body !== undefined) init.body = JSON.stringify(body);
+    const resp = await fetchOrNetworkError(this._fetch, this.base + path, init);
+    let data = null;
+    try {
+      data = await resp.json();
+    } catch {
+      data = null;
+    }
+    if (!resp.ok) throw new ApiError(resp.status, data);
+    return data;
+  }
+
+  /**
+   * Exchanges an MTurk-style task link for an assignment token.
+   * @param {PageParams} params
+   * @returns {Promise<string>} the assignment token
+   */
+  async start(params) {
+    const data = await this.request("POST", "/api/annotate/start", {
+      task_token: params.taskToken,
+      assignment_id: params.assignmentId,
+      hit_id: params.hitId,
+      worker_id: params.workerId,
+    });
+    return data.token;
+  }
+
+  /** The task, its frames and the assignment's saved tracks. */
+  getTask() {
+    return this.request("GET", "/api/annotate/task");
+  }
+
+  /**
+   * Saves every track, based on `body.version`.
+   * @param {{version: number, tracks: object[], edit_count: number, working_time_s: number}} body
+   * @returns {Promise<{version: number}>}
+   */
+  saveTracks(body) {
+    return this.request("PUT", "/api/annotate/tracks", body);
+  }
+
+  /**
+   * Saves and submits (same body as saveTracks).
+   * @param {{version: number, tracks: object[], edit_count: number, working_time_s: number}} body
+   * @returns {Promise<{status: string, version: number}>}
+   */
+  submit(body) {
+    return this.request("POST", "/api/annotate/submit", body);
+  }
+}
+
+/**
+ * Posts the marketplace's completion form ({turkSubmitTo}/mturk/externalSubmit) from the page.
+ * The labels stay in our database; the marketplace only learns that the work is done.
+ * @param {Document} doc
+ * @param {string} turkSubmitTo
+ * @param {string} assignmentId
+ * @param {string} result
+ * @returns {HTMLFormElement} the form (already submitted)
+ */
+export function postExternalSubmit(doc, turkSubmitTo, assignmentId, result) {
+  const form = doc.createElement("form");
+  form.method = "POST";
+  form.action = `${turkSubmitTo.replace(/\/+$/, "")}/mturk/externalSubmit`;
+  form.hidden = true;
+  for (const [name, value] of [["assignmentId", assignmentId], ["result", result]]) {
+    const input = doc.createElement("input");
+    input.type = "hidden";
+    input.name = name;
+    input.value = value;
+    form.appendChild(input);
+  }
+  doc.body.appendChild(form);
+  form.submit();
+  return form;
+}

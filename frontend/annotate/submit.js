@@ -1,0 +1,159 @@
+/**
+ * Submitting: check the work (core completeness + suspicious), say what is missing frame by
+ * frame, and only then send it. Incomplete work cannot be submitted; suspicious work needs the
+ * worker to confirm. After the server accepts it, a marketplace HIT is completed by posting
+ * {turkSubmitTo}/mturk/externalSubmit.
+ */
+
+import { completeness, suspicious } from "./core/interpolate.js";
+import { displayName, escapeHtml } from "./instructions.js";
+
+/**
+ * @typedef {{from: number, to: number, points: number[]}} FrameProblem
+ *   consecutive frames [from, to] missing the same points
+ */
+
+/**
+ * Regroups per-point problems frame by frame: runs of consecutive frames with the same missing
+ * points become one line ("frames 30-71: Thumb TIP, Index PIP").
+ * @param {import("./core/interpolate.js").Problem[]} problems
+ * @param {number} numFrames
+ * @returns {FrameProblem[]}
+ */
+export function problemsByFrame(problems, numFrames) {
+  const missing = Array.from({ length: numFrames }, () => []);
+  for (const problem of problems) {
+    for (const [a, b] of problem.frames) {
+      for (let f = a; f <= b; f++) missing[f].push(problem.point);
+    }
+  }
+  /** @type {FrameProblem[]} */
+  const out = [];
+  missing.forEach((points, f) => {
+    if (points.length === 0) return;
+    const last = out[out.length - 1];
+    if (last && last.to === f - 1 && last.points.join() === points.join()) last.to = f;
+    else out.push({ from: f, to: f, points });
+  });
+  return out;
+}
+
+/**
+ * @param {import("./core/store.js").AnnotationStore} store
+ * @param {{num_frames: number, point_names: string[]}} task
+ */
+export function checkWork(store, task) {
+  const tracks = store.tracks();
+  const { complete, problems } = completeness(tracks, task.num_frames, task.point_names);
+  const warnings = suspicious(tracks, task.num_frames, task.point_names);
+  return { complete, problems, warnings, byFrame: problemsByFrame(problems, task.num_frames) };
+}
+
+/** @param {FrameProblem} p @param {string[]} names */
+function frameProblemText(p, names) {
+  const frames = p.from === p.to ? `Frame ${p.from}` : `Frames ${p.from}–${p.to}`;
+  const who = p.points.length === names.length
+    ? `all ${names.length} points`
+    : p.points.map((i) => displayName(names[i])).join(", ");
+  return `${frames}: ${who} not placed or marked occluded`;
+}
+
+/**
+ * @typedef {Object} SubmitContext
+ * @property {HTMLDialogElement} dialog
+ * @property {import("./core/store.js").AnnotationStore} store
+ * @property {import("./sync.js").AutoSaver} saver
+ * @property {import("./api.js").AnnotateApi} api
+ * @property {{num_frames: number, point_names: string[]}} task
+ * @property {(frame: number, point: number) => void} show   go to a problem
+ * @property {(resp: {version: number}) => void} onSubmitted
+ * @property {(err: Error) => void} onFatal   a conflict or refused token: stop editing
+ */
+
+/**
+ * Opens the submit dialog with the check results.
+ * @param {SubmitContext} ctx
+ */
+export function openSubmitDialog(ctx) {
+  const { dialog, task } = ctx;
+  const check = checkWork(ctx.store, task);
+  const problemList = dialog.querySelector(".submit-problems");
+  const warningList = dialog.querySelector(".submit-warnings");
+  const confirmBox = dialog.querySelector(".confirm-warnings input");
+  const button = dialog.querySelector(".submit-confirm");
+  dialog.querySelector(".submit-summary").textContent = check.complete
+    ? "Every point is placed or marked occluded in every frame."
+    : "Not ready yet: every frame of every point must be placed or marked occluded.";
+  problemList.innerHTML = check.byFrame.map((p, i) =>
+    `<li><button type="button" data-index="${i}">` +
+    `${escapeHtml(frameProblemText(p, task.point_names))}</button></li>`).join("");
+  problemList.onclick = (e) => {
+    const item = e.target instanceof Element ? e.target.closest("button[data-index]") : null;
+    if (!item) return;
+    const p = check.byFrame[Number(item.dataset.index)];
+    dialog.close();
+    ctx.show(p.from, p.points[0]);
+  };
+  warningList.innerHTML = check.warnings.map((w) =>
+    `<li>Please check: ${escapeHtml(w.message)}</li>`).join("");
+  confirmBox.checked = false;
+  confirmBox.closest("label").hidden = check.warnings.length === 0;
+  const update = () => {
+    button.disabled = !check.complete || (check.warnings.length > 0 && !confirmBox.checked);
+  };
+  confirmBox.onchange = update;
+  update();
+  setError(dialog, "");
+  button.onclick = () => submitNow(ctx);
+  dialog.showModal();
+}
+
+/** @param {HTMLDialogElement} dialog @param {string} message */
+function setError(dialog, message) {
+  const el = dialog.querySelector(".submit-error");
+  el.textContent = message;
+  el.hidden = !message;
+}
+
+/**
+ * Sends the submit: the same body as an autosave, after any save in flight has landed.
+ * @param {SubmitContext} ctx
+ */
+export async function submitNow(ctx) {
+  const { dialog, saver, store } = ctx;
+  const button = dialog.querySelector(".submit-confirm");
+  button.disabled = true;
+  setError(dialog, "");
+  await saver.hold();
+  try {
+    const resp = await ctx.api.submit(saver.body());
+    store.markSaved(resp.version, store.editCount);
+    saver.clearLocal();
+    saver.dispose();
+    dialog.close();
+    ctx.onSubmitted(resp);
+  } catch (err) {
+    handleSubmitError(ctx, err);
+  }
+}
+
+/** @param {SubmitContext} ctx @param {any} err */
+function handleSubmitError(ctx, err) {
+  const { dialog, saver } = ctx;
+  if (err.status === 409 || err.status === 401 || err.status === 403) {
+    dialog.close();
+    ctx.onFatal(err);
+    return;
+  }
+  saver.release();
+  dialog.querySelector(".submit-confirm").disabled = false;
+  if (err.status === 0) {
+    setError(dialog, "Could not reach the server. Your work is kept in this browser; " +
+      "try again when you are back online.");
+    return;
+  }
+  const problems = err.body && Array.isArray(err.body.problems) ? err.body.problems : [];
+  const lines = problems.map((p) => (typeof p === "string" ? p : p.message || JSON.stringify(p)));
+  setError(dialog, [`The server did not accept the submission: ${err.message}`, ...lines]
+    .join("\n"));
+}

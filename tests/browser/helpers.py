@@ -1,0 +1,107 @@
+"""Driving the annotation page like a worker: open, click and drag on image positions, read back.
+
+Image positions are converted to page coordinates by the page's own Transform, so clicks land
+where a worker's would at the current zoom.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from playwright.sync_api import Page, expect
+
+READY = "window.__dexlabel && (window.__dexlabel.ready || window.__dexlabel.error)"
+
+
+def open_task(page: Page, url: str) -> None:
+    """Opens the page and waits until every frame is loaded (or an error is shown)."""
+    page.goto(url)
+    page.wait_for_function(READY)
+
+
+def frames_shown(page: Page) -> bool:
+    """Every frame decoded, and the canvas shows the image (not the empty background)."""
+    return page.evaluate("""() => {
+      const { editor } = window.__dexlabel;
+      if (editor.bitmaps.filter(Boolean).length !== editor.numFrames) return false;
+      const r = editor.transform.imageRect(editor.task.width, editor.task.height);
+      const dpr = window.devicePixelRatio || 1;
+      const x = Math.max(0, r.x) + 4, y = Math.max(0, r.y) + 4;
+      const [red, green, blue] = editor.ctx.getImageData(x * dpr, y * dpr, 1, 1).data;
+      return !(red === 0x1b && green === 0x1f && blue === 0x24);
+    }""")
+
+
+def to_client(page: Page, x: float, y: float) -> tuple[float, float]:
+    pos = page.evaluate("([x, y]) => window.__dexlabel.imageToClient(x, y)", [x, y])
+    return pos["x"], pos["y"]
+
+
+def click_image(page: Page, x: float, y: float) -> None:
+    page.mouse.click(*to_client(page, x, y))
+
+
+def drag_image(page: Page, start: tuple[float, float], end: tuple[float, float]) -> None:
+    """Presses on ``start`` (image px), moves in steps to ``end``, releases."""
+    page.mouse.move(*to_client(page, *start))
+    page.mouse.down()
+    page.mouse.move(*to_client(page, *end), steps=6)
+    page.mouse.up()
+
+
+def zoom_at(page: Page, x: float, y: float, wheel_delta: float) -> None:
+    """Wheel over an image position (negative delta zooms in)."""
+    page.mouse.move(*to_client(page, x, y))
+    page.mouse.wheel(0, wheel_delta)
+
+
+def pan_to_centre(page: Page, x: float, y: float) -> None:
+    """Right-drags the image so that image position (x, y) sits in the middle of the canvas."""
+    box = page.locator("#view").bounding_box()
+    page.mouse.move(*to_client(page, x, y))
+    page.mouse.down(button="right")
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2, steps=5)
+    page.mouse.up(button="right")
+
+
+def goto_frame(page: Page, frame: int) -> None:
+    """Steps there with the keyboard (Shift+arrows by 10, arrows by 1)."""
+    current = page.evaluate("window.__dexlabel.editor.frame")
+    delta = frame - current
+    key = "ArrowRight" if delta > 0 else "ArrowLeft"
+    for _ in range(abs(delta) // 10):
+        page.keyboard.press(f"Shift+{key}")
+    for _ in range(abs(delta) % 10):
+        page.keyboard.press(key)
+    assert page.evaluate("window.__dexlabel.editor.frame") == frame
+
+
+def select_point(page: Page, point: int) -> None:
+    page.locator(f'.point-row[data-point="{point}"]').click()
+
+
+def point_states(page: Page) -> list[str]:
+    """Each point's state in the current frame, as the point list shows it."""
+    return page.eval_on_selector_all(".point-row", "rows => rows.map((r) => r.dataset.state)")
+
+
+def value_at(page: Page, point: int, frame: int) -> dict[str, Any]:
+    return page.evaluate("([p, f]) => window.__dexlabel.store.valueAt(p, f)", [point, frame])
+
+
+def wait_saved(page: Page) -> None:
+    expect(page.locator("#save-status")).to_have_text("All changes saved", timeout=10000)
+
+
+def server_keyframes(assignment: dict) -> dict[int, list[list]]:
+    """Keyframes per point as the server holds them (from GET /api/annotate/task)."""
+    tracks = assignment["tracks"]
+    return {t["point"]: t["keyframes"] for t in tracks["tracks"]} if tracks else {}
+
+
+def assert_rows_close(got: list[list], want: list[list], tol: float = 1.0) -> None:
+    """Keyframe rows equal, positions within ``tol`` image px (clicks land on whole screen px)."""
+    assert len(got) == len(want), (got, want)
+    for g, w in zip(got, want, strict=True):
+        assert g[0] == w[0] and g[3] == w[3], (got, want)
+        assert abs(g[1] - w[1]) <= tol and abs(g[2] - w[2]) <= tol, (got, want)
