@@ -40,7 +40,10 @@ class Task(TimestampMixin, Base):
 
     sequence: Mapped[Sequence] = relationship()
     camera: Mapped[Camera] = relationship()
-    assignments: Mapped[list[Assignment]] = relationship(back_populates="task")
+    # Module-qualified targets: other domains (the marketplace) have classes of the same name.
+    assignments: Mapped[list[Assignment]] = relationship(
+        "backend.annotation.models.Assignment", back_populates="task"
+    )
 
 
 class Assignment(TimestampMixin, Base):
@@ -67,9 +70,10 @@ class Assignment(TimestampMixin, Base):
     saved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     submitted_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
 
-    task: Mapped[Task] = relationship(back_populates="assignments")
+    task: Mapped[Task] = relationship("backend.annotation.models.Task", back_populates="assignments")
     tracks: Mapped[list[Track]] = relationship(
-        back_populates="assignment", cascade="all, delete-orphan", order_by="Track.point_index"
+        "backend.annotation.models.Track", back_populates="assignment",
+        cascade="all, delete-orphan", order_by="backend.annotation.models.Track.point_index",
     )
 
 
@@ -82,4 +86,6 @@ class Track(Base):
     point_index: Mapped[int] = mapped_column(Integer)
     keyframes: Mapped[list[list[Any]]] = mapped_column(JSON)
 
-    assignment: Mapped[Assignment] = relationship(back_populates="tracks")
+    assignment: Mapped[Assignment] = relationship(
+        "backend.annotation.models.Assignment", back_populates="tracks"
+    )
