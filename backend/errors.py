@@ -41,6 +41,11 @@ class Forbidden(DexlabelError):
     code = "forbidden"
 
 
+class PayloadTooLarge(DexlabelError):
+    status_code = 413
+    code = "payload_too_large"
+
+
 class InvalidCapture(DexlabelError):
     """A capture on disk is missing a file or has a malformed one; ``path`` names it."""
 

@@ -23,7 +23,7 @@ from backend.annotation.schemas import (
 )
 from backend.config import get_settings
 from backend.db import SessionDep
-from backend.errors import DexlabelError, Unauthorized
+from backend.errors import PayloadTooLarge, Unauthorized
 from backend.security import sign_token, verify_token
 from backend.storage import get_storage
 
@@ -33,11 +33,6 @@ TASK_SCOPE = "task"
 ASSIGNMENT_SCOPE = "assignment"
 TOKEN_TTL_S = 14 * 24 * 3600
 PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE"
-
-
-class PayloadTooLarge(DexlabelError):
-    status_code = 413
-    code = "payload_too_large"
 
 
 def task_token(task: Task) -> str:

@@ -15,7 +15,7 @@ from backend.captures.schemas import (
 )
 from backend.config import get_settings
 from backend.db import SessionDep
-from backend.errors import NotFound
+from backend.errors import NotFound, PayloadTooLarge
 from backend.security import sign_token
 from backend.storage import get_storage
 
@@ -109,6 +109,11 @@ def frames_bundle(sequence_id: int, serial: str, request: Request, session: Sess
     if request.headers.get("if-none-match") == etag:
         return Response(status_code=304, headers=headers)
     frames = service.list_frames(session, camera.id)
+    limit = get_settings().max_bundle_frames
+    if len(frames) > limit:
+        raise PayloadTooLarge(
+            f"view has {len(frames)} frames, more than one bundle serves ({limit}); "
+            "use the per-frame URLs of the manifest")
     data = build_bundle(get_storage(), camera, frames, etag)
     return Response(data, media_type=BUNDLE_MEDIA_TYPE, headers=headers)
 

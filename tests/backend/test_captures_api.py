@@ -112,3 +112,14 @@ def test_import_endpoint_reports_the_broken_file(
 def test_import_endpoint_needs_a_path(client: TestClient, admin_headers: dict) -> None:
     resp = client.post("/api/captures/import", json={}, headers=admin_headers)
     assert resp.status_code == 422 and resp.json()["fields"][0]["field"] == "path"
+
+
+def test_a_view_longer_than_the_bundle_limit_points_to_the_manifest(
+    client: TestClient, admin_headers: dict, imported: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from backend.config import get_settings
+
+    monkeypatch.setattr(get_settings(), "max_bundle_frames", 4)
+    resp = client.get(f"/api/sequences/{imported['id']}/views/{imported['serials'][0]}/frames.bin",
+                      headers=admin_headers)
+    assert resp.status_code == 413 and "manifest" in resp.json()["detail"]
