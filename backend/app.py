@@ -11,6 +11,7 @@ from backend.accounts.router import router as auth_router
 from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.errors import install_error_handlers
+from backend.market.router import router as market_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 
@@ -22,6 +23,7 @@ def create_app() -> FastAPI:
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)
+    app.include_router(market_router)
 
     @app.get("/healthz", tags=["ops"])
     def healthz() -> dict[str, str]:

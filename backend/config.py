@@ -7,6 +7,8 @@ PostgreSQL, Redis and S3 (see docker-compose.yml).
 
 from __future__ import annotations
 
+import re
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -16,6 +18,46 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 PLACEHOLDER_SECRETS = frozenset({"", "changeme", "change-me", "secret", "dev-secret-change-me"})
 DEV_SECRET = "dev-secret-change-me"
+# The built-in marketplace's requester key pair for local use only; `prod` refuses it.
+DEV_MARKET_ACCESS_KEY = "AKDEXLABELDEVREQUESTER"
+DEV_MARKET_REQUESTERS = f"{DEV_MARKET_ACCESS_KEY}:dexlabel-dev-requester-secret"
+_ACCESS_KEY_RE = re.compile(r"[A-Z0-9]{16,128}")
+_AMOUNT_RE = re.compile(r"[0-9]{1,10}(\.[0-9]{1,2})?")
+
+
+@dataclass(frozen=True)
+class MarketRequester:
+    """One requester account of the built-in marketplace: a SigV4 key pair and its funds."""
+
+    access_key: str
+    secret_key: str
+    start_balance_cents: int
+
+
+def _cents(amount: str) -> int:
+    if not _AMOUNT_RE.fullmatch(amount):
+        raise ValueError(f"{amount!r} is not a dollar amount like 100 or 100.00")
+    whole, _, frac = amount.partition(".")
+    return int(whole) * 100 + int(frac.ljust(2, "0"))
+
+
+def parse_market_requesters(spec: str, default_balance: str) -> dict[str, MarketRequester]:
+    """``"AKID:secret[:balance],..."`` as requesters keyed by access key id."""
+    requesters: dict[str, MarketRequester] = {}
+    for entry in filter(None, (part.strip() for part in spec.split(","))):
+        fields = entry.split(":")
+        if len(fields) not in (2, 3) or not fields[1]:
+            raise ValueError(
+                "DEXLABEL_MARKET_REQUESTERS entries are ACCESS_KEY:SECRET or "
+                "ACCESS_KEY:SECRET:BALANCE")
+        key = fields[0]
+        if not _ACCESS_KEY_RE.fullmatch(key):
+            raise ValueError(f"market access key {key!r} must be 16-128 characters A-Z and 0-9")
+        if key in requesters:
+            raise ValueError(f"market access key {key} is listed twice")
+        balance = _cents(fields[2] if len(fields) == 3 else default_balance)
+        requesters[key] = MarketRequester(key, fields[1], balance)
+    return requesters
 
 
 class Settings(BaseSettings):
@@ -39,6 +81,12 @@ class Settings(BaseSettings):
     worker_threads: int = Field(default=2, ge=1, le=64)
     # Upper bound on frames served in one per-view bundle (a DexYCB clip has 72).
     max_bundle_frames: int = Field(default=2000, ge=1)
+    # Requester accounts of the built-in MTurk-compatible marketplace: comma-separated
+    # ACCESS_KEY:SECRET[:STARTING_BALANCE]; each key pair is one requester account.
+    market_requesters: str = DEV_MARKET_REQUESTERS
+    market_start_balance: str = "10000.00"
+    # Check every marketplace response against botocore's output shape before sending it.
+    market_check_responses: bool = True
 
     @model_validator(mode="after")
     def _fill_defaults_and_check(self) -> Settings:
@@ -52,12 +100,23 @@ class Settings(BaseSettings):
             )
         if self.env == "prod" and len(self.secret_key) < 32:
             raise ValueError("DEXLABEL_SECRET_KEY must be at least 32 characters outside dev")
+        requesters = parse_market_requesters(self.market_requesters, self.market_start_balance)
+        if self.env == "prod":
+            if DEV_MARKET_ACCESS_KEY in requesters:
+                raise ValueError("DEXLABEL_MARKET_REQUESTERS holds the dev key pair; set real ones")
+            if any(len(r.secret_key) < 20 for r in requesters.values()):
+                raise ValueError("market secret keys must be at least 20 characters outside dev")
         return self
 
     @property
     def queue_path(self) -> Path:
         """SQLite file of the embedded job queue (used when REDIS_URL is unset)."""
         return self.var_dir / "queue.db"
+
+    @property
+    def market_requester_accounts(self) -> dict[str, MarketRequester]:
+        """The marketplace's requester accounts keyed by access key id."""
+        return parse_market_requesters(self.market_requesters, self.market_start_balance)
 
     @property
     def is_sqlite(self) -> bool:

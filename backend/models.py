@@ -4,5 +4,7 @@ from backend.accounts.models import Admin
 from backend.annotation.models import Assignment, Task, Track
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.db import Base
+from backend.market import models as market
 
-__all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject", "Sequence", "Subject"]
+__all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject",
+           "Sequence", "Subject", "market"]

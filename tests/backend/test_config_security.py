@@ -31,7 +31,28 @@ def test_prod_refuses_a_placeholder_or_short_secret(monkeypatch: pytest.MonkeyPa
 def test_prod_accepts_a_long_random_secret(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DEXLABEL_ENV", "prod")
     monkeypatch.setenv("DEXLABEL_SECRET_KEY", "x7" * 20)
+    monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", "AKIAPRODREQUESTER000:" + "s3" * 20)
     assert Settings().env == "prod"
+
+
+def test_prod_refuses_the_dev_market_key_pair(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DEXLABEL_ENV", "prod")
+    monkeypatch.setenv("DEXLABEL_SECRET_KEY", "x7" * 20)
+    monkeypatch.delenv("DEXLABEL_MARKET_REQUESTERS", raising=False)
+    with pytest.raises(ValidationError, match="dev key pair"):
+        Settings()
+
+
+def test_market_requesters_parse_with_optional_balances(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", "AKIAFIRSTREQUESTER00:one, "
+                                                     "AKIASECONDREQUESTER0:two:12.5")
+    accounts = Settings().market_requester_accounts
+    assert {key: (r.secret_key, r.start_balance_cents) for key, r in accounts.items()} == {
+        "AKIAFIRSTREQUESTER00": ("one", 1_000_000), "AKIASECONDREQUESTER0": ("two", 1250)}
+    for bad in ("AKIAFIRSTREQUESTER00", "short:secret", "AKIAFIRSTREQUESTER00:s:lots"):
+        monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", bad)
+        with pytest.raises(ValidationError):
+            Settings()
 
 
 def test_password_hash_verifies_only_the_right_password() -> None:
