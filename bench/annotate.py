@@ -26,14 +26,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 import urllib.request
 from pathlib import Path
+
+from _server import free_port, start_server
 
 CHROMIUM = os.environ.get("DEXLABEL_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -70,12 +69,6 @@ FILL_SCRIPT = """() => {
 }"""
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def _request(url: str, body: dict | None = None, token: str | None = None) -> dict | list:
     headers = {"Content-Type": "application/json"}
     if token:
@@ -85,19 +78,6 @@ def _request(url: str, body: dict | None = None, token: str | None = None) -> di
                                  method="POST" if data is not None else "GET")
     with urllib.request.urlopen(req) as resp:  # noqa: S310 - local server
         return json.loads(resp.read())
-
-
-def _wait_up(base: str, proc: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError("server exited during start-up")
-        try:
-            urllib.request.urlopen(f"{base}/healthz")  # noqa: S310
-            return
-        except OSError:
-            time.sleep(0.2)
-    raise RuntimeError("server did not start in 60 s")
 
 
 def _prepare(work: Path, frames: int, views: int) -> int:
@@ -190,7 +170,7 @@ def main() -> None:
     args = parser.parse_args()
 
     work = Path(tempfile.mkdtemp(prefix="dexlabel-bench-annotate-"))
-    port = _free_port()
+    port = free_port()
     base = f"http://127.0.0.1:{port}"
     os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
                        "DEXLABEL_INPROCESS_WORKER": "false", "DEXLABEL_PUBLIC_URL": base})
@@ -200,11 +180,8 @@ def main() -> None:
     sequence_id = _prepare(work, args.frames, args.views)
     prepare_s = time.perf_counter() - t0
 
-    server = subprocess.Popen([sys.executable, "-m", "backend.cli", "serve", "--port", str(port)],
-                              env=os.environ.copy(), stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+    server, _ = start_server(os.environ.copy(), port)
     try:
-        _wait_up(base, server)
         urls = _hand_task_urls(base, sequence_id)
         results = _measure(urls, args.steps)
     finally:

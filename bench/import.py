@@ -14,38 +14,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
-import subprocess
-import sys
 import tempfile
 import time
 import urllib.request
 from pathlib import Path
 
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+from _server import start_server
 
 
 def _get(url: str, token: str) -> bytes:
     req = urllib.request.Request(url, headers={"Authorization": f"Bearer {token}"})
     with urllib.request.urlopen(req) as resp:  # noqa: S310 - local server
         return resp.read()
-
-
-def _wait_up(base: str, proc: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError("server exited during start-up")
-        try:
-            urllib.request.urlopen(f"{base}/healthz")  # noqa: S310
-            return
-        except OSError:
-            time.sleep(0.2)
-    raise RuntimeError("server did not start in 60 s")
 
 
 def main() -> None:
@@ -78,13 +58,8 @@ def main() -> None:
     with session_scope() as s:
         create_admin(s, "bench@example.org", "bench-password-123")
 
-    port = _free_port()
-    base = f"http://127.0.0.1:{port}"
-    server = subprocess.Popen([sys.executable, "-m", "backend.cli", "serve", "--port", str(port)],
-                              env=os.environ.copy(), stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+    server, base = start_server(os.environ.copy())
     try:
-        _wait_up(base, server)
         body = json.dumps({"email": "bench@example.org", "password": "bench-password-123"}).encode()
         req = urllib.request.Request(f"{base}/api/auth/token", data=body,
                                      headers={"Content-Type": "application/json"})
