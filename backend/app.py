@@ -10,8 +10,10 @@ from fastapi.staticfiles import StaticFiles
 from backend.accounts.router import router as auth_router
 from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
+from backend.crowd.router import router as crowd_router
 from backend.errors import install_error_handlers
 from backend.market.router import router as market_router
+from backend.portal.router import router as portal_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 
@@ -23,7 +25,9 @@ def create_app() -> FastAPI:
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)
+    app.include_router(crowd_router)
     app.include_router(market_router)
+    app.include_router(portal_router)
 
     @app.get("/healthz", tags=["ops"])
     def healthz() -> dict[str, str]:

@@ -251,5 +251,88 @@ def tasks_create(
         _fail(exc)
 
 
+def _publish_options(  # type: ignore[no-untyped-def]
+    reward: str, assignments: int, allow_large_hits: bool, round_: int,
+    min_approval_rate: int | None, require_training: bool,
+):
+    from pydantic import ValidationError
+
+    from backend.crowd.schemas import PublishOptions
+
+    try:
+        return PublishOptions(reward=reward, max_assignments=assignments,
+                              allow_large_hits=allow_large_hits, round=round_,
+                              min_approval_rate=min_approval_rate,
+                              require_training=require_training)
+    except ValidationError as exc:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        _fail(DexlabelError(problems))
+
+
+@app.command()
+def publish(
+    sequence: Annotated[str | None, typer.Option(help="sequence id or SUBJECT/SEQUENCE")] = None,
+    dry_run: Annotated[bool, typer.Option(
+        "--dry-run", help="print the cost, publish nothing")] = False,
+    reward: Annotated[str, typer.Option(help="reward per assignment in US dollars")] = "0.50",
+    assignments: Annotated[int, typer.Option(min=1, help="assignments per HIT")] = 1,
+    allow_large_hits: Annotated[bool, typer.Option(
+        "--allow-large-hits",
+        help="allow 10+ assignments per HIT (MTurk fee 40%, not 20%)")] = False,
+    round_: Annotated[int, typer.Option("--round", min=1, help="publishing round")] = 1,
+    min_approval_rate: Annotated[int | None, typer.Option(min=0, max=100)] = 95,
+    require_training: Annotated[bool, typer.Option(
+        help="require our training qualification")] = False,
+) -> None:
+    """Publish one HIT per task not yet published in this round (safe to re-run)."""
+    from backend.config import get_settings
+    from backend.crowd import flows
+    from backend.crowd.client import make_client
+    from backend.db import session_scope
+
+    options = _publish_options(reward, assignments, allow_large_hits, round_, min_approval_rate,
+                               require_training)
+    try:
+        with session_scope() as session:
+            sequence_id = _resolve_sequence(session, sequence) if sequence else None
+            plan = flows.plan(session, options, sequence_id)
+        c = plan.cost
+        typer.echo(f"{c.hits} HITs x {c.assignments_per_hit} assignment(s) at ${c.reward} "
+                   f"(+ ${c.fee_per_assignment} fee each): rewards ${c.rewards} + fees ${c.fees}"
+                   f" = ${c.total}")
+        if dry_run:
+            typer.echo("dry run: nothing published")
+            return
+        result = flows.publish_each(make_client(get_settings()), options, sequence_id)
+        typer.echo(f"published: {result.created} created, {result.recovered} recovered, "
+                   f"{result.already_published} already published")
+    except DexlabelError as exc:
+        _fail(exc)
+
+
+crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.", no_args_is_help=True)
+app.add_typer(crowd_app, name="crowd")
+
+
+@crowd_app.command("sync")
+def crowd_sync() -> None:
+    """Collect submitted assignments and check them against the requester API's records."""
+    from backend.config import get_settings
+    from backend.crowd.client import make_client
+    from backend.crowd.sync import sync
+    from backend.db import session_scope
+
+    try:
+        with session_scope() as session:
+            result = sync(session, make_client(get_settings()))
+        typer.echo(f"{result.hits} HITs: {result.accepted} new submissions accepted, "
+                   f"{result.already_accepted} known, {len(result.mismatched)} refused "
+                   f"(HIT or worker mismatch), {len(result.unknown)} unknown")
+        for assignment_id in result.mismatched:
+            typer.echo(f"refused {assignment_id}: HIT or worker differs from our record")
+    except DexlabelError as exc:
+        _fail(exc)
+
+
 if __name__ == "__main__":
     app()

@@ -87,6 +87,15 @@ class Settings(BaseSettings):
     market_start_balance: str = "10000.00"
     # Check every marketplace response against botocore's output shape before sending it.
     market_check_responses: bool = True
+    # The requester side: the MTurk endpoint HITs are published to. Unset = the built-in
+    # marketplace at {PUBLIC_URL}/mturk; any other endpoint must be HTTPS.
+    mturk_endpoint_url: str | None = None
+    # Unset = the built-in marketplace's dev requester pair.
+    mturk_access_key_id: str | None = None
+    mturk_secret_access_key: str | None = None
+    # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
+    mturk_sandbox: bool = True
+    mturk_use_aws: bool = False
 
     @model_validator(mode="after")
     def _fill_defaults_and_check(self) -> Settings:

@@ -2,9 +2,11 @@
 
 from backend.accounts.models import Admin
 from backend.annotation.models import Assignment, Task, Track
+from backend.crowd import models as crowd
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.db import Base
 from backend.market import models as market
+from backend.portal import models as portal
 
 __all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject",
-           "Sequence", "Subject", "market"]
+           "Sequence", "Subject", "crowd", "market", "portal"]

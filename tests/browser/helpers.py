@@ -1,16 +1,24 @@
 """Driving the annotation page like a worker: open, click and drag on image positions, read back.
 
 Image positions are converted to page coordinates by the page's own Transform, so clicks land
-where a worker's would at the current zoom.
+where a worker's would at the current zoom. Every helper also takes the page's Frame when it is
+framed (as the worker portal frames it, like MTurk): positions are then offset by the iframe.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from playwright.sync_api import Page, expect
+from playwright.sync_api import Frame, Page, expect
+
+Target = Page | Frame
 
 READY = "window.__dexlabel && (window.__dexlabel.ready || window.__dexlabel.error)"
+
+
+def _page_of(target: Target) -> Page:
+    """The top-level page, whose mouse and keyboard reach into a framed annotation page."""
+    return target.page if isinstance(target, Frame) else target
 
 
 def open_task(page: Page, url: str) -> None:
@@ -32,47 +40,69 @@ def frames_shown(page: Page) -> bool:
     }""")
 
 
-def to_client(page: Page, x: float, y: float) -> tuple[float, float]:
+def to_client(page: Target, x: float, y: float) -> tuple[float, float]:
     pos = page.evaluate("([x, y]) => window.__dexlabel.imageToClient(x, y)", [x, y])
+    if isinstance(page, Frame) and page.parent_frame is not None:
+        box = page.frame_element().bounding_box()
+        assert box is not None
+        return box["x"] + pos["x"], box["y"] + pos["y"]
     return pos["x"], pos["y"]
 
 
-def click_image(page: Page, x: float, y: float) -> None:
-    page.mouse.click(*to_client(page, x, y))
+def click_image(page: Target, x: float, y: float) -> None:
+    _page_of(page).mouse.click(*to_client(page, x, y))
 
 
-def drag_image(page: Page, start: tuple[float, float], end: tuple[float, float]) -> None:
+def drag_image(page: Target, start: tuple[float, float], end: tuple[float, float]) -> None:
     """Presses on ``start`` (image px), moves in steps to ``end``, releases."""
-    page.mouse.move(*to_client(page, *start))
-    page.mouse.down()
-    page.mouse.move(*to_client(page, *end), steps=6)
-    page.mouse.up()
+    mouse = _page_of(page).mouse
+    mouse.move(*to_client(page, *start))
+    mouse.down()
+    mouse.move(*to_client(page, *end), steps=6)
+    mouse.up()
 
 
-def zoom_at(page: Page, x: float, y: float, wheel_delta: float) -> None:
+def zoom_at(page: Target, x: float, y: float, wheel_delta: float) -> None:
     """Wheel over an image position (negative delta zooms in)."""
-    page.mouse.move(*to_client(page, x, y))
-    page.mouse.wheel(0, wheel_delta)
+    mouse = _page_of(page).mouse
+    mouse.move(*to_client(page, x, y))
+    mouse.wheel(0, wheel_delta)
 
 
-def pan_to_centre(page: Page, x: float, y: float) -> None:
+def pan_to_centre(page: Target, x: float, y: float) -> None:
     """Right-drags the image so that image position (x, y) sits in the middle of the canvas."""
     box = page.locator("#view").bounding_box()
-    page.mouse.move(*to_client(page, x, y))
-    page.mouse.down(button="right")
-    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2, steps=5)
-    page.mouse.up(button="right")
+    mouse = _page_of(page).mouse
+    mouse.move(*to_client(page, x, y))
+    mouse.down(button="right")
+    mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2, steps=5)
+    mouse.up(button="right")
 
 
-def goto_frame(page: Page, frame: int) -> None:
+def zoom_on_points(page: Target, points) -> None:
+    """Centres the image on the mean of ``points`` (N x 2, image px) and zooms in on it."""
+    cx = sum(p[0] for p in points) / len(points)
+    cy = sum(p[1] for p in points) / len(points)
+    pan_to_centre(page, cx, cy)
+    zoom_at(page, cx, cy, -400)
+
+
+def place_joints(page: Target, joints, points) -> None:
+    """One click per point, in order; the page moves on to the next unplaced point itself."""
+    for p in points:
+        expect(page.locator(f'.point-row[data-point="{p}"]')).to_have_class("point-row active")
+        click_image(page, *joints[p])
+
+
+def goto_frame(page: Target, frame: int) -> None:
     """Steps there with the keyboard (Shift+arrows by 10, arrows by 1)."""
     current = page.evaluate("window.__dexlabel.editor.frame")
     delta = frame - current
     key = "ArrowRight" if delta > 0 else "ArrowLeft"
     for _ in range(abs(delta) // 10):
-        page.keyboard.press(f"Shift+{key}")
+        _page_of(page).keyboard.press(f"Shift+{key}")
     for _ in range(abs(delta) % 10):
-        page.keyboard.press(key)
+        _page_of(page).keyboard.press(key)
     assert page.evaluate("window.__dexlabel.editor.frame") == frame
 
 
@@ -80,7 +110,7 @@ def select_point(page: Page, point: int) -> None:
     page.locator(f'.point-row[data-point="{point}"]').click()
 
 
-def point_states(page: Page) -> list[str]:
+def point_states(page: Target) -> list[str]:
     """Each point's state in the current frame, as the point list shows it."""
     return page.eval_on_selector_all(".point-row", "rows => rows.map((r) => r.dataset.state)")
 
@@ -89,7 +119,7 @@ def value_at(page: Page, point: int, frame: int) -> dict[str, Any]:
     return page.evaluate("([p, f]) => window.__dexlabel.store.valueAt(p, f)", [point, frame])
 
 
-def wait_saved(page: Page) -> None:
+def wait_saved(page: Target) -> None:
     expect(page.locator("#save-status")).to_have_text("All changes saved", timeout=10000)
 
 

@@ -10,8 +10,8 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
-    assert_rows_close, click_image, drag_image, frames_shown, goto_frame, open_task, pan_to_centre,
-    point_states, select_point, server_keyframes, value_at, wait_saved, zoom_at,
+    assert_rows_close, click_image, drag_image, frames_shown, goto_frame, open_task, place_joints,
+    point_states, select_point, server_keyframes, value_at, wait_saved, zoom_on_points,
 )
 
 LAST = CLIP_FRAMES - 1
@@ -22,18 +22,7 @@ OCCLUDED_FROM, VISIBLE_AGAIN = 4, 8
 
 
 def _zoom_on_hand(page: Page, server: LiveServer, serial: str) -> None:
-    both = [*server.truth(serial, 0), *server.truth(serial, LAST)]
-    cx = sum(p[0] for p in both) / len(both)
-    cy = sum(p[1] for p in both) / len(both)
-    pan_to_centre(page, cx, cy)
-    zoom_at(page, cx, cy, -400)
-
-
-def _place_joints(page: Page, joints, points: range) -> None:
-    """First pass: one click per joint; the page moves on to the next unplaced point itself."""
-    for p in points:
-        expect(page.locator(f'.point-row[data-point="{p}"]')).to_have_class("point-row active")
-        click_image(page, *joints[p])
+    zoom_on_points(page, [*server.truth(serial, 0), *server.truth(serial, LAST)])
 
 
 def _first_keyframe_with_a_reload(page: Page, server: LiveServer, link: dict, first) -> None:
@@ -42,7 +31,7 @@ def _first_keyframe_with_a_reload(page: Page, server: LiveServer, link: dict, fi
     serial = server.worker_get_task(link["token"])["task"]["serial"]
     page.route("**/api/annotate/tracks", lambda route: route.abort())
     _zoom_on_hand(page, server, serial)
-    _place_joints(page, first, range(0, 10))
+    place_joints(page, first, range(0, 10))
     expect(page.locator("#save-status")).to_contain_text("not saved yet")
     page.reload()
     page.wait_for_function("window.__dexlabel.ready")
@@ -54,7 +43,7 @@ def _first_keyframe_with_a_reload(page: Page, server: LiveServer, link: dict, fi
     stored = server_keyframes(server.worker_get_task(link["token"])["assignment"])
     assert [len(stored[p]) for p in range(21)] == [1] * 10 + [0] * 11
     _zoom_on_hand(page, server, serial)
-    _place_joints(page, first, range(10, 21))
+    place_joints(page, first, range(10, 21))
     assert point_states(page) == ["keyframe"] * 21
 
 

@@ -1,0 +1,97 @@
+"""The requester's own records: published HITs, verified submissions, and the payment ledger.
+
+Amounts are integer US cents. The ledger is what makes re-runs safe: marketplace tokens expire
+after 24 hours, these rows do not.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import CheckConstraint, DateTime, ForeignKey, Integer, String, Text
+from sqlalchemy import UniqueConstraint
+from sqlalchemy.orm import Mapped, mapped_column
+
+from backend.db import Base, TimestampMixin
+
+
+class CrowdHit(TimestampMixin, Base):
+    """One task published in one round; ``hit_id`` is null until the marketplace answered."""
+
+    __tablename__ = "crowd_hits"
+    __table_args__ = (
+        UniqueConstraint("task_id", "round"),
+        CheckConstraint("round >= 1", name="round_positive"),
+        CheckConstraint("max_assignments >= 1", name="max_assignments_positive"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"))
+    round: Mapped[int] = mapped_column(Integer, default=1)
+    request_token: Mapped[str] = mapped_column(String(64), unique=True)
+    hit_id: Mapped[str | None] = mapped_column(String(64), unique=True)
+    max_assignments: Mapped[int] = mapped_column(Integer)
+    reward_cents: Mapped[int] = mapped_column(Integer)
+    expired_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+class CrowdSubmission(TimestampMixin, Base):
+    """A submission whose assignment, HIT and worker ids matched the requester API's record."""
+
+    __tablename__ = "crowd_submissions"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    assignment_id: Mapped[int] = mapped_column(
+        ForeignKey("assignments.id", ondelete="CASCADE"), unique=True)
+    hit_id: Mapped[str] = mapped_column(String(64))
+    worker_id: Mapped[str] = mapped_column(String(64))
+    market_status: Mapped[str] = mapped_column(String(16))
+
+
+class CrowdPayment(TimestampMixin, Base):
+    """One approval, rejection or bonus; approvals and rejections are one per assignment."""
+
+    __tablename__ = "crowd_payments"
+    __table_args__ = (
+        CheckConstraint("kind IN ('approval', 'rejection', 'bonus')", name="kind_valid"),
+        CheckConstraint("amount_cents >= 0 AND fee_cents >= 0", name="amounts_nonnegative"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    assignment_id: Mapped[int] = mapped_column(
+        ForeignKey("assignments.id", ondelete="CASCADE"), index=True)
+    worker_id: Mapped[str] = mapped_column(String(64), index=True)
+    # Deterministic: "approval-<assignment>", "rejection-<assignment>" or a bonus token.
+    request_token: Mapped[str] = mapped_column(String(64), unique=True)
+    amount_cents: Mapped[int] = mapped_column(Integer, default=0)
+    fee_cents: Mapped[int] = mapped_column(Integer, default=0)
+    feedback: Mapped[str | None] = mapped_column(Text)
+
+
+class CrowdQualification(TimestampMixin, Base):
+    """A qualification type we created on the marketplace, found again by name."""
+
+    __tablename__ = "crowd_qualifications"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(128), unique=True)
+    qualification_type_id: Mapped[str] = mapped_column(String(64), unique=True)
+
+
+class CrowdWorkerAction(TimestampMixin, Base):
+    """The current state of a per-worker action: a block, or a qualification grant."""
+
+    __tablename__ = "crowd_worker_actions"
+    __table_args__ = (
+        UniqueConstraint("worker_id", "kind", "target"),
+        CheckConstraint("kind IN ('block', 'qualification')", name="kind_valid"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    worker_id: Mapped[str] = mapped_column(String(64))
+    kind: Mapped[str] = mapped_column(String(16))
+    # The qualification type id of a grant; "" for a block.
+    target: Mapped[str] = mapped_column(String(64), default="")
+    value: Mapped[int | None] = mapped_column(Integer)
+    reason: Mapped[str | None] = mapped_column(Text)

@@ -1,0 +1,124 @@
+"""Requests and replies of the crowd endpoints; amounts in US dollars on the wire."""
+
+from __future__ import annotations
+
+from decimal import Decimal
+from typing import Annotated
+
+from pydantic import BaseModel, Field
+
+# MTurk's own bounds: lifetime 30 s to 1 year, assignment duration 30 s to 1 year,
+# auto-approval delay 0 to 30 days.
+Seconds = Annotated[int, Field(ge=30, le=31_536_000)]
+Dollars = Annotated[Decimal, Field(ge=0, le=1000, decimal_places=2)]
+Feedback = Annotated[str, Field(min_length=1, max_length=1024)]
+
+
+class PublishOptions(BaseModel):
+    """How tasks are published. Rewards in dollars, durations in seconds."""
+
+    reward: Dollars = Decimal("0.50")
+    max_assignments: int = Field(default=1, ge=1, le=1_000_000_000)
+    # 10+ assignments per HIT cost 20% more in fees: it must be asked for explicitly.
+    allow_large_hits: bool = False
+    round: int = Field(default=1, ge=1, le=1000)
+    lifetime_s: Seconds = 7 * 24 * 3600
+    assignment_duration_s: Seconds = 2 * 3600
+    auto_approval_delay_s: int = Field(default=3 * 24 * 3600, ge=0, le=2_592_000)
+    keywords: str = Field(default="hand, keypoints, tracking, video, annotation", max_length=1000)
+    frame_height: int = Field(default=900, ge=0, le=4000)
+    min_approval_rate: int | None = Field(default=95, ge=0, le=100)
+    locales: list[Annotated[str, Field(pattern=r"^[A-Z]{2}$")]] = Field(default_factory=list)
+    require_training: bool = False
+
+
+class PublishRequest(PublishOptions):
+    sequence_id: int | None = None
+    dry_run: bool = False
+
+
+class CostRead(BaseModel):
+    hits: int
+    assignments_per_hit: int
+    reward: str
+    fee_per_assignment: str
+    rewards: str
+    fees: str
+    total: str
+
+
+class PublishResult(BaseModel):
+    cost: CostRead
+    created: int = 0
+    recovered: int = 0
+    already_published: int = 0
+    hit_ids: list[str] = Field(default_factory=list)
+
+
+class SyncResult(BaseModel):
+    hits: int
+    accepted: int
+    already_accepted: int
+    mismatched: list[str]
+    unknown: list[str]
+
+
+class ApproveRequest(BaseModel):
+    feedback: Feedback | None = None
+
+
+class RejectRequest(BaseModel):
+    feedback: Feedback
+
+
+class BonusRequest(BaseModel):
+    amount: Annotated[Decimal, Field(gt=0, le=100, decimal_places=2)]
+    reason: Feedback
+    # Names this bonus among the assignment's bonuses: the same key never pays twice.
+    key: Annotated[str, Field(min_length=1, max_length=32, pattern=r"^[A-Za-z0-9_-]+$")] = "1"
+
+
+class PaymentRead(BaseModel):
+    kind: str
+    assignment_id: int
+    worker_id: str
+    amount: str
+    fee: str
+    already_done: bool = False
+
+
+class ExtendRequest(BaseModel):
+    seconds: Annotated[int, Field(ge=60, le=31_536_000)]
+
+
+class AddAssignmentsRequest(BaseModel):
+    count: Annotated[int, Field(ge=1, le=1_000_000_000)]
+    allow_large_hits: bool = False
+
+
+class QualificationRequest(BaseModel):
+    qualification_type_id: str | None = None  # unset: our "passed training" type
+    value: int = 1
+    notify: bool = False
+
+
+class NotifyRequest(BaseModel):
+    worker_ids: Annotated[list[str], Field(min_length=1, max_length=100)]
+    subject: Annotated[str, Field(min_length=1, max_length=200)]
+    message: Annotated[str, Field(min_length=1, max_length=4096)]
+
+
+class BlockRequest(BaseModel):
+    reason: Feedback
+
+
+class CostLine(BaseModel):
+    key: str
+    spent: str
+    committed: str
+
+
+class CostsRead(BaseModel):
+    total: CostLine
+    by_sequence: list[CostLine]
+    by_worker: list[CostLine]

@@ -1,0 +1,74 @@
+"""Collecting submissions from the marketplace and checking them against our assignments.
+
+A submission counts only when the requester API's record (ListAssignmentsForHIT) names the same
+HIT and worker as the annotation assignment our page opened for that AssignmentId: a worker
+cannot claim someone else's work by replaying an id.
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation.models import Assignment
+from backend.crowd.client import MTurkClient, paginate
+from backend.crowd.models import CrowdHit, CrowdSubmission
+from backend.crowd.schemas import SyncResult
+from backend.errors import Conflict
+
+COLLECTED_STATUSES = ["Submitted", "Approved", "Rejected"]
+
+
+def verified_submission(session: Session, assignment: Assignment) -> CrowdSubmission:
+    """The checked submission of ``assignment``, or a Conflict saying to sync first."""
+    row = session.scalar(select(CrowdSubmission).where(
+        CrowdSubmission.assignment_id == assignment.id))
+    if row is None:
+        raise Conflict(f"assignment {assignment.id} has no submission confirmed by the "
+                       "marketplace yet; run `dexlabel crowd sync` first")
+    return row
+
+
+def _accept(session: Session, ours: Assignment, record: dict) -> bool:
+    """Record a matching submission; False when it was already recorded."""
+    row = session.scalar(select(CrowdSubmission).where(
+        CrowdSubmission.assignment_id == ours.id))
+    if row is not None:
+        row.market_status = record["AssignmentStatus"]
+        return False
+    session.add(CrowdSubmission(assignment_id=ours.id, hit_id=record["HITId"],
+                                worker_id=record["WorkerId"],
+                                market_status=record["AssignmentStatus"]))
+    return True
+
+
+def _records(client: MTurkClient, hit_ids: list[str]) -> list[dict]:
+    return [record for hit_id in hit_ids
+            for record in paginate(client, "list_assignments_for_hit", "Assignments",
+                                   HITId=hit_id, AssignmentStatuses=COLLECTED_STATUSES)]
+
+
+def sync(session: Session, client: MTurkClient, hit_ids: list[str] | None = None) -> SyncResult:
+    """Collect the submitted, approved and rejected assignments of our published HITs.
+
+    All marketplace pages are read before anything is written (no transaction held open
+    across HTTP calls).
+    """
+    if hit_ids is None:
+        hit_ids = list(session.scalars(select(CrowdHit.hit_id).where(
+            CrowdHit.hit_id.is_not(None)).order_by(CrowdHit.id)))
+    result = SyncResult(hits=len(hit_ids), accepted=0, already_accepted=0, mismatched=[],
+                        unknown=[])
+    for record in _records(client, hit_ids):
+        market_id = record["AssignmentId"]
+        ours = session.scalar(select(Assignment).where(Assignment.external_id == market_id))
+        if ours is None:
+            result.unknown.append(market_id)
+        elif ours.hit_id != record["HITId"] or ours.worker_id != record["WorkerId"]:
+            result.mismatched.append(market_id)
+        elif _accept(session, ours, record):
+            result.accepted += 1
+        else:
+            result.already_accepted += 1
+    session.flush()
+    return result

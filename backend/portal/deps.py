@@ -1,0 +1,38 @@
+"""Portal authorisation: a worker's signed token of scope "portal", sent as a bearer header
+(never a cookie, like every token of the product)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from backend.accounts.deps import bearer_token
+from backend.config import get_settings
+from backend.db import SessionDep
+from backend.errors import Unauthorized
+from backend.portal.accounts import get_active_account
+from backend.portal.models import PortalAccount
+from backend.security import sign_token, verify_token
+
+PORTAL_SCOPE = "portal"
+PORTAL_TOKEN_TTL_S = 12 * 3600
+
+
+def portal_token(account: PortalAccount) -> str:
+    payload = {"scope": PORTAL_SCOPE, "sub": account.id, "worker_id": account.worker_id}
+    return sign_token(payload, get_settings().secret_key, PORTAL_TOKEN_TTL_S)
+
+
+def current_worker(request: Request, session: SessionDep) -> PortalAccount:
+    token = bearer_token(request)
+    if token is None:
+        raise Unauthorized("worker login required: send 'Authorization: Bearer <token>'")
+    payload = verify_token(token, get_settings().secret_key, PORTAL_SCOPE)
+    account = get_active_account(session, int(payload["sub"]))
+    if account.worker_id != payload.get("worker_id"):
+        raise Unauthorized("token does not belong to this worker account")
+    return account
+
+
+CurrentWorker = Annotated[PortalAccount, Depends(current_worker)]

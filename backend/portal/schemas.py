@@ -1,0 +1,88 @@
+"""Request and response shapes of the worker portal API. Money is a decimal string of USD
+("0.50"), as MTurk writes it."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from pydantic import BaseModel, Field
+
+
+class AccountCreate(BaseModel):
+    email: str = Field(min_length=3, max_length=320)
+    password: str = Field(min_length=1, max_length=1000)
+
+
+class Register(AccountCreate):
+    invite: str = Field(min_length=8, max_length=200)
+
+
+class Login(BaseModel):
+    email: str = Field(min_length=3, max_length=320)
+    password: str = Field(min_length=1, max_length=1000)
+
+
+class AccountRead(BaseModel):
+    id: int
+    email: str
+    worker_id: str
+
+
+class InviteCreate(BaseModel):
+    ttl_hours: int = Field(default=7 * 24, ge=1, le=90 * 24)
+
+
+class InviteRead(BaseModel):
+    invite: str
+    url: str
+    expires_at: datetime
+
+
+class TokenRead(BaseModel):
+    access_token: str
+    token_type: str = "bearer"
+    expires_in: int
+    worker_id: str
+
+
+class HitRead(BaseModel):
+    hit_id: str
+    title: str
+    description: str
+    keywords: str | None
+    reward: str
+    assignment_duration_s: int
+    available: int
+    expiration: datetime
+    can_accept: bool
+
+
+class HitPreview(HitRead):
+    preview_url: str | None
+    frame_height: int
+
+
+class AssignmentRead(BaseModel):
+    assignment_id: str
+    hit_id: str
+    title: str
+    status: str
+    reward: str
+    bonus: str
+    accept_time: datetime
+    deadline: datetime
+    submit_time: datetime | None
+    feedback: str | None
+    work_url: str | None
+    frame_height: int
+
+
+class EarningsRead(BaseModel):
+    paid: str
+    pending: str
+    bonuses: str
+
+
+class AssignmentsRead(BaseModel):
+    assignments: list[AssignmentRead]
+    earnings: EarningsRead
