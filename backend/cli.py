@@ -334,5 +334,35 @@ def crowd_sync() -> None:
         _fail(exc)
 
 
+
+@crowd_app.command("simulate")
+def crowd_simulate(
+    capture: Annotated[Path, typer.Option(help="synthetic capture with the ground truth")],
+    workers: Annotated[int, typer.Option(min=1, max=1000)] = 5,
+    profile: Annotated[str, typer.Option(
+        help="mixed, careful, sloppy, swapper, lazy, spammer or occluder")] = "mixed",
+    base: Annotated[str | None, typer.Option(help="the app's URL (default: PUBLIC_URL)")] = None,
+    admin_email: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_EMAIL")] = None,
+    admin_password: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_PASSWORD")] = None,
+    seed: Annotated[int, typer.Option(help="random seed of profiles and labels")] = 0,
+) -> None:
+    """Simulated workers accept, label and submit HITs through the portal, over HTTP."""
+    from backend.crowd.simulate import simulate
+
+    try:
+        if not admin_email or not admin_password:
+            raise DexlabelError("give --admin-email and --admin-password (an admin of the app)")
+        outcomes = simulate(base or get_settings().public_url, capture, workers, profile,
+                            admin_email, admin_password, seed)
+    except ValueError as exc:
+        _fail(DexlabelError(str(exc)))
+    except DexlabelError as exc:
+        _fail(exc)
+    for o in outcomes:
+        typer.echo(f"{o.worker_id} {o.profile:9s} {o.status:17s} HIT {o.hit_id or '-'} "
+                   f"assignment {o.assignment_id or '-'} task {o.task_id or '-'}")
+    done = sum(o.status == "submitted" for o in outcomes)
+    typer.echo(f"{done} of {len(outcomes)} simulated workers submitted")
+
 if __name__ == "__main__":
     app()

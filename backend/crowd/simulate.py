@@ -1,0 +1,199 @@
+"""A simulated crowd: workers who do exactly what a browser does, over HTTP, against a running app.
+
+Each worker gets a portal account (created through the admin API, or reused), signs in, lists
+the HITs, accepts one, opens the annotation page's assignment (``/api/annotate/start`` with the
+task token of the work URL), autosaves its tracks twice, submits them, and posts the
+marketplace's completion form to ``{turkSubmitTo}/mturk/externalSubmit``. The labels come from
+the ground truth of a synthetic capture (matched by the task's camera serial), spoiled by the
+worker's profile (worker.synth.annotators).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+import httpx
+import numpy as np
+import yaml
+
+from backend.errors import DexlabelError
+from worker.synth.annotators import annotate, draw_profiles, hand_visibility, object_landmarks
+
+WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
+WORKER_PASSWORD = "simulated worker {index:03d}"
+HTTP_TIMEOUT_S = 30.0
+
+
+class SimulationError(DexlabelError):
+    """A step of the worker flow answered with an error."""
+
+    status_code = 502
+    code = "simulation_failed"
+
+
+@dataclass
+class WorkerOutcome:
+    """What one simulated worker did: status is "submitted" or "no HIT available"."""
+
+    email: str
+    worker_id: str
+    profile: str
+    status: str
+    hit_id: str | None = None
+    assignment_id: str | None = None
+    task_id: int | None = None
+
+
+def _checked(resp: httpx.Response, step: str) -> Any:
+    if resp.status_code != 200:
+        raise SimulationError(f"{step}: HTTP {resp.status_code}: {resp.text[:300]}")
+    return resp.json() if "json" in resp.headers.get("content-type", "") else resp.text
+
+
+class CaptureTruth:
+    """Ground truth of a synthetic capture's views, read once per view (serial)."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+        self._views: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _folder(self, serial: str) -> Path:
+        found = sorted(p for p in self.root.glob(f"*/*/{serial}") if p.is_dir())
+        if not found:
+            raise SimulationError(f"the capture at {self.root} has no view {serial!r}")
+        return found[0]
+
+    def view(self, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 21, 2) joint_2d px and (F, H, W) seg of one view."""
+        if serial not in self._views:
+            folder = self._folder(serial)
+            joints, segs = [], []
+            for f in range(frames):
+                with np.load(folder / f"labels_{f:06d}.npz") as labels:
+                    joints.append(labels["joint_2d"][0].astype(np.float64))
+                    segs.append(labels["seg"])
+            self._views[serial] = (np.stack(joints), np.stack(segs))
+        return self._views[serial]
+
+    def object_value(self, serial: str, target_key: str) -> int:
+        """The seg value (YCB id) of the task's object, from the sequence's meta.yml."""
+        meta = yaml.safe_load((self._folder(serial).parent / "meta.yml").read_text())
+        return int(meta["ycb_ids"][int(target_key.split(":")[1])])
+
+    def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """The task's true points (F, P, 2) px and visibility (F, P)."""
+        joint_2d, seg = self.view(task["serial"], task["num_frames"])
+        if task["kind"] == "hand":
+            return joint_2d, hand_visibility(joint_2d, seg)
+        return object_landmarks(seg, self.object_value(task["serial"], task["target_key"]), rng)
+
+
+class WorkerClient:
+    """One simulated worker's HTTP session with the app at ``base``."""
+
+    def __init__(self, http: httpx.Client, base: str) -> None:
+        self.http = http
+        self.base = base.rstrip("/")
+
+    def sign_in(self, admin_token: str, email: str, password: str) -> tuple[str, str]:
+        """Create the account (or reuse it) and log in; (portal token, worker id)."""
+        resp = self.http.post(f"{self.base}/api/portal/workers",
+                              headers={"Authorization": f"Bearer {admin_token}"},
+                              json={"email": email, "password": password})
+        if resp.status_code != 409:
+            _checked(resp, f"create worker {email}")
+        reply = _checked(self.http.post(f"{self.base}/api/portal/login",
+                                        json={"email": email, "password": password}),
+                         f"log in {email}")
+        return reply["access_token"], reply["worker_id"]
+
+    def accept_first(self, token: str) -> dict | None:
+        """Accept the first HIT on offer; the portal's assignment reply, or None."""
+        auth = {"Authorization": f"Bearer {token}"}
+        hits = _checked(self.http.get(f"{self.base}/api/portal/hits", headers=auth), "list HITs")
+        for hit in hits:
+            resp = self.http.post(f"{self.base}/api/portal/hits/{hit['hit_id']}/accept",
+                                  headers=auth)
+            if resp.status_code == 200:
+                return resp.json()
+        return None
+
+    def open_page(self, work_url: str) -> tuple[dict[str, str], str, dict]:
+        """What the page does on load: (query parameters, assignment token, task reply)."""
+        params = {k: v[0] for k, v in parse_qs(urlsplit(work_url).query).items()}
+        started = _checked(self.http.post(f"{self.base}/api/annotate/start", json={
+            "task_token": params["task"], "assignment_id": params["assignmentId"],
+            "worker_id": params["workerId"], "hit_id": params.get("hitId")}), "start assignment")
+        token = started["token"]
+        task = _checked(self.http.get(f"{self.base}/api/annotate/task",
+                                      headers={"Authorization": f"Bearer {token}"}), "read task")
+        return params, token, task
+
+    def label(self, token: str, version: int, tracks: list[list[list[float | None]]]) -> int:
+        """Autosave half the points, then all of them, then submit; the final version."""
+        auth = {"Authorization": f"Bearer {token}"}
+        body = [{"point": p, "keyframes": rows} for p, rows in enumerate(tracks)]
+        for step, part in enumerate((body[: len(body) // 2 or 1], body)):
+            saved = _checked(self.http.put(f"{self.base}/api/annotate/tracks", headers=auth, json={
+                "version": version, "tracks": part, "edit_count": 10 * (step + 1),
+                "working_time_s": 60.0 * (step + 1)}), "autosave tracks")
+            version = saved["version"]
+        done = _checked(self.http.post(f"{self.base}/api/annotate/submit", headers=auth, json={
+            "version": version, "tracks": body, "edit_count": 25, "working_time_s": 150.0}),
+            "submit tracks")
+        return int(done["version"])
+
+    def external_submit(self, params: dict[str, str], version: int) -> None:
+        """The completion form the page posts to the marketplace."""
+        url = f"{params['turkSubmitTo'].rstrip('/')}/mturk/externalSubmit"
+        form = {"assignmentId": params["assignmentId"], "result": f"submitted:{version}"}
+        _checked(self.http.post(url, data=form), "post externalSubmit")
+
+
+def admin_token(http: httpx.Client, base: str, email: str, password: str) -> str:
+    reply = _checked(http.post(f"{base.rstrip('/')}/api/auth/token",
+                               json={"email": email, "password": password}), "admin log in")
+    return reply["access_token"]
+
+
+def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth: CaptureTruth,
+              rng: np.random.Generator) -> WorkerOutcome:
+    email = WORKER_EMAIL.format(index=index)
+    token, worker_id = client.sign_in(admin, email, WORKER_PASSWORD.format(index=index))
+    outcome = WorkerOutcome(email=email, worker_id=worker_id, profile=profile,
+                            status="no HIT available")
+    accepted = client.accept_first(token)
+    if accepted is None or not accepted.get("work_url"):
+        return outcome
+    params, page_token, reply = client.open_page(accepted["work_url"])
+    task = reply["task"]
+    xy, visible = truth.points(task, rng)
+    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)
+    version = client.label(page_token, reply["assignment"]["version"], work.tracks)
+    client.external_submit(params, version)
+    outcome.status, outcome.task_id = "submitted", task["id"]
+    outcome.hit_id, outcome.assignment_id = params.get("hitId"), params["assignmentId"]
+    return outcome
+
+
+def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: str,
+             admin_password: str, seed: int = 0) -> list[WorkerOutcome]:
+    """Run ``workers`` simulated workers one after another against the app at ``base``.
+
+    Worker i (from 1) is ``sim-worker-<i>`` with a deterministic password, so a re-run reuses
+    the same accounts; a worker already done with every HIT on offer reports "no HIT available".
+    """
+    rng = np.random.default_rng(seed)
+    profiles = draw_profiles(workers, profile, rng)
+    truth = CaptureTruth(capture)
+    try:
+        with httpx.Client(timeout=HTTP_TIMEOUT_S) as http:
+            admin = admin_token(http, base, admin_email, admin_password)
+            client = WorkerClient(http, base)
+            return [_work_one(client, admin, i + 1, name, truth, rng)
+                    for i, name in enumerate(profiles)]
+    except httpx.HTTPError as exc:
+        raise SimulationError(f"could not reach the app at {base}: {exc}") from exc

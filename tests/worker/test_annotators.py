@@ -1,0 +1,144 @@
+"""Simulated annotators: each profile's defining error, measured against a synthetic view."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worker.synth.annotators import (
+    LITTLE, PROFILES, RING, swap_window, annotate, draw_profiles, hand_visibility,
+    object_landmarks,
+)
+
+FRAMES, WIDTH, HEIGHT = 72, 640, 480
+SIZE = (WIDTH, HEIGHT)
+
+
+def _scene() -> tuple[np.ndarray, np.ndarray]:
+    """21 joints on a 5x5-ish grid moving 2 px right per frame, all visible: (F, 21, 2), (F, 21)."""
+    grid = np.stack(np.meshgrid(np.arange(5), np.arange(5)), -1).reshape(-1, 2)[:21] * 25.0
+    xy = grid[None] + np.array([150.0, 150.0]) + np.arange(FRAMES)[:, None, None] * [2.0, 0.0]
+    return xy, np.ones((FRAMES, 21), dtype=bool)
+
+
+def _rows(work) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(point index, frame, [x, y, visible]) of every keyframe row."""
+    points, frames, values = [], [], []
+    for p, rows in enumerate(work.tracks):
+        for f, x, y, v in rows:
+            points.append(p)
+            frames.append(f)
+            values.append([x, y, v])
+    return np.array(points), np.array(frames), np.array(values, dtype=float)
+
+
+def _errors(work, xy: np.ndarray) -> np.ndarray:
+    points, frames, values = _rows(work)
+    return np.linalg.norm(values[:, :2] - xy[frames, points], axis=1)
+
+
+# The median of |N(0, sigma^2 I_2)| is sigma * sqrt(2 ln 2) ~ 1.18 sigma.
+@pytest.mark.parametrize(("profile", "sigma"), [("careful", 2.0), ("sloppy", 8.0)])
+def test_noise_profiles_have_their_median_error(profile: str, sigma: float) -> None:
+    xy, vis = _scene()
+    errors = _errors(annotate(xy, vis, SIZE, profile, np.random.default_rng(1)), xy)
+    assert errors.size > 21 * 18
+    assert abs(np.median(errors) / np.sqrt(2 * np.log(2)) - sigma) < 0.2 * sigma
+
+
+def test_keyframes_every_fourth_frame_plus_last_inside_image() -> None:
+    xy, vis = _scene()
+    work = annotate(xy, vis, SIZE, "careful", np.random.default_rng(2))
+    assert len(work.tracks) == 21
+    assert [row[0] for row in work.tracks[0]] == [*range(0, FRAMES, 4), FRAMES - 1]
+    _, _, values = _rows(annotate(xy * 10, vis, SIZE, "sloppy", np.random.default_rng(2)))
+    assert values[:, 0].min() >= 0 and values[:, 0].max() < WIDTH
+    assert values[:, 1].min() >= 0 and values[:, 1].max() < HEIGHT
+
+
+def test_swapper_exchanges_ring_and_little_in_its_window_only() -> None:
+    xy, vis = _scene()
+    work = annotate(xy, vis, SIZE, "swapper", np.random.default_rng(3))
+    lo, hi = swap_window(FRAMES)
+    assert (lo, hi) == (20, 45)
+    points, frames, values = _rows(work)
+    inside = (frames >= lo) & (frames <= hi)
+    for ring, little in zip(RING, LITTLE, strict=True):
+        sel = (points == ring) & inside
+        assert sel.sum() >= 7
+        assert np.median(np.linalg.norm(values[sel, :2] - xy[frames[sel], little], axis=1)) < 4
+        out = (points == ring) & ~inside
+        assert np.median(np.linalg.norm(values[out, :2] - xy[frames[out], ring], axis=1)) < 4
+    wrist = points == 0
+    assert np.median(np.linalg.norm(values[wrist, :2] - xy[frames[wrist], 0], axis=1)) < 4
+
+
+def test_lazy_worker_copies_one_frame_so_nothing_moves() -> None:
+    xy, vis = _scene()
+    points, _, values = _rows(annotate(xy, vis, SIZE, "lazy", np.random.default_rng(4)))
+    for p in range(21):
+        assert np.ptp(values[points == p, :2], axis=0).max() == 0
+    assert np.ptp(xy[:, 0, 0]) > 100  # while the true hand moves
+
+
+def test_spammer_is_far_off() -> None:
+    xy, vis = _scene()
+    errors = _errors(annotate(xy, vis, SIZE, "spammer", np.random.default_rng(5)), xy)
+    assert np.median(errors) > 100
+
+
+def test_occluder_marks_visible_joints_occluded_over_long_spans() -> None:
+    xy, vis = _scene()
+    _, _, careful = _rows(annotate(xy, vis, SIZE, "careful", np.random.default_rng(6)))
+    assert careful[:, 2].min() == 1
+    work = annotate(xy, vis, SIZE, "occluder", np.random.default_rng(6))
+    for rows in work.tracks:
+        hidden = [f for f, _, _, v in rows if v == 0]
+        assert hidden and hidden[-1] - hidden[0] >= 0.5 * FRAMES
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_same_seed_same_tracks(profile: str) -> None:
+    xy, vis = _scene()
+    first = annotate(xy, vis, SIZE, profile, np.random.default_rng(7))
+    again = annotate(xy, vis, SIZE, profile, np.random.default_rng(7))
+    other = annotate(xy, vis, SIZE, profile, np.random.default_rng(8))
+    assert first == again and first.profile == profile
+    assert first.tracks != other.tracks
+
+
+def test_mixed_draws_half_careful_and_every_profile() -> None:
+    names = draw_profiles(2000, "mixed", np.random.default_rng(9))
+    assert set(names) == set(PROFILES)
+    assert abs(names.count("careful") / 2000 - 0.5) < 0.05
+    assert draw_profiles(3, "lazy", np.random.default_rng(0)) == ["lazy"] * 3
+    with pytest.raises(ValueError, match="unknown profile"):
+        draw_profiles(1, "perfect", np.random.default_rng(0))
+
+
+def test_visibility_hand_and_background_visible_object_covered() -> None:
+    seg = np.zeros((1, 40, 40), dtype=np.uint8)
+    seg[0, 0:20, 0:20] = 255
+    seg[0, 20:40, 20:40] = 7
+    joints = np.array([[[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [-5.0, 10.0]]])
+    assert hand_visibility(joints, seg).tolist() == [[True, True, False, False]]
+    with pytest.raises(ValueError, match=r"\(F, P, 2\)"):
+        hand_visibility(joints[0], seg)
+
+
+def test_object_landmarks_follow_the_silhouette() -> None:
+    seg = np.zeros((3, 60, 80), dtype=np.uint8)
+    for f in range(3):
+        seg[f, 10:30, 10 + 5 * f:30 + 5 * f] = 4
+    points, visible = object_landmarks(seg, 4, np.random.default_rng(0))
+    assert points.shape == (3, 2, 2) and visible.all()
+    assert np.allclose(points[2] - points[0], [[10.0, 0.0], [10.0, 0.0]])
+    assert seg[0, int(points[0, 0, 1]), int(points[0, 0, 0])] == 4
+
+
+def test_object_never_shown_is_marked_occluded_without_positions() -> None:
+    seg = np.zeros((5, 30, 40), dtype=np.uint8)
+    points, visible = object_landmarks(seg, 9, np.random.default_rng(0))
+    assert np.isnan(points).all() and not visible.any()
+    work = annotate(points, visible, (40, 30), "careful", np.random.default_rng(0))
+    assert work.tracks[0] == [[0, None, None, 0], [4, None, None, 0]]

@@ -1,0 +1,208 @@
+"""Simulated annotators: ground truth of one view turned into the keyframe tracks a person sends.
+
+Everything is in image pixels (x right, y down) of one camera view with F frames and P points
+(21 hand joints in DexYCB order, or 2 object landmarks). A worker's output is a list of P tracks,
+each a list of keyframe rows ``[frame, x, y, visible01]`` as the annotation page saves them
+(see worker.tracks): a keyframe every ``key_step`` frames plus the last frame, plus the frames
+where the worker's visibility or labelling changes, positions clamped inside the image.
+
+Profiles (what each worker does wrong):
+    careful   Gaussian noise, sigma 2 px.
+    sloppy    Gaussian noise, sigma 8 px.
+    swapper   exchanges the ring and little fingers (the two landmarks on objects) over the
+              frames 20/72 to 45/72 of the clip; careful elsewhere.
+    lazy      places every point once, on one frame, and copies it to all frames (no motion).
+    spammer   uniform random points anywhere in the image, all marked visible.
+    occluder  marks every point occluded over a long span (60% of the clip); careful elsewhere.
+
+``mixed`` draws profiles with MIXED_WEIGHTS: half careful, a tenth each of the others.
+Pure numpy; every random choice comes from the ``rng`` passed in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+
+from worker.dataset import HAND_SEG_VALUE
+
+Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder"]
+PROFILES: tuple[str, ...] = get_args(Profile)
+MIXED_WEIGHTS: dict[str, float] = {"careful": 0.5, "sloppy": 0.1, "swapper": 0.1, "lazy": 0.1,
+                                   "spammer": 0.1, "occluder": 0.1}
+CAREFUL_SIGMA_PX = 2.0
+SLOPPY_SIGMA_PX = 8.0
+# The swap window as a fraction of the clip: frames 20 to 45 of a 72-frame clip.
+SWAP_WINDOW = (20 / 72, 45 / 72)
+OCCLUDED_SPAN = 0.6
+KEY_STEP = 4
+RING = (13, 14, 15, 16)
+LITTLE = (17, 18, 19, 20)
+# Half-width (px) of the square around a point's rounded pixel searched for its own label: a
+# joint sits on the hand's surface, and the rendered silhouette edge may miss it by a pixel.
+VISIBILITY_RADIUS_PX = 2
+
+
+@dataclass(frozen=True)
+class SimulatedWork:
+    """One simulated worker's annotation of one view.
+
+    profile: the profile's name.
+    tracks: P lists of [frame, x, y, visible01] rows; x, y in image px, or None (no position).
+    """
+
+    profile: str
+    tracks: list[list[list[float | None]]]
+
+
+def draw_profiles(count: int, profile: str, rng: np.random.Generator) -> list[str]:
+    """``count`` profile names: all ``profile``, or drawn with MIXED_WEIGHTS for ``mixed``."""
+    if profile == "mixed":
+        names = list(MIXED_WEIGHTS)
+        weights = np.array([MIXED_WEIGHTS[n] for n in names])
+        return [names[i] for i in rng.choice(len(names), size=count, p=weights / weights.sum())]
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; one of {', '.join(PROFILES)} or mixed")
+    return [profile] * count
+
+
+def _labelled_near(seg: np.ndarray, points: np.ndarray, value: int) -> np.ndarray:
+    """(F, P) bool: inside the image and ``value`` within VISIBILITY_RADIUS_PX of the rounded
+    pixel (in the same frame). seg: (F, H, W) uint8; points: (F, P, 2) px."""
+    frames, height, width = seg.shape
+    pix = np.rint(points).astype(np.int64)
+    inside = ((pix[..., 0] >= 0) & (pix[..., 0] < width)
+              & (pix[..., 1] >= 0) & (pix[..., 1] < height))
+    found = np.zeros(inside.shape, dtype=bool)
+    f_idx = np.broadcast_to(np.arange(frames)[:, None], inside.shape)
+    r = VISIBILITY_RADIUS_PX
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            x = np.clip(pix[..., 0] + dx, 0, width - 1)
+            y = np.clip(pix[..., 1] + dy, 0, height - 1)
+            found |= seg[f_idx, y, x] == value
+    return inside & found
+
+
+def hand_visibility(joint_2d: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """(F, 21) bool: a joint is visible where it lies inside the image and either on the hand's
+    pixels or on background (not covered by an object). joint_2d: (F, 21, 2) px; seg: (F, H, W)
+    uint8 with HAND_SEG_VALUE on the hand, object ids elsewhere, 0 background."""
+    if joint_2d.ndim != 3 or joint_2d.shape[2] != 2 or seg.ndim != 3:
+        raise ValueError(f"expected joint_2d (F, P, 2) and seg (F, H, W), got {joint_2d.shape} "
+                         f"and {seg.shape}")
+    on_hand = _labelled_near(seg, joint_2d, HAND_SEG_VALUE)
+    on_background = _labelled_near(seg, joint_2d, 0)
+    return on_hand | on_background
+
+
+def object_landmarks(seg: np.ndarray, value: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Two landmarks on the object labelled ``value``, followed by its silhouette's centroid.
+
+    Two pixels of the object's mask in the first frame where it shows are moved, frame by frame,
+    by the shift of the mask's centroid (a cheap stand-in for the object's motion); where the
+    object does not show, the last centroid is kept. Returns (F, 2, 2) px and (F, 2) visibility
+    (the landmark's pixel still on the object). An object that never shows in this view gets
+    NaN positions, never visible (a person marks it occluded throughout).
+    """
+    frames = seg.shape[0]
+    centroids = np.full((frames, 2), np.nan)
+    for f in range(frames):
+        ys, xs = np.nonzero(seg[f] == value)
+        if xs.size:
+            centroids[f] = xs.mean(), ys.mean()
+    shown = np.flatnonzero(~np.isnan(centroids[:, 0]))
+    if shown.size == 0:
+        return np.full((frames, 2, 2), np.nan), np.zeros((frames, 2), dtype=bool)
+    first = int(shown[0])
+    ys, xs = np.nonzero(seg[first] == value)
+    picks = rng.choice(xs.size, size=2, replace=xs.size < 2)
+    start = np.stack([xs[picks], ys[picks]], axis=1).astype(np.float64)
+    for f in range(frames):  # carry the last known centroid over frames without the object
+        if np.isnan(centroids[f, 0]):
+            centroids[f] = centroids[f - 1] if f > 0 else centroids[first]
+    points = start[None] + (centroids - centroids[first])[:, None, :]
+    return points, _labelled_near(seg, points, value)
+
+
+def swap_window(frames: int) -> tuple[int, int]:
+    """First and last frame (inclusive) a swapper exchanges the fingers in a clip of F frames."""
+    return (min(frames - 1, round(SWAP_WINDOW[0] * frames)),
+            min(frames - 1, round(SWAP_WINDOW[1] * frames)))
+
+
+def _swap_pairs(points: int) -> tuple[list[int], list[int]]:
+    return (list(RING), list(LITTLE)) if points == 21 else ([0], [1])
+
+
+def _apply_profile(profile: str, xy: np.ndarray, vis: np.ndarray, size: tuple[int, int],
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, set[int]]:
+    """The worker's dense (F, P, 2) positions, (F, P) visibility and extra keyframes."""
+    frames, points = vis.shape
+    width, height = size
+    extra: set[int] = set()
+    if profile == "spammer":
+        scale = np.array([width - 1, height - 1], dtype=np.float64)
+        return rng.uniform(0, 1, (frames, points, 2)) * scale, np.ones_like(vis), extra
+    sigma = SLOPPY_SIGMA_PX if profile == "sloppy" else CAREFUL_SIGMA_PX
+    xy, vis = xy.copy(), vis.copy()
+    if profile == "swapper":
+        lo, hi = swap_window(frames)
+        a, b = _swap_pairs(points)
+        xy[lo:hi + 1, a + b] = xy[lo:hi + 1, b + a]
+        vis[lo:hi + 1, a + b] = vis[lo:hi + 1, b + a]
+        extra |= {lo, hi} | ({hi + 1} if hi + 1 < frames else set())
+    elif profile == "lazy":
+        frame = int(rng.integers(frames))
+        xy[:], vis[:] = xy[frame], vis[frame]
+        return xy + rng.normal(0, sigma, (1, points, 2)), vis, extra
+    elif profile == "occluder":
+        span = max(1, round(OCCLUDED_SPAN * frames))
+        for p in range(points):
+            start = int(rng.integers(frames - span + 1))
+            vis[start:start + span, p] = False
+    return xy + rng.normal(0, sigma, xy.shape), vis, extra
+
+
+def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
+                     extra: Iterable[int] = ()) -> list[int]:
+    """Frames a person keys for one point: every ``key_step``-th, the last, each change of
+    visibility (visible: (F,) bool) and ``extra``."""
+    keys = set(range(0, frames, key_step)) | {frames - 1} | set(extra)
+    keys |= {int(f) for f in np.flatnonzero(visible[1:] != visible[:-1]) + 1}
+    return sorted(k for k in keys if 0 <= k < frames)
+
+
+def _position(xy: np.ndarray) -> list[float | None]:
+    if not np.isfinite(xy).all():
+        return [None, None]
+    return [round(float(xy[0]), 2), round(float(xy[1]), 2)]
+
+
+def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile: str,
+             rng: np.random.Generator, key_step: int = KEY_STEP) -> SimulatedWork:
+    """One simulated worker's tracks for one view.
+
+    xy: (F, P, 2) true positions, image px (NaN where unknown: such keyframes carry no
+    position); visible: (F, P) bool; size: (width, height) px.
+    """
+    if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
+        raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
+                         f"{visible.shape}")
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; one of {', '.join(PROFILES)}")
+    width, height = size
+    noisy, vis, extra = _apply_profile(profile, np.asarray(xy, np.float64),
+                                       np.asarray(visible, bool), size, rng)
+    # Strictly inside the image: the page and the server accept 0 <= x < width.
+    noisy[..., 0] = np.clip(noisy[..., 0], 0.0, width - 1.0)
+    noisy[..., 1] = np.clip(noisy[..., 1], 0.0, height - 1.0)
+    tracks = []
+    for p in range(xy.shape[1]):
+        keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
+        tracks.append([[f, *_position(noisy[f, p]), int(vis[f, p])] for f in keys])
+    return SimulatedWork(profile=profile, tracks=tracks)
