@@ -115,6 +115,10 @@ class WorkerClient:
         auth = {"Authorization": f"Bearer {token}"}
         hits = _checked(self.http.get(f"{self.base}/api/portal/hits", headers=auth), "list HITs")
         for hit in hits:
+            # Only HITs that open our annotation page with a task token can be worked here.
+            preview = self.http.get(f"{self.base}/api/portal/hits/{hit['hit_id']}", headers=auth)
+            if preview.status_code != 200 or "task=" not in (preview.json().get("preview_url") or ""):
+                continue
             resp = self.http.post(f"{self.base}/api/portal/hits/{hit['hit_id']}/accept",
                                   headers=auth)
             if resp.status_code == 200:
