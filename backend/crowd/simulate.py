@@ -117,7 +117,8 @@ class WorkerClient:
         for hit in hits:
             # Only HITs that open our annotation page with a task token can be worked here.
             preview = self.http.get(f"{self.base}/api/portal/hits/{hit['hit_id']}", headers=auth)
-            if preview.status_code != 200 or "task=" not in (preview.json().get("preview_url") or ""):
+            url = preview.json().get("preview_url") if preview.status_code == 200 else None
+            if "task=" not in (url or ""):
                 continue
             resp = self.http.post(f"{self.base}/api/portal/hits/{hit['hit_id']}/accept",
                                   headers=auth)

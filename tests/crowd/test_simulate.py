@@ -85,3 +85,23 @@ def test_cli_simulate_labels_hand_and_object_tasks(crowd_url: str, small_capture
                                    "--profile", "perfect", "--admin-email", ADMIN_EMAIL,
                                    "--admin-password", ADMIN_PASSWORD])
     assert bad.exit_code == 2 and "unknown profile" in bad.output
+
+
+def test_simulated_workers_leave_hits_that_do_not_open_the_annotation_page(
+    crowd_url: str, small_capture: Path
+) -> None:
+    """A HIT someone published by hand (no task token in its URL) is neither accepted nor broken."""
+    requester = boto3_client(crowd_url, (DEV_MARKET_ACCESS_KEY,
+                                         DEV_MARKET_REQUESTERS.split(":")[1]))
+    question = (
+        '<ExternalQuestion xmlns="http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/'
+        f'2006-07-14/ExternalQuestion.xsd"><ExternalURL>{crowd_url}/annotate/</ExternalURL>'
+        "<FrameHeight>800</FrameHeight></ExternalQuestion>")
+    foreign = requester.create_hit(
+        Title="A survey", Description="not ours", Reward="0.10", LifetimeInSeconds=3600,
+        AssignmentDurationInSeconds=600, Question=question, MaxAssignments=1)["HIT"]["HITId"]
+    hit_ids = _publish_tasks(small_capture)
+    outcomes = simulate(crowd_url, small_capture, 3, "careful", ADMIN_EMAIL, ADMIN_PASSWORD)
+    assert [o.status for o in outcomes] == ["submitted"] * 3
+    assert sorted(o.hit_id for o in outcomes) == sorted(hit_ids)
+    assert requester.list_assignments_for_hit(HITId=foreign)["Assignments"] == []
