@@ -52,8 +52,9 @@ def sign_token(payload: dict[str, Any], secret: str, ttl_s: int) -> str:
     return f"{raw}.{_b64(sig)}"
 
 
-def verify_token(token: str, secret: str, scope: str) -> dict[str, Any]:
-    """The payload of a valid, unexpired token of ``scope``; Unauthorized otherwise."""
+def verify_token(token: str, secret: str, scope: str | tuple[str, ...]) -> dict[str, Any]:
+    """The payload of a valid, unexpired token of ``scope`` (or of one of several scopes);
+    Unauthorized otherwise."""
     try:
         raw, sig = token.split(".")
         expected = hmac.new(secret.encode(), raw.encode(), hashlib.sha256).digest()
@@ -62,8 +63,9 @@ def verify_token(token: str, secret: str, scope: str) -> dict[str, Any]:
         payload = json.loads(_unb64(raw))
     except (ValueError, json.JSONDecodeError):
         raise Unauthorized("token is malformed or its signature does not match") from None
-    if payload.get("scope") != scope:
-        raise Unauthorized(f"token is not valid for {scope}")
+    scopes = (scope,) if isinstance(scope, str) else scope
+    if payload.get("scope") not in scopes:
+        raise Unauthorized(f"token is not valid for {' or '.join(scopes)}")
     if payload.get("exp", 0) < time.time():
         raise Unauthorized("token has expired")
     return payload

@@ -51,14 +51,4 @@ def require_view_access(request: Request, session: SessionDep, sequence_id: int,
 
 def _frame_token(token: str) -> dict:
     """The payload of a token that may read one view's frames: view, task or assignment."""
-    secret = get_settings().secret_key
-    last: Unauthorized | None = None
-    for scope in FRAME_SCOPES:
-        try:
-            return verify_token(token, secret, scope)
-        except Unauthorized as exc:
-            if "not valid for" not in exc.detail:
-                raise
-            last = exc
-    assert last is not None
-    raise last
+    return verify_token(token, get_settings().secret_key, FRAME_SCOPES)

@@ -51,13 +51,7 @@ def _worker_claims(request: Request) -> dict[str, Any]:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")
-    secret = get_settings().secret_key
-    try:
-        return verify_token(token, secret, ASSIGNMENT_SCOPE)
-    except Unauthorized as exc:
-        if "not valid for" not in exc.detail:
-            raise
-    return verify_token(token, secret, TASK_SCOPE)
+    return verify_token(token, get_settings().secret_key, (ASSIGNMENT_SCOPE, TASK_SCOPE))
 
 
 WorkerClaims = Annotated[dict[str, Any], Depends(_worker_claims)]
