@@ -2,11 +2,28 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.request
+from pathlib import Path
+
+
+def isolated_workdir(name: str, **settings: str) -> Path:
+    """A new temp folder holding this run's embedded database, queue and storage.
+
+    Points this process's DEXLABEL_* environment at it (dropping any database, Redis or storage
+    URL set outside), so the benchmark and the server it starts measure a fresh embedded setup.
+    """
+    work = Path(tempfile.mkdtemp(prefix=f"dexlabel-bench-{name}-"))
+    os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
+                       "DEXLABEL_INPROCESS_WORKER": "false", **settings})
+    for key in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_URL"):
+        os.environ.pop(key, None)
+    return work
 
 
 def free_port() -> int:

@@ -27,12 +27,11 @@ import argparse
 import json
 import os
 import statistics
-import tempfile
 import time
 import urllib.request
 from pathlib import Path
 
-from _server import free_port, start_server
+from _server import free_port, isolated_workdir, start_server
 
 CHROMIUM = os.environ.get("DEXLABEL_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -169,13 +168,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200)
     args = parser.parse_args()
 
-    work = Path(tempfile.mkdtemp(prefix="dexlabel-bench-annotate-"))
     port = free_port()
     base = f"http://127.0.0.1:{port}"
-    os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
-                       "DEXLABEL_INPROCESS_WORKER": "false", "DEXLABEL_PUBLIC_URL": base})
-    for name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_URL"):
-        os.environ.pop(name, None)
+    work = isolated_workdir("annotate", DEXLABEL_PUBLIC_URL=base)
     t0 = time.perf_counter()
     sequence_id = _prepare(work, args.frames, args.views)
     prepare_s = time.perf_counter() - t0

@@ -14,12 +14,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 import time
 import urllib.request
-from pathlib import Path
 
-from _server import start_server
+from _server import isolated_workdir, start_server
 
 
 def _get(url: str, token: str) -> bytes:
@@ -35,11 +33,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
 
-    work = Path(tempfile.mkdtemp(prefix="dexlabel-bench-"))
-    os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
-                       "DEXLABEL_INPROCESS_WORKER": "false"})
-    for name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_URL"):
-        os.environ.pop(name, None)
+    work = isolated_workdir("import")
 
     from backend.accounts.service import create_admin
     from backend.captures.flows import import_path

@@ -13,11 +13,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 import time
-from pathlib import Path
 
-from _server import start_server
+from _server import isolated_workdir, start_server
 
 QUESTION = (
     '<ExternalQuestion xmlns="http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/'
@@ -63,11 +61,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=200)
     args = parser.parse_args()
 
-    work = Path(tempfile.mkdtemp(prefix="dexlabel-bench-market-"))
-    os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
-                       "DEXLABEL_INPROCESS_WORKER": "false"})
-    for name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_URL"):
-        os.environ.pop(name, None)
+    isolated_workdir("market")
     from backend.config import get_settings
     from backend.migrate import upgrade
 
