@@ -96,6 +96,23 @@ class Settings(BaseSettings):
     # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
     mturk_sandbox: bool = True
     mturk_use_aws: bool = False
+    # Queue jobs (QC, solve): attempts before "failed", the first retry delay (doubled each
+    # attempt), and the lease a running job holds; a job whose lease ran out (its worker died)
+    # is queued again by the reaper. A lost queue message is re-sent after job_requeue_after_s.
+    job_max_attempts: int = Field(default=5, ge=1, le=50)
+    job_retry_base_s: float = Field(default=5.0, ge=0)
+    job_lease_s: float = Field(default=900.0, gt=0)
+    job_requeue_after_s: float = Field(default=600.0, gt=0)
+    # Sleep this long after claiming a job, before running it: a fault-injection knob for the
+    # crash-recovery test and drills (kill a worker mid-job); 0 in every real deployment.
+    job_start_delay_s: float = Field(default=0.0, ge=0)
+    # Quality control: act on clear decisions (approve / reject + re-open) without an admin;
+    # block a worker after this many rejected assignments (0: never); bounds of the learned
+    # thresholds as JSON of worker.quality.decide.QCThresholds fields, e.g.
+    # DEXLABEL_QC_THRESHOLDS='{"approve_px_max": 8.0}'.
+    qc_auto_actions: bool = True
+    qc_block_after_failures: int = Field(default=3, ge=0)
+    qc_thresholds: dict[str, float] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _fill_defaults_and_check(self) -> Settings:

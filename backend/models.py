@@ -5,8 +5,12 @@ from backend.annotation.models import Assignment, Task, Track
 from backend.crowd import models as crowd
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.db import Base
+from backend.jobs.models import Job
 from backend.market import models as market
 from backend.portal import models as portal
+from backend.review.models import QCReport, TrainingClip
+from backend.solve.models import SolveRun
 
 __all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject",
-           "Sequence", "Subject", "crowd", "market", "portal"]
+           "Sequence", "Subject", "crowd", "market", "portal", "Job", "QCReport",
+           "TrainingClip", "SolveRun"]

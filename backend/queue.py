@@ -55,9 +55,15 @@ def _drop_jobs(session: Session) -> None:
 
 
 def make_consumer(workers: int) -> Consumer:
-    import worker.tasks  # noqa: F401  (registers the tasks on ``huey``)
+    import worker.tasks  # noqa: F401  (registers the tasks and job handlers on ``huey``)
+    from backend.jobs.service import requeue_stale
 
-    return huey.create_consumer(workers=workers, worker_type="thread", periodic=False)
+    try:  # jobs whose worker died while no consumer ran are picked up at once
+        requeue_stale()
+    except Exception:
+        log.exception("could not check the job table for stale jobs")
+    # periodic: the reaper (worker.tasks.reap_jobs) runs every minute in every consumer.
+    return huey.create_consumer(workers=workers, worker_type="thread", periodic=True)
 
 
 def start_inprocess_consumer(workers: int) -> Consumer:

@@ -55,6 +55,7 @@ class CrowdPayment(TimestampMixin, Base):
     __table_args__ = (
         CheckConstraint("kind IN ('approval', 'rejection', 'bonus')", name="kind_valid"),
         CheckConstraint("amount_cents >= 0 AND fee_cents >= 0", name="amounts_nonnegative"),
+        CheckConstraint("state IN ('pending', 'done')", name="state_valid"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -67,6 +68,9 @@ class CrowdPayment(TimestampMixin, Base):
     amount_cents: Mapped[int] = mapped_column(Integer, default=0)
     fee_cents: Mapped[int] = mapped_column(Integer, default=0)
     feedback: Mapped[str | None] = mapped_column(Text)
+    # "pending": written and committed before the marketplace call, so a run whose reply or
+    # commit was lost finds it and checks the marketplace instead of paying again; "done" after.
+    state: Mapped[str] = mapped_column(String(16), default="done", server_default="done")
 
 
 class CrowdQualification(TimestampMixin, Base):

@@ -4,6 +4,7 @@ Arrays are float64 with batch dimensions first; see each module for frames and u
 """
 
 from worker.geometry.cameras import (
+    CameraModel,
     camera_to_world,
     distort_normalized,
     intrinsics_matrix,
@@ -30,6 +31,7 @@ from worker.geometry.transforms import (
 )
 
 __all__ = [
+    "CameraModel",
     "Mesh",
     "axis_angle_to_matrix",
     "axis_angle_to_quaternion",

@@ -13,6 +13,8 @@ Conventions (written down once for the whole project):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from worker.geometry.transforms import make_pose
@@ -191,3 +193,31 @@ def pixels_to_rays(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray | None = 
     x = (pixels[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
     xy = undistort_normalized(np.stack([x, y], axis=-1), dist)
     return np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """One calibrated view as the worker packages take it.
+
+    K: (3, 3) intrinsics, pixels. dist: (5,) OpenCV ``(k1, k2, p1, p2, k3)`` or None.
+    T_cam_to_world: (3, 4) camera-to-world extrinsics, metres. width, height: image size, pixels.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray | None
+    T_cam_to_world: np.ndarray
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "K", _as_intrinsics(self.K))
+        object.__setattr__(self, "dist", _as_dist(self.dist))
+        object.__setattr__(self, "T_cam_to_world", _as_pose("T_cam_to_world", self.T_cam_to_world))
+
+    def project(self, X_world: np.ndarray) -> np.ndarray:
+        """World points (..., 3) metres -> pixels (..., 2)."""
+        return project_points(X_world, self.K, self.T_cam_to_world, self.dist)
+
+    def depth_of(self, X_world: np.ndarray) -> np.ndarray:
+        """Camera-frame z (...,) of world points (..., 3), metres (<= 0: behind the camera)."""
+        return world_to_camera(X_world, self.T_cam_to_world)[..., 2]

@@ -1,0 +1,44 @@
+"""Queue jobs as the admins see them: one row per job key, with status, attempts and error.
+
+The queue (Huey) carries only the key; this row is the truth. A job is claimed by a
+compare-and-set on its status, holds a lease while it runs, and a job whose lease ran out (its
+worker was killed) is queued again by the reaper, so every job ends ``done`` or ``failed``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import JSON, CheckConstraint, DateTime, Integer, String, Text
+from sqlalchemy.orm import Mapped, mapped_column
+
+from backend.db import Base, TimestampMixin, utcnow
+
+JOB_STATUSES = ("queued", "running", "retrying", "waiting", "done", "failed")
+
+
+class Job(TimestampMixin, Base):
+    __tablename__ = "jobs"
+    __table_args__ = (
+        CheckConstraint(
+            "status IN ('queued', 'running', 'retrying', 'waiting', 'done', 'failed')",
+            name="status_valid"),
+        CheckConstraint("attempts >= 0 AND max_attempts >= 1", name="attempts_valid"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    # What runs: "qc", "solve", ...; the key names the work ("qc:12:hand:0") and is unique.
+    kind: Mapped[str] = mapped_column(String(32), index=True)
+    key: Mapped[str] = mapped_column(String(128), unique=True)
+    args: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    max_attempts: Mapped[int] = mapped_column(Integer, default=5)
+    error: Mapped[str | None] = mapped_column(Text)
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    lease_until: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow,
+                                                 onupdate=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))

@@ -1,0 +1,209 @@
+"""Queue jobs: enqueue by key, claim with a lease, finish or retry with backoff, reap the dead.
+
+Every state change is one short committed statement, guarded by a compare-and-set on the
+status (and on the attempt number when finishing), so two consumers never run the same attempt
+and a worker declared dead cannot overwrite the attempt that replaced it. The job's own work
+runs in its own units of work between the claim and the finish.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+from sqlalchemy import or_, select, update
+from sqlalchemy.orm import Session
+
+from backend.config import get_settings
+from backend.db import session_scope
+from backend.errors import Conflict, NotFound
+from backend.jobs.models import Job
+from backend.queue import enqueue_after_commit, huey
+
+log = logging.getLogger(__name__)
+
+_CLAIMABLE = ("queued", "retrying")
+_ACTIVE = ("queued", "running", "retrying")
+
+
+@dataclass(frozen=True)
+class Handler:
+    run: Callable[[dict[str, Any]], dict[str, Any] | None]
+    lease_s: float | None
+
+
+_HANDLERS: dict[str, Handler] = {}
+
+
+def job_handler(kind: str, lease_s: float | None = None):
+    """Register ``fn(args) -> result dict`` as the work of jobs of ``kind``.
+
+    The handler opens its own units of work and must be idempotent: a retry (after an error
+    or a killed worker) runs it again from the start.
+    """
+    def register(fn: Callable[[dict[str, Any]], dict[str, Any] | None]):
+        _HANDLERS[kind] = Handler(fn, lease_s)
+        return fn
+    return register
+
+
+def _now() -> datetime:
+    return datetime.now(UTC)
+
+
+def get_job_or_raise(session: Session, job_id: int) -> Job:
+    job = session.get(Job, job_id)
+    if job is None:
+        raise NotFound(f"no job {job_id}")
+    return job
+
+
+def list_jobs(session: Session, status: str | None = None, kind: str | None = None,
+              limit: int = 100) -> list[Job]:
+    stmt = select(Job).order_by(Job.id.desc()).limit(limit)
+    if status:
+        stmt = stmt.where(Job.status == status)
+    if kind:
+        stmt = stmt.where(Job.kind == kind)
+    return list(session.scalars(stmt))
+
+
+def enqueue_job(session: Session, kind: str, key: str, args: dict[str, Any] | None = None) -> Job:
+    """Queue the job named ``key`` once this unit of work commits.
+
+    A job already queued or running is left as it is (its run will see the newest data); a
+    finished, failed or waiting one is queued again with fresh attempts.
+    """
+    job = session.scalar(select(Job).where(Job.key == key))
+    if job is None:
+        job = Job(kind=kind, key=key, args=args or {}, status="queued", attempts=0,
+                  max_attempts=get_settings().job_max_attempts)
+        session.add(job)
+    elif job.status in _ACTIVE:
+        return job
+    else:
+        job.status, job.attempts, job.error, job.args = "queued", 0, None, args or job.args
+        job.finished_at = None
+    session.flush()
+    enqueue_after_commit(session, run_job, key)
+    return job
+
+
+def mark_waiting(session: Session, kind: str, key: str, args: dict[str, Any], reason: str) -> Job:
+    """Record a job that cannot run yet (e.g. no solver installed), with the reason shown."""
+    job = session.scalar(select(Job).where(Job.key == key))
+    if job is None:
+        job = Job(kind=kind, key=key, args=args, attempts=0,
+                  max_attempts=get_settings().job_max_attempts)
+        session.add(job)
+    job.status, job.error = "waiting", reason
+    session.flush()
+    return job
+
+
+def retry_job(session: Session, job_id: int) -> Job:
+    """An admin's re-run of a failed or waiting job."""
+    job = get_job_or_raise(session, job_id)
+    if job.status in _ACTIVE:
+        raise Conflict(f"job {job_id} is already {job.status}", state=job.status)
+    return enqueue_job(session, job.kind, job.key, job.args)
+
+
+def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
+    """Take the job for this worker: (kind, args, attempt), or None when not ours to run."""
+    settings = get_settings()
+    with session_scope() as session:
+        job = session.scalar(select(Job).where(Job.key == key))
+        if job is None:
+            log.warning("job %s is not in the job table; dropped", key)
+            return None
+        handler = _HANDLERS.get(job.kind)
+        lease = (handler.lease_s if handler and handler.lease_s else settings.job_lease_s)
+        now = _now()
+        claimed = session.execute(
+            update(Job).where(Job.key == key, or_(
+                Job.status.in_(_CLAIMABLE),
+                (Job.status == "running") & (Job.lease_until < now)))
+            .values(status="running", attempts=Job.attempts + 1, started_at=now,
+                    lease_until=now + timedelta(seconds=lease), error=None)
+            .execution_options(synchronize_session=False))
+        if claimed.rowcount != 1:
+            return None
+        session.refresh(job)
+        return job.kind, dict(job.args or {}), job.attempts
+
+
+def _finish(key: str, attempt: int, **values: Any) -> bool:
+    with session_scope() as session:
+        done = session.execute(
+            update(Job).where(Job.key == key, Job.status == "running", Job.attempts == attempt)
+            .values(lease_until=None, **values).execution_options(synchronize_session=False))
+        return done.rowcount == 1
+
+
+def _retry_delay(attempt: int) -> float:
+    base = get_settings().job_retry_base_s
+    return min(base * 2 ** (attempt - 1), 3600.0)
+
+
+def execute(key: str) -> None:
+    """Run one attempt of the job ``key`` (the body of the queue task)."""
+    claim = _claim(key)
+    if claim is None:
+        return
+    kind, args, attempt = claim
+    delay = get_settings().job_start_delay_s
+    if delay:
+        time.sleep(delay)
+    handler = _HANDLERS.get(kind)
+    try:
+        if handler is None:
+            raise RuntimeError(f"no handler for jobs of kind {kind!r} in this worker")
+        result = handler.run(args) or {}
+    except Exception as exc:  # every failure is recorded on the job, then retried or failed
+        log.exception("job %s attempt %d failed", key, attempt)
+        _after_failure(key, attempt, exc)
+        return
+    _finish(key, attempt, status="done", result=result, finished_at=_now())
+
+
+def _after_failure(key: str, attempt: int, exc: Exception) -> None:
+    text = f"{type(exc).__name__}: {exc}"
+    detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+    with session_scope() as session:
+        job = session.scalar(select(Job).where(Job.key == key))
+        final = job is None or attempt >= job.max_attempts
+    if final:
+        _finish(key, attempt, status="failed", error=detail or text, finished_at=_now())
+        return
+    if _finish(key, attempt, status="retrying", error=detail or text):
+        run_job.schedule((key,), delay=_retry_delay(attempt))
+
+
+def requeue_stale(now: datetime | None = None) -> list[str]:
+    """Queue again the jobs whose worker died (lease ran out) or whose message was lost."""
+    settings = get_settings()
+    now = now or _now()
+    lost_before = now - timedelta(seconds=settings.job_requeue_after_s)
+    with session_scope() as session:
+        keys = list(session.scalars(select(Job.key).where(or_(
+            (Job.status == "running") & (Job.lease_until < now),
+            Job.status.in_(_CLAIMABLE) & (Job.updated_at < lost_before)))))
+        for key in keys:
+            # Touch the row so a lost message is re-sent once per interval, not every minute.
+            session.execute(update(Job).where(Job.key == key, Job.status != "running")
+                            .values(updated_at=now).execution_options(synchronize_session=False))
+    for key in keys:
+        log.warning("re-queueing job %s (lease ran out or message lost)", key)
+        run_job(key)
+    return keys
+
+
+@huey.task()
+def run_job(key: str) -> None:
+    execute(key)

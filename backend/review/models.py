@@ -1,0 +1,64 @@
+"""Quality control results: one report per scored assignment, and gold clips for training.
+
+A report is overwritten each time its target is scored again (more views came in); the action
+taken on it (approve, reject, re-open) is recorded once and never repeated, so a re-run of a
+QC job changes scores but never pays or rejects twice.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import JSON, Boolean, CheckConstraint, DateTime, ForeignKey, Integer, String, Text
+from sqlalchemy.orm import Mapped, mapped_column
+
+from backend.db import Base, TimestampMixin, utcnow
+
+
+class QCReport(TimestampMixin, Base):
+    __tablename__ = "qc_reports"
+    __table_args__ = (
+        CheckConstraint("outcome IN ('approve', 'review', 'reject')", name="outcome_valid"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    assignment_id: Mapped[int] = mapped_column(
+        ForeignKey("assignments.id", ondelete="CASCADE"), unique=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), index=True)
+    sequence_id: Mapped[int] = mapped_column(
+        ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
+    target_key: Mapped[str] = mapped_column(String(32))
+    worker_id: Mapped[str] = mapped_column(String(64), index=True)
+    # "consensus" (scored against the other views) or "gold" (a training clip's known labels).
+    method: Mapped[str] = mapped_column(String(16), default="consensus")
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON)
+    per_joint: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    per_frame: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    swaps: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    thresholds: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    outcome: Mapped[str] = mapped_column(String(8))
+    reasons: Mapped[list[str]] = mapped_column(JSON, default=list)
+    feedback: Mapped[str] = mapped_column(Text, default="")
+    provisional: Mapped[bool] = mapped_column(Boolean, default=False)
+    views: Mapped[int] = mapped_column(Integer, default=0)
+    # What was done about it, once: "approved", "rejected", "review" (left to an admin),
+    # "waiting" (provisional), "recorded" (no marketplace submission to act on).
+    action: Mapped[str | None] = mapped_column(String(16))
+    action_detail: Mapped[str | None] = mapped_column(Text)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow,
+                                                 onupdate=utcnow)
+
+
+class TrainingClip(TimestampMixin, Base):
+    """A task whose labels are known (gold): new workers label it to earn the qualification."""
+
+    __tablename__ = "training_clips"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), unique=True)
+    # "truth" (a synthetic capture's ground truth) or "assignment:<id>" (accepted labels).
+    source: Mapped[str] = mapped_column(String(64))
+    # P tracks of keyframe rows [frame, x, y, visible01], as the annotation page saves them.
+    tracks: Mapped[list[Any]] = mapped_column(JSON)
+    note: Mapped[str | None] = mapped_column(Text)

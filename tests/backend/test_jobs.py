@@ -1,0 +1,138 @@
+"""The job table and runner: claim once, retry with backoff, fail for good, reap dead workers."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select, update
+
+from backend.db import session_scope
+from backend.jobs.models import Job
+from backend.jobs.service import (
+    _retry_delay, enqueue_job, execute, job_handler, requeue_stale,
+)
+from backend.queue import huey
+
+CALLS: list[dict] = []
+
+
+@job_handler("test-echo")
+def _echo(args: dict) -> dict:
+    CALLS.append(args)
+    return {"echo": args["value"]}
+
+
+@job_handler("test-broken")
+def _broken(args: dict) -> dict:
+    CALLS.append(args)
+    raise ValueError(f"boom {args['value']}")
+
+
+@pytest.fixture(autouse=True)
+def _clear_calls() -> None:
+    CALLS.clear()
+    huey.flush()
+
+
+def _queue(kind: str, key: str, value: int = 1) -> None:
+    with session_scope() as session:
+        enqueue_job(session, kind, key, {"value": value})
+
+
+def _job(key: str) -> Job:
+    with session_scope() as session:
+        job = session.scalar(select(Job).where(Job.key == key))
+        session.expunge(job)
+        return job
+
+
+def test_job_runs_once_and_records_its_result(app_env: dict) -> None:
+    _queue("test-echo", "echo:1", 7)
+    assert huey.pending_count() == 1  # the queue message went out after the commit
+    execute("echo:1")
+    execute("echo:1")  # a duplicate message finds the job done and does nothing
+    job = _job("echo:1")
+    assert (job.status, job.attempts, job.result, job.error) == ("done", 1, {"echo": 7}, None)
+    assert CALLS == [{"value": 7}]
+
+
+def test_enqueue_of_a_rolled_back_unit_sends_nothing(app_env: dict) -> None:
+    with pytest.raises(RuntimeError):
+        with session_scope() as session:
+            enqueue_job(session, "test-echo", "echo:lost", {"value": 1})
+            raise RuntimeError("the unit of work failed")
+    assert huey.pending_count() == 0
+    with session_scope() as session:
+        assert session.scalar(select(Job).where(Job.key == "echo:lost")) is None
+
+
+def test_failing_job_is_retried_with_backoff_then_failed(app_env: dict,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from backend.config import get_settings
+
+    monkeypatch.setenv("DEXLABEL_JOB_MAX_ATTEMPTS", "2")
+    get_settings.cache_clear()
+    _queue("test-broken", "broken:1", 3)
+    huey.flush()
+    execute("broken:1")
+    job = _job("broken:1")
+    assert (job.status, job.attempts) == ("retrying", 1)
+    assert "ValueError: boom 3" in job.error
+    [retry] = huey.pending()  # the retry is sent with its backoff delay as the ETA
+    assert retry.args == ("broken:1",) and retry.eta is not None
+    execute("broken:1")
+    job = _job("broken:1")
+    assert (job.status, job.attempts) == ("failed", 2)
+    assert job.finished_at is not None
+    assert len(CALLS) == 2
+
+
+def test_retry_delay_doubles_from_the_base(app_env: dict) -> None:
+    assert [_retry_delay(a) for a in (1, 2, 3, 4)] == [5.0, 10.0, 20.0, 40.0]
+
+
+def test_reaper_requeues_the_job_of_a_dead_worker(app_env: dict) -> None:
+    _queue("test-echo", "echo:dead", 5)
+    huey.flush()
+    past = datetime.now(UTC) - timedelta(minutes=5)
+    with session_scope() as session:  # a worker claimed it, then was killed
+        session.execute(update(Job).where(Job.key == "echo:dead").values(
+            status="running", attempts=1, lease_until=past))
+    assert requeue_stale() == ["echo:dead"]
+    assert huey.pending_count() == 1
+    execute("echo:dead")
+    job = _job("echo:dead")
+    assert (job.status, job.attempts) == ("done", 2)
+    assert requeue_stale() == []
+
+
+def test_reaper_leaves_a_running_job_with_a_live_lease(app_env: dict) -> None:
+    _queue("test-echo", "echo:live", 5)
+    future = datetime.now(UTC) + timedelta(minutes=5)
+    with session_scope() as session:
+        session.execute(update(Job).where(Job.key == "echo:live").values(
+            status="running", attempts=1, lease_until=future))
+    assert requeue_stale() == []
+    execute("echo:live")  # another worker holds it: not claimed
+    assert _job("echo:live").attempts == 1 and CALLS == []
+
+
+def test_admin_lists_jobs_and_reruns_a_failed_one(client: TestClient,
+                                                  admin_headers: dict[str, str]) -> None:
+    _queue("test-broken", "broken:api", 1)
+    with session_scope() as session:
+        session.execute(update(Job).where(Job.key == "broken:api").values(
+            status="failed", attempts=5, error="ValueError: boom"))
+    listed = client.get("/api/jobs?status=failed", headers=admin_headers)
+    assert listed.status_code == 200
+    [row] = listed.json()
+    assert (row["key"], row["error"]) == ("broken:api", "ValueError: boom")
+    again = client.post(f"/api/jobs/{row['id']}/retry", headers=admin_headers)
+    assert again.status_code == 200 and again.json()["status"] == "queued"
+    assert again.json()["attempts"] == 0
+    twice = client.post(f"/api/jobs/{row['id']}/retry", headers=admin_headers)
+    assert twice.status_code == 409 and "already queued" in twice.json()["detail"]
+    assert client.get("/api/jobs/99999", headers=admin_headers).status_code == 404
+    assert client.get("/api/jobs").status_code == 401
