@@ -12,8 +12,11 @@ from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.crowd.router import router as crowd_router
 from backend.errors import install_error_handlers
+from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.portal.router import router as portal_router
+from backend.solve.router import router as solve_router
+from backend.review.router import router as review_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 
@@ -26,8 +29,11 @@ def create_app() -> FastAPI:
     app.include_router(captures_router)
     app.include_router(annotation_router)
     app.include_router(crowd_router)
+    app.include_router(jobs_router)
+    app.include_router(review_router)
     app.include_router(market_router)
     app.include_router(portal_router)
+    app.include_router(solve_router)
 
     @app.get("/healthz", tags=["ops"])
     def healthz() -> dict[str, str]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import secrets
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -133,87 +132,52 @@ def worker(
 def demo(
     host: Annotated[str, typer.Option()] = "127.0.0.1",
     port: Annotated[int, typer.Option()] = 8000,
-    serve_: Annotated[bool, typer.Option("--serve/--no-serve", help="start the server")] = True,
+    serve_: Annotated[bool, typer.Option(
+        "--serve/--no-serve", help="keep serving when done (--no-serve: exit)")] = True,
+    frames: Annotated[int, typer.Option(min=2, max=10000, help="frames of a new capture")] = 72,
+    views: Annotated[int, typer.Option(min=1, max=64, help="views of a new capture")] = 8,
+    objects: Annotated[int, typer.Option(min=1, max=10, help="objects of a new capture")] = 3,
+    assignments: Annotated[int, typer.Option(min=1, max=9, help="assignments per HIT")] = 2,
+    workers: Annotated[int | None, typer.Option(
+        min=1, max=1000, help="simulated workers (default: assignments x hand tasks)")] = None,
+    simulate_: Annotated[bool, typer.Option(
+        "--simulate/--no-simulate", help="fill the demo with simulated submissions")] = True,
 ) -> None:
-    """Migrate, synthesise a capture if none, import it, serve, and print the URLs."""
+    """Migrate, synthesise a capture if none, import it, create and publish its tasks on the
+    built-in marketplace, start the server, let a simulated crowd (mixed profiles) submit work,
+    print it all, and keep serving. Re-running adds nothing that is already there."""
     from backend import migrate as m
     from backend.captures.flows import import_path
+    from backend.demo import (
+        DemoServer, demo_admin, demo_annotation_links, demo_crowd, demo_print, demo_settings,
+    )
 
-    settings = get_settings()
+    settings = demo_settings(host, port)
     m.upgrade(settings.database_url)
     capture = settings.var_dir / "demo-capture"
     if not any(capture.glob("*/*/meta.yml")):
         typer.echo(f"synthesising a demo capture in {capture} ...")
-        synth(capture, seed=7)
+        synth(capture, seed=7, frames=frames, views=views, objects=objects)
     try:
-        results = import_path(capture)
+        seq = import_path(capture)[0]
+        password = demo_admin()
+        annotate, preview = demo_annotation_links(seq.sequence_id, settings.public_url)
     except DexlabelError as exc:
         _fail(exc)
         return
-    password = _demo_admin()
-    base = f"http://{host}:{port}"
-    seq = results[0]
-    typer.echo(f"\nsequence {seq.subject}/{seq.name} (id {seq.sequence_id}): "
-               f"{seq.num_cameras} cameras x {seq.num_frames} frames")
-    typer.echo(f"API docs:        {base}/docs")
-    typer.echo(f"health:          {base}/healthz")
-    typer.echo(f"sequences:       {base}/api/sequences  (admin bearer token)")
-    typer.echo(f"admin login:     POST {base}/api/auth/token  email=demo@dexlabel.local "
-               f"password={password}")
-    typer.echo(f"first view:      {base}{_demo_view_url(seq.sequence_id)}")
-    annotate, preview = _demo_annotation_links(seq.sequence_id, base)
-    typer.echo(f"annotate (hand): {annotate}")
-    typer.echo(f"HIT preview:     {preview}")
-    if serve_:
-        typer.echo("serving; Ctrl+C stops")
-        sys.stdout.flush()
-        _serve(host, port)
-
-
-def _demo_admin() -> str:
-    """(Re)set the demo admin's password and return it."""
-    from backend.accounts.service import create_admin as create
-    from backend.db import session_scope
-
-    password = secrets.token_urlsafe(12)
-    with session_scope() as session:
-        create(session, "demo@dexlabel.local", password, reset=True)
-    return password
-
-
-def _demo_annotation_links(sequence_id: int, base: str) -> tuple[str, str]:
-    """Tasks for the demo sequence, and page links for the first hand task: a demo worker's
-    assignment, and the read-only preview a worker sees before accepting a HIT."""
-    from urllib.parse import urlencode
-
-    from backend.annotation import service
-    from backend.annotation.router import PREVIEW_ASSIGNMENT_ID, assignment_token, task_token
-    from backend.db import session_scope
-    from backend.storage import get_storage
-
-    with session_scope() as session:
-        tasks = service.create_tasks(session, get_storage(), sequence_id)
-        task = service.get_task_or_raise(session, next(t.id for t in tasks if t.kind == "hand"))
-        assignment = next((a for a in task.assignments if a.worker_id == "demo-worker"), None)
-        if assignment is None:
-            assignment = service.create_assignment(session, task, "demo-worker")
-        work = {"token": assignment_token(task, assignment),
-                "assignmentId": assignment.external_id, "workerId": assignment.worker_id}
-        look = {"token": task_token(task), "assignmentId": PREVIEW_ASSIGNMENT_ID}
-    return f"{base}/annotate/?{urlencode(work)}", f"{base}/annotate/?{urlencode(look)}"
-
-
-def _demo_view_url(sequence_id: int) -> str:
-    from backend.accounts.deps import VIEW_SCOPE
-    from backend.captures.service import get_sequence_or_raise
-    from backend.db import session_scope
-    from backend.security import sign_token
-
-    with session_scope() as session:
-        serial = get_sequence_or_raise(session, sequence_id).cameras[0].serial
-    token = sign_token({"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial},
-                       get_settings().secret_key, 7 * 24 * 3600)
-    return f"/api/sequences/{sequence_id}/views/{serial}/frames?token={token}"
+    server = DemoServer(host, port)
+    try:
+        server.start(consumer=serve_)
+        demo_crowd(seq.sequence_id, capture, password, assignments, workers, simulate_)
+        demo_print(seq, settings.public_url, password, annotate, preview)
+        if serve_:
+            typer.echo("serving; Ctrl+C stops")
+            sys.stdout.flush()
+            server.wait()
+    except DexlabelError as exc:
+        _fail(exc)
+    finally:
+        server.stop()
 
 
 tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).", no_args_is_help=True)
@@ -335,6 +299,58 @@ def crowd_sync() -> None:
 
 
 
+_COST_COLUMNS = ("spent_rewards", "spent_bonuses", "spent_fees", "spent",
+                 "committed_rewards", "committed_bonuses", "committed_fees", "committed")
+
+
+def _cost_row(label: str, line) -> str:  # type: ignore[no-untyped-def]
+    return f"{label:<32}" + "".join(f"{getattr(line, c):>10}" for c in _COST_COLUMNS)
+
+
+@crowd_app.command("costs")
+def crowd_costs() -> None:
+    """Spend so far and money committed (US dollars): rewards, bonuses and fees apart, for the
+    project, per sequence and per worker."""
+    from backend.crowd.costs import costs
+    from backend.db import session_scope
+
+    with session_scope() as session:
+        report = costs(session)
+    typer.echo(f"{'':<32}{'--- spent ---':>40}{'--- committed ---':>40}")
+    typer.echo(f"{'':<32}" + "".join(f"{h:>10}" for h in ("rewards", "bonuses", "fees",
+                                                           "total") * 2))
+    typer.echo(_cost_row("project", report.total))
+    for line in report.by_sequence:
+        typer.echo(_cost_row(f"sequence {line.key}", line))
+    for line in report.by_worker:
+        typer.echo(_cost_row(f"worker {line.key}", line))
+
+
+@crowd_app.command("bonus")
+def crowd_bonus(
+    assignment: Annotated[int, typer.Argument(help="our assignment id")],
+    amount: Annotated[str, typer.Argument(help="US dollars, e.g. 1.00")],
+    reason: Annotated[str, typer.Option(help="what the worker reads")],
+    key: Annotated[str, typer.Option(help="names this bonus: one key pays once")] = "1",
+) -> None:
+    """Pay a bonus once (ledger row committed before the payment; safe to re-run)."""
+    from backend.crowd import flows, pricing
+    from backend.crowd.client import make_client
+
+    try:
+        cents = pricing.dollars_to_cents(amount)
+        paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
+    except ValueError as exc:
+        _fail(DexlabelError(str(exc)))
+        return
+    except DexlabelError as exc:
+        _fail(exc)
+        return
+    state = "already paid" if paid.already_done else "paid"
+    typer.echo(f"bonus {key!r} of assignment {assignment} {state}: ${paid.amount} "
+               f"(+ ${paid.fee} fee) to {paid.worker_id}")
+
+
 @crowd_app.command("simulate")
 def crowd_simulate(
     capture: Annotated[Path, typer.Option(help="synthetic capture with the ground truth")],
@@ -363,6 +379,19 @@ def crowd_simulate(
                    f"assignment {o.assignment_id or '-'} task {o.task_id or '-'}")
     done = sum(o.status == "submitted" for o in outcomes)
     typer.echo(f"{done} of {len(outcomes)} simulated workers submitted")
+
+def _register_domain_commands() -> None:
+    from backend.review.cli import jobs_app, qc_app, training_app
+    from backend.solve.cli import calibrate_hand_command, solve_command
+
+    app.command("solve")(solve_command)
+    app.command("calibrate-hand")(calibrate_hand_command)
+    app.add_typer(qc_app, name="qc")
+    app.add_typer(jobs_app, name="jobs")
+    app.add_typer(training_app, name="training")
+
+
+_register_domain_commands()
 
 if __name__ == "__main__":
     app()

@@ -103,9 +103,15 @@ class Settings(BaseSettings):
     job_retry_base_s: float = Field(default=5.0, ge=0)
     job_lease_s: float = Field(default=900.0, gt=0)
     job_requeue_after_s: float = Field(default=600.0, gt=0)
-    # Sleep this long after claiming a job, before running it: a fault-injection knob for the
-    # crash-recovery test and drills (kill a worker mid-job); 0 in every real deployment.
-    job_start_delay_s: float = Field(default=0.0, ge=0)
+    # Pause this long at each checkpoint of a job (between the QC job's actions): a
+    # fault-injection knob for the crash-recovery test and drills (kill a worker mid-job);
+    # 0 in every real deployment.
+    job_pause_s: float = Field(default=0.0, ge=0)
+    # Solve jobs: the optimiser when a request names none ("default" = batched
+    # Levenberg-Marquardt from triangulation, "paper" = DexYCB's per-frame Adam), and the torch
+    # device the solver runs on ("cpu", or "cuda" where a GPU is present).
+    solve_optimiser: Literal["paper", "default"] = "default"
+    solve_device: str = "cpu"
     # Quality control: act on clear decisions (approve / reject + re-open) without an admin;
     # block a worker after this many rejected assignments (0: never); bounds of the learned
     # thresholds as JSON of worker.quality.decide.QCThresholds fields, e.g.

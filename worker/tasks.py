@@ -12,8 +12,11 @@ import cv2
 import numpy as np
 from sqlalchemy import select
 
+from huey import crontab
+
 from backend.captures.models import Camera, Frame
 from backend.db import session_scope
+from backend.jobs.service import job_handler, requeue_stale
 from backend.queue import huey
 from backend.storage import get_storage
 from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
@@ -42,3 +45,36 @@ def compute_frame_stats(sequence_id: int) -> int:
             frame.thumb_key = thumb_key
     log.info("frame statistics for sequence %d: %d frames", sequence_id, len(frames))
     return len(frames)
+
+
+@huey.periodic_task(crontab(minute="*"))
+def reap_jobs() -> None:
+    """Every minute: re-queue jobs whose worker died or whose queue message was lost."""
+    requeue_stale()
+
+
+@job_handler("qc")
+def quality_check(args: dict) -> dict:
+    """Score one target of a sequence and act on the decisions (backend.review.flows)."""
+    from backend.review.flows import run_qc
+
+    return run_qc(int(args["sequence_id"]), str(args["target_key"]))
+
+
+@job_handler("confirm")
+def confirm_submission(args: dict) -> dict:
+    """The page said an assignment was submitted: check it with the requester API, then QC."""
+    from backend.crowd.confirm import confirm
+
+    return confirm(int(args["assignment_id"]))
+
+
+# --- solve (issue 6): the "solve" job fits MANO hand and 6D object poses of one run --------
+
+
+@job_handler("solve", lease_s=3600)
+def solve_run(args: dict) -> dict:
+    """Solve run ``args["run_id"]`` of a sequence and store its outputs (idempotent)."""
+    from backend.solve.flows import run_solve
+
+    return run_solve(int(args["run_id"]))

@@ -106,6 +106,20 @@ def block_worker(session: Session, client: MTurkClient, worker_id: str, reason: 
     session.flush()
 
 
+def unblock_worker(session: Session, client: MTurkClient, worker_id: str,
+                   reason: str | None = None) -> None:
+    """Lift our block of ``worker_id`` (DeleteWorkerBlock); not blocked is a Conflict."""
+    row = _worker_action(session, worker_id, "block", "")
+    if row is None:
+        raise Conflict(f"worker {worker_id} is not blocked", state="not_blocked")
+    params = {"WorkerId": worker_id}
+    if reason:
+        params["Reason"] = reason
+    call(client, "delete_worker_block", **params)
+    session.delete(row)
+    session.flush()
+
+
 def notify_workers(client: MTurkClient, worker_ids: list[str], subject: str,
                    message: str) -> list[dict]:
     """Send a message; the marketplace's per-worker failures (empty when all went out)."""

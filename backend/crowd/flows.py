@@ -1,8 +1,9 @@
-"""Publishing runs: which tasks are due, what they cost, and publishing them.
+"""Crowd runs: which tasks are due, what they cost, publishing them, and paying bonuses.
 
 ``publish`` works inside the caller's unit of work (the API request). ``publish_each`` is the
 CLI's run: one unit of work per task, so an interrupted run keeps every HIT it recorded and a
-re-run only has the rest to do.
+re-run only has the rest to do. ``pay_bonus`` commits its ledger row before it pays and again
+after, so a bonus is never paid twice (review.py says how).
 """
 
 from __future__ import annotations
@@ -11,23 +12,26 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
-from backend.crowd import pricing
+from backend.crowd import pricing, review
 from backend.crowd.client import MTurkClient
 from backend.crowd.models import CrowdHit
 from backend.crowd.publish import check_assignments, publish_task, requirements
-from backend.crowd.schemas import CostRead, PublishOptions, PublishResult
+from backend.crowd.schemas import CostRead, PaymentRead, PublishOptions, PublishResult
 from backend.db import session_scope
 
 _COUNTERS = {"created": "created", "recovered": "recovered", "existing": "already_published"}
 
 
-def due_task_ids(session: Session, round_: int, sequence_id: int | None = None) -> list[int]:
-    """Tasks with no HIT yet in ``round_`` (optionally of one sequence), by id."""
+def due_task_ids(session: Session, round_: int, sequence_id: int | None = None,
+                 kind: str | None = None) -> list[int]:
+    """Tasks with no HIT yet in ``round_`` (optionally of one sequence, of one kind), by id."""
     published = select(CrowdHit.task_id).where(
         CrowdHit.round == round_, CrowdHit.hit_id.is_not(None))
     stmt = select(Task.id).where(Task.id.not_in(published)).order_by(Task.id)
     if sequence_id is not None:
         stmt = stmt.where(Task.sequence_id == sequence_id)
+    if kind is not None:
+        stmt = stmt.where(Task.kind == kind)
     return list(session.scalars(stmt))
 
 
@@ -41,10 +45,11 @@ def cost_read(hits: int, options: PublishOptions) -> CostRead:
                     total=money(cost.total_cents))
 
 
-def plan(session: Session, options: PublishOptions, sequence_id: int | None) -> PublishResult:
+def plan(session: Session, options: PublishOptions, sequence_id: int | None,
+         kind: str | None = None) -> PublishResult:
     """What a publish would do: the HIT count and cost, nothing sent."""
     check_assignments(options.max_assignments, options.allow_large_hits)
-    due = due_task_ids(session, options.round, sequence_id)
+    due = due_task_ids(session, options.round, sequence_id, kind)
     return PublishResult(cost=cost_read(len(due), options))
 
 
@@ -69,18 +74,36 @@ def publish(
 
 def publish_each(
     client: MTurkClient, options: PublishOptions, sequence_id: int | None,
+    kind: str | None = None,
 ) -> PublishResult:
-    """Publish every due task, one unit of work (and commit) per HIT."""
+    """Publish every due task (of ``kind``: "hand", "object"; None: all), one unit of work
+    (and commit) per HIT."""
     with session_scope() as session:
-        result = plan(session, options, sequence_id)
+        result = plan(session, options, sequence_id, kind)
         with session.no_autoflush:
-            task_ids = due_task_ids(session, options.round, sequence_id)
+            task_ids = due_task_ids(session, options.round, sequence_id, kind)
             reqs = requirements(session, client, options) if task_ids else []
     for task_id in task_ids:
         with session_scope() as session, session.no_autoflush:
             task = session.get_one(Task, task_id)
             _count(result, *publish_task(session, client, task, options, reqs))
     return result
+
+
+def pay_bonus(client: MTurkClient, assignment_id: int, amount_cents: int, reason: str,
+              key: str = "1") -> PaymentRead:
+    """Pay a bonus once per (assignment, key): commit a pending row, pay, commit it done.
+
+    A repeat returns the recorded payment (``already_done``); a run that died after the first
+    commit is finished by the next one, which checks the marketplace before paying.
+    """
+    with session_scope() as session:
+        intent = review.begin_bonus(session, assignment_id, amount_cents, reason, key)
+    if intent.payment is not None:
+        return intent.payment
+    review.send_bonus(client, intent)
+    with session_scope() as session:
+        return review.finish_bonus(session, intent.token)
 
 
 def _count(result: PublishResult, hit_id: str, outcome: str) -> None:

@@ -136,6 +136,13 @@ def _recovered_hit_id(exc: MarketplaceError) -> str:
     return match.group(1)
 
 
+def _is_training_clip(session: Session, task_id: int) -> bool:
+    from backend.review.models import TrainingClip
+
+    return session.scalar(select(TrainingClip.id).where(TrainingClip.task_id == task_id)) \
+        is not None
+
+
 def publish_task(
     session: Session, client: MTurkClient, task: Task, options: PublishOptions,
     reqs: list[dict],
@@ -146,6 +153,9 @@ def publish_task(
     the call would lock the embedded SQLite database the built-in marketplace writes to.
     """
     check_assignments(options.max_assignments, options.allow_large_hits)
+    if _is_training_clip(session, task.id):
+        # New workers take the training clip to earn the qualification: it cannot require it.
+        reqs = [r for r in reqs if r["QualificationTypeId"] in (PERCENT_APPROVED, LOCALE)]
     row = published_hit(session, task.id, options.round)
     if row is not None and row.hit_id is not None:
         return row.hit_id, "existing"

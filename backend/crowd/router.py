@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Query
 
 from backend.accounts.deps import CurrentAdmin
 from backend.config import get_settings
@@ -63,10 +63,10 @@ def reject(assignment_id: int, body: RejectRequest, session: SessionDep, _: Curr
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)
-def bonus(assignment_id: int, body: BonusRequest, session: SessionDep, _: CurrentAdmin,
-          client: MTurk) -> PaymentRead:
-    return review.bonus(session, client, assignment_id, pricing.dollars_to_cents(body.amount),
-                        body.reason, body.key)
+def bonus(assignment_id: int, body: BonusRequest, _: CurrentAdmin, client: MTurk) -> PaymentRead:
+    # The flow commits its own units of work: the ledger row before paying, and after.
+    return flows.pay_bonus(client, assignment_id, pricing.dollars_to_cents(body.amount),
+                           body.reason, body.key)
 
 
 @router.post("/hits/{hit_id}/extend")
@@ -108,6 +108,13 @@ def block(worker_id: str, body: BlockRequest, session: SessionDep, _: CurrentAdm
           client: MTurk) -> dict[str, str]:
     actions.block_worker(session, client, worker_id, body.reason)
     return {"worker_id": worker_id, "state": "blocked"}
+
+
+@router.delete("/workers/{worker_id}/block")
+def unblock(worker_id: str, session: SessionDep, _: CurrentAdmin, client: MTurk,
+            reason: Annotated[str | None, Query(max_length=1024)] = None) -> dict[str, str]:
+    actions.unblock_worker(session, client, worker_id, reason)
+    return {"worker_id": worker_id, "state": "unblocked"}
 
 
 @router.post("/notify")

@@ -113,9 +113,22 @@ class BlockRequest(BaseModel):
 
 
 class CostLine(BaseModel):
+    """Money of one project, sequence or worker, in dollars.
+
+    spent: approved rewards and paid bonuses, each with MTurk's fee. committed: what is still
+    held for it: open slots of live HITs and submitted work not yet decided (reward + fee), and
+    bonuses started but not yet confirmed paid (bonus + fee).
+    """
+
     key: str
     spent: str
+    spent_rewards: str
+    spent_bonuses: str
+    spent_fees: str
     committed: str
+    committed_rewards: str
+    committed_bonuses: str
+    committed_fees: str
 
 
 class CostsRead(BaseModel):

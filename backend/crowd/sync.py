@@ -30,7 +30,9 @@ def verified_submission(session: Session, assignment: Assignment) -> CrowdSubmis
 
 
 def _accept(session: Session, ours: Assignment, record: dict) -> bool:
-    """Record a matching submission; False when it was already recorded."""
+    """Record a matching submission and queue its quality check; False when already recorded."""
+    from backend.review.service import request_qc
+
     row = session.scalar(select(CrowdSubmission).where(
         CrowdSubmission.assignment_id == ours.id))
     if row is not None:
@@ -39,7 +41,23 @@ def _accept(session: Session, ours: Assignment, record: dict) -> bool:
     session.add(CrowdSubmission(assignment_id=ours.id, hit_id=record["HITId"],
                                 worker_id=record["WorkerId"],
                                 market_status=record["AssignmentStatus"]))
+    if ours.status == "submitted":
+        request_qc(session, ours.task)
     return True
+
+
+def accept_record(session: Session, record: dict) -> str:
+    """Check one requester-API assignment record against ours and record it.
+
+    Returns "accepted", "already_accepted", "mismatched" or "unknown".
+    """
+    ours = session.scalar(select(Assignment).where(
+        Assignment.external_id == record["AssignmentId"]))
+    if ours is None:
+        return "unknown"
+    if ours.hit_id != record["HITId"] or ours.worker_id != record["WorkerId"]:
+        return "mismatched"
+    return "accepted" if _accept(session, ours, record) else "already_accepted"
 
 
 def _records(client: MTurkClient, hit_ids: list[str]) -> list[dict]:
@@ -60,15 +78,10 @@ def sync(session: Session, client: MTurkClient, hit_ids: list[str] | None = None
     result = SyncResult(hits=len(hit_ids), accepted=0, already_accepted=0, mismatched=[],
                         unknown=[])
     for record in _records(client, hit_ids):
-        market_id = record["AssignmentId"]
-        ours = session.scalar(select(Assignment).where(Assignment.external_id == market_id))
-        if ours is None:
-            result.unknown.append(market_id)
-        elif ours.hit_id != record["HITId"] or ours.worker_id != record["WorkerId"]:
-            result.mismatched.append(market_id)
-        elif _accept(session, ours, record):
-            result.accepted += 1
+        outcome = accept_record(session, record)
+        if outcome in ("unknown", "mismatched"):
+            getattr(result, outcome).append(record["AssignmentId"])
         else:
-            result.already_accepted += 1
+            setattr(result, outcome, getattr(result, outcome) + 1)
     session.flush()
     return result

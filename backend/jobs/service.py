@@ -138,6 +138,13 @@ def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
         return job.kind, dict(job.args or {}), job.attempts
 
 
+def checkpoint() -> None:
+    """A point inside a job where a crash drill may kill the worker (see job_pause_s)."""
+    pause = get_settings().job_pause_s
+    if pause:
+        time.sleep(pause)
+
+
 def _finish(key: str, attempt: int, **values: Any) -> bool:
     with session_scope() as session:
         done = session.execute(
@@ -157,9 +164,6 @@ def execute(key: str) -> None:
     if claim is None:
         return
     kind, args, attempt = claim
-    delay = get_settings().job_start_delay_s
-    if delay:
-        time.sleep(delay)
     handler = _HANDLERS.get(kind)
     try:
         if handler is None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -62,3 +63,37 @@ def tasks(crowd_url: str) -> list[int]:
     from tests.crowd.helpers import make_tasks
 
     return make_tasks(5)
+
+
+@pytest.fixture
+def mturk(crowd_url: str) -> Any:
+    """The requester's boto3 client as the product makes it (botocore retries on)."""
+    from backend.config import get_settings
+    from backend.crowd.client import make_client
+
+    return make_client(get_settings())
+
+
+@pytest.fixture
+def hit_ids(mturk: Any, tasks: list[int]) -> list[str]:
+    """The five tasks published (reward $0.50, fee $0.10, one assignment each); HIT ids."""
+    from backend.crowd import flows
+    from backend.crowd.schemas import PublishOptions
+    from backend.db import session_scope
+
+    with session_scope() as session:
+        result = flows.publish(session, mturk, PublishOptions(min_approval_rate=None), None)
+    return result.hit_ids
+
+
+@pytest.fixture
+def api(crowd_url: str) -> Iterator[Any]:
+    """The app's TestClient, signed in as an admin."""
+    from fastapi.testclient import TestClient
+
+    from backend.app import create_app
+    from tests.crowd.helpers import admin_headers
+
+    with TestClient(create_app()) as client:
+        client.headers.update(admin_headers(client))
+        yield client

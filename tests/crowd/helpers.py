@@ -70,3 +70,15 @@ def admin_headers(client: Any) -> dict[str, str]:
     resp = client.post("/api/auth/token", json={"email": ADMIN_EMAIL, "password": ADMIN_PASSWORD})
     assert resp.status_code == 200, resp.text
     return {"Authorization": f"Bearer {resp.json()['access_token']}"}
+
+
+def synced_submission(base: str, hit_id: str, worker_id: str) -> int:
+    """A worker submits on the HIT and our sync accepts it; our assignment id."""
+    from backend.config import get_settings
+    from backend.crowd.client import make_client
+    from backend.crowd.sync import sync
+
+    _, ours = worker_submits(base, hit_id, worker_id)
+    with session_scope() as session:
+        assert sync(session, make_client(get_settings())).accepted == 1
+    return ours

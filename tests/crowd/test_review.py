@@ -5,49 +5,23 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
-from fastapi.testclient import TestClient
 
 from backend.config import get_settings
 from backend.crowd import actions, costs, flows, review
 from backend.crowd.client import make_client
 from backend.crowd.publish import TooManyAssignments
-from backend.crowd.schemas import PublishOptions
 from backend.crowd.sync import sync
 from backend.db import session_scope
 from backend.errors import Conflict
 from backend.market import protocol
-from tests.crowd.helpers import admin_headers, worker_submits
+from tests.crowd.helpers import synced_submission, worker_submits
 from tests.market.helpers import WORKER, WORKER_2
 
 MTurk = Any
 
 
-@pytest.fixture
-def mturk(crowd_url: str) -> MTurk:
-    return make_client(get_settings())
-
-
-@pytest.fixture
-def hit_ids(mturk: MTurk, tasks: list[int]) -> list[str]:
-    with session_scope() as session:
-        result = flows.publish(session, mturk, PublishOptions(min_approval_rate=None), None)
-    return result.hit_ids
-
-
-@pytest.fixture
-def api(crowd_url: str) -> Any:
-    from backend.app import create_app
-
-    with TestClient(create_app()) as client:
-        client.headers.update(admin_headers(client))
-        yield client
-
-
 def _synced(crowd_url: str, hit_id: str, worker_id: str = WORKER) -> int:
-    _, ours = worker_submits(crowd_url, hit_id, worker_id)
-    with session_scope() as session:
-        assert sync(session, make_client(get_settings())).accepted == 1
-    return ours
+    return synced_submission(crowd_url, hit_id, worker_id)
 
 
 def test_sync_accepts_a_matching_submission_and_refuses_a_mismatched_worker(
@@ -127,14 +101,12 @@ def test_a_bonus_retried_after_service_faults_pays_once(
     # botocore retries all three, and the fourth attempt replays the token.
     protocol.inject_faults("SendBonus", 2)
     protocol.inject_faults("SendBonus", 1, after_commit=True)
-    with session_scope() as session:
-        paid = review.bonus(session, mturk, ours, 100, "Careful work on occluded frames")
+    paid = flows.pay_bonus(mturk, ours, 100, "Careful work on occluded frames")
     assert not paid.already_done and (paid.amount, paid.fee) == ("1.00", "0.20")
-    with session_scope() as session:
-        again = review.bonus(session, mturk, ours, 100, "Careful work on occluded frames")
+    again = flows.pay_bonus(mturk, ours, 100, "Careful work on occluded frames")
     assert again.already_done
-    with session_scope() as session, pytest.raises(Conflict, match="another key"):
-        review.bonus(session, mturk, ours, 200, "Careful work on occluded frames")
+    with pytest.raises(Conflict, match="another key"):
+        flows.pay_bonus(mturk, ours, 200, "Careful work on occluded frames")
     market_id = _market_id(ours)
     assert float(before) - float(_balance(mturk)) == pytest.approx(1.20)
     assert mturk.list_bonus_payments(AssignmentId=market_id)["NumResults"] == 1
@@ -188,3 +160,30 @@ def test_hit_and_worker_actions_are_recorded_once_with_clear_state_errors(
     failures = actions.notify_workers(mturk, [WORKER], "New HITs", "Round 2 is open.")
     assert [(f["WorkerId"], f["NotifyWorkersFailureCode"]) for f in failures] == [
         (WORKER, "HardFailure")]
+
+
+def _offered(worker_id: str) -> int:
+    """How many HITs the marketplace offers the worker."""
+    from backend.market import clock, workers
+
+    with session_scope() as session:
+        return len(workers.list_available_hits(session, worker_id, clock.now()))
+
+
+def test_unblocking_lets_the_worker_back_and_unblocking_twice_is_a_conflict(
+    hit_ids: list[str], api: Any,
+) -> None:
+    url = f"/api/crowd/workers/{WORKER_2}/block"
+    assert api.post(url, json={"reason": "Random clicks on every frame"}).status_code == 200
+    assert _offered(WORKER_2) == 0
+    lifted = api.delete(url, params={"reason": "Appeal accepted"})
+    assert lifted.status_code == 200, lifted.text
+    assert lifted.json() == {"worker_id": WORKER_2, "state": "unblocked"}
+    assert _offered(WORKER_2) == len(hit_ids)
+    again = api.delete(url)
+    assert again.status_code == 409
+    assert again.json()["detail"] == f"worker {WORKER_2} is not blocked"
+    never = api.delete(f"/api/crowd/workers/{WORKER}/block")
+    assert never.status_code == 409 and "is not blocked" in never.json()["detail"]
+    assert api.post(url, json={"reason": "Blocked again"}).status_code == 200
+    assert _offered(WORKER_2) == 0

@@ -1,0 +1,126 @@
+"""CLI of quality control and the job table: `dexlabel qc ...`, `dexlabel jobs ...`,
+`dexlabel training ...`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from backend.db import session_scope
+from backend.errors import DexlabelError
+
+qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True)
+jobs_app = typer.Typer(help="Queue jobs: status, attempts, errors.", no_args_is_help=True)
+training_app = typer.Typer(help="Training clips (gold) for the qualification.",
+                           no_args_is_help=True)
+
+
+def _fail(exc: DexlabelError) -> None:
+    typer.secho(f"error: {exc.detail}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(code=2)
+
+
+@qc_app.command("run")
+def qc_run(
+    sequence_id: Annotated[int, typer.Argument()],
+    target: Annotated[str | None, typer.Option(help="hand:0, object:1, ... (default: all)")] = None,
+    now: Annotated[bool, typer.Option("--now/--queue",
+                                      help="run here and wait, or queue for a worker")] = True,
+) -> None:
+    """Score the submitted work of a sequence's targets and act on the decisions."""
+    from backend.jobs.service import execute
+    from backend.review.service import request_qc_for
+
+    try:
+        with session_scope() as session:
+            keys = [job.key for job in request_qc_for(session, sequence_id, target)]
+    except DexlabelError as exc:
+        _fail(exc)
+        return
+    for key in keys:
+        if now:
+            execute(key)
+        typer.echo(f"{key}: {'done' if now else 'queued'}")
+    if now:
+        qc_reports(sequence_id)
+
+
+@qc_app.command("reports")
+def qc_reports(sequence_id: Annotated[int, typer.Argument()]) -> None:
+    """One line per scored assignment: outcome, errors, action, and the worker's feedback."""
+    from backend.review.service import list_reports
+
+    with session_scope() as session:
+        rows = list_reports(session, sequence_id)
+        for r in rows:
+            m = r.metrics or {}
+            med = m.get("median_error_px")
+            typer.echo(f"assignment {r.assignment_id:5d} {r.target_key:9s} {r.worker_id:24s} "
+                       f"{r.outcome:7s}{' (provisional)' if r.provisional else ''} "
+                       f"median {med if med is None else round(med, 1)} px "
+                       f"action {r.action or '-'}")
+            if r.outcome != "approve" and r.feedback:
+                typer.echo(f"    {r.feedback}")
+
+
+@qc_app.command("workers")
+def qc_workers() -> None:
+    """Each worker's running quality score."""
+    from backend.review.service import worker_quality
+
+    with session_scope() as session:
+        for row in worker_quality(session):
+            typer.echo(f"{row['worker_id']:24s} score {row['score']:.2f} scored {row['scored']} "
+                       f"rejected {row['rejected']}{' BLOCKED' if row['blocked'] else ''}")
+
+
+@jobs_app.command("list")
+def jobs_list(
+    status: Annotated[str | None, typer.Option(help="queued, running, retrying, waiting, "
+                                                    "done or failed")] = None,
+    kind: Annotated[str | None, typer.Option()] = None,
+) -> None:
+    """The newest jobs with their status, attempts and last error."""
+    from backend.jobs.service import list_jobs
+
+    with session_scope() as session:
+        for job in list_jobs(session, status, kind):
+            error = f"  {job.error.splitlines()[-1][:120]}" if job.error else ""
+            typer.echo(f"{job.id:5d} {job.key:32s} {job.status:8s} "
+                       f"attempts {job.attempts}/{job.max_attempts}{error}")
+
+
+@jobs_app.command("retry")
+def jobs_retry(job_id: Annotated[int, typer.Argument()]) -> None:
+    """Queue a failed or waiting job again."""
+    from backend.jobs.service import retry_job
+
+    try:
+        with session_scope() as session:
+            job = retry_job(session, job_id)
+            typer.echo(f"{job.key}: queued")
+    except DexlabelError as exc:
+        _fail(exc)
+
+
+@training_app.command("create")
+def training_create(
+    task_id: Annotated[int, typer.Argument()],
+    from_assignment: Annotated[int | None, typer.Option(help="an approved assignment")] = None,
+    from_truth: Annotated[Path | None, typer.Option(
+        help="a synthetic capture whose ground truth is the gold")] = None,
+) -> None:
+    """Make a task a training clip whose known labels score new workers."""
+    from backend.review.gold import create_clip, truth_tracks
+    from backend.review.schemas import TrainingClipCreate
+
+    try:
+        with session_scope() as session:
+            tracks = truth_tracks(session, task_id, from_truth) if from_truth else None
+            clip = create_clip(session, TrainingClipCreate(
+                task_id=task_id, from_assignment_id=from_assignment, tracks=tracks))
+            typer.echo(f"task {clip.task_id} is a training clip ({clip.source})")
+    except DexlabelError as exc:
+        _fail(exc)

@@ -1,0 +1,178 @@
+"""The QC job: score a target, then act on each new decision in its own unit of work.
+
+Marketplace calls happen with no write transaction open (the embedded SQLite database is
+shared with the built-in marketplace); each action's ledger row and the report's ``action``
+are committed together, so a job killed at any point and run again repeats no action.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from sqlalchemy import func, select
+
+from backend.annotation.models import Assignment, Task
+from backend.config import get_settings
+from backend.crowd import actions, review
+from backend.crowd.client import MTurkClient, make_client
+from backend.crowd.models import CrowdWorkerAction
+from backend.db import session_scope
+from backend.errors import Conflict, DexlabelError
+from backend.jobs.service import checkpoint, mark_waiting
+from backend.review.models import QCReport
+from backend.review.service import hit_of, score_target
+from backend.solve.service import request_solve
+
+log = logging.getLogger(__name__)
+
+REOPEN_PENDING = "rejected; re-opening the task"
+REOPENED = "rejected; the task was re-opened with one more assignment"
+GRANT_PENDING = "passed training; granting the qualification"
+GRANTED = "passed training; the training qualification was granted"
+
+
+def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
+    """The whole QC job of one target; returns counts for the job table."""
+    timings: dict[str, float] = {}
+    started = time.perf_counter()
+    with session_scope() as session:
+        counts = score_target(session, sequence_id, target_key, timings)
+    timings["score_and_store_s"] = round(time.perf_counter() - started, 3)
+    settings = get_settings()
+    acted: dict[str, int] = {}
+    started = time.perf_counter()
+    if settings.qc_auto_actions:
+        client = make_client(settings)
+        acted = act_on_reports(client, sequence_id, target_key)
+        block_repeat_failures(client, sequence_id, target_key)
+    timings["act_s"] = round(time.perf_counter() - started, 3)
+    solve = maybe_request_solve(sequence_id)
+    return {"scored": counts, "actions": acted, "solve": solve, "timings": timings}
+
+
+def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
+    with session_scope() as session:
+        rows = session.execute(select(QCReport.id, QCReport.assignment_id).where(
+            QCReport.sequence_id == sequence_id, QCReport.target_key == target_key,
+            (QCReport.action.is_(None))
+            | QCReport.action_detail.in_((REOPEN_PENDING, GRANT_PENDING)))
+            .order_by(QCReport.id))
+        return [(int(r), int(a)) for r, a in rows]
+
+
+def act_on_reports(client: MTurkClient, sequence_id: int, target_key: str) -> dict[str, int]:
+    done: dict[str, int] = {}
+    for report_id, assignment_id in _pending(sequence_id, target_key):
+        outcome = _act(client, report_id, assignment_id)
+        if outcome:
+            done[outcome] = done.get(outcome, 0) + 1
+            checkpoint()
+    return done
+
+
+def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
+    """One report's action (at most one marketplace decision, then the re-open)."""
+    with session_scope() as session, session.no_autoflush:
+        report = session.get_one(QCReport, report_id)
+        assignment = session.get_one(Assignment, assignment_id)
+        if report.action_detail == GRANT_PENDING:
+            follow_up = _grant
+        elif report.action_detail == REOPEN_PENDING:
+            follow_up = _reopen
+        elif assignment.status in ("approved", "rejected"):
+            report.action, report.action_detail = assignment.status, "decided by an admin"
+            return None
+        elif report.provisional:
+            report.action_detail = "waiting for more views before acting"
+            return None
+        elif report.outcome == "review":
+            report.action_detail = "left for an admin's review"
+            return None
+        elif hit_of(session, assignment) is None:
+            # Not from a marketplace (a direct link): the decision is recorded, nobody is paid.
+            assignment.status = "approved" if report.outcome == "approve" else "rejected"
+            report.action, report.action_detail = "recorded", "no marketplace submission"
+            return "recorded"
+        elif report.outcome == "approve":
+            review.approve(session, client, assignment_id, None)
+            report.action, report.action_detail = "approved", "approved automatically"
+            if report.method != "gold":
+                return "approved"
+            report.action_detail, follow_up = GRANT_PENDING, _grant
+        else:
+            review.reject(session, client, assignment_id, report.feedback)
+            report.action, report.action_detail = "rejected", REOPEN_PENDING
+            follow_up = _reopen
+    follow_up(client, report_id, assignment_id)
+    return report.action
+
+
+def _grant(client: MTurkClient, report_id: int, assignment_id: int) -> None:
+    """The worker passed a training clip: grant our "passed training" qualification."""
+    with session_scope() as session, session.no_autoflush:
+        worker_id = session.get_one(Assignment, assignment_id).worker_id
+        try:
+            actions.grant_qualification(session, client, worker_id, None, notify=True)
+        except Conflict:
+            pass  # granted by an earlier run whose commit was lost, or by an admin
+        session.get_one(QCReport, report_id).action_detail = GRANTED
+
+
+def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
+    """One more assignment on the rejected work's HIT (its token makes a repeat add nothing)."""
+    with session_scope() as session, session.no_autoflush:
+        hit = hit_of(session, session.get_one(Assignment, assignment_id))
+        if hit is not None and hit.expired_at is None:
+            try:
+                actions.add_assignments(session, client, hit.hit_id, 1, allow_large_hits=True)
+            except DexlabelError as exc:
+                log.warning("could not re-open HIT %s: %s", hit.hit_id, exc.detail)
+        report = session.get_one(QCReport, report_id)
+        report.action_detail = REOPENED
+
+
+def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str) -> list[str]:
+    """Block the target's workers whose final rejected reports reached the limit."""
+    limit = get_settings().qc_block_after_failures
+    if limit <= 0:
+        return []
+    with session_scope() as session:
+        workers = set(session.scalars(select(QCReport.worker_id).where(
+            QCReport.sequence_id == sequence_id, QCReport.target_key == target_key)))
+        stmt = (select(QCReport.worker_id, func.count()).where(
+            QCReport.worker_id.in_(workers), QCReport.outcome == "reject",
+            QCReport.provisional.is_(False)).group_by(QCReport.worker_id))
+        due = [wid for wid, count in session.execute(stmt) if count >= limit]
+        blocked = set(session.scalars(select(CrowdWorkerAction.worker_id).where(
+            CrowdWorkerAction.kind == "block")))
+    done = []
+    for worker_id in due:
+        if worker_id in blocked:
+            continue
+        with session_scope() as session, session.no_autoflush:
+            try:
+                actions.block_worker(session, client, worker_id,
+                                     f"{limit} or more assignments failed the quality check")
+                done.append(worker_id)
+            except Conflict:
+                pass
+    return done
+
+
+def maybe_request_solve(sequence_id: int) -> str:
+    """Queue the solve once every task of the sequence has approved work."""
+    with session_scope() as session:
+        tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
+        approved = set(session.scalars(select(Assignment.task_id).where(
+            Assignment.task_id.in_(tasks), Assignment.status == "approved")))
+        if not tasks or set(tasks) - approved:
+            return f"waiting: {len(set(tasks) - approved)} of {len(tasks)} tasks not accepted yet"
+        try:
+            run = request_solve(session, sequence_id)
+        except DexlabelError as exc:
+            mark_waiting(session, "solve", f"solve:{sequence_id}", {"sequence_id": sequence_id},
+                         exc.detail)
+            return f"solve not started: {exc.detail}"
+        return f"solve run {run.id} queued"

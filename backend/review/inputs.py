@@ -1,0 +1,165 @@
+"""What a QC job reads: the target's cameras, every scored assignment's dense tracks, depth.
+
+Arrays only leave this module; the scoring itself is pure (worker.quality).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation.models import Assignment, Task
+from backend.captures.models import Camera, Frame, Sequence
+from backend.storage import get_storage
+from worker.geometry import CameraModel
+from worker.tracks import dense_track
+
+# Depth maps decoded at once when the visibility check reads a view.
+DECODE_THREADS = 4
+# Assignments whose labels take part in scoring; rejected work is left out of the consensus.
+SCORED_STATUSES = ("submitted", "approved")
+
+
+@dataclass
+class ScoredAssignment:
+    """Who and what one label set is, beside its arrays."""
+
+    assignment_id: int
+    task_id: int
+    worker_id: str
+    status: str
+    view: int
+
+
+@dataclass
+class TargetInputs:
+    sequence_id: int
+    target_key: str
+    kind: str
+    num_frames: int
+    cameras: list[CameraModel]
+    # view index (into cameras) -> camera row id, serial
+    serials: list[str]
+    labels: list = field(default_factory=list)  # worker.quality.consensus.ViewLabels
+    who: dict[str, ScoredAssignment] = field(default_factory=dict)
+    tasks: dict[int, Task] = field(default_factory=dict)
+
+
+def camera_model(camera: Camera) -> CameraModel:
+    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
+    return CameraModel(K=K, dist=np.asarray(camera.distortion, dtype=np.float64),
+                       T_cam_to_world=np.asarray(camera.extrinsics, dtype=np.float64),
+                       width=camera.width, height=camera.height)
+
+
+def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int):
+    """An assignment's tracks as dense (F, P, 2) px (NaN = no position) and (F, P) visibility,
+    as a worker.quality.consensus.ViewLabels."""
+    from worker.quality.consensus import ViewLabels
+
+    xy = np.full((num_frames, num_points, 2), np.nan)
+    visible = np.zeros((num_frames, num_points), dtype=bool)
+    for track in assignment.tracks:
+        if 0 <= track.point_index < num_points:
+            dense = dense_track(track.keyframes, num_frames)
+            xy[:, track.point_index] = dense.xy
+            visible[:, track.point_index] = dense.visible
+    return ViewLabels(key=str(assignment.id), view=view, xy=xy, visible=visible,
+                      working_time_s=assignment.working_time_s)
+
+
+def target_inputs(session: Session, sequence_id: int, target_key: str) -> TargetInputs:
+    """Cameras of the sequence and the scored assignments of every task of one target."""
+    sequence = session.get_one(Sequence, sequence_id)
+    cameras = list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
+                                   .order_by(Camera.view_index, Camera.id)))
+    view_of = {camera.id: i for i, camera in enumerate(cameras)}
+    tasks = list(session.scalars(select(Task).where(
+        Task.sequence_id == sequence_id, Task.target_key == target_key).order_by(Task.id)))
+    if not tasks:
+        raise ValueError(f"sequence {sequence_id} has no tasks for target {target_key!r}")
+    out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
+                       num_frames=sequence.num_frames, cameras=[camera_model(c) for c in cameras],
+                       serials=[c.serial for c in cameras], tasks={t.id: t for t in tasks})
+    stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
+                                     Assignment.status.in_(SCORED_STATUSES))
+            .order_by(Assignment.id))
+    for assignment in session.scalars(stmt):
+        task = out.tasks[assignment.task_id]
+        view = view_of[task.camera_id]
+        out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))
+        out.who[str(assignment.id)] = ScoredAssignment(
+            assignment.id, task.id, assignment.worker_id, assignment.status, view)
+    return out
+
+
+class DepthStack:
+    """The (F, H, W) uint16 depth maps (millimetres) of one view, read when indexed.
+
+    Supports what the visibility check does with a depth array: ``shape`` and fancy indexing
+    with (frames, rows, cols) integer arrays. Only the frames asked for are decoded, in
+    parallel (cv2 releases the GIL), and none is kept afterwards: one view's maps are in
+    memory at a time instead of every view's (8 x 72 maps are 350 MB).
+    """
+
+    ndim = 3
+
+    def __init__(self, keys: list[str], height: int, width: int) -> None:
+        self.keys = keys
+        self.shape = (len(keys), height, width)
+        self._last: tuple[bytes, np.ndarray] | None = None
+
+    def _load(self, frame: int) -> np.ndarray:
+        data = get_storage().get_bytes(self.keys[frame])
+        depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if depth is None or depth.dtype != np.uint16 or depth.shape != self.shape[1:]:
+            raise ValueError(f"{self.keys[frame]}: not a {self.shape[2]}x{self.shape[1]} "
+                             "16-bit depth map")
+        return depth
+
+    def __getitem__(self, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+        frames, rows, cols = (np.asarray(i, dtype=np.int64) for i in index)
+        # Every assignment of a view asks for the same pixels (the consensus projected into
+        # the view): the last answer is kept so the maps are decoded once per view.
+        asked = hashlib.sha1(b"".join(a.tobytes() for a in (frames, rows, cols))).digest()
+        if self._last is not None and self._last[0] == asked:
+            return self._last[1].copy()
+        out = np.zeros(frames.shape, dtype=np.uint16)
+        needed = [int(f) for f in np.unique(frames)]
+        with ThreadPoolExecutor(max_workers=DECODE_THREADS) as pool:
+            for frame, depth in zip(needed, pool.map(self._load, needed)):
+                at = frames == frame
+                out[at] = depth[rows[at], cols[at]]
+        self._last = (asked, out)
+        return out.copy()
+
+
+def depth_maps(session: Session, sequence_id: int, views: set[int]) -> dict[int, DepthStack]:
+    """The depth maps of each listed view that has depth, as lazily read stacks."""
+    cameras = list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
+                                   .order_by(Camera.view_index, Camera.id)))
+    out: dict[int, DepthStack] = {}
+    for view, camera in enumerate(cameras):
+        if view not in views or not camera.has_depth:
+            continue
+        keys = list(session.scalars(select(Frame.depth_key).where(Frame.camera_id == camera.id)
+                                    .order_by(Frame.index)))
+        if keys and all(keys):
+            out[view] = DepthStack(keys, camera.height, camera.width)
+    return out
+
+
+def highlight_mask(task: Task, width: int, height: int) -> np.ndarray | None:
+    """The object's outline at its initial pose (the task's highlight polygon) as a mask."""
+    polygon = (task.highlight or {}).get("polygon")
+    if not polygon:
+        return None
+    mask = np.zeros((height, width), dtype=np.uint8)
+    cv2.fillPoly(mask, [np.round(np.asarray(polygon, dtype=np.float64)).astype(np.int32)], 1)
+    return mask.astype(bool)

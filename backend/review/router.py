@@ -1,0 +1,51 @@
+"""Admin endpoints of quality control: reports, worker quality, QC runs, training clips."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from fastapi import APIRouter, Query
+
+from backend.accounts.deps import CurrentAdmin
+from backend.db import SessionDep
+from backend.jobs.schemas import JobRead
+from backend.review import gold, service
+from backend.review.schemas import (
+    QCReportDetail, QCReportRead, QCRunRequest, TrainingClipCreate, TrainingClipRead,
+    WorkerQualityRead,
+)
+
+router = APIRouter(prefix="/api/qc", tags=["quality"])
+
+Outcome = Literal["approve", "review", "reject"]
+
+
+@router.get("/reports", response_model=list[QCReportRead])
+def list_reports(session: SessionDep, _: CurrentAdmin, sequence_id: int | None = None,
+                 outcome: Outcome | None = None, worker_id: str | None = None,
+                 limit: int = Query(500, ge=1, le=5000)) -> list[QCReportRead]:
+    rows = service.list_reports(session, sequence_id, outcome, worker_id, limit)
+    return [QCReportRead.model_validate(r) for r in rows]
+
+
+@router.get("/reports/{assignment_id}", response_model=QCReportDetail)
+def read_report(assignment_id: int, session: SessionDep, _: CurrentAdmin) -> QCReportDetail:
+    return QCReportDetail.model_validate(service.get_report_or_raise(session, assignment_id))
+
+
+@router.post("/runs", response_model=list[JobRead])
+def run_qc(body: QCRunRequest, session: SessionDep, _: CurrentAdmin) -> list[JobRead]:
+    """Queue the QC job of one target (or of every target with submitted work)."""
+    jobs = service.request_qc_for(session, body.sequence_id, body.target_key)
+    return [JobRead.model_validate(j) for j in jobs]
+
+
+@router.get("/workers", response_model=list[WorkerQualityRead])
+def workers(session: SessionDep, _: CurrentAdmin) -> list[WorkerQualityRead]:
+    return [WorkerQualityRead(**row) for row in service.worker_quality(session)]
+
+
+@router.post("/training-clips", response_model=TrainingClipRead)
+def create_training_clip(body: TrainingClipCreate, session: SessionDep,
+                         _: CurrentAdmin) -> TrainingClipRead:
+    return TrainingClipRead.model_validate(gold.create_clip(session, body))

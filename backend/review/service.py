@@ -1,0 +1,205 @@
+"""Quality control of a target (a hand, or one object) of a sequence: score, decide, act.
+
+A QC job scores every submitted assignment of every view of one target together (the views
+check each other), writes one report per assignment, then acts on the reports not acted on
+yet, each action in its own unit of work after its marketplace call:
+
+- approve on a clear pass; reject on a clear fail (feedback = the evidence) and re-open the
+  task with one more assignment; leave borderline work to an admin;
+- a provisional report (fewer than ``qc_min_views`` views in) never acts: the next submission
+  to the target scores it again;
+- a worker whose rejections reach ``qc_block_after_failures`` is blocked.
+
+Re-running the job (a retry, a crashed worker, another submission) re-scores but never
+repeats an action: each report's ``action`` is set in the same commit as the ledger row of
+the payment it stands for.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from backend.annotation.models import Assignment, Task
+from backend.annotation.points import point_names
+from backend.config import get_settings
+from backend.crowd.models import CrowdHit, CrowdSubmission, CrowdWorkerAction
+from backend.errors import NotFound
+from backend.jobs.models import Job
+from backend.jobs.service import enqueue_job
+from backend.review import gold
+from backend.review.inputs import SCORED_STATUSES, TargetInputs, depth_maps, highlight_mask, target_inputs
+from backend.review.models import QCReport, TrainingClip
+
+log = logging.getLogger(__name__)
+
+
+def qc_key(sequence_id: int, target_key: str) -> str:
+    return f"qc:{sequence_id}:{target_key}"
+
+
+def request_qc(session: Session, task: Task) -> Job:
+    """Queue the QC job of the task's target (after this unit of work commits)."""
+    return enqueue_job(session, "qc", qc_key(task.sequence_id, task.target_key),
+                       {"sequence_id": task.sequence_id, "target_key": task.target_key})
+
+
+def request_qc_for(session: Session, sequence_id: int, target_key: str | None) -> list[Job]:
+    """Queue QC for one target, or for every target of the sequence with submitted work."""
+    stmt = (select(Task).join(Assignment, Assignment.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, Assignment.status.in_(SCORED_STATUSES))
+            .order_by(Task.id))
+    if target_key:
+        stmt = stmt.where(Task.target_key == target_key)
+    firsts: dict[str, Task] = {}
+    for task in session.scalars(stmt):
+        firsts.setdefault(task.target_key, task)
+    if not firsts:
+        what = f"target {target_key!r} of " if target_key else ""
+        raise NotFound(f"{what}sequence {sequence_id} has no submitted work to check")
+    return [request_qc(session, task) for task in firsts.values()]
+
+
+def thresholds_bounds():  # -> worker.quality.decide.QCThresholds
+    from worker.quality.decide import QCThresholds
+
+    return QCThresholds(**get_settings().qc_thresholds)
+
+
+def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
+           ) -> tuple[dict[str, Any], dict[str, str], bool]:
+    """Per-assignment QC results and scoring method ("consensus" against the other views,
+    "gold" for training clips) keyed by assignment id (str), and whether provisional."""
+    from worker.quality.consensus import score_hand
+
+    training = set(session.scalars(select(TrainingClip.task_id).where(
+        TrainingClip.task_id.in_(inputs.tasks))))
+    crowd = [lab for lab in inputs.labels if inputs.who[lab.key].task_id not in training]
+    results: dict[str, Any] = {}
+    provisional = False
+    if inputs.kind == "hand" and crowd:
+        started = time.perf_counter()
+        depth = depth_maps(session, inputs.sequence_id, {lab.view for lab in crowd})
+        timings["read_depth_s"] = round(time.perf_counter() - started, 3)
+        started = time.perf_counter()
+        report = score_hand(inputs.cameras, crowd, depth=depth)
+        timings["score_s"] = round(time.perf_counter() - started, 3)
+        results.update(report.assignments)
+        provisional = bool(report.provisional)
+    elif crowd:
+        from worker.quality.landmarks import score_landmarks
+
+        for lab in crowd:
+            camera = inputs.cameras[lab.view]
+            task = inputs.tasks[inputs.who[lab.key].task_id]
+            mask = highlight_mask(task, camera.width, camera.height)
+            results[lab.key] = score_landmarks(camera, lab, {0: mask} if mask is not None else None)
+    methods = {key: "consensus" for key in results}
+    for lab in inputs.labels:
+        if lab.key not in results:
+            task_id = inputs.who[lab.key].task_id
+            results[lab.key] = gold.score_training(session, task_id, lab, inputs.num_frames)
+            methods[lab.key] = "gold"
+    return results, methods, provisional
+
+
+def _population(session: Session, kind: str, fresh: dict[str, dict]) -> list[dict]:
+    """Metrics of every consensus-scored assignment of the project for this kind of target."""
+    stmt = select(QCReport.assignment_id, QCReport.metrics).where(
+        QCReport.method == "consensus", QCReport.target_key.like(f"{kind}:%"))
+    rows = {str(aid): metrics for aid, metrics in session.execute(stmt)}
+    rows.update(fresh)
+    return list(rows.values())
+
+
+def score_target(session: Session, sequence_id: int, target_key: str,
+                 timings: dict[str, float] | None = None) -> dict[str, int]:
+    """Score the target's assignments and write (overwrite) their reports; counts by outcome.
+    ``timings`` (if given) receives the seconds spent reading inputs and scoring."""
+    from worker.quality.decide import decide, learn_thresholds
+
+    timings = {} if timings is None else timings
+    started = time.perf_counter()
+    inputs = target_inputs(session, sequence_id, target_key)
+    timings["read_tracks_s"] = round(time.perf_counter() - started, 3)
+    results, methods, provisional = _score(session, inputs, timings)
+    fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
+    thresholds = learn_thresholds(_population(session, inputs.kind, fresh), thresholds_bounds())
+    names = point_names(inputs.kind)
+    views = len({lab.view for lab in inputs.labels})
+    counts = {"approve": 0, "review": 0, "reject": 0, "provisional": 0}
+    for key, qc in results.items():
+        method = methods[key]
+        is_provisional = provisional and method == "consensus"
+        decision = decide(qc, thresholds, names)
+        who = inputs.who[key]
+        row = session.scalar(select(QCReport).where(QCReport.assignment_id == who.assignment_id))
+        if row is None:
+            row = QCReport(assignment_id=who.assignment_id)
+            session.add(row)
+        data = qc.to_dict()
+        row.task_id, row.sequence_id, row.target_key = who.task_id, sequence_id, target_key
+        row.worker_id, row.method = who.worker_id, method
+        row.metrics, row.per_joint = data.get("metrics", {}), data.get("per_joint", [])
+        row.per_frame, row.swaps = data.get("per_frame", []), data.get("swaps", [])
+        row.thresholds, row.outcome = thresholds, decision.outcome
+        row.reasons, row.feedback = list(decision.reasons), decision.feedback
+        row.provisional = is_provisional or bool(decision.provisional)
+        row.views = views
+        counts[decision.outcome] += 1
+        counts["provisional"] += int(row.provisional)
+    session.flush()
+    return counts
+
+
+def get_report_or_raise(session: Session, assignment_id: int) -> QCReport:
+    row = session.scalar(select(QCReport).where(QCReport.assignment_id == assignment_id))
+    if row is None:
+        raise NotFound(f"assignment {assignment_id} has no QC report yet")
+    return row
+
+
+def list_reports(session: Session, sequence_id: int | None = None, outcome: str | None = None,
+                 worker_id: str | None = None, limit: int = 500) -> list[QCReport]:
+    stmt = select(QCReport).order_by(QCReport.id).limit(limit)
+    if sequence_id is not None:
+        stmt = stmt.where(QCReport.sequence_id == sequence_id)
+    if outcome:
+        stmt = stmt.where(QCReport.outcome == outcome)
+    if worker_id:
+        stmt = stmt.where(QCReport.worker_id == worker_id)
+    return list(session.scalars(stmt))
+
+
+def worker_quality(session: Session, worker_id: str | None = None) -> list[dict[str, Any]]:
+    """Each worker's running quality: share of final (non-provisional) reports that passed."""
+    stmt = (select(QCReport.worker_id, QCReport.outcome, func.count())
+            .where(QCReport.provisional.is_(False))
+            .group_by(QCReport.worker_id, QCReport.outcome))
+    if worker_id:
+        stmt = stmt.where(QCReport.worker_id == worker_id)
+    tally: dict[str, dict[str, int]] = {}
+    for wid, outcome, count in session.execute(stmt):
+        tally.setdefault(wid, {"approve": 0, "review": 0, "reject": 0})[outcome] = int(count)
+    blocked = set(session.scalars(select(CrowdWorkerAction.worker_id).where(
+        CrowdWorkerAction.kind == "block")))
+    out = []
+    for wid, t in sorted(tally.items()):
+        total = sum(t.values())
+        out.append({"worker_id": wid, "scored": total, "approved": t["approve"],
+                    "review": t["review"], "rejected": t["reject"],
+                    "score": round((t["approve"] + 0.5 * t["review"]) / total, 4),
+                    "blocked": wid in blocked})
+    return out
+
+
+def hit_of(session: Session, assignment: Assignment) -> CrowdHit | None:
+    submission = session.scalar(select(CrowdSubmission).where(
+        CrowdSubmission.assignment_id == assignment.id))
+    if submission is None:
+        return None
+    return session.scalar(select(CrowdHit).where(CrowdHit.hit_id == submission.hit_id))

@@ -1,0 +1,193 @@
+"""What a solve reads from the database and storage, as the arrays worker.solver takes.
+
+Labels come only from approved assignments. Where several are approved for one task (one view
+of one target), they are merged per frame: the median of their positions (pixels) and visible
+where most of them say visible. Views run in the cameras' ``view_index`` order.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, selectinload
+
+from backend.annotation.models import Assignment, Task
+from backend.captures.models import Camera, Frame, Sequence
+from backend.config import get_settings
+from backend.storage import Storage, get_storage
+from worker.geometry.cameras import CameraModel
+from worker.geometry.mesh_io import Mesh, read_mesh
+from worker.hand import HandModel, load_hand_model
+from worker.hand.joints import NUM_JOINTS
+from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
+from worker.tracks import dense_track
+
+ACCEPTED = "approved"
+
+
+def camera_model(camera: Camera) -> CameraModel:
+    """A camera row as the worker packages take it (pixels, camera-to-world metres)."""
+    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
+    dist = np.zeros(5)
+    coeffs = np.asarray(camera.distortion or [], dtype=np.float64)[:5]
+    dist[: len(coeffs)] = coeffs
+    return CameraModel(K=K, dist=dist, T_cam_to_world=np.asarray(camera.extrinsics, float),
+                       width=camera.width, height=camera.height)
+
+
+def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
+    return list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
+                                .order_by(Camera.view_index, Camera.id)))
+
+
+def dense_labels(assignment: Assignment, num_frames: int,
+                 num_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """One assignment's tracks as (F, P, 2) px (NaN = no position) and (F, P) visibility."""
+    xy = np.full((num_frames, num_points, 2), np.nan)
+    visible = np.zeros((num_frames, num_points), dtype=bool)
+    for track in assignment.tracks:
+        if 0 <= track.point_index < num_points:
+            dense = dense_track(track.keyframes, num_frames)
+            xy[:, track.point_index] = dense.xy
+            visible[:, track.point_index] = dense.visible
+    return xy, visible
+
+
+def merge_labels(labels: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Several workers' labels of one view: per-frame median position, majority visibility.
+
+    labels: A pairs of (F, P, 2) px and (F, P) bool. Returns (F, P, 2) px (NaN where nobody
+    placed the point) and (F, P) bool, visible where more than half of the A workers say so.
+    """
+    xy = np.stack([x for x, _ in labels])
+    votes = np.stack([v for _, v in labels]).sum(axis=0)
+    placed = np.isfinite(xy).all(axis=-1).any(axis=0)
+    merged = np.full(xy.shape[1:], np.nan)
+    if placed.any():
+        merged[placed] = np.nanmedian(xy[:, placed], axis=0)
+    return merged, 2 * votes > len(labels)
+
+
+def approved_labels(session: Session, sequence_id: int, num_frames: int
+                    ) -> dict[tuple[int, str], tuple[np.ndarray, np.ndarray]]:
+    """Merged approved labels keyed by (camera id, target key) of every task that has any."""
+    stmt = (select(Assignment, Task).join(Task, Assignment.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, Assignment.status == ACCEPTED)
+            .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
+    grouped: dict[tuple[int, str], list] = defaultdict(list)
+    for assignment, task in session.execute(stmt):
+        grouped[(task.camera_id, task.target_key)].append(
+            dense_labels(assignment, num_frames, task.num_points))
+    return {key: merge_labels(labels) for key, labels in grouped.items()}
+
+
+def count_approved(session: Session, sequence_id: int) -> int:
+    stmt = (select(func.count(Assignment.id)).join(Task, Assignment.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, Assignment.status == ACCEPTED))
+    return int(session.scalar(stmt) or 0)
+
+
+def load_mesh(storage: Storage, key: str) -> Mesh:
+    """An object model (OBJ or PLY, metres) from storage."""
+    with tempfile.NamedTemporaryFile(suffix=Path(key).suffix) as fh:
+        fh.write(storage.get_bytes(key))
+        fh.flush()
+        return read_mesh(Path(fh.name))
+
+
+def load_depth(storage: Storage, camera: Camera, frames: list[Frame]) -> np.ndarray | None:
+    """(F, H, W) uint16 millimetres of one view, or None when the view has no depth.
+
+    Raises ValueError naming the file when a stored depth map is not an H x W uint16 PNG.
+    """
+    if not camera.has_depth or not frames or any(f.depth_key is None for f in frames):
+        return None
+    maps = []
+    for frame in frames:
+        data = np.frombuffer(storage.get_bytes(frame.depth_key), np.uint8)
+        depth = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if depth is None or depth.dtype != np.uint16 or depth.shape != (camera.height,
+                                                                        camera.width):
+            raise ValueError(f"depth map {frame.depth_key} is not a {camera.width}x"
+                             f"{camera.height} uint16 PNG")
+        maps.append(depth)
+    return np.stack(maps)
+
+
+def hand_model_for(side: str) -> HandModel:
+    """The MANO model of ``side``: official pickles from DEXLABEL_MANO_DIR, else built in."""
+    return load_hand_model(side, get_settings().mano_dir)
+
+
+@dataclass
+class GatheredInputs:
+    """The solver's inputs plus the names the API shows beside them."""
+
+    inputs: SolveInputs
+    serials: list[str]
+    object_names: list[str]
+    hand_side: str | None
+
+
+def hand_target(seq: Sequence, cameras: list[Camera], labels: dict,
+                hand_index: int = 0) -> HandTarget | None:
+    """One hand's merged labels over all views (NaN in views nobody labelled); the solver
+    takes one hand, DexYCB's sequences have one."""
+    hand = next((h for h in seq.hands if h.index == hand_index), None)
+    if hand is None:
+        return None
+    key = f"hand:{hand.index}"
+    keypoints = np.full((len(cameras), seq.num_frames, NUM_JOINTS, 2), np.nan)
+    visible = np.zeros((len(cameras), seq.num_frames, NUM_JOINTS), dtype=bool)
+    for view, camera in enumerate(cameras):
+        if (camera.id, key) in labels:
+            keypoints[view], visible[view] = labels[(camera.id, key)]
+    betas = np.asarray(hand.betas if hand.betas is not None else [], dtype=np.float64)
+    return HandTarget(side=hand.side, betas=betas, keypoints=keypoints, visible=visible)
+
+
+def object_targets(seq: Sequence, cameras: list[Camera], labels: dict,
+                   storage: Storage) -> list[ObjectTarget]:
+    """Every object with its mesh, initial pose and the landmarks of its approved tasks."""
+    out = []
+    for obj in seq.objects:
+        mesh = load_mesh(storage, obj.mesh_key)
+        landmarks = []
+        for view, camera in enumerate(cameras):
+            merged = labels.get((camera.id, f"object:{obj.index}"))
+            if merged is None:
+                continue
+            xy, visible = merged
+            landmarks += [Landmark(view=view, xy=xy[:, p], visible=visible[:, p])
+                          for p in range(xy.shape[1])]
+        pose = None if obj.initial_pose is None else np.asarray(obj.initial_pose, float)
+        out.append(ObjectTarget(name=obj.name, vertices=mesh.vertices, faces=mesh.faces,
+                                initial_pose=pose, landmarks=landmarks))
+    return out
+
+
+def gather_inputs(session: Session, sequence_id: int, with_depth: bool = True) -> GatheredInputs:
+    """Cameras, merged approved labels, meshes, initial poses and depth of one sequence."""
+    storage = get_storage()
+    seq = session.get_one(Sequence, sequence_id)
+    cameras = sequence_cameras(session, sequence_id)
+    labels = approved_labels(session, sequence_id, seq.num_frames)
+    hand = hand_target(seq, cameras, labels)
+    depth: list[np.ndarray | None] = []
+    for camera in cameras:
+        frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)
+                                      .order_by(Frame.index)))
+        depth.append(load_depth(storage, camera, frames) if with_depth else None)
+    inputs = SolveInputs(
+        cameras=[camera_model(c) for c in cameras], num_frames=seq.num_frames, hand=hand,
+        objects=object_targets(seq, cameras, labels, storage), depth=depth,
+        hand_model=hand_model_for(hand.side) if hand is not None else None)
+    return GatheredInputs(inputs=inputs, serials=[c.serial for c in cameras],
+                          object_names=[o.name for o in seq.objects],
+                          hand_side=hand.side if hand is not None else None)

@@ -1,0 +1,81 @@
+"""Solve runs and their per-frame outputs as the API reads and writes them."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, field_validator
+
+Optimiser = Literal["paper", "default"]
+
+
+class SolveRequest(BaseModel):
+    """Body of POST /api/sequences/{id}/solve; the optimiser defaults to the setting.
+
+    params: overrides of worker.solver.SolveSettings fields (weights, iterations, use_depth,
+    ...), e.g. {"w_depth": 0.5}; unknown names are refused.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    optimiser: Optimiser | None = None
+    params: dict[str, StrictBool | int | float] | None = None
+
+
+class SolveRunRead(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    sequence_id: int
+    optimiser: str
+    params: dict[str, Any]
+    status: str
+    timings: dict[str, Any]
+    summary: dict[str, Any] | None
+    error: str | None
+    num_frames: int
+    num_views: int
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    # True for the sequence's newest finished run: the one its results come from.
+    current: bool = False
+
+
+class ObjectPose(BaseModel):
+    index: int
+    name: str
+    pose: list[list[float | None]]
+
+
+class SolveFrameRead(BaseModel):
+    """One frame's outputs: world frame, metres; errors in pixels and millimetres."""
+
+    run_id: int
+    frame: int
+    labelled: bool
+    reason: str | None
+    hand_pose_m: list[float] | None
+    hand_joints: list[list[float]] | None
+    objects: list[ObjectPose]
+    # serial -> 21 joint errors (px), None where the joint is not labelled in that view.
+    kpt_error_px: dict[str, list[float | None]]
+    depth_rms_mm: float | None
+    hand_vertices: list[list[float]] | None = None
+    hand_faces: list[list[int]] | None = None
+
+
+class InitialPoseUpdate(BaseModel):
+    """Object-to-world 3x4 pose at the first frame, metres, with a rotation block."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    pose: list[list[float]] = Field(min_length=3, max_length=3)
+
+    @field_validator("pose")
+    @classmethod
+    def _three_by_four(cls, pose: list[list[float]]) -> list[list[float]]:
+        if any(len(row) != 4 for row in pose):
+            raise ValueError("pose must be 3 rows of 4 numbers (object-to-world, metres)")
+        return pose

@@ -1,0 +1,188 @@
+"""Solve rules: who may be solved, runs, reading a run's outputs. Services flush, never commit.
+
+A sequence can be solved once every object has an initial pose, its hand has betas (the
+subject's shape) and at least one assignment has been approved. A request creates a run and
+queues the ``solve`` job; the run's outputs become the sequence's current result only when the
+job finishes, so a re-run (or a failed one) never hides the previous result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.captures.models import SceneObject, Sequence
+from backend.captures.service import get_sequence_or_raise
+from backend.config import get_settings
+from backend.errors import Conflict, DexlabelError, NotFound
+from backend.jobs.service import enqueue_job
+from backend.solve.inputs import count_approved
+from backend.solve.models import SolveRun
+from worker.solver import SolveSettings
+
+JOB_KIND = "solve"
+OPTIMISERS = ("paper", "default")
+# A given rotation block must be orthonormal to this tolerance (unitless).
+ROTATION_TOLERANCE = 1e-4
+
+
+class SolveNotReady(Conflict):
+    """The sequence lacks something the solve needs; the detail says what and how to give it."""
+
+    code = "not_ready"
+
+
+class InvalidSolveRequest(DexlabelError):
+    status_code = 422
+    code = "invalid_request"
+
+
+class InvalidPose(DexlabelError):
+    status_code = 422
+    code = "invalid_pose"
+
+
+def job_key(run_id: int) -> str:
+    return f"solve-run:{run_id}"
+
+
+def check_ready(session: Session, seq: Sequence) -> None:
+    """Raise SolveNotReady naming the first thing the sequence lacks."""
+    for obj in seq.objects:
+        if obj.initial_pose is None:
+            raise SolveNotReady(
+                f"object '{obj.name}' has no initial pose; give one with PUT "
+                f"/api/sequences/{seq.id}/objects/{obj.index}/initial-pose or in the capture "
+                "(pose.npz)", object_index=obj.index)
+    for hand in seq.hands:
+        if not hand.betas:
+            raise SolveNotReady(
+                f"hand {hand.index} ({hand.side}) has no betas; run `dexlabel calibrate-hand "
+                f"{seq.id}` or give them in the capture's mano.yml", hand_index=hand.index)
+    if count_approved(session, seq.id) == 0:
+        raise SolveNotReady(f"sequence {seq.id} has no accepted (approved) tracks to solve from")
+
+
+# Settings a request may not override: chosen by their own field or by the deployment.
+_FIXED_PARAMS = ("optimiser", "device")
+
+
+def solver_params(optimiser: str, overrides: dict | None = None) -> dict:
+    """The solver settings a run records and uses (JSON): defaults, then ``overrides``."""
+    settings = dataclasses.asdict(SolveSettings(optimiser=optimiser,
+                                                device=get_settings().solve_device))
+    for name, value in (overrides or {}).items():
+        if name not in settings or name in _FIXED_PARAMS:
+            allowed = sorted(set(settings) - set(_FIXED_PARAMS))
+            raise InvalidSolveRequest(f"params.{name} is not a solver setting; one of "
+                                f"{', '.join(allowed)}", field=f"params.{name}")
+        default = settings[name]
+        wrong_kind = isinstance(default, bool) != isinstance(value, bool)
+        if wrong_kind or (isinstance(default, int) and value != int(value)):
+            raise InvalidSolveRequest(f"params.{name} must be a {type(default).__name__}, got "
+                                f"{value!r}", field=f"params.{name}")
+        settings[name] = type(default)(value)
+    return settings
+
+
+def request_solve(session: Session, sequence_id: int, optimiser: str | None = None,
+                  params: dict | None = None) -> SolveRun:
+    """Create a run of the sequence's solve and queue its job (runs after commit); a run
+    with the same settings that is still queued is returned instead of a second one.
+
+    optimiser: "paper" or "default"; None takes DEXLABEL_SOLVE_OPTIMISER. params: overrides
+    of the solver's settings (see solver_params).
+    Raises NotFound (no sequence), SolveNotReady (409) or InvalidSolveRequest (422: an
+    unknown optimiser or parameter).
+    """
+    optimiser = optimiser or get_settings().solve_optimiser
+    if optimiser not in OPTIMISERS:
+        raise InvalidSolveRequest(f"optimiser must be one of {', '.join(OPTIMISERS)}, got "
+                            f"{optimiser!r}", field="optimiser")
+    settings = solver_params(optimiser, params)
+    seq = get_sequence_or_raise(session, sequence_id)
+    check_ready(session, seq)
+    waiting = session.scalars(select(SolveRun).where(
+        SolveRun.sequence_id == seq.id, SolveRun.status == "queued",
+        SolveRun.optimiser == optimiser).order_by(SolveRun.id)).all()
+    for run in waiting:
+        # Not started yet, so it will read the newest labels: asking again changes nothing.
+        if run.params == settings:
+            return run
+    run = SolveRun(sequence_id=seq.id, optimiser=optimiser, params=settings,
+                   status="queued", timings={}, num_frames=seq.num_frames,
+                   num_views=len(seq.cameras))
+    session.add(run)
+    session.flush()
+    enqueue_job(session, JOB_KIND, job_key(run.id), {"run_id": run.id})
+    return run
+
+
+def get_run_or_raise(session: Session, run_id: int) -> SolveRun:
+    run = session.get(SolveRun, run_id)
+    if run is None:
+        raise NotFound(f"solve run {run_id} does not exist")
+    return run
+
+
+def list_runs(session: Session, sequence_id: int) -> list[SolveRun]:
+    get_sequence_or_raise(session, sequence_id)
+    return list(session.scalars(select(SolveRun).where(SolveRun.sequence_id == sequence_id)
+                                .order_by(SolveRun.id.desc())))
+
+
+def current_run(session: Session, sequence_id: int) -> SolveRun | None:
+    """The sequence's result: its newest run that finished."""
+    stmt = (select(SolveRun).where(SolveRun.sequence_id == sequence_id,
+                                   SolveRun.status == "done")
+            .order_by(SolveRun.finished_at.desc(), SolveRun.id.desc()).limit(1))
+    return session.scalars(stmt).first()
+
+
+def finished_run_or_raise(session: Session, run_id: int) -> SolveRun:
+    """A run whose outputs can be read; 409 while it is queued, running or failed."""
+    run = get_run_or_raise(session, run_id)
+    if run.status != "done" or run.result_key is None:
+        raise Conflict(f"solve run {run_id} is {run.status}; outputs exist once it is done",
+                       state=run.status)
+    return run
+
+
+def check_frame(run: SolveRun, frame: int) -> None:
+    if not 0 <= frame < run.num_frames:
+        raise NotFound(f"frame {frame} is out of range: run {run.id} has frames 0.."
+                       f"{run.num_frames - 1}")
+
+
+def resolve_view(run: SolveRun, view: str, serials: list[str]) -> int:
+    """A view given as a camera serial or an index into the run's views."""
+    if view in serials:
+        return serials.index(view)
+    if view.isdigit() and int(view) < len(serials):
+        return int(view)
+    raise NotFound(f"view {view!r} is out of range: run {run.id} has views 0..{len(serials) - 1}"
+                   f" (serials {', '.join(serials)})")
+
+
+def set_initial_pose(session: Session, sequence_id: int, index: int,
+                     pose: list[list[float]]) -> SceneObject:
+    """Give object ``index`` its object-to-world (3, 4) pose at the first frame, metres."""
+    seq = get_sequence_or_raise(session, sequence_id)
+    obj = next((o for o in seq.objects if o.index == index), None)
+    if obj is None:
+        raise NotFound(f"object {index} is out of range: sequence {sequence_id} has objects "
+                       f"0..{len(seq.objects) - 1}")
+    matrix = np.asarray(pose, dtype=np.float64)
+    if not np.isfinite(matrix).all():
+        raise InvalidPose("pose must hold finite numbers", field="pose")
+    rot = matrix[:, :3]
+    if (np.abs(rot.T @ rot - np.eye(3)).max() > ROTATION_TOLERANCE
+            or np.linalg.det(rot) < 0):
+        raise InvalidPose("pose's first three columns must be a rotation (orthonormal, "
+                          "determinant +1)", field="pose")
+    obj.initial_pose = matrix.tolist()
+    session.flush()
+    return obj

@@ -1,0 +1,203 @@
+"""Benchmark: quality-control decisions on a simulated crowd, as a confusion table.
+
+A default synthetic capture (8 views x 72 frames) is imported into a fresh embedded setup and
+its hand tasks get submissions from simulated workers (worker.synth.annotators): in each of
+``--rounds`` rounds every view gets one careful worker and one worker of a bad profile
+(sloppy, swapper, lazy, spammer, occluder, taken in turn). The product's own QC job
+(backend.review.flows.run_qc, the code a queue worker runs) scores and decides them all.
+good = careful; bad = every other profile; "flagged" = review or reject.
+
+Then the job size the issue names is timed alone: one hand target with one assignment per
+view (8 views x 72 frames x 21 joints).
+
+Prints the table, then a JSON summary on its last line:
+    confusion                   {profile: {approve, review, reject}}
+    bad_flagged_rate            share of bad assignments sent to review or rejected (target >= 0.95)
+    good_flagged_rate           share of careful ones sent to review or rejected (target <= 0.03)
+    swaps_found / swaps_total   swappers whose report names ring and little over about the true span
+    qc_job_s                    seconds of one QC job, 8 views x 72 frames x 21 joints (median)
+    qc_job_parts_s              its parts: reading tracks and depth maps, scoring, acting
+Usage: python bench/qc.py [--capture DIR] [--rounds 3] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from _server import isolated_workdir
+
+BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder")
+
+
+def _capture(path: Path | None, work: Path) -> Path:
+    from worker.synth import generate_capture
+
+    if path is not None and any(path.glob("*/*/meta.yml")):
+        return path
+    out = path or work / "capture"
+    generate_capture(out, seed=7)
+    return out
+
+
+def _setup(capture: Path) -> tuple[int, list[dict]]:
+    """Import, create the tasks; (sequence id, hand tasks as dicts)."""
+    from backend.annotation.models import Task
+    from backend.annotation.service import create_tasks
+    from backend.captures.flows import import_path
+    from backend.config import get_settings
+    from backend.db import session_scope
+    from backend.migrate import upgrade
+    from backend.storage import get_storage
+
+    upgrade(get_settings().database_url)
+    sequence_id = import_path(capture)[0].sequence_id
+    with session_scope() as session:
+        create_tasks(session, get_storage(), sequence_id)
+        tasks = [{"id": t.id, "serial": t.camera.serial, "kind": t.kind,
+                  "num_frames": t.sequence.num_frames, "target_key": t.target_key,
+                  "width": t.camera.width, "height": t.camera.height}
+                 for t in session.query(Task).filter_by(sequence_id=sequence_id, kind="hand")]
+    return sequence_id, tasks
+
+
+def _submit(task: dict, profile: str, worker: str, truth, rng: np.random.Generator) -> int:
+    """One simulated worker's submitted assignment, written as the page's submit writes it."""
+    from backend.annotation.models import Assignment, Track
+    from backend.db import session_scope, utcnow
+    from worker.synth.annotators import annotate
+
+    xy, visible = truth.points(task, rng)
+    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)
+    with session_scope() as session:
+        assignment = Assignment(task_id=task["id"], worker_id=worker,
+                                external_id=f"bench-{worker}-{task['id']}", status="submitted",
+                                version=1, working_time_s=150.0, submitted_at=utcnow())
+        assignment.tracks = [Track(point_index=p, keyframes=rows)
+                             for p, rows in enumerate(work.tracks)]
+        session.add(assignment)
+        session.flush()
+        return assignment.id
+
+
+def _run_qc(sequence_id: int) -> tuple[float, dict[str, float]]:
+    """Seconds of one whole QC job of the hand target, and its own breakdown."""
+    from backend.review.flows import run_qc
+
+    t0 = time.perf_counter()
+    result = run_qc(sequence_id, "hand:0")
+    return time.perf_counter() - t0, result["timings"]
+
+
+def _swap_found(swaps: list[dict], frames: int) -> bool:
+    from worker.synth.annotators import swap_window
+
+    first, last = swap_window(frames)
+    for swap in swaps:
+        if sorted(swap.get("fingers", [])) != ["little", "ring"]:
+            continue
+        lo, hi = swap["frames"]
+        # The reported span must overlap the true one by most of its length.
+        overlap = min(hi, last) - max(lo, first) + 1
+        if overlap >= 0.7 * (last - first + 1):
+            return True
+    return False
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--capture", type=Path, default=None,
+                        help="reuse (or write) the synthetic capture here")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=11)
+    args = parser.parse_args()
+
+    work = isolated_workdir("qc", DEXLABEL_QC_BLOCK_AFTER_FAILURES="0")
+    capture = _capture(args.capture, work)
+
+    from backend.crowd.simulate import CaptureTruth
+    from backend.db import session_scope
+    from backend.review.models import QCReport
+
+    sequence_id, tasks = _setup(capture)
+    truth = CaptureTruth(capture)
+    rng = np.random.default_rng(args.seed)
+    profile_of: dict[int, str] = {}
+    turn = 0
+    for r in range(args.rounds):
+        for task in tasks:
+            good = _submit(task, "careful", f"careful-{r}-{task['id']}", truth, rng)
+            profile_of[good] = "careful"
+            bad_profile = BAD_PROFILES[turn % len(BAD_PROFILES)]
+            turn += 1
+            bad = _submit(task, bad_profile, f"{bad_profile}-{r}-{task['id']}", truth, rng)
+            profile_of[bad] = bad_profile
+    pool_s, _ = _run_qc(sequence_id)
+
+    confusion = {p: {"approve": 0, "review": 0, "reject": 0}
+                 for p in ("careful", *BAD_PROFILES)}
+    swaps_found = swaps_total = 0
+    frames = tasks[0]["num_frames"]
+    with session_scope() as session:
+        for report in session.query(QCReport).filter_by(sequence_id=sequence_id):
+            profile = profile_of[report.assignment_id]
+            confusion[profile][report.outcome] += 1
+            if profile == "swapper":
+                swaps_total += 1
+                swaps_found += _swap_found(report.swaps, frames)
+    bad = [confusion[p] for p in BAD_PROFILES]
+    bad_n = sum(sum(c.values()) for c in bad)
+    bad_flagged = sum(c["review"] + c["reject"] for c in bad)
+    good = confusion["careful"]
+    good_n = sum(good.values())
+
+    print(f"{'profile':10s} {'approve':>8s} {'review':>8s} {'reject':>8s}")
+    for profile, row in confusion.items():
+        print(f"{profile:10s} {row['approve']:8d} {row['review']:8d} {row['reject']:8d}")
+
+    # The job size of the issue: one hand target, one assignment per view, in a fresh setup.
+    _fresh_setup()
+    sequence_id, tasks = _setup(capture)
+    for task in tasks:
+        _submit(task, "careful", f"timed-{task['id']}", truth, rng)
+    runs = [_run_qc(sequence_id) for _ in range(args.repeats)]
+    job_s = [seconds for seconds, _ in runs]
+    parts = {name: round(statistics.median(t[name] for _, t in runs), 3)
+             for name in runs[0][1]}
+
+    summary = {
+        "confusion": confusion,
+        "assignments": len(profile_of),
+        "bad_flagged_rate": round(bad_flagged / bad_n, 4),
+        "good_flagged_rate": round((good["review"] + good["reject"]) / good_n, 4),
+        "swaps_found": swaps_found,
+        "swaps_total": swaps_total,
+        "pool_qc_job_s": round(pool_s, 3),
+        "pool_views": len(tasks),
+        "qc_job_s": round(statistics.median(job_s), 3),
+        "qc_job_size": f"{len(tasks)} views x {frames} frames x 21 joints",
+        "qc_job_parts_s": parts,
+    }
+    print(json.dumps(summary))
+
+
+def _fresh_setup() -> None:
+    """Point this process at a new empty embedded setup (settings, engine, storage)."""
+    from backend.config import get_settings
+    from backend.db import get_engine, get_sessionmaker
+    from backend.storage import get_storage
+
+    isolated_workdir("qc-one", DEXLABEL_QC_BLOCK_AFTER_FAILURES="0")
+    get_engine().dispose()
+    for cached in (get_settings, get_engine, get_sessionmaker, get_storage):
+        cached.cache_clear()
+
+
+if __name__ == "__main__":
+    main()

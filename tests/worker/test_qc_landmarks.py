@@ -1,0 +1,115 @@
+"""worker.quality.landmarks: one object-landmark label against its silhouette and its own motion."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
+from worker.quality.consensus import ViewLabels
+from worker.quality.decide import decide, learn_thresholds
+from worker.quality.landmarks import score_landmarks
+
+FRAMES, WIDTH, HEIGHT = 30, 320, 240
+RADIUS = 30
+
+
+@pytest.fixture(scope="module")
+def camera() -> CameraModel:
+    pose = look_at(np.array([0.0, -0.6, 0.3]), np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    return CameraModel(intrinsics_matrix(300.0, 300.0, 160.0, 120.0), None, pose, WIDTH, HEIGHT)
+
+
+def _centres() -> np.ndarray:
+    """(F, 2) px: the object's silhouette centre moving 3 px per frame to the right."""
+    return np.stack([80.0 + 3.0 * np.arange(FRAMES), np.full(FRAMES, 120.0)], axis=1)
+
+
+@pytest.fixture(scope="module")
+def masks() -> dict[int, np.ndarray]:
+    """A disc silhouette per frame."""
+    rows, cols = np.mgrid[0:HEIGHT, 0:WIDTH]
+    return {f: (cols - c[0]) ** 2 + (rows - c[1]) ** 2 <= RADIUS ** 2
+            for f, c in enumerate(_centres())}
+
+
+def _label(xy: np.ndarray, key: str = "w") -> ViewLabels:
+    return ViewLabels(key=key, view=0, xy=xy, visible=np.ones(xy.shape[:2], bool),
+                      working_time_s=40.0)
+
+
+def _careful(seed: int = 0) -> np.ndarray:
+    """(F, 2, 2) two landmarks riding on the object, 1 px noise."""
+    offsets = np.array([[-12.0, -5.0], [10.0, 8.0]])
+    xy = _centres()[:, None, :] + offsets[None]
+    return xy + np.random.default_rng(seed).normal(0.0, 1.0, xy.shape)
+
+
+class TestScoreLandmarks:
+    def test_careful_landmarks_sit_on_the_silhouette_and_move_with_it(self, camera, masks):
+        qc = score_landmarks(camera, _label(_careful()), masks)
+        m = qc.metrics
+        assert m["median_error_px"] == 0.0 and m["outlier_fraction"] == 0.0
+        assert m["jump_fraction"] == 0.0 and 0.8 < m["motion_ratio"] < 1.3
+        assert m["static_fraction"] == 0.0 and m["completeness"] == 1.0
+        assert not qc.issues and not qc.provisional
+        assert len(qc.per_joint) == 2 and len(qc.per_frame) == FRAMES
+
+    def test_landmarks_off_the_object_are_measured_in_pixels(self, camera, masks):
+        xy = _careful()
+        xy[:, 1] = _centres() + [RADIUS + 20.0, 0.0]  # 20 px right of the disc's edge
+        qc = score_landmarks(camera, _label(xy), masks)
+        assert 19.0 <= qc.per_joint[1] <= 21.0 and qc.per_joint[0] == 0.0
+        assert qc.metrics["outlier_fraction"] == pytest.approx(0.5)
+        assert qc.issues[0]["about"] == "silhouette" and qc.issues[0]["point"] == 1
+
+    def test_frozen_landmarks_are_static_and_do_not_follow_the_object(self, camera, masks):
+        xy = np.broadcast_to(_careful()[5], (FRAMES, 2, 2)).copy()
+        qc = score_landmarks(camera, _label(xy), masks)
+        assert qc.metrics["static_fraction"] == 1.0 and qc.metrics["motion_ratio"] == 0.0
+
+    def test_exchanged_landmarks_show_as_jumps(self, camera, masks):
+        xy = _careful()
+        xy[12:] = xy[12:, ::-1]  # the worker swaps the two landmarks from frame 12 on
+        qc = score_landmarks(camera, _label(xy), masks)
+        jumps = [i for i in qc.issues if i["about"] == "jump"]
+        assert {tuple(i["frames"]) for i in jumps} == {(11, 12)}
+        assert {i["point"] for i in jumps} == {0, 1} and qc.metrics["jump_fraction"] > 0
+        assert qc.metrics["max_step_ratio"] > 6.0
+
+    def test_without_masks_only_the_label_itself_is_judged(self, camera):
+        qc = score_landmarks(camera, _label(_careful()))
+        assert qc.metrics["median_error_px"] is None and qc.metrics["motion_ratio"] is None
+        assert qc.metrics["jump_fraction"] == 0.0 and qc.provisional
+
+    def test_result_is_json_friendly(self, camera, masks):
+        xy = _careful()
+        xy[3:6, 0] = np.nan
+        text = json.dumps(score_landmarks(camera, _label(xy), masks).to_dict(), allow_nan=False)
+        assert '"completeness"' in text
+
+    def test_mask_of_the_wrong_size_raises_naming_its_shape(self, camera):
+        with pytest.raises(ValueError, match=r"masks\[2\].*\(10, 10\)"):
+            score_landmarks(camera, _label(_careful()), {2: np.zeros((10, 10), bool)})
+
+    def test_label_shape_mismatch_raises(self, camera):
+        bad = ViewLabels("w", 0, np.zeros((FRAMES, 2, 3)), np.ones((FRAMES, 2), bool))
+        with pytest.raises(ValueError, match=r"\(30, 2, 3\)"):
+            score_landmarks(camera, bad)
+
+
+class TestLandmarkDecision:
+    def test_careful_tracks_pass_and_exchanged_landmarks_go_to_review(self, camera, masks):
+        pool = [score_landmarks(camera, _label(_careful(seed), f"w{seed}"), masks)
+                for seed in range(10)]
+        swapped = _careful(99)
+        swapped[12:] = swapped[12:, ::-1]
+        bad = score_landmarks(camera, _label(swapped, "bad"), masks)
+        learned = learn_thresholds([qc.metrics for qc in pool + [bad]])
+        names = ["landmark 1", "landmark 2"]
+        assert all(decide(qc, learned, names).outcome == "approve" for qc in pool)
+        decision = decide(bad, learned, names)
+        assert decision.outcome == "review"
+        assert "the landmark 1 jumped" in decision.feedback

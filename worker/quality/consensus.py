@@ -1,0 +1,383 @@
+"""Multi-view consensus of a hand target and the quality of every assignment that labelled it.
+
+Each camera view of a sequence is one task; several assignments (workers) may label the same
+view. Every visible labelled point is one observation; all observations of a joint in a frame
+are triangulated together, robustly (worker.geometry.triangulate), so that a spammer or a
+swapper in the pool becomes outliers instead of dragging the consensus:
+
+1. each label's reliability (its inlier rate on a subsample of points) weighs its vote among
+   hypotheses, and with many labels only the most reliable ones propose hypotheses;
+2. the inliers are refined with a Cauchy loss scaled by each label's own noise (weights
+   1 / sigma^2), so a sloppy label weighs less and a minority cluster inside the inlier
+   threshold (a swapped finger 10 px away) does not pull the point;
+3. each observation is scored against the point fitted without it (leave-one-out), so a label
+   is never judged by a consensus it helped to make;
+4. where swaps are found, the consensus is refitted once with them undone (or, when the
+   consensus itself was swapped by a majority of swappers, with theirs undone) and every label
+   is judged again, as it was sent.
+
+Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; world metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from worker.geometry.cameras import CameraModel
+from worker.geometry.triangulate import (
+    CameraStack,
+    cauchy_weights,
+    column_pairs,
+    leave_one_out_residuals,
+    reprojection_errors,
+    refine_points,
+    triangulate_points,
+)
+from worker.quality.metrics import (
+    HIDDEN_MARGIN_M,
+    SURFACE_MARGIN_M,
+    AssignmentQC,
+    depth_visibility,
+    error_issues,
+    error_summary,
+    jitter_px,
+    motion_ratio,
+    num,
+    per_point_and_frame,
+)
+from worker.quality.swaps import find_swaps, swap_corrections, undo_swaps
+
+# Rayleigh median / sigma: the median pixel distance of isotropic 2-D noise with per-axis sigma.
+_RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+
+
+@dataclass
+class ViewLabels:
+    """One assignment's labels of one view.
+
+    key: the assignment's id. view: index into the cameras list.
+    xy: (F, P, 2) image px, NaN where there is no position. visible: (F, P) bool.
+    working_time_s: the worker's active time, seconds, if known.
+    """
+
+    key: str
+    view: int
+    xy: np.ndarray
+    visible: np.ndarray
+    working_time_s: float | None = None
+
+
+@dataclass
+class HandOptions:
+    """Settings of score_hand (all keyword options of score_hand).
+
+    outlier_px: reprojection error above which an observation is an outlier; 10 px is five
+        times the 2 px per-axis noise of a careful annotator at 640x480.
+    max_pairs: most view pairs tried as hypotheses per point (bounds the run time).
+    reliability_points: points sampled to measure each label's reliability (its inlier rate).
+    min_sigma_px: floor of a label's estimated noise in the re-weighting.
+    min_vote: floor of a label's vote (its inlier rate) when hypotheses are compared.
+    swap_refits: times the consensus is refitted with detected swaps undone.
+    cauchy_k: the robust refinement's Cauchy scale, in multiples of each label's own noise.
+    surface_margin_m, hidden_margin_m: depth margins of the visibility check (see metrics).
+    """
+
+    outlier_px: float = 10.0
+    max_pairs: int = 64
+    reliability_points: int = 48
+    min_sigma_px: float = 1.0
+    min_vote: float = 0.05
+    swap_refits: int = 1
+    cauchy_k: float = 2.5
+    surface_margin_m: float = SURFACE_MARGIN_M
+    hidden_margin_m: float = HIDDEN_MARGIN_M
+
+    @classmethod
+    def of(cls, options: dict) -> HandOptions:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"unknown option(s) {', '.join(unknown)}; known: {sorted(known)}")
+        return cls(**options)
+
+
+@dataclass
+class HandReport:
+    """consensus: (F, P, 3) world metres, NaN where unsupported. support: (F, P) number of
+    distinct views behind each point. assignments: AssignmentQC per assignment key.
+    provisional: fewer than 3 distinct views support the target."""
+
+    consensus: np.ndarray
+    support: np.ndarray
+    assignments: dict[str, AssignmentQC]
+    provisional: bool
+
+    def to_dict(self) -> dict:
+        pts = np.round(self.consensus, 6).astype(object)
+        pts[~np.isfinite(self.consensus)] = None
+        return {"consensus": pts.tolist(), "support": self.support.astype(int).tolist(),
+                "provisional": self.provisional,
+                "assignments": {k: a.to_dict() for k, a in self.assignments.items()}}
+
+
+def check_labels(cameras: list[CameraModel], labels: list[ViewLabels]) -> tuple[int, int]:
+    """(F, P) shared by all labels; ValueError naming the field and shape otherwise."""
+    if not labels:
+        raise ValueError("labels must not be empty")
+    frames, points = np.shape(labels[0].xy)[:2]
+    keys = set()
+    for lab in labels:
+        xy, vis = np.shape(lab.xy), np.shape(lab.visible)
+        if xy != (frames, points, 2) or vis != (frames, points):
+            raise ValueError(f"labels {lab.key!r}: xy must have shape (F={frames}, P={points}, 2) "
+                             f"and visible (F, P), got {xy} and {vis}")
+        if not 0 <= lab.view < len(cameras):
+            raise ValueError(f"labels {lab.key!r}: view {lab.view} is not in 0..{len(cameras) - 1}")
+        if lab.key in keys:
+            raise ValueError(f"labels: key {lab.key!r} appears twice")
+        keys.add(lab.key)
+    return frames, points
+
+
+def _observations(labels: list[ViewLabels]) -> np.ndarray:
+    """(F*P, L, 2) px of every label's visible points, NaN elsewhere."""
+    cols = []
+    for lab in labels:
+        xy = np.asarray(lab.xy, dtype=np.float64)
+        cols.append(np.where(np.asarray(lab.visible, bool)[..., None], xy, np.nan))
+    return np.stack(cols, axis=2).reshape(-1, len(labels), 2)
+
+
+def _label_reliability(cams: list[CameraModel], pixels: np.ndarray,
+                       opts: HandOptions) -> np.ndarray:
+    """(L,) fraction of each label's observations that are inliers, on a subsample of points."""
+    sample = np.unique(np.linspace(0, len(pixels) - 1, opts.reliability_points).astype(int))
+    probe = triangulate_points(cams, pixels[sample], outlier_px=opts.outlier_px, refine=False)
+    observed = np.isfinite(pixels[sample]).all(axis=-1).sum(axis=0)
+    return probe.inliers.sum(axis=0) / np.maximum(observed, 1)
+
+
+def _hypothesis_pairs(cams: list[CameraModel], views: np.ndarray, reliability: np.ndarray,
+                      opts: HandOptions) -> np.ndarray | None:
+    """Column pairs to use as hypotheses: all when few, else pairs among each view's most
+    reliable labels, as many as max_pairs allows."""
+    stack = CameraStack.of(cams)
+    if len(column_pairs(stack)) <= opts.max_pairs:
+        return None
+    ranked = {v: [c for c in np.argsort(-reliability, kind="stable") if views[c] == v]
+              for v in np.unique(views)}
+    chosen: list[int] = [r[0] for r in ranked.values()]
+    for depth in range(1, max(len(r) for r in ranked.values())):
+        more = chosen + [r[depth] for r in ranked.values() if len(r) > depth]
+        if len(column_pairs(stack, np.array(more))) > opts.max_pairs:
+            break
+        chosen = more
+    return column_pairs(stack, np.array(sorted(chosen)))
+
+
+def _label_weights(residuals: np.ndarray, inliers: np.ndarray, min_sigma_px: float) -> np.ndarray:
+    """(L,) 1 / sigma^2 per label, sigma from the median leave-one-out distance of its inliers."""
+    dist = np.linalg.norm(residuals, axis=-1)
+    weights = np.ones(inliers.shape[1])
+    for col in range(inliers.shape[1]):
+        d = dist[inliers[:, col], col]
+        d = d[np.isfinite(d)]
+        if d.size:
+            sigma = max(float(np.median(d)) / _RAYLEIGH_MEDIAN, min_sigma_px)
+            weights[col] = 1.0 / sigma ** 2
+    return weights
+
+
+def _distinct_views(inliers: np.ndarray, views: np.ndarray) -> np.ndarray:
+    """(N, V') bool: which distinct views have an inlier observation of each point."""
+    return np.stack([inliers[:, views == v].any(axis=1) for v in np.unique(views)], axis=1)
+
+
+@dataclass
+class _Fit:
+    """A consensus fit over N = F * P points and L labels: pixels (N, L, 2) observations,
+    points (N, 3) world m, inliers (N, L), loo (N, L, 2) leave-one-out residuals px, views (L,),
+    reliability (L,) inlier rates, weights (L,) 1 / sigma^2 per label."""
+
+    pixels: np.ndarray
+    points: np.ndarray
+    inliers: np.ndarray
+    loo: np.ndarray
+    views: np.ndarray
+    reliability: np.ndarray
+    weights: np.ndarray
+
+
+def _solve(cams: list[CameraModel], pixels: np.ndarray, views: np.ndarray,
+           reliability: np.ndarray, opts: HandOptions, weights: np.ndarray | None = None):
+    """Robust points, inliers, leave-one-out residuals and label weights of ``pixels``."""
+    pairs = _hypothesis_pairs(cams, views, reliability, opts)
+    # A label's vote counts by its reliability, so that a spammer's point that happens to lie
+    # near the epipolar line of a good one cannot outvote a true two-view point; the floor keeps
+    # every label able to break a tie.
+    votes = np.clip(reliability, opts.min_vote, 1.0)
+    tri = triangulate_points(cams, pixels, outlier_px=opts.outlier_px, pairs=pairs, votes=votes)
+    if weights is None:
+        loo = leave_one_out_residuals(cams, pixels, tri.points, tri.inliers)
+        weights = _label_weights(loo, tri.inliers, opts.min_sigma_px)
+    stack = CameraStack.of(cams)
+    scales = opts.cauchy_k / np.sqrt(weights)
+    points = refine_points(stack, pixels, tri.points, tri.inliers, weights, scales)
+    errors = reprojection_errors(stack, pixels, points)
+    # Inliers the robust fit left far behind (a minority cluster) are inliers no more.
+    inliers = tri.inliers & (errors < opts.outlier_px)
+    enough = inliers.sum(axis=1) >= 2
+    inliers = np.where(enough[:, None], inliers, tri.inliers)
+    points = np.where(enough[:, None], points, tri.points)
+    errors = reprojection_errors(stack, pixels, points)
+    effective = weights * cauchy_weights(np.where(inliers, errors, 0.0), scales)
+    loo = leave_one_out_residuals(cams, pixels, points, inliers, effective)
+    return points, inliers, loo, weights
+
+
+def _fit(cameras: list[CameraModel], labels: list[ViewLabels], opts: HandOptions,
+         previous: _Fit | None = None) -> _Fit:
+    """The consensus of ``labels``; with ``previous`` (a fit of the same labels before some
+    were corrected) only the points whose observations changed are solved again."""
+    cams = [cameras[lab.view] for lab in labels]
+    views = np.array([lab.view for lab in labels])
+    pixels = _observations(labels)
+    if previous is None:
+        reliability = _label_reliability(cams, pixels, opts)
+        points, inliers, loo, weights = _solve(cams, pixels, views, reliability, opts)
+        return _Fit(pixels, points, inliers, loo, views, reliability, weights)
+    same = np.isclose(pixels, previous.pixels, equal_nan=True).all(axis=(1, 2))
+    rows = np.flatnonzero(~same)
+    fit = _Fit(pixels, previous.points.copy(), previous.inliers.copy(), previous.loo.copy(),
+               views, previous.reliability, previous.weights)
+    if rows.size:
+        solved = _solve(cams, pixels[rows], views, fit.reliability, opts, fit.weights)
+        fit.points[rows], fit.inliers[rows], fit.loo[rows] = solved[:3]
+    return fit
+
+
+def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors: np.ndarray,
+            outlier: np.ndarray, other_views: np.ndarray, depth_mm: np.ndarray | None,
+            opts: HandOptions) -> AssignmentQC:
+    """Metrics of one label. consensus (F, P, 3) world m; errors, outlier, other_views (F, P):
+    leave-one-out error px (NaN where not scored), not an inlier, other distinct views."""
+    xy = np.asarray(lab.xy, dtype=np.float64)
+    visible = np.asarray(lab.visible, bool)
+    reference = camera.project(consensus)
+    # Motion and jitter are measured only where two other views fix the point without this label.
+    judged_reference = np.where((other_views >= 2)[..., None], reference, np.nan)
+    scored = np.isfinite(errors)
+    metrics = error_summary(errors)
+    metrics["outlier_fraction"] = num(outlier[scored].mean()) if scored.any() else None
+    vis_metrics = dict.fromkeys(("visibility_disagreement", "occluded_on_surface",
+                                 "visible_behind_surface"))
+    if depth_mm is not None:
+        vis_metrics = depth_visibility(camera, consensus, visible, depth_mm,
+                                       opts.surface_margin_m, opts.hidden_margin_m)
+    metrics.update(vis_metrics)
+    shown = np.where(visible[..., None], xy, np.nan)
+    metrics["jitter_px"] = jitter_px(shown, judged_reference)
+    metrics["motion_ratio"] = motion_ratio(xy, judged_reference)
+    metrics["completeness"] = num(np.isfinite(xy).all(axis=-1).mean())
+    metrics["visible_fraction"] = num(visible.mean())
+    metrics["scored_fraction"] = num(scored.mean())
+    metrics["working_time_s"] = num(lab.working_time_s, 1)
+    per_joint, per_frame = per_point_and_frame(errors)
+    swaps = find_swaps(xy, visible, reference) if xy.shape[1] == 21 else []
+    support = np.median(other_views[scored]) if scored.any() else 0.0
+    return AssignmentQC(key=lab.key, view=lab.view, metrics=metrics, per_joint=per_joint,
+                        per_frame=per_frame, swaps=swaps,
+                        issues=error_issues(errors, opts.outlier_px, other_views),
+                        provisional=bool(support < 2))
+
+
+def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
+               depth: dict[int, np.ndarray] | None = None, **options) -> HandReport:
+    """Consensus of a hand target from all its labels, and every assignment's quality.
+
+    Args:
+        cameras: one CameraModel per view (labels refer to them by index).
+        labels: every assignment's ViewLabels of this target (several per view allowed).
+        depth: optional {view: (F, H, W) uint16 depth, millimetres, 0 = none} for the
+            visibility check.
+        options: HandOptions fields (outlier_px, max_pairs, ...).
+
+    Returns:
+        HandReport with consensus (F, P, 3) world metres, support (F, P) distinct views,
+        assignments {key: AssignmentQC}, provisional (fewer than 3 distinct views support it).
+    """
+    opts = HandOptions.of(options)
+    frames, points = check_labels(cameras, labels)
+    for view, dm in (depth or {}).items():
+        if np.ndim(dm) != 3 or np.shape(dm)[0] != frames:
+            raise ValueError(f"depth[{view}] must have shape (F={frames}, H, W), "
+                             f"got {np.shape(dm)}")
+    report, fit = _score(cameras, labels, labels, depth, opts)
+    for _ in range(opts.swap_refits):
+        corrections = swap_corrections(
+            {k: a.swaps for k, a in report.assignments.items()}, report.consensus)
+        if not any(corrections.values()):
+            break
+        # Refit with the swaps undone, so that swapped points stop pulling (or, with several
+        # swappers, outvoting) the consensus; every label is then judged as it was sent.
+        fit_labels = [_undone(lab, corrections[lab.key]) for lab in labels]
+        report, fit = _score(cameras, labels, fit_labels, depth, opts, fit)
+    return report
+
+
+def _undone(lab: ViewLabels, swaps: list[dict]) -> ViewLabels:
+    if not swaps:
+        return lab
+    xy, visible = undo_swaps(np.asarray(lab.xy, np.float64), np.asarray(lab.visible, bool), swaps)
+    return ViewLabels(lab.key, lab.view, xy, visible, lab.working_time_s)
+
+
+def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus: np.ndarray,
+             errors: np.ndarray, outlier: np.ndarray,
+             outlier_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Errors (F, P) px and outlier flags of the label as sent where the fit used a corrected
+    copy: plain distances to the consensus there (the copy's residuals describe other joints)."""
+    sent_xy = np.asarray(lab.xy, np.float64)
+    changed = (np.asarray(lab.visible) != np.asarray(fitted.visible)) \
+        | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1)
+    plain = np.linalg.norm(sent_xy - camera.project(consensus), axis=-1)
+    plain = np.where(np.asarray(lab.visible, bool), plain, np.nan)
+    errors = np.where(changed, plain, errors)
+    outlier = np.where(changed, ~(plain <= outlier_px), outlier)
+    return errors, outlier
+
+
+def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: list[ViewLabels],
+           depth: dict[int, np.ndarray] | None, opts: HandOptions,
+           previous: _Fit | None = None) -> tuple[HandReport, _Fit]:
+    """Consensus from ``fit_labels`` (updating ``previous`` where given), every label of
+    ``labels`` judged against it; the report and the fit."""
+    frames, points = np.shape(labels[0].xy)[:2]
+    fit = _fit(cameras, fit_labels, opts, previous)
+    fitted, inliers, loo, views = fit.points, fit.inliers, fit.loo, fit.views
+    consensus = fitted.reshape(frames, points, 3)
+    distinct = _distinct_views(inliers, views)
+    support = distinct.sum(axis=1)
+    view_ids = np.unique(views)
+    has_point = np.isfinite(fitted).all(axis=1)
+    provisional = not has_point.any() or float(np.median(support[has_point])) < 3
+    errors = np.linalg.norm(loo, axis=-1)
+    assignments = {}
+    for col, lab in enumerate(labels):
+        own = distinct[:, np.searchsorted(view_ids, lab.view)]
+        other = (support - own).reshape(frames, points)
+        err = errors[:, col].reshape(frames, points)
+        err = np.where(has_point.reshape(frames, points), err, np.nan)
+        outlier = ~inliers[:, col].reshape(frames, points)
+        if fit_labels[col] is not lab:
+            err, outlier = _as_sent(lab, fit_labels[col], cameras[lab.view], consensus, err,
+                                    outlier, opts.outlier_px)
+        qc = _assess(lab, cameras[lab.view], consensus, err, outlier, other,
+                     None if depth is None else depth.get(lab.view), opts)
+        qc.provisional = qc.provisional or provisional
+        assignments[lab.key] = qc
+    report = HandReport(consensus=consensus, support=support.reshape(frames, points),
+                        assignments=assignments, provisional=provisional)
+    return report, fit

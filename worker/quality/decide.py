@@ -1,0 +1,262 @@
+"""Approve, review or reject an assignment from its QC metrics, with reasons and worker feedback.
+
+Thresholds are learned from the population of a project's assignments (median + k * 1.4826 *
+MAD: a robust z-score of k, unmoved by a minority of bad workers) and clamped into bounds set by
+people (MetricBound): the lower bound keeps a very tight population from flagging normal noise,
+the upper bound keeps a bad population from excusing itself. Metrics where low is bad (motion
+ratio, completeness, working time) use median - k * 1.4826 * MAD, clamped the same way.
+
+Threshold keys read "<metric>.<review|reject>_<above|below>", so a stored thresholds dict says
+by itself which way each one cuts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Literal
+
+import numpy as np
+
+from worker.quality.metrics import AssignmentQC
+from worker.tracks import format_spans
+
+# The consistent estimator of a normal distribution's sigma from the MAD.
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class MetricBound:
+    """How one metric is judged. worse: "above" or "below" the threshold is bad.
+    review, reject: (lowest, highest) values the learned threshold may take; reject None: the
+    metric alone never rejects."""
+
+    worse: Literal["above", "below"]
+    review: tuple[float, float]
+    reject: tuple[float, float] | None = None
+
+
+def _bounds() -> dict[str, MetricBound]:
+    # Pixel bounds suit 640x480 views: a careful annotator (2 px per-axis noise) scores a median
+    # error of ~2.2 px and a 90th percentile of ~4 px against the consensus; a sloppy one (8 px)
+    # ~7.5 px and ~14 px. Fractions: careful workers leave ~0 outliers (sloppy ones 25-45%, so
+    # they are reviewed, not rejected, on that alone) and mark <2% of the points on the visible
+    # surface as occluded.
+    return {
+        "median_error_px": MetricBound("above", (3.5, 5.0), (12.0, 20.0)),
+        "p90_error_px": MetricBound("above", (7.0, 12.0), (30.0, 60.0)),
+        "outlier_fraction": MetricBound("above", (0.05, 0.15), (0.5, 0.7)),
+        "jitter_px": MetricBound("above", (3.0, 6.0)),
+        "motion_ratio": MetricBound("below", (0.4, 0.6), (0.1, 0.2)),
+        "occluded_on_surface": MetricBound("above", (0.1, 0.2), (0.3, 0.45)),
+        "completeness": MetricBound("below", (0.9, 0.95), (0.5, 0.5)),
+        "working_time_s": MetricBound("below", (10.0, 30.0)),
+        # Object landmarks: a careful track never leaps (0 jumps); a swap of the two makes two.
+        "jump_fraction": MetricBound("above", (0.02, 0.05)),
+    }
+
+
+@dataclass
+class QCThresholds:
+    """Settings of the decision.
+
+    k_review, k_reject: robust z-scores of the review and reject thresholds.
+    min_population: fewer assignments with a metric than this, and its threshold is the
+        strict end of its bounds (a new project reviews more rather than approve blindly).
+    motion_ratio_high: path length above this multiple of the hand's is noise (random clicks).
+    bounds: MetricBound per metric (see _bounds).
+    """
+
+    k_review: float = 3.0
+    k_reject: float = 6.0
+    min_population: int = 8
+    motion_ratio_high: float = 3.0
+    bounds: dict[str, MetricBound] = field(default_factory=_bounds)
+
+
+@dataclass
+class Decision:
+    outcome: Literal["approve", "review", "reject"]
+    reasons: list[str]
+    feedback: str
+    provisional: bool
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def _learned(values: np.ndarray, k: float, worse: str) -> float:
+    median = float(np.median(values))
+    spread = MAD_TO_SIGMA * float(np.median(np.abs(values - median)))
+    return median + k * spread if worse == "above" else median - k * spread
+
+
+def learn_thresholds(metric_rows: list[dict[str, float | None]],
+                     bounds: QCThresholds = QCThresholds()) -> dict[str, float]:
+    """Review and reject thresholds from a population of assignments' metrics.
+
+    Args:
+        metric_rows: AssignmentQC.metrics of the project's assignments (None entries skipped).
+        bounds: k factors and per-metric bounds.
+
+    Returns:
+        {"<metric>.review_above": x, "<metric>.reject_above": y, ...} (or ..._below), each the
+        learned value clamped into its bounds, plus "motion_ratio.review_above".
+    """
+    out: dict[str, float] = {}
+    for name, rule in bounds.bounds.items():
+        values = np.array([r[name] for r in metric_rows if r.get(name) is not None], float)
+        enough = values.size >= bounds.min_population
+        for level, k, limits in (("review", bounds.k_review, rule.review),
+                                 ("reject", bounds.k_reject, rule.reject)):
+            if limits is None:
+                continue
+            lo, hi = limits
+            strict = lo if rule.worse == "above" else hi
+            value = _learned(values, k, rule.worse) if enough else strict
+            out[f"{name}.{level}_{rule.worse}"] = float(min(max(value, lo), hi))
+    out["motion_ratio.review_above"] = bounds.motion_ratio_high
+    return out
+
+
+def _failures(metrics: dict[str, float | None], thresholds: dict[str, float]) -> list[tuple]:
+    """(level, metric, value, threshold, worse) of every crossed threshold."""
+    found = []
+    for key, limit in thresholds.items():
+        name, rule = key.split(".", 1)
+        level, worse = rule.split("_")
+        value = metrics.get(name)
+        if value is None:
+            continue
+        if (worse == "above" and value > limit) or (worse == "below" and value < limit):
+            found.append((level, name, value, limit, worse))
+    return found
+
+
+def _pct(value: float) -> str:
+    return f"{100.0 * value:.0f}%"
+
+
+# One sentence per failing metric, for the worker; {v} the value, {t} the threshold.
+_ADVICE = {
+    "median_error_px": lambda v, t: (f"Half of your points are more than {v:.1f} px off "
+                                     f"(aim for under {t:.0f} px)."),
+    "p90_error_px": lambda v, t: (f"A tenth of your points are more than {v:.0f} px off; "
+                                  "recheck the frames named above."),
+    "outlier_fraction": lambda v, t: f"{_pct(v)} of your visible points are far off.",
+    "jitter_px": lambda v, t: (f"Your tracks jitter ({v:.1f} px per frame^2); follow each point "
+                               "smoothly from keyframe to keyframe."),
+    "motion_ratio": lambda v, t: (
+        f"Your points move {v:.1f} times as much as the hand: place each point on the joint "
+        "it names." if v > 1 else
+        f"Your points barely move while the hand moves ({_pct(v)} of its motion): place each "
+        "point on every keyframe instead of copying one frame to all."),
+    "occluded_on_surface": lambda v, t: (
+        f"You marked points occluded in {_pct(v)} of the frames where the depth camera sees them "
+        "on the surface; mark a point occluded only while something hides it."),
+    "completeness": lambda v, t: f"Only {_pct(v)} of the points have a position; place them all.",
+    "working_time_s": lambda v, t: f"You spent only {v:.0f} s on this task.",
+    "jump_fraction": lambda v, t: ("Your landmarks jump between frames; keep each one on the "
+                                   "same spot of the object all through the clip."),
+}
+
+
+def _readable(name: str) -> str:
+    return name.replace("_", " ")
+
+
+def _swap_sentence(swap: dict) -> str:
+    frames = format_spans([swap["frames"]])
+    if swap["kind"] == "mirror":
+        return (f"Your finger order was mirrored in {frames} (thumb labelled as the little "
+                f"finger, index as ring): check which hand you are labelling.")
+    a, b = swap["fingers"]
+    return (f"Your {a} and {b} finger labels were swapped in {frames} ({swap['error_px']:.0f} px "
+            f"from where the other views place them, {swap['error_swapped_px']:.0f} px once "
+            f"exchanged).")
+
+
+def _explained_by_swap(issue: dict, swaps: list[dict], names: list[str]) -> bool:
+    """An issue on a swapped finger inside the swap's frames needs no sentence of its own."""
+    name = names[issue["point"]] if issue["point"] < len(names) else ""
+    for swap in swaps:
+        fingers = ("thumb", "index", "ring", "little") if swap["kind"] == "mirror" \
+            else swap["fingers"]
+        lo, hi = swap["frames"]
+        if name.split("_")[0] in fingers and issue["frames"][0] <= hi and issue["frames"][1] >= lo:
+            return True
+    return False
+
+
+def _issue_text(issue: dict, name: str) -> str:
+    frames, error = format_spans([issue["frames"]]), issue["error_px"] or 0.0
+    if issue.get("about") == "silhouette":
+        return f"the {name} was {error:.0f} px off the object in {frames}"
+    if issue.get("about") == "jump":
+        return f"the {name} jumped {error:.0f} px between frames {issue['frames'][0]} and " \
+            f"{issue['frames'][1]}"
+    views = issue.get("views")
+    where = f"the other {views} camera views" if views else "the other camera views"
+    return f"the {name} was {error:.0f} px from where {where} place it in {frames}"
+
+
+def _issue_sentence(issues: list[dict], names: list[str], limit: int = 3) -> str:
+    parts = []
+    for issue in issues[:limit]:
+        name = _readable(names[issue["point"]]) if issue["point"] < len(names) \
+            else f"point {issue['point']}"
+        parts.append(_issue_text(issue, name))
+    if not parts:
+        return ""
+    more = f" ({len(issues) - limit} more spans like these)" if len(issues) > limit else ""
+    return "Check these frames: " + "; ".join(parts) + more + "."
+
+
+def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str]) -> Decision:
+    """The outcome of one assignment.
+
+    reject: a clear fail (a reject threshold crossed, or a swap of fingers); review: a review
+    threshold crossed, or a reject-level fail on a provisional report (never auto-rejected);
+    approve otherwise. reasons are short and technical (for admins); feedback speaks to the
+    worker and names the joints, frames and distances.
+    """
+    failures = _failures(qc.metrics, thresholds)
+    swaps = [s for s in qc.swaps if s.get("kind") in ("swap", "mirror")]
+    reasons = [f"{'swap' if s['kind'] == 'swap' else 'mirrored fingers'}: {s['message']}"
+               for s in swaps]
+    worst: dict[str, tuple] = {}
+    for fail in sorted(failures, key=lambda f: f[0] != "reject"):
+        worst.setdefault(fail[1], fail)
+    for level, name, value, limit, worse in worst.values():
+        sign = ">" if worse == "above" else "<"
+        reasons.append(f"{name} {value:.3g} {sign} {limit:.3g} ({level})")
+    clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values())
+    if clear_fail and not qc.provisional:
+        outcome = "reject"
+    elif clear_fail or worst:
+        outcome = "review"
+    else:
+        outcome = "approve"
+    if qc.provisional:
+        reasons.append("provisional: fewer than 3 camera views to compare with")
+    return Decision(outcome=outcome, reasons=reasons, provisional=qc.provisional,
+                    feedback=_feedback(qc, swaps, worst, thresholds, point_names, outcome))
+
+
+def _feedback(qc: AssignmentQC, swaps: list[dict], worst: dict[str, tuple],
+              thresholds: dict[str, float], names: list[str], outcome: str) -> str:
+    sentences = [_swap_sentence(s) for s in swaps]
+    if outcome != "approve":
+        issues = [i for i in qc.issues if not _explained_by_swap(i, swaps, names)]
+        sentences.append(_issue_sentence(issues, names))
+    for _, name, value, limit, worse in worst.values():
+        if name in _ADVICE:
+            # Advise the review threshold: that is what a good label stays within.
+            sentences.append(_ADVICE[name](value, thresholds.get(f"{name}.review_{worse}", limit)))
+    if outcome == "approve":
+        median = qc.metrics.get("median_error_px")
+        agree = f" (median error {median:.1f} px)" if median is not None else ""
+        sentences.append(f"Thank you: your labels agree with the other camera views{agree}.")
+    if qc.provisional:
+        sentences.append("Fewer than 3 camera views could be compared, so this check is "
+                         "provisional and a person will look at it.")
+    return " ".join(s for s in sentences if s)

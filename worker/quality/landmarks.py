@@ -1,0 +1,142 @@
+"""Quality of one object-landmark label: smooth tracks, on the object, not frozen.
+
+Each view's 2 landmarks are the worker's own choice, so nothing matches them across views; a
+label is judged on its own: temporal smoothness (jumps against the label's own typical motion),
+distance to the object's projected silhouette where a mask is given (the object's pose is known
+for those frames), and how much of the clip it stands still. Pixels x right, y down, one view.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from worker.geometry.cameras import CameraModel
+from worker.quality.consensus import ViewLabels
+from worker.quality.metrics import (
+    AssignmentQC,
+    error_issues,
+    error_summary,
+    num,
+    per_point_and_frame,
+    static_fraction,
+)
+
+# A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
+# at pixel centres and a careful click lands within ~2 px.
+SILHOUETTE_TOLERANCE_PX = 3.0
+# A frame-to-frame step is a jump when it exceeds this multiple of the label's median step and
+# this floor (px): objects move smoothly, a relabelled or swapped landmark leaps.
+JUMP_FACTOR = 6.0
+JUMP_FLOOR_PX = 8.0
+
+
+def _check(label: ViewLabels, masks: dict[int, np.ndarray] | None,
+           camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    xy = np.asarray(label.xy, dtype=np.float64)
+    visible = np.asarray(label.visible, bool)
+    if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
+        raise ValueError(f"labels {label.key!r}: xy must have shape (F, P, 2) and visible (F, P), "
+                         f"got {xy.shape} and {visible.shape}")
+    for frame, mask in (masks or {}).items():
+        if np.shape(mask) != (camera.height, camera.width):
+            raise ValueError(f"masks[{frame}] must have shape ({camera.height}, {camera.width}), "
+                             f"got {np.shape(mask)}")
+        if not 0 <= frame < xy.shape[0]:
+            raise ValueError(f"masks: frame {frame} is not in 0..{xy.shape[0] - 1}")
+    return xy, visible
+
+
+def silhouette_distances(xy: np.ndarray, visible: np.ndarray,
+                         masks: dict[int, np.ndarray]) -> np.ndarray:
+    """(F, P) px from each visible landmark to the nearest silhouette pixel (0 inside), NaN in
+    frames without a mask, for occluded landmarks or landmarks without a position."""
+    out = np.full(visible.shape, np.nan)
+    for frame, mask in masks.items():
+        mask = np.asarray(mask, bool)
+        if not mask.any():
+            continue
+        # Distance of every pixel to the nearest silhouette pixel.
+        dist = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 5)
+        h, w = mask.shape
+        for p in range(visible.shape[1]):
+            if not visible[frame, p] or not np.isfinite(xy[frame, p]).all():
+                continue
+            col = int(np.clip(np.rint(xy[frame, p, 0]), 0, w - 1))
+            row = int(np.clip(np.rint(xy[frame, p, 1]), 0, h - 1))
+            out[frame, p] = float(dist[row, col])
+    return out
+
+
+def jumps(xy: np.ndarray) -> tuple[np.ndarray, float | None]:
+    """(F-1, P) bool steps that are jumps, and the label's typical (median) step, px."""
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    finite = step[np.isfinite(step)]
+    if finite.size == 0:
+        return np.zeros(step.shape, bool), None
+    typical = float(np.median(finite))
+    return np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX), typical
+
+
+def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | None:
+    """Mean landmark path length over the silhouette centroid's, on consecutive masked frames."""
+    centroid = {}
+    for frame, mask in masks.items():
+        rows, cols = np.nonzero(mask)
+        if cols.size:
+            centroid[frame] = np.array([cols.mean(), rows.mean()])
+    label_path = object_path = 0.0
+    for frame in sorted(centroid):
+        if frame + 1 in centroid:
+            step = np.linalg.norm(xy[frame + 1] - xy[frame], axis=-1)
+            if np.isfinite(step).all():
+                label_path += float(step.mean())
+                object_path += float(np.linalg.norm(centroid[frame + 1] - centroid[frame]))
+    return num(label_path / object_path) if object_path > 1.0 else None
+
+
+def score_landmarks(camera: CameraModel, label: ViewLabels,
+                    masks: dict[int, np.ndarray] | None = None) -> AssignmentQC:
+    """Quality of one object-landmark label.
+
+    Args:
+        camera: the view (its width and height size the masks).
+        label: ViewLabels with xy (F, 2, 2) px and visible (F, 2).
+        masks: optional {frame: (H, W) bool} the object's projected silhouette under its known
+            pose in that frame.
+
+    Returns:
+        AssignmentQC whose metrics hold, against the silhouette (None without masks),
+        median/mean/p90_error_px and outlier_fraction (share of judged landmarks farther than
+        SILHOUETTE_TOLERANCE_PX), motion_ratio (landmark vs silhouette centroid motion); and
+        always jump_fraction, max_step_ratio, jitter_px, static_fraction, completeness,
+        visible_fraction and working_time_s. per_joint / per_frame: median silhouette distance.
+    """
+    xy, visible = _check(label, masks, camera)
+    masks = masks or {}
+    dist = silhouette_distances(xy, visible, masks)
+    judged = np.isfinite(dist)
+    metrics = error_summary(dist)
+    metrics["outlier_fraction"] = num((dist[judged] > SILHOUETTE_TOLERANCE_PX).mean()) \
+        if judged.any() else None
+    metrics["motion_ratio"] = _mask_motion_ratio(xy, masks)
+    jump, typical = jumps(xy)
+    steps = np.isfinite(np.linalg.norm(np.diff(xy, axis=0), axis=-1))
+    metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    metrics["max_step_ratio"] = num(np.nanmax(step) / max(typical, 0.5)) \
+        if typical is not None else None
+    acc = np.linalg.norm(xy[2:] - 2.0 * xy[1:-1] + xy[:-2], axis=-1)
+    metrics["jitter_px"] = num(np.sqrt(np.nanmean(acc ** 2))) if np.isfinite(acc).any() else None
+    metrics["static_fraction"] = static_fraction(xy)
+    metrics["completeness"] = num(np.isfinite(xy).all(axis=-1).mean())
+    metrics["visible_fraction"] = num(visible.mean())
+    metrics["working_time_s"] = num(label.working_time_s, 1)
+    per_joint, per_frame = per_point_and_frame(dist)
+    issues = [dict(i, about="silhouette")
+              for i in error_issues(dist, SILHOUETTE_TOLERANCE_PX, min_frames=1)]
+    for f, p in zip(*np.nonzero(jump)):
+        issues.append({"point": int(p), "frames": [int(f), int(f) + 1],
+                       "error_px": num(step[f, p], 1), "about": "jump"})
+    return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
+                        per_frame=per_frame, issues=issues, provisional=not judged.any())

@@ -1,0 +1,202 @@
+"""Per-assignment quality metrics of one view's labels against a reference (the consensus).
+
+Everything is in one camera view: F frames, P points (21 hand joints in DexYCB order or 2 object
+landmarks), positions in image pixels (x right, y down). Errors are pixel distances between a
+label and where the other views place the point. Outputs are plain floats, lists and dicts (None
+for "not measurable"), so they go to JSON as they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from worker.geometry.cameras import CameraModel
+
+# Depth margins (metres) for the visibility check, from the synthetic capture (seed 7, 8 views,
+# 72 frames): a visible joint lies under the skin, so the depth camera sees the surface a little
+# nearer (z - depth: median 12.5 mm, 75th percentile 22 mm, sensor noise ~1 mm at 0.7 m); an
+# object-covered joint reads 5-11 cm nearer (10th percentile 51 mm). Between the margins the
+# verdict is left open (hand self-occlusion by a finger or the palm falls there or above).
+SURFACE_MARGIN_M = 0.025
+HIDDEN_MARGIN_M = 0.05
+# A span of at least this many frames with errors above the issue threshold is reported.
+ISSUE_MIN_FRAMES = 3
+# Gaps of up to this many frames inside a span are bridged (a close miss mid-span).
+ISSUE_GAP_FRAMES = 2
+
+
+def num(value: float | np.floating | None, digits: int = 4) -> float | None:
+    """A JSON-friendly float: None for None, NaN or infinity."""
+    if value is None or not np.isfinite(value):
+        return None
+    return round(float(value), digits)
+
+
+def num_list(values: np.ndarray, digits: int = 3) -> list[float | None]:
+    return [num(v, digits) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+@dataclass
+class AssignmentQC:
+    """Quality of one assignment (one worker's labels of one view).
+
+    metrics: named numbers (None where not measurable), see hand_metrics / score_landmarks.
+    per_joint: (P,) median error per point, px. per_frame: (F,) median error per frame, px.
+    swaps: detected label permutations (worker.quality.swaps). issues: spans where one point is
+    far off: {"point", "frames": [first, last], "error_px", "views"}. provisional: too few
+    other views to judge (never auto-rejected).
+    """
+
+    key: str
+    view: int
+    metrics: dict[str, float | None]
+    per_joint: list[float | None]
+    per_frame: list[float | None]
+    swaps: list[dict] = field(default_factory=list)
+    issues: list[dict] = field(default_factory=list)
+    provisional: bool = False
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _nan_median(values: np.ndarray, axis: int) -> np.ndarray:
+    """np.nanmedian without the all-NaN warning: NaN where a slice has no value."""
+    finite = np.isfinite(values)
+    out = np.full(values.shape[:axis] + values.shape[axis + 1:], np.nan)
+    has = finite.any(axis=axis)
+    if has.any():
+        moved = np.moveaxis(np.where(finite, values, np.nan), axis, -1)
+        out[has] = np.nanmedian(moved[has], axis=-1)
+    return out
+
+
+def error_summary(errors: np.ndarray) -> dict[str, float | None]:
+    """median, mean and 90th percentile (px) of the finite values of errors (F, P)."""
+    e = errors[np.isfinite(errors)]
+    if e.size == 0:
+        return {"median_error_px": None, "mean_error_px": None, "p90_error_px": None}
+    return {"median_error_px": num(np.median(e)), "mean_error_px": num(e.mean()),
+            "p90_error_px": num(np.percentile(e, 90))}
+
+
+def per_point_and_frame(errors: np.ndarray) -> tuple[list[float | None], list[float | None]]:
+    """Median error per point (P,) and per frame (F,) of errors (F, P) px."""
+    return num_list(_nan_median(errors, 0)), num_list(_nan_median(errors, 1))
+
+
+def jitter_px(xy: np.ndarray, reference: np.ndarray) -> float | None:
+    """Root-mean-square second difference (px per frame^2) of the label's offset from the
+    reference, over runs of three frames where both exist. Removing the reference's motion
+    leaves the label's own shake. xy, reference: (F, P, 2) px, NaN where absent."""
+    d = xy - reference
+    acc = d[2:] - 2.0 * d[1:-1] + d[:-2]
+    ok = np.isfinite(acc).all(axis=-1)
+    if not ok.any():
+        return None
+    return num(np.sqrt(np.mean(np.sum(acc[ok] ** 2, axis=-1))))
+
+
+def motion_ratio(xy: np.ndarray, reference: np.ndarray) -> float | None:
+    """Path length of the label divided by the reference's, over consecutive frame pairs where
+    both have positions. xy, reference: (F, P, 2) px. ~1 for a good label, ~0 for one frame
+    copied to all; None where the reference does not move (nothing to compare)."""
+    step_label = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    step_ref = np.linalg.norm(np.diff(reference, axis=0), axis=-1)
+    ok = np.isfinite(step_label) & np.isfinite(step_ref)
+    ref_total = step_ref[ok].sum()
+    if not ok.any() or ref_total < 1e-6:
+        return None
+    return num(step_label[ok].sum() / ref_total)
+
+
+def static_fraction(xy: np.ndarray, still_px: float = 0.25) -> float | None:
+    """Fraction of consecutive frame pairs in which no point of the label moves more than
+    ``still_px``. xy: (F, P, 2) px."""
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    has = np.isfinite(step).any(axis=1)
+    if not has.any():
+        return None
+    moving = np.where(np.isfinite(step), step, 0.0).max(axis=1) > still_px
+    return num(1.0 - moving[has].mean())
+
+
+def depth_visibility(camera: CameraModel, points_world: np.ndarray, visible: np.ndarray,
+                     depth_mm: np.ndarray, surface_margin_m: float = SURFACE_MARGIN_M,
+                     hidden_margin_m: float = HIDDEN_MARGIN_M) -> dict[str, float | None]:
+    """How often the label's visibility flags contradict the view's depth map.
+
+    Args:
+        camera: the view. points_world: (F, P, 3) reference points, world metres (NaN: none).
+        visible: (F, P) the label's flags. depth_mm: (F, H, W) uint16 depth along the camera's
+            z axis, millimetres, 0 = no reading.
+        surface_margin_m: the point is on the visible surface where the depth reads at most this
+            much nearer than the point. hidden_margin_m: hidden where it reads more than this
+            much nearer. Points in between, off-image or without a reading are not judged.
+
+    Returns:
+        visibility_disagreement (contradicted fraction of the judged points),
+        occluded_on_surface (of the points on the surface, fraction marked occluded),
+        visible_behind_surface (of the hidden points, fraction marked visible); None where
+        nothing was judged.
+    """
+    frames, height, width = depth_mm.shape
+    if depth_mm.shape[0] != points_world.shape[0]:
+        raise ValueError(f"depth_mm must have shape (F={points_world.shape[0]}, H, W), "
+                         f"got {depth_mm.shape}")
+    pix = camera.project(points_world)
+    z = camera.depth_of(points_world)
+    col, row = np.rint(pix[..., 0]), np.rint(pix[..., 1])
+    inside = np.isfinite(z) & (z > 0) & (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    f_idx = np.broadcast_to(np.arange(frames)[:, None], z.shape)
+    reading = np.zeros(z.shape)
+    reading[inside] = depth_mm[f_idx[inside], row[inside].astype(int),
+                               col[inside].astype(int)] / 1000.0
+    judged = inside & (reading > 0)
+    nearer = z - reading
+    on_surface = judged & (nearer <= surface_margin_m)
+    hidden = judged & (nearer > hidden_margin_m)
+    wrong = (on_surface & ~visible) | (hidden & visible)
+    n_judged = on_surface.sum() + hidden.sum()
+
+    def fraction(part: np.ndarray, whole: np.ndarray) -> float | None:
+        return num(part.sum() / whole.sum()) if whole.any() else None
+
+    return {"visibility_disagreement": num(wrong.sum() / n_judged) if n_judged else None,
+            "occluded_on_surface": fraction(on_surface & ~visible, on_surface),
+            "visible_behind_surface": fraction(hidden & visible, hidden)}
+
+
+def error_issues(errors: np.ndarray, threshold_px: float, other_views: np.ndarray | None = None,
+                 min_frames: int = ISSUE_MIN_FRAMES) -> list[dict]:
+    """Spans of frames where one point's error stays above ``threshold_px``.
+
+    Args:
+        errors: (F, P) px, NaN where not measured (a NaN frame neither starts nor breaks a span).
+        threshold_px: what counts as far off.
+        other_views: (F, P) number of other views behind the reference, for the message.
+        min_frames: shortest span reported (frames over the threshold inside it).
+
+    Returns:
+        [{"point": p, "frames": [first, last], "error_px": median in the span, "views": n}],
+        worst first.
+    """
+    issues = []
+    for p in range(errors.shape[1]):
+        far = np.flatnonzero(errors[:, p] > threshold_px)
+        if far.size == 0:
+            continue
+        breaks = np.flatnonzero(np.diff(far) > ISSUE_GAP_FRAMES + 1)
+        for run in np.split(far, breaks + 1):
+            if run.size < min_frames:
+                continue
+            first, last = int(run[0]), int(run[-1])
+            span = errors[first:last + 1, p]
+            issue = {"point": p, "frames": [first, last],
+                     "error_px": num(np.nanmedian(span[np.isfinite(span)]), 1)}
+            if other_views is not None:
+                issue["views"] = int(np.median(other_views[first:last + 1, p]))
+            issues.append(issue)
+    return sorted(issues, key=lambda i: -(i["error_px"] or 0.0))

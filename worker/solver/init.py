@@ -1,0 +1,107 @@
+"""Starting points: the hand from triangulated keypoints, objects from their landmarks.
+
+Hand: DLT-triangulate the labelled joints (robustly reweighted), align the subject's mean hand
+to the palm joints (Kabsch: rotation and translation), then fit the 45 pose coefficients to the
+3D joints with Levenberg-Marquardt. Objects: a linear multi-view pose from the mapped
+landmarks where a frame has enough of them, else the previous frame's pose (frame 0: the given
+initial pose). World frame, metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from worker.geometry.transforms import matrix_to_axis_angle
+from worker.solver.lm import levenberg_marquardt
+from worker.solver.problem import MappedLandmarks, Problem
+from worker.solver.triangulate import linear_poses, reprojection_px, triangulate
+
+# DexYCB indices of the wrist and the four fingers' MCP joints: the rigid part of the palm.
+PALM_JOINTS = (0, 5, 9, 13, 17)
+# Weight (per rad^2) of the pose prior while fitting 3D joints, against residuals in mm.
+INIT_PRIOR = 1.0
+
+
+def kabsch(source: np.ndarray, target: np.ndarray, weight: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """R (B, 3, 3), t (B, 3) minimising sum w ||R s + t - x||^2.
+
+    source, target: (B, N, 3) points; weight: (B, N).
+    """
+    w = weight[..., None] / np.maximum(weight.sum(1), 1e-12)[:, None, None]
+    mu_s, mu_t = (w * source).sum(1), (w * target).sum(1)
+    cov = np.einsum("bn,bni,bnj->bij", weight, target - mu_t[:, None], source - mu_s[:, None])
+    u, _, vt = np.linalg.svd(cov)
+    sign = np.sign(np.linalg.det(u @ vt))
+    fix = np.stack([np.ones_like(sign), np.ones_like(sign), sign], axis=1)
+    rot = (u * fix[:, None, :]) @ vt
+    return rot, mu_t - np.einsum("bij,bj->bi", rot, mu_s)
+
+
+def initial_hand(problem: Problem, frames: np.ndarray, iterations: int = 10) -> np.ndarray:
+    """pose_m (B, 51) for frames (B,), from the triangulated keypoints."""
+    subject = problem.subject
+    points, ok = triangulate(problem.cameras, problem.keypoints[:, frames],
+                             problem.gamma[:, frames], problem.settings.robust_scale_px)
+    zero = torch.zeros(1, 51, dtype=torch.float64, device=problem.device)
+    rest = subject.pose(zero)[0][0].cpu().numpy()  # (21, 3) mean hand, identity rotation
+    palm = list(PALM_JOINTS)
+    # The palm alone where at least 3 of its joints are seen, else every triangulated joint.
+    weight = ok[:, palm].astype(np.float64)
+    few = weight.sum(1) < 3
+    weight[few] = 0.0
+    w_all = np.concatenate([weight, np.where(few[:, None], ok, 0.0)], axis=1)
+    src = np.concatenate([rest[palm], rest])[None].repeat(len(frames), 0)
+    tgt = np.nan_to_num(np.concatenate([points[:, palm], points], axis=1))
+    rot, trans = kabsch(src, tgt, w_all)
+    wrist = subject.rest_joints[0].cpu().numpy()
+    pose = np.zeros((len(frames), 51))
+    pose[:, :3] = matrix_to_axis_angle(rot)
+    pose[:, 48:] = trans + rot @ wrist - wrist
+    target = problem.tensor(np.nan_to_num(points))
+    mask = problem.tensor(ok.astype(np.float64))[..., None]
+
+    def residuals(p: torch.Tensor) -> torch.Tensor:
+        joints, _ = subject.pose(p, p.new_zeros(0).long())
+        offsets = ((joints - target) * mask * 1000.0).flatten(1)
+        return torch.cat((offsets, p[:, 3:48] * INIT_PRIOR), dim=1)
+
+    fitted, _ = levenberg_marquardt(residuals, problem.tensor(pose), iterations)
+    return fitted.cpu().numpy()
+
+
+def initial_object_poses(problem: Problem, index: int, marks: MappedLandmarks) -> np.ndarray:
+    """(F, 3, 4) starting poses of object `index` over all frames: the linear pose where it
+    reprojects the frame's landmarks better (median px) than the previous frame's start,
+    else that previous start; frame 0 keeps the given initial pose."""
+    frames = problem.num_frames
+    poses = np.repeat(problem.initial_poses[index][None], frames, axis=0)
+    if not len(marks.views):
+        return poses
+    model = problem.object_vertices[index][marks.vertices]
+    linear, ok = linear_poses(problem.cameras, marks.views, model, marks.xy, marks.gamma)
+    linear_error = _median_errors(problem, marks, model, linear)
+    for f in range(1, frames):
+        if ok[f] and linear_error[f] < _median_errors(problem, marks, model, poses[f - 1][None],
+                                                      [f])[0]:
+            poses[f] = linear[f]
+        else:
+            poses[f] = poses[f - 1]
+    return poses
+
+
+def _median_errors(problem: Problem, marks: MappedLandmarks, model: np.ndarray,
+                   poses: np.ndarray, frames: list[int] | None = None) -> np.ndarray:
+    """(B,) median reprojection error px of the seen landmarks under poses (B, 3, 4) at frames
+    (default: all frames, B = F); inf where a frame sees none."""
+    frames = list(range(len(poses))) if frames is None else frames
+    world = np.einsum("bij,lj->bli", poses[:, :, :3], model) + poses[:, None, :, 3]
+    errors = np.stack([reprojection_px([problem.cameras[v]], world[:, k],
+                                       marks.xy[frames, k][None])[0]
+                       for k, v in enumerate(marks.views)], axis=1)
+    errors = np.where(marks.gamma[frames], errors, np.nan)
+    out = np.full(len(poses), np.inf)
+    seen = marks.gamma[frames].any(axis=1)
+    out[seen] = np.nanmedian(errors[seen], axis=1)
+    return out

@@ -1,0 +1,82 @@
+"""The hand's Jacobian by the chain rule, for Levenberg-Marquardt.
+
+Forward-mode autodiff through every residual would push all 51 tangents through the camera
+projection of 21 joints in V views and through every depth match; instead the tangents go
+through MANO's forward kinematics only (joints and the matched vertices), and the rest is
+chained on: each projected joint depends on its own 3D position (a 3-tangent autodiff of the
+projection), each depth residual linearly on its triangle's corners. Rows follow
+`energies.hand_residuals`: keypoints, regulariser, depth, smoothness.
+
+For a depth point matched inside a triangle the residual is n . (p - c); its Jacobian here
+keeps the normal n fixed (the usual point-to-plane linearisation). At the matching pose p - c
+is parallel to n, so the dropped term (p - c) . dn vanishes there; LM accepts steps on the exact
+residuals, so the approximation costs at most a little convergence speed.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch.func import jvp
+
+from worker.solver.energies import MM_PER_M, HandData
+from worker.solver.hand_fk import SubjectHand
+from worker.solver.lm import jacobian
+from worker.solver.projection import Rig
+
+
+def _projection_derivative(rig: Rig, joints: torch.Tensor) -> torch.Tensor:
+    """(B, V, 21, 2, 3) derivative of each joint's pixels in each view w.r.t. its position."""
+    columns = []
+    for axis in range(3):
+        tangent = torch.zeros_like(joints)
+        tangent[..., axis] = 1.0
+        columns.append(jvp(rig.project, (joints,), (tangent,))[1])
+    return torch.stack(columns, dim=-1)
+
+
+def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandData
+                  ) -> torch.Tensor:
+    """(B, M, 51) Jacobian of `energies.hand_residuals` w.r.t. pose_m (B, 51)."""
+    batch = pose_m.shape[0]
+    depth = data.depth
+    ids = depth.vertex_ids if depth is not None else pose_m.new_zeros(0).long()
+
+    def forward(p: torch.Tensor) -> torch.Tensor:
+        joints, vertices = hand.pose(p, ids)
+        return torch.cat((joints.flatten(1), vertices.flatten(1)), dim=1)
+
+    with torch.no_grad():
+        value = forward(pose_m)
+    fk = jacobian(forward, pose_m)  # (B, 63 + 3K, 51)
+    joints = value[:, :63].reshape(batch, 21, 3)
+    d_joints = fk[:, :63].reshape(batch, 21, 3, -1)
+    d_pixels = _projection_derivative(rig, joints)  # (B, V, 21, 2, 3)
+    parts = [(data.sqrt_w[..., None, None] * (d_pixels @ d_joints[:, None])).flatten(1, 3)]
+    reg = torch.zeros(45, pose_m.shape[1], dtype=pose_m.dtype, device=pose_m.device)
+    reg[:, 3:48] = torch.eye(45, dtype=pose_m.dtype, device=pose_m.device) * data.sqrt_reg
+    parts.append(reg.expand(batch, -1, -1))
+    if depth is not None:
+        vertices = value[:, 63:].reshape(batch, -1, 3)
+        d_vertices = fk[:, 63:].reshape(batch, vertices.shape[1], 3, -1)
+        parts.append(_depth_jacobian(vertices, d_vertices, data))
+    if data.smooth_target is not None:
+        parts.append((d_joints * MM_PER_M * data.sqrt_smooth).flatten(1, 2))
+    return torch.cat(parts, dim=1)
+
+
+def _depth_jacobian(vertices: torch.Tensor, d_vertices: torch.Tensor, data: HandData
+                    ) -> torch.Tensor:
+    """(B, 3N, P) rows of the depth residuals from posed vertices (B, K, 3) and their
+    derivatives (B, K, 3, P)."""
+    depth = data.depth
+    rows = torch.arange(vertices.shape[0], device=vertices.device)[:, None, None]
+    corners = vertices[rows, depth.corners]  # (B, N, 3, 3)
+    d_corners = d_vertices[rows, depth.corners]  # (B, N, 3, 3, P)
+    d_offset = -(depth.bary[..., None, None] * d_corners).sum(2)  # (B, N, 3, P)
+    normal = torch.linalg.cross(corners[..., 1, :] - corners[..., 0, :],
+                                corners[..., 2, :] - corners[..., 0, :])
+    normal = normal / normal.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+    d_signed = (normal[..., None] * d_offset).sum(2, keepdim=True)  # (B, N, 1, P)
+    d_plane = torch.cat((d_signed, torch.zeros_like(d_offset[:, :, :2])), dim=2)
+    d_res = torch.where(depth.interior[..., None, None], d_plane, d_offset)
+    return (d_res * (MM_PER_M * depth.sqrt_w)[..., None, None]).flatten(1, 2)

@@ -1,0 +1,74 @@
+"""The solve entry point: validate, run the chosen optimiser, report poses and residuals."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from worker.solver.default import solve_default
+from worker.solver.paper import solve_paper
+from worker.solver.problem import Problem
+from worker.solver.state import SolveState, hand_vertices_world
+from worker.solver.types import SolveInputs, SolveResult, SolveSettings
+from worker.solver.validate import check_inputs
+
+
+def solve(inputs: SolveInputs, settings: SolveSettings | None = None) -> SolveResult:
+    """Fit the hand's MANO pose and the objects' 6D poses in every frame (world frame).
+
+    Raises ValueError (naming the field and its actual shape) on unusable input, including an
+    object without an initial pose; RuntimeError if settings.device is CUDA and none exists.
+    """
+    settings = settings or SolveSettings()
+    check_inputs(inputs, settings)
+    if settings.device.startswith("cuda") and not torch.cuda.is_available():
+        raise RuntimeError(f"device {settings.device!r} was asked for but CUDA is not available")
+    start = time.perf_counter()
+    timings: dict[str, float] = {}
+    problem = Problem(inputs, settings)
+    timings["setup"] = time.perf_counter() - start
+    if settings.optimiser == "paper":
+        state = solve_paper(problem, timings)
+    else:
+        state = solve_default(problem, timings)
+    tick = time.perf_counter()
+    result = _result(problem, state, timings)
+    timings["residuals"] = time.perf_counter() - tick
+    timings["total"] = time.perf_counter() - start
+    timings["per_frame"] = timings["total"] / problem.num_frames
+    return result
+
+
+def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> SolveResult:
+    frames, views = problem.num_frames, len(problem.cameras)
+    pose = np.full((frames, 51), np.nan)
+    joints = np.full((frames, 21, 3), np.nan)
+    errors = np.full((frames, views, 21), np.nan)
+    labelled = problem.labelled.copy()
+    if problem.subject is not None and len(state.hand_frames):
+        hf = state.hand_frames
+        pose[hf] = state.hand_pose[hf]
+        joints[hf] = state.joints(problem)
+        errors[hf] = np.moveaxis(state.hand_errors(problem), 0, 1)
+    depth_rms = state.depth_rms_mm(problem) if problem.clouds else np.full(frames, np.nan)
+    return SolveResult(
+        hand_pose_m=pose, hand_joints=joints, object_poses=state.object_poses.copy(),
+        labelled=labelled, reasons=list(problem.reasons), kpt_error_px=errors,
+        depth_rms_mm=depth_rms, landmark_vertices=[list(v) for v in state.landmarks],
+        timings=timings,
+        betas=None if problem.subject is None else problem.betas.copy(),
+        side=None if problem.hand is None else problem.hand.side)
+
+
+def hand_vertices(result: SolveResult, inputs: SolveInputs, frame: int) -> np.ndarray:
+    """(V, 3) world vertices, metres, of the solved hand at `frame` (V = the model's, 778 for
+    MANO). Raises ValueError if the frame has no hand solution."""
+    if inputs.hand is None or not 0 <= frame < len(result.labelled) or not result.labelled[frame]:
+        raise ValueError(f"frame {frame} has no hand solution")
+    problem_settings = SolveSettings(use_depth=False)
+    problem = Problem(SolveInputs(inputs.cameras, inputs.num_frames, inputs.hand, [],
+                                  [None] * len(inputs.cameras), inputs.hand_model),
+                      problem_settings)
+    return hand_vertices_world(problem, result.hand_pose_m[frame][None])[0]

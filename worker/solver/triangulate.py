@@ -1,0 +1,105 @@
+"""Linear (DLT) triangulation of labelled keypoints with robust reweighting, and a linear
+multi-view pose estimate for rigid objects. NumPy, float64; world frame, metres; pixels."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worker.geometry.cameras import CameraModel, pixels_to_rays, project_points
+
+
+def _normalised(cameras: list[CameraModel], pixels: np.ndarray) -> np.ndarray:
+    """(V, ..., 2) pixels -> undistorted normalised image coordinates (V, ..., 2)."""
+    return np.stack([pixels_to_rays(np.nan_to_num(px), c.K, c.dist)[..., :2]
+                     for c, px in zip(cameras, pixels, strict=True)])
+
+
+def _world_to_cam(cameras: list[CameraModel]) -> np.ndarray:
+    """(V, 3, 4) world-to-camera [R | t] of each view."""
+    out = []
+    for c in cameras:
+        rot = c.T_cam_to_world[:, :3].T
+        out.append(np.hstack([rot, -(rot @ c.T_cam_to_world[:, 3])[:, None]]))
+    return np.stack(out)
+
+
+def reprojection_px(cameras: list[CameraModel], points: np.ndarray,
+                    pixels: np.ndarray) -> np.ndarray:
+    """(V, ...) pixel distance between points (..., 3) projected into each view and pixels
+    (V, ..., 2)."""
+    return np.stack([np.linalg.norm(project_points(points, c.K, c.T_cam_to_world, c.dist) - px,
+                                    axis=-1) for c, px in zip(cameras, pixels, strict=True)])
+
+
+def triangulate(cameras: list[CameraModel], pixels: np.ndarray, mask: np.ndarray,
+                robust_scale_px: float | None = 8.0, rounds: int = 4
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate points seen in V views.
+
+    pixels: (V, ..., 2) px; mask: (V, ...) bool, which observations to use.
+    robust_scale_px: Cauchy scale for iteratively reweighted DLT (None: plain DLT, 1 round).
+    Returns points (..., 3) world metres (NaN where fewer than 2 views) and a (...,) bool of
+    where a point was triangulated.
+    """
+    pixels = np.asarray(pixels, dtype=np.float64)
+    mask = np.asarray(mask, dtype=bool) & np.isfinite(pixels).all(axis=-1)
+    xy = _normalised(cameras, pixels)
+    proj = _world_to_cam(cameras)
+    shape = mask.shape[1:]
+    # Rows u P3 - P1 and v P3 - P2 per view: (V, ..., 2, 4).
+    extra = (None,) * len(shape)
+    p = proj[(slice(None),) + extra]
+    rows = np.stack([xy[..., 0, None] * p[..., 2, :] - p[..., 0, :],
+                     xy[..., 1, None] * p[..., 2, :] - p[..., 1, :]], axis=-2)
+    rows = np.moveaxis(rows, 0, -3).reshape(shape + (-1, 4))  # (..., 2V, 4)
+    weight = mask.astype(np.float64)
+    ok = mask.sum(axis=0) >= 2
+    points = np.full(shape + (3,), np.nan)
+    for _ in range(rounds if robust_scale_px else 1):
+        w = np.repeat(np.moveaxis(weight, 0, -1), 2, axis=-1)
+        _, _, vt = np.linalg.svd(rows * w[..., None])
+        h = vt[..., -1, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            points = h[..., :3] / h[..., 3:4]
+        if not robust_scale_px:
+            break
+        err = reprojection_px(cameras, np.nan_to_num(points), pixels)
+        weight = mask / (1.0 + (np.nan_to_num(err, nan=1e6) / robust_scale_px) ** 2)
+    points[~ok] = np.nan
+    return points, ok
+
+
+def linear_poses(cameras: list[CameraModel], views: np.ndarray, model_points: np.ndarray,
+                 pixels: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Object-to-world poses of F frames from L landmarks, each one model point seen in one view.
+
+    views: (L,) view ids; model_points: (L, 3) object frame, metres; pixels: (F, L, 2) px;
+    seen: (F, L) bool. Per frame, the 12 entries of [R | t] are solved linearly (u r3.X' - r1.X'
+    = 0 per observation in its camera's normalised coordinates) and R is projected onto SO(3).
+    Returns poses (F, 3, 4) and (F,) bool: at least 6 observations and a well-posed system.
+    """
+    frames = pixels.shape[0]
+    xy = np.stack([pixels_to_rays(np.nan_to_num(pixels[:, k]), cameras[v].K, cameras[v].dist)
+                   [:, :2] for k, v in enumerate(views)], axis=1)  # (F, L, 2)
+    proj = _world_to_cam(cameras)[views]  # (L, 3, 4)
+    homo = np.hstack([model_points, np.ones((len(views), 1))])
+    # camera point = Rc (A X_h) + tc with A = [R | t]; linear in vec(A) (row-major).
+    blocks = np.einsum("kij,kl->kijl", proj[:, :, :3], homo).reshape(len(views), 3, 12)
+    const = proj[:, :, 3]
+    rows = np.concatenate([xy[..., 0, None] * blocks[:, 2] - blocks[:, 0],
+                           xy[..., 1, None] * blocks[:, 2] - blocks[:, 1]], axis=1)
+    rhs = np.concatenate([const[:, 0] - xy[..., 0] * const[:, 2],
+                          const[:, 1] - xy[..., 1] * const[:, 2]], axis=1)
+    weight = np.concatenate([seen, seen], axis=1).astype(np.float64)
+    normal = np.einsum("fm,fmi,fmj->fij", weight, rows, rows)
+    ok = (seen.sum(1) >= 6) & (np.linalg.cond(normal) < 1e12)
+    normal[~ok] = np.eye(12)
+    sol = np.linalg.solve(normal, np.einsum("fm,fmi,fm->fi", weight, rows, rhs)[..., None])
+    pose = sol[..., 0].reshape(frames, 3, 4)
+    u, s, vt = np.linalg.svd(pose[:, :, :3])
+    fix = np.ones((frames, 3))
+    fix[:, 2] = np.sign(np.linalg.det(u @ vt))
+    rot = (u * fix[:, None, :]) @ vt
+    # The linear solution's scale error lives in its singular values; rescale t with them.
+    trans = pose[:, :, 3] / s.mean(axis=1, keepdims=True)
+    return np.concatenate([rot, trans[..., None]], axis=2), ok

@@ -1,0 +1,163 @@
+"""What the solver takes and returns: targets, inputs, settings and the per-frame result.
+
+Frames: world = the capture's master frame; cameras are `CameraModel`s (camera-to-world 3x4,
+metres). Pixels are x right, y down. Lengths are metres unless a name says mm or px.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from worker.geometry.cameras import CameraModel
+
+
+@dataclass
+class HandTarget:
+    """One hand's crowd labels over V views and F frames.
+
+    side: "right" or "left". betas: (10,) subject shape, fixed.
+    keypoints: (V, F, 21, 2) px in DexYCB joint order, NaN where there is no label.
+    visible: (V, F, 21) bool, the annotator's visibility flag (gamma in the paper).
+    """
+
+    side: str
+    betas: np.ndarray
+    keypoints: np.ndarray
+    visible: np.ndarray
+
+
+@dataclass
+class Landmark:
+    """One worker-chosen object landmark, tracked in one view.
+
+    view: index into the cameras. xy: (F, 2) px, NaN where there is none. visible: (F,) bool.
+    """
+
+    view: int
+    xy: np.ndarray
+    visible: np.ndarray
+
+
+@dataclass
+class ObjectTarget:
+    """One rigid object: its mesh (object frame, metres), pose at frame 0 and landmarks.
+
+    vertices: (N, 3) metres. faces: (M, 3) int. initial_pose: (3, 4) object-to-world at frame 0,
+    required (the solver refuses None). landmarks: usually 2 per view.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    initial_pose: np.ndarray | None
+    landmarks: list[Landmark] = field(default_factory=list)
+
+
+@dataclass
+class SolveInputs:
+    """Everything one sequence's solve needs.
+
+    cameras: V calibrated views. num_frames: F. depth: per view (F, H, W) uint16 millimetres
+    along the camera's z (0 = no depth), aligned to colour, or None. hand_model: a
+    `worker.hand.HandModel`; None means the built-in model of the hand's side.
+    """
+
+    cameras: list[CameraModel]
+    num_frames: int
+    hand: HandTarget | None
+    objects: list[ObjectTarget]
+    depth: list[np.ndarray | None]
+    hand_model: object | None = None
+
+
+@dataclass
+class SolveSettings:
+    """Energy weights and optimiser choice.
+
+    Energies (per frame): E = w_kpt E_kpt + w_depth E_depth + w_reg E_reg (+ w_smooth E_smooth
+    for the default optimiser). E_kpt in px^2 (visibility-weighted mean squared reprojection
+    error), E_depth in mm^2 (mean squared distance of depth points to the union of meshes),
+    E_reg in rad^2 (squared norm of the 45 PCA pose coefficients), E_smooth in mm^2 (squared
+    second difference of the 3D joints and of the object translations over frames).
+
+    optimiser: "paper" = Adam (lr, paper_iterations per frame, warm start from the previous
+    frame, depth matches renewed every paper_rematch_every iterations); "default" = batched
+    Levenberg-Marquardt from triangulation, lm_iterations per (robust) round, icp_rounds
+    rounds of renewed depth matches.
+    min_views: a frame is solved for the hand only where at least `min_joints` joints are
+    labelled visible in at least `min_views` views each.
+    robust_scale_px: Cauchy scale of the robust keypoint loss (default optimiser, robust=True).
+    depth_stride: take every n-th depth pixel in x and y. depth_margin: keep depth points within
+    this distance (m) of a current mesh's box. max_depth_points: per frame, random subset.
+    """
+
+    optimiser: Literal["paper", "default"] = "default"
+    device: str = "cpu"
+    w_kpt: float = 1.0
+    w_depth: float = 1.0
+    w_reg: float = 1.0
+    w_smooth: float = 0.0
+    robust: bool = True
+    robust_scale_px: float = 8.0
+    min_views: int = 2
+    min_joints: int = 6
+    lr: float = 0.01
+    paper_iterations: int = 100
+    paper_rematch_every: int = 1
+    lm_iterations: int = 4
+    icp_rounds: int = 2
+    depth_stride: int = 4
+    depth_margin: float = 0.02
+    workspace_margin: float = 0.5
+    max_depth_points: int = 1500
+    use_depth: bool = True
+    seed: int = 0
+
+
+@dataclass
+class SolveResult:
+    """Per-frame solution, world frame.
+
+    hand_pose_m: (F, 51) DexYCB pose_m (3 global axis-angle, 45 PCA coefficients with
+    flat_hand_mean False, 3 translation in metres), NaN rows where the hand is unlabelled.
+    hand_joints: (F, 21, 3) metres, NaN where unlabelled. object_poses: (O, F, 3, 4)
+    object-to-world. labelled: (F,) bool. reasons: per frame None or why it is unlabelled.
+    kpt_error_px: (F, V, 21) reprojection error of each labelled visible joint, NaN elsewhere.
+    depth_rms_mm: (F,) RMS distance of the cropped depth points to the meshes (NaN: none).
+    landmark_vertices: per object, per landmark the mesh vertex id (-1 if it could not be
+    mapped). timings: seconds per stage.
+    """
+
+    hand_pose_m: np.ndarray
+    hand_joints: np.ndarray
+    object_poses: np.ndarray
+    labelled: np.ndarray
+    reasons: list[str | None]
+    kpt_error_px: np.ndarray
+    depth_rms_mm: np.ndarray
+    landmark_vertices: list[list[int]]
+    timings: dict[str, float]
+    betas: np.ndarray | None = None
+    side: str | None = None
+
+    def to_summary(self) -> dict:
+        """JSON-friendly summary: counts, error statistics (px, mm), timings (s)."""
+        kpt = self.kpt_error_px[np.isfinite(self.kpt_error_px)]
+        depth = self.depth_rms_mm[np.isfinite(self.depth_rms_mm)]
+
+        def stat(values: np.ndarray) -> float | None:
+            return float(values) if np.isfinite(values) else None
+
+        return {
+            "frames": int(self.labelled.shape[0]),
+            "labelled_frames": int(self.labelled.sum()),
+            "unlabelled": {str(f): r for f, r in enumerate(self.reasons) if r is not None},
+            "kpt_error_px_mean": stat(kpt.mean()) if kpt.size else None,
+            "kpt_error_px_median": stat(np.median(kpt)) if kpt.size else None,
+            "depth_rms_mm_mean": stat(depth.mean()) if depth.size else None,
+            "landmark_vertices": [list(map(int, v)) for v in self.landmark_vertices],
+            "timings": {k: float(v) for k, v in self.timings.items()},
+        }
