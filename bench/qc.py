@@ -17,7 +17,10 @@ Prints the table, then a JSON summary on its last line:
     swaps_found / swaps_total   swappers whose report names ring and little over about the true span
     qc_job_s                    seconds of one QC job, 8 views x 72 frames x 21 joints (median)
     qc_job_parts_s              its parts: reading tracks and depth maps, scoring, acting
-Usage: python bench/qc.py [--capture DIR] [--rounds 3] [--repeats 3]
+    mixed                       the same measures over --mixed-seeds fresh projects where each
+                                view is labelled by one worker drawn from the mixed profile
+                                (half careful): the harder case, fewer good views to agree
+Usage: python bench/qc.py [--capture DIR] [--rounds 3] [--repeats 3] [--mixed-seeds 10]
 """
 
 from __future__ import annotations
@@ -116,6 +119,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--mixed-seeds", type=int, default=10,
+                        help="projects of the mixed-crowd scenario (one worker per view)")
     args = parser.parse_args()
 
     work = isolated_workdir("qc", DEXLABEL_QC_BLOCK_AFTER_FAILURES="0")
@@ -161,6 +166,8 @@ def main() -> None:
     for profile, row in confusion.items():
         print(f"{profile:10s} {row['approve']:8d} {row['review']:8d} {row['reject']:8d}")
 
+    mixed = _mixed_crowds(capture, truth, args.mixed_seeds, args.seed)
+
     # The job size of the issue: one hand target, one assignment per view, in a fresh setup.
     _fresh_setup()
     sequence_id, tasks = _setup(capture)
@@ -183,8 +190,45 @@ def main() -> None:
         "qc_job_s": round(statistics.median(job_s), 3),
         "qc_job_size": f"{len(tasks)} views x {frames} frames x 21 joints",
         "qc_job_parts_s": parts,
+        "mixed": mixed,
     }
     print(json.dumps(summary))
+
+
+def _mixed_crowds(capture: Path, truth, seeds: int, base_seed: int) -> dict:
+    """Each of ``seeds`` fresh projects: every view labelled by one worker drawn from the mixed
+    profile weights (half careful), scored alone by the QC job; the summed confusion table."""
+    from backend.db import session_scope
+    from backend.review.models import QCReport
+    from worker.synth.annotators import draw_profiles
+
+    table = {p: {"approve": 0, "review": 0, "reject": 0} for p in ("careful", *BAD_PROFILES)}
+    swaps_found = swaps_total = 0
+    for seed in range(seeds):
+        _fresh_setup()
+        sequence_id, tasks = _setup(capture)
+        rng = np.random.default_rng(base_seed + 1000 + seed)
+        profile_of = {}
+        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng)):
+            profile_of[_submit(task, profile, f"{profile}-m{seed}-{task['id']}", truth, rng)] = \
+                profile
+        _run_qc(sequence_id)
+        with session_scope() as session:
+            for report in session.query(QCReport).filter_by(sequence_id=sequence_id):
+                profile = profile_of[report.assignment_id]
+                table[profile][report.outcome] += 1
+                if profile == "swapper":
+                    swaps_total += 1
+                    swaps_found += _swap_found(report.swaps, tasks[0]["num_frames"])
+    bad = [table[p] for p in BAD_PROFILES]
+    bad_n = sum(sum(c.values()) for c in bad)
+    good_n = sum(table["careful"].values())
+    return {"projects": seeds, "confusion": table,
+            "bad_flagged_rate": round(sum(c["review"] + c["reject"] for c in bad)
+                                      / max(bad_n, 1), 4),
+            "good_flagged_rate": round((table["careful"]["review"] + table["careful"]["reject"])
+                                       / max(good_n, 1), 4),
+            "swaps_found": swaps_found, "swaps_total": swaps_total}
 
 
 def _fresh_setup() -> None:

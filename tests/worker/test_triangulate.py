@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
+from worker.geometry.refine import CameraStack, project_stack
 from worker.geometry.triangulate import (
-    CameraStack,
     leave_one_out_residuals,
-    project_stack,
     triangulate_dlt,
     triangulate_points,
 )

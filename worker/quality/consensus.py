@@ -26,13 +26,15 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
-from worker.geometry.triangulate import (
+from worker.geometry.refine import (
     CameraStack,
     cauchy_weights,
+    refine_points,
+    reprojection_errors,
+)
+from worker.geometry.triangulate import (
     column_pairs,
     leave_one_out_residuals,
-    reprojection_errors,
-    refine_points,
     triangulate_points,
 )
 from worker.quality.metrics import (
