@@ -127,8 +127,6 @@ def main() -> None:
     capture = _capture(args.capture, work)
 
     from backend.crowd.simulate import CaptureTruth
-    from backend.db import session_scope
-    from backend.review.models import QCReport
 
     sequence_id, tasks = _setup(capture)
     truth = CaptureTruth(capture)
@@ -145,22 +143,10 @@ def main() -> None:
             profile_of[bad] = bad_profile
     pool_s, _ = _run_qc(sequence_id)
 
-    confusion = {p: {"approve": 0, "review": 0, "reject": 0}
-                 for p in ("careful", *BAD_PROFILES)}
-    swaps_found = swaps_total = 0
     frames = tasks[0]["num_frames"]
-    with session_scope() as session:
-        for report in session.query(QCReport).filter_by(sequence_id=sequence_id):
-            profile = profile_of[report.assignment_id]
-            confusion[profile][report.outcome] += 1
-            if profile == "swapper":
-                swaps_total += 1
-                swaps_found += _swap_found(report.swaps, frames)
-    bad = [confusion[p] for p in BAD_PROFILES]
-    bad_n = sum(sum(c.values()) for c in bad)
-    bad_flagged = sum(c["review"] + c["reject"] for c in bad)
-    good = confusion["careful"]
-    good_n = sum(good.values())
+    tally = _Tally()
+    tally.add(sequence_id, profile_of, frames)
+    confusion = tally.table
 
     print(f"{'profile':10s} {'approve':>8s} {'review':>8s} {'reject':>8s}")
     for profile, row in confusion.items():
@@ -179,12 +165,8 @@ def main() -> None:
              for name in runs[0][1]}
 
     summary = {
-        "confusion": confusion,
+        **tally.summary(),
         "assignments": len(profile_of),
-        "bad_flagged_rate": round(bad_flagged / bad_n, 4),
-        "good_flagged_rate": round((good["review"] + good["reject"]) / good_n, 4),
-        "swaps_found": swaps_found,
-        "swaps_total": swaps_total,
         "pool_qc_job_s": round(pool_s, 3),
         "pool_views": len(tasks),
         "qc_job_s": round(statistics.median(job_s), 3),
@@ -198,12 +180,9 @@ def main() -> None:
 def _mixed_crowds(capture: Path, truth, seeds: int, base_seed: int) -> dict:
     """Each of ``seeds`` fresh projects: every view labelled by one worker drawn from the mixed
     profile weights (half careful), scored alone by the QC job; the summed confusion table."""
-    from backend.db import session_scope
-    from backend.review.models import QCReport
     from worker.synth.annotators import draw_profiles
 
-    table = {p: {"approve": 0, "review": 0, "reject": 0} for p in ("careful", *BAD_PROFILES)}
-    swaps_found = swaps_total = 0
+    tally = _Tally()
     for seed in range(seeds):
         _fresh_setup()
         sequence_id, tasks = _setup(capture)
@@ -213,22 +192,43 @@ def _mixed_crowds(capture: Path, truth, seeds: int, base_seed: int) -> dict:
             profile_of[_submit(task, profile, f"{profile}-m{seed}-{task['id']}", truth, rng)] = \
                 profile
         _run_qc(sequence_id)
+        tally.add(sequence_id, profile_of, tasks[0]["num_frames"])
+    return {"projects": seeds, **tally.summary()}
+
+
+class _Tally:
+    """QC outcomes of simulated work by profile, and the swaps reported right."""
+
+    def __init__(self) -> None:
+        self.table = {p: {"approve": 0, "review": 0, "reject": 0}
+                      for p in ("careful", *BAD_PROFILES)}
+        self.swaps_found = self.swaps_total = 0
+
+    def add(self, sequence_id: int, profile_of: dict[int, str], frames: int) -> None:
+        from backend.db import session_scope
+        from backend.review.models import QCReport
+
         with session_scope() as session:
             for report in session.query(QCReport).filter_by(sequence_id=sequence_id):
                 profile = profile_of[report.assignment_id]
-                table[profile][report.outcome] += 1
+                self.table[profile][report.outcome] += 1
                 if profile == "swapper":
-                    swaps_total += 1
-                    swaps_found += _swap_found(report.swaps, tasks[0]["num_frames"])
-    bad = [table[p] for p in BAD_PROFILES]
-    bad_n = sum(sum(c.values()) for c in bad)
-    good_n = sum(table["careful"].values())
-    return {"projects": seeds, "confusion": table,
-            "bad_flagged_rate": round(sum(c["review"] + c["reject"] for c in bad)
-                                      / max(bad_n, 1), 4),
-            "good_flagged_rate": round((table["careful"]["review"] + table["careful"]["reject"])
-                                       / max(good_n, 1), 4),
-            "swaps_found": swaps_found, "swaps_total": swaps_total}
+                    self.swaps_total += 1
+                    self.swaps_found += _swap_found(report.swaps, frames)
+
+    def summary(self) -> dict:
+        bad = [self.table[p] for p in BAD_PROFILES]
+        good = self.table["careful"]
+        return {"confusion": self.table,
+                "bad_flagged_rate": _flagged_rate(bad),
+                "good_flagged_rate": _flagged_rate([good]),
+                "swaps_found": self.swaps_found, "swaps_total": self.swaps_total}
+
+
+def _flagged_rate(rows: list[dict[str, int]]) -> float:
+    """Share of the counted assignments sent to review or rejected."""
+    total = sum(sum(r.values()) for r in rows)
+    return round(sum(r["review"] + r["reject"] for r in rows) / max(total, 1), 4)
 
 
 def _fresh_setup() -> None:

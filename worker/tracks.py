@@ -184,6 +184,22 @@ def dense_track(keyframes: Iterable[Any], num_frames: int) -> DenseTrack:
     return DenseTrack(values, state)
 
 
+def dense_points(tracks: Iterable[tuple[int, Iterable[Any]]], num_frames: int,
+                 num_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """A task's tracks, given as (point index, keyframes) pairs, at every frame.
+
+    Returns (F, P, 2) image px (NaN where a point has no position) and (F, P) bool visibility;
+    points without a track, or with an index outside 0..P-1, stay unplaced.
+    """
+    xy = np.full((num_frames, num_points, 2), np.nan)
+    visible = np.zeros((num_frames, num_points), dtype=bool)
+    for point, keyframes in tracks:
+        if 0 <= point < num_points:
+            dense = dense_track(keyframes, num_frames)
+            xy[:, point], visible[:, point] = dense.xy, dense.visible
+    return xy, visible
+
+
 def frame_spans(flags: Sequence[bool] | np.ndarray) -> list[list[int]]:
     """Inclusive [start, end] spans of the frames where flags is true."""
     spans: list[list[int]] = []

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
@@ -15,6 +16,7 @@ from backend.captures.layout import CameraPlan, SequencePlan
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.errors import Conflict, NotFound
 from backend.storage import Storage
+from worker.geometry.cameras import CameraModel
 
 UPLOAD_THREADS = 8
 
@@ -187,3 +189,13 @@ def _frame_sources(
         color_key = f"{base}/color_{index:06d}.jpg"
         jobs.append((color_key, data, ""))
         yield index, color_key, None, len(data)
+
+
+def camera_model(camera: Camera) -> CameraModel:
+    """A camera row as the worker packages take it (pixels, camera-to-world metres)."""
+    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
+    dist = np.zeros(5)
+    coeffs = np.asarray(camera.distortion or [], dtype=np.float64)[:5]
+    dist[: len(coeffs)] = coeffs
+    return CameraModel(K=K, dist=dist, T_cam_to_world=np.asarray(camera.extrinsics, float),
+                       width=camera.width, height=camera.height)

@@ -103,17 +103,9 @@ def truth_tracks(session: Session, task_id: int, capture: Path) -> list[list[lis
 
 def gold_dense(clip: TrainingClip, num_frames: int):
     """The clip's gold as (F, P, 2) px and (F, P) visibility."""
-    import numpy as np
+    from worker.tracks import dense_points
 
-    from worker.tracks import dense_track
-
-    points = len(clip.tracks)
-    xy = np.full((num_frames, points, 2), np.nan)
-    visible = np.zeros((num_frames, points), dtype=bool)
-    for p, rows in enumerate(clip.tracks):
-        dense = dense_track(rows, num_frames)
-        xy[:, p], visible[:, p] = dense.xy, dense.visible
-    return xy, visible
+    return dense_points(enumerate(clip.tracks), num_frames, len(clip.tracks))
 
 
 def score_training(session: Session, task_id: int, label, num_frames: int):

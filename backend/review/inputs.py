@@ -16,9 +16,10 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
+from backend.captures.service import camera_model
 from backend.storage import get_storage
 from worker.geometry import CameraModel
-from worker.tracks import dense_track
+from worker.tracks import dense_points
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
@@ -51,25 +52,13 @@ class TargetInputs:
     tasks: dict[int, Task] = field(default_factory=dict)
 
 
-def camera_model(camera: Camera) -> CameraModel:
-    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
-    return CameraModel(K=K, dist=np.asarray(camera.distortion, dtype=np.float64),
-                       T_cam_to_world=np.asarray(camera.extrinsics, dtype=np.float64),
-                       width=camera.width, height=camera.height)
-
-
 def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int):
     """An assignment's tracks as dense (F, P, 2) px (NaN = no position) and (F, P) visibility,
     as a worker.quality.consensus.ViewLabels."""
     from worker.quality.consensus import ViewLabels
 
-    xy = np.full((num_frames, num_points, 2), np.nan)
-    visible = np.zeros((num_frames, num_points), dtype=bool)
-    for track in assignment.tracks:
-        if 0 <= track.point_index < num_points:
-            dense = dense_track(track.keyframes, num_frames)
-            xy[:, track.point_index] = dense.xy
-            visible[:, track.point_index] = dense.visible
+    xy, visible = dense_points(((t.point_index, t.keyframes) for t in assignment.tracks),
+                               num_frames, num_points)
     return ViewLabels(key=str(assignment.id), view=view, xy=xy, visible=visible,
                       working_time_s=assignment.working_time_s)
 

@@ -12,11 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session
 
-from backend.captures.service import get_sequence_or_raise
+from backend.captures.service import camera_model, get_sequence_or_raise
 from backend.errors import Conflict, NotFound
 from backend.solve.inputs import (
     approved_labels,
-    camera_model,
     hand_model_for,
     hand_target,
     sequence_cameras,

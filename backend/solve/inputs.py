@@ -19,26 +19,16 @@ from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
+from backend.captures.service import camera_model
 from backend.config import get_settings
 from backend.storage import Storage, get_storage
-from worker.geometry.cameras import CameraModel
 from worker.geometry.mesh_io import Mesh, read_mesh
 from worker.hand import HandModel, load_hand_model
 from worker.hand.joints import NUM_JOINTS
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
-from worker.tracks import dense_track
+from worker.tracks import dense_points
 
 ACCEPTED = "approved"
-
-
-def camera_model(camera: Camera) -> CameraModel:
-    """A camera row as the worker packages take it (pixels, camera-to-world metres)."""
-    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
-    dist = np.zeros(5)
-    coeffs = np.asarray(camera.distortion or [], dtype=np.float64)[:5]
-    dist[: len(coeffs)] = coeffs
-    return CameraModel(K=K, dist=dist, T_cam_to_world=np.asarray(camera.extrinsics, float),
-                       width=camera.width, height=camera.height)
 
 
 def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
@@ -49,14 +39,8 @@ def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
 def dense_labels(assignment: Assignment, num_frames: int,
                  num_points: int) -> tuple[np.ndarray, np.ndarray]:
     """One assignment's tracks as (F, P, 2) px (NaN = no position) and (F, P) visibility."""
-    xy = np.full((num_frames, num_points, 2), np.nan)
-    visible = np.zeros((num_frames, num_points), dtype=bool)
-    for track in assignment.tracks:
-        if 0 <= track.point_index < num_points:
-            dense = dense_track(track.keyframes, num_frames)
-            xy[:, track.point_index] = dense.xy
-            visible[:, track.point_index] = dense.visible
-    return xy, visible
+    return dense_points(((t.point_index, t.keyframes) for t in assignment.tracks), num_frames,
+                        num_points)
 
 
 def merge_labels(labels: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:

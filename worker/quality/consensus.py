@@ -44,10 +44,9 @@ from worker.quality.metrics import (
     depth_visibility,
     error_issues,
     error_summary,
-    jitter_px,
-    motion_ratio,
     num,
     per_point_and_frame,
+    track_metrics,
 )
 from worker.quality.swaps import find_swaps, swap_corrections, undo_swaps
 
@@ -279,13 +278,8 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors:
         vis_metrics = depth_visibility(camera, consensus, visible, depth_mm,
                                        opts.surface_margin_m, opts.hidden_margin_m)
     metrics.update(vis_metrics)
-    shown = np.where(visible[..., None], xy, np.nan)
-    metrics["jitter_px"] = jitter_px(shown, judged_reference)
-    metrics["motion_ratio"] = motion_ratio(xy, judged_reference)
-    metrics["completeness"] = num(np.isfinite(xy).all(axis=-1).mean())
-    metrics["visible_fraction"] = num(visible.mean())
+    metrics.update(track_metrics(xy, visible, judged_reference, lab.working_time_s))
     metrics["scored_fraction"] = num(scored.mean())
-    metrics["working_time_s"] = num(lab.working_time_s, 1)
     per_joint, per_frame = per_point_and_frame(errors)
     swaps = find_swaps(xy, visible, reference) if xy.shape[1] == 21 else []
     support = np.median(other_views[scored]) if scored.any() else 0.0

@@ -10,8 +10,7 @@ import numpy as np
 
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import (
-    AssignmentQC, error_issues, error_summary, jitter_px, motion_ratio, num,
-    per_point_and_frame,
+    AssignmentQC, error_issues, error_summary, num, per_point_and_frame, track_metrics,
 )
 from worker.quality.swaps import find_swaps
 
@@ -51,12 +50,8 @@ def score_against_gold(label: ViewLabels, gold_xy: np.ndarray, gold_visible: np.
     metrics["visible_behind_surface"] = (num((visible & ~gold_visible).sum()
                                              / (~gold_visible).sum())
                                          if (~gold_visible).any() else None)
-    metrics["jitter_px"] = jitter_px(np.where(visible[..., None], xy, np.nan), gold_xy)
-    metrics["motion_ratio"] = motion_ratio(xy, gold_xy)
-    metrics["completeness"] = num(np.isfinite(xy).all(axis=-1).mean())
-    metrics["visible_fraction"] = num(visible.mean())
+    metrics.update(track_metrics(xy, visible, gold_xy, label.working_time_s))
     metrics["scored_fraction"] = num(scored.mean())
-    metrics["working_time_s"] = num(label.working_time_s, 1)
     per_joint, per_frame = per_point_and_frame(errors)
     swaps = find_swaps(xy, visible, gold_xy) if xy.shape[1] == 21 else []
     return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,

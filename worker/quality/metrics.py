@@ -123,6 +123,21 @@ def static_fraction(xy: np.ndarray, still_px: float = 0.25) -> float | None:
     return num(1.0 - moving[has].mean())
 
 
+def track_metrics(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
+                  working_time_s: float | None) -> dict[str, float | None]:
+    """The label's own behaviour against a reference (consensus or gold) of the same view.
+
+    xy: (F, P, 2) px, NaN = no position; visible: (F, P); reference: (F, P, 2) px, NaN where
+    unknown. Returns jitter_px, motion_ratio, completeness, visible_fraction, working_time_s.
+    """
+    shown = np.where(visible[..., None], xy, np.nan)
+    return {"jitter_px": jitter_px(shown, reference),
+            "motion_ratio": motion_ratio(xy, reference),
+            "completeness": num(np.isfinite(xy).all(axis=-1).mean()),
+            "visible_fraction": num(visible.mean()),
+            "working_time_s": num(working_time_s, 1)}
+
+
 def depth_visibility(camera: CameraModel, points_world: np.ndarray, visible: np.ndarray,
                      depth_mm: np.ndarray, surface_margin_m: float = SURFACE_MARGIN_M,
                      hidden_margin_m: float = HIDDEN_MARGIN_M) -> dict[str, float | None]:
