@@ -17,6 +17,8 @@ Prints the table, then a JSON summary on its last line:
     swaps_found / swaps_total   swappers whose report names ring and little over about the true span
     qc_job_s                    seconds of one QC job, 8 views x 72 frames x 21 joints (median)
     qc_job_parts_s              its parts: reading tracks and depth maps, scoring, acting
+    objects                     the confusion table and rates of object-landmark QC (two careful
+                                workers and one of each bad profile per object task)
     mixed                       the same measures over --mixed-seeds fresh projects where each
                                 view is labelled by one worker drawn from the mixed profile
                                 (half careful): the harder case, fewer good views to agree
@@ -48,11 +50,13 @@ def _capture(path: Path | None, work: Path) -> Path:
     return out
 
 
-def _setup(capture: Path) -> tuple[int, list[dict]]:
-    """Import, create the tasks; (sequence id, hand tasks as dicts)."""
+def _setup(capture: Path, kind: str = "hand") -> tuple[int, list[dict]]:
+    """Import (unless imported), create the tasks; (sequence id, tasks of ``kind`` as dicts,
+    with "moving": whether the task's object is the grasped one)."""
     from backend.annotation.models import Task
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
+    from backend.captures.models import SceneObject
     from backend.config import get_settings
     from backend.db import session_scope
     from backend.migrate import upgrade
@@ -64,8 +68,10 @@ def _setup(capture: Path) -> tuple[int, list[dict]]:
         create_tasks(session, get_storage(), sequence_id)
         tasks = [{"id": t.id, "serial": t.camera.serial, "kind": t.kind,
                   "num_frames": t.sequence.num_frames, "target_key": t.target_key,
-                  "width": t.camera.width, "height": t.camera.height}
-                 for t in session.query(Task).filter_by(sequence_id=sequence_id, kind="hand")]
+                  "width": t.camera.width, "height": t.camera.height,
+                  "moving": t.object_id is not None
+                  and session.get_one(SceneObject, t.object_id).grasped}
+                 for t in session.query(Task).filter_by(sequence_id=sequence_id, kind=kind)]
     return sequence_id, tasks
 
 
@@ -88,13 +94,32 @@ def _submit(task: dict, profile: str, worker: str, truth, rng: np.random.Generat
         return assignment.id
 
 
-def _run_qc(sequence_id: int) -> tuple[float, dict[str, float]]:
-    """Seconds of one whole QC job of the hand target, and its own breakdown."""
+def _run_qc(sequence_id: int, target_key: str = "hand:0") -> tuple[float, dict[str, float]]:
+    """Seconds of one whole QC job of a target, and its own breakdown."""
     from backend.review.flows import run_qc
 
     t0 = time.perf_counter()
-    result = run_qc(sequence_id, "hand:0")
+    result = run_qc(sequence_id, target_key)
     return time.perf_counter() - t0, result["timings"]
+
+
+def _objects(capture: Path, truth, rng: np.random.Generator) -> dict:
+    """Object landmarks in the same project: every object task gets two careful workers and one
+    of each bad profile; each object target's QC job decides. A frozen ("lazy") track is wrong
+    only on the object that moves (the grasped one): on a still object it is counted apart."""
+    sequence_id, tasks = _setup(capture, kind="object")
+    profile_of: dict[int, str] = {}
+    for task in tasks:
+        for i, profile in enumerate(("careful", "careful", *BAD_PROFILES)):
+            key = _submit(task, profile, f"{profile}-o{i}-{task['id']}", truth, rng)
+            profile_of[key] = profile if profile != "lazy" or task["moving"] else "lazy-still"
+    for target in sorted({t["target_key"] for t in tasks}):
+        _run_qc(sequence_id, target)
+    tally = _Tally(extra=("lazy-still",))
+    tally.add(sequence_id, profile_of, tasks[0]["num_frames"])
+    summary = tally.summary()
+    del summary["swaps_found"], summary["swaps_total"]
+    return summary
 
 
 def _swap_found(swaps: list[dict], frames: int) -> bool:
@@ -152,6 +177,7 @@ def main() -> None:
     for profile, row in confusion.items():
         print(f"{profile:10s} {row['approve']:8d} {row['review']:8d} {row['reject']:8d}")
 
+    objects = _objects(capture, truth, rng)
     mixed = _mixed_crowds(capture, truth, args.mixed_seeds, args.seed)
 
     # The job size of the issue: one hand target, one assignment per view, in a fresh setup.
@@ -173,6 +199,7 @@ def main() -> None:
         "qc_job_size": f"{len(tasks)} views x {frames} frames x 21 joints",
         "qc_job_parts_s": parts,
         "mixed": mixed,
+        "objects": objects,
     }
     print(json.dumps(summary))
 
@@ -199,9 +226,9 @@ def _mixed_crowds(capture: Path, truth, seeds: int, base_seed: int) -> dict:
 class _Tally:
     """QC outcomes of simulated work by profile, and the swaps reported right."""
 
-    def __init__(self) -> None:
+    def __init__(self, extra: tuple[str, ...] = ()) -> None:
         self.table = {p: {"approve": 0, "review": 0, "reject": 0}
-                      for p in ("careful", *BAD_PROFILES)}
+                      for p in ("careful", *BAD_PROFILES, *extra)}
         self.swaps_found = self.swaps_total = 0
 
     def add(self, sequence_id: int, profile_of: dict[int, str], frames: int) -> None:
@@ -209,7 +236,8 @@ class _Tally:
         from backend.review.models import QCReport
 
         with session_scope() as session:
-            for report in session.query(QCReport).filter_by(sequence_id=sequence_id):
+            for report in session.query(QCReport).filter(
+                    QCReport.assignment_id.in_(profile_of)):
                 profile = profile_of[report.assignment_id]
                 self.table[profile][report.outcome] += 1
                 if profile == "swapper":

@@ -50,6 +50,7 @@ class TargetInputs:
     labels: list = field(default_factory=list)  # worker.quality.consensus.ViewLabels
     who: dict[str, ScoredAssignment] = field(default_factory=dict)
     tasks: dict[int, Task] = field(default_factory=dict)
+    view_of_task: dict[int, int] = field(default_factory=dict)
 
 
 def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int):
@@ -75,7 +76,8 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
         raise ValueError(f"sequence {sequence_id} has no tasks for target {target_key!r}")
     out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
                        num_frames=sequence.num_frames, cameras=[camera_model(c) for c in cameras],
-                       serials=[c.serial for c in cameras], tasks={t.id: t for t in tasks})
+                       serials=[c.serial for c in cameras], tasks={t.id: t for t in tasks},
+                       view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
                                      Assignment.status.in_(SCORED_STATUSES))
             .order_by(Assignment.id))

@@ -91,13 +91,16 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         results.update(report.assignments)
         provisional = bool(report.provisional)
     elif crowd:
-        from worker.quality.landmarks import score_landmarks
+        from worker.quality.landmarks import score_object
 
-        for lab in crowd:
-            camera = inputs.cameras[lab.view]
-            task = inputs.tasks[inputs.who[lab.key].task_id]
+        masks = {}
+        for task in inputs.tasks.values():
+            view = inputs.view_of_task[task.id]
+            camera = inputs.cameras[view]
             mask = highlight_mask(task, camera.width, camera.height)
-            results[lab.key] = score_landmarks(camera, lab, {0: mask} if mask is not None else None)
+            if mask is not None:
+                masks[view] = {0: mask}
+        results.update(score_object(inputs.cameras, crowd, masks))
     methods = {key: "consensus" for key in results}
     for lab in inputs.labels:
         if lab.key not in results:

@@ -10,7 +10,7 @@ import pytest
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
-from worker.quality.landmarks import score_landmarks
+from worker.quality.landmarks import score_landmarks, score_object
 
 FRAMES, WIDTH, HEIGHT = 30, 320, 240
 RADIUS = 30
@@ -113,3 +113,48 @@ class TestLandmarkDecision:
         decision = decide(bad, learned, names)
         assert decision.outcome == "review"
         assert "the landmark 1 jumped" in decision.feedback
+
+
+def _lifted(seed: int, scale: float = 1.0) -> np.ndarray:
+    """(F, 2, 2) landmarks of an object resting for 10 frames, then lifted 6 px per frame
+    (``scale`` times that in this view), 1 px click noise."""
+    centre = np.stack([np.full(FRAMES, 150.0),
+                       120.0 - scale * 6.0 * np.clip(np.arange(FRAMES) - 10, 0, None)], axis=1)
+    xy = centre[:, None, :] + np.array([[-12.0, -5.0], [10.0, 8.0]])[None]
+    return xy + np.random.default_rng(seed).normal(0.0, 1.0, xy.shape)
+
+
+class TestScoreObject:
+    """Several views' labels of one object: each judged against the motion the others show."""
+
+    def _views(self, camera: CameraModel, extra: ViewLabels) -> list:
+        views = [ViewLabels(key=f"v{i}", view=0, xy=_lifted(i, scale), visible=np.ones((FRAMES, 2),
+                            bool)) for i, scale in enumerate((1.0, 0.6, 1.5, 0.8))]
+        return [*views, extra]
+
+    def test_a_frozen_track_of_a_lifted_object_is_rejected(self, camera):
+        frozen = np.repeat(_lifted(9)[:1], FRAMES, axis=0)
+        labels = self._views(camera, _label(frozen, key="lazy"))
+        scored = score_object([camera], labels)
+        assert scored["lazy"].metrics["moved_with_object"] == 0.0
+        assert all(scored[f"v{i}"].metrics["moved_with_object"] > 0.5 for i in range(4))
+        thresholds = learn_thresholds([qc.metrics for qc in scored.values()])
+        decision = decide(scored["lazy"], thresholds, ["landmark 1", "landmark 2"])
+        assert decision.outcome == "reject", decision.reasons
+        assert "as far as the object does" in decision.feedback
+        assert decide(scored["v1"], thresholds, ["a", "b"]).outcome == "approve"
+
+    def test_the_object_s_own_motion_is_not_a_jump(self, camera):
+        labels = self._views(camera, _label(_lifted(5, 2.0), key="fast"))
+        scored = score_object([camera], labels)
+        assert scored["fast"].metrics["jump_fraction"] == 0.0
+        swapped = _lifted(6)
+        swapped[15:20] = swapped[15:20, ::-1]
+        labels = self._views(camera, _label(swapped, key="swap"))
+        assert score_object([camera], labels)["swap"].metrics["jump_fraction"] > 0.0
+
+    def test_a_still_object_is_not_judged_by_motion(self, camera):
+        still = [ViewLabels(key=f"s{i}", view=0, xy=np.repeat(_lifted(i)[:1], FRAMES, axis=0),
+                            visible=np.ones((FRAMES, 2), bool)) for i in range(4)]
+        scored = score_object([camera], still)
+        assert all(qc.metrics["moved_with_object"] is None for qc in scored.values())

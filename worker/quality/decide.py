@@ -52,6 +52,9 @@ def _bounds() -> dict[str, MetricBound]:
         "working_time_s": MetricBound("below", (10.0, 30.0)),
         # Object landmarks: a careful track never leaps (0 jumps); a swap of the two makes two.
         "jump_fraction": MetricBound("above", (0.02, 0.05)),
+        # Share of the object's travel (as the other views see it) a track follows: views see the
+        # motion at different scales (0.4-1 for careful tracks); one frame copied to all: ~0.
+        "moved_with_object": MetricBound("below", (0.25, 0.35), (0.08, 0.12)),
     }
 
 
@@ -157,6 +160,9 @@ _ADVICE = {
     "working_time_s": lambda v, t: f"You spent only {v:.0f} s on this task.",
     "jump_fraction": lambda v, t: ("Your landmarks jump between frames; keep each one on the "
                                    "same spot of the object all through the clip."),
+    "moved_with_object": lambda v, t: (
+        f"Your landmarks travel only {_pct(v)} as far as the object does in the other camera "
+        "views: follow each landmark as the object moves."),
 }
 
 

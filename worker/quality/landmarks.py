@@ -8,6 +8,8 @@ for those frames), and how much of the clip it stands still. Pixels x right, y d
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -29,6 +31,12 @@ SILHOUETTE_TOLERANCE_PX = 3.0
 # this floor (px): objects move smoothly, a relabelled or swapped landmark leaps.
 JUMP_FACTOR = 6.0
 JUMP_FLOOR_PX = 8.0
+# The object counts as moving in a clip when the other labels' landmarks get this far (median
+# over labels, px) from where they were first placed: ten careful clicks' noise.
+OBJECT_MOVES_PX = 20.0
+# A step is the object's own motion, not a jump, unless it exceeds this multiple of the step
+# the other labels take in the same frame (views see the motion at different scales).
+JUMP_OVER_OTHERS = 3.0
 
 
 def _check(label: ViewLabels, masks: dict[int, np.ndarray] | None,
@@ -68,14 +76,79 @@ def silhouette_distances(xy: np.ndarray, visible: np.ndarray,
     return out
 
 
-def jumps(xy: np.ndarray) -> tuple[np.ndarray, float | None]:
-    """(F-1, P) bool steps that are jumps, and the label's typical (median) step, px."""
+def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
+          ) -> tuple[np.ndarray, float | None]:
+    """(F-1, P) bool steps that are jumps, and the label's typical (median) step, px.
+
+    others_step: optional (F-1,) px, the step the other labels of the object take in each
+    frame; then a step is a jump when it exceeds JUMP_OVER_OTHERS times that (and the floor).
+    """
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
     finite = step[np.isfinite(step)]
     if finite.size == 0:
         return np.zeros(step.shape, bool), None
     typical = float(np.median(finite))
-    return np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX), typical
+    if others_step is None:
+        return np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX), typical
+    # The other views show when the object moves: a step is judged against that frame's
+    # motion, not against the label's own typical step (which the object's motion inflates).
+    allowed = np.maximum(JUMP_OVER_OTHERS * np.nan_to_num(np.asarray(others_step, float)),
+                         JUMP_FLOOR_PX)
+    return np.nan_to_num(step) > allowed[:, None], typical
+
+
+def track_motion(xy: np.ndarray) -> tuple[np.ndarray, float]:
+    """A label's motion: (F-1,) median step of its landmarks, px (NaN where unknown), and the
+    largest median distance of its landmarks from where they were first placed, px."""
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    first = np.full(xy.shape[1:], np.nan)
+    for p in range(xy.shape[1]):
+        placed = np.flatnonzero(np.isfinite(xy[:, p]).all(axis=-1))
+        if placed.size:
+            first[p] = xy[placed[0], p]
+    dist = np.linalg.norm(xy - first, axis=-1)
+    has_step, has_dist = np.isfinite(step).any(axis=1), np.isfinite(dist).any(axis=1)
+    med_step = np.full(step.shape[0], np.nan)
+    if has_step.any():
+        med_step[has_step] = np.nanmedian(step[has_step], axis=1)
+    reach = float(np.nanmedian(dist[has_dist], axis=1).max()) if has_dist.any() else 0.0
+    return med_step, reach
+
+
+@dataclass
+class ObjectMotion:
+    """How the OTHER labels of an object see it move: step (F-1,) px, their median per-frame
+    step; reach px, their median largest distance from the first position."""
+
+    step: np.ndarray
+    reach: float
+
+
+def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
+    """For each label, the object's motion as the other labels (other views or other workers)
+    show it; None with fewer than two other labels."""
+    motions = {lab.key: track_motion(np.asarray(lab.xy, dtype=np.float64)) for lab in labels}
+    out: dict[str, ObjectMotion | None] = {}
+    for key in motions:
+        others = [m for k, m in motions.items() if k != key]
+        if len(others) < 2:
+            out[key] = None
+            continue
+        steps = np.stack([m[0] for m in others])
+        has = np.isfinite(steps).any(axis=0)
+        step = np.full(steps.shape[1], np.nan)
+        step[has] = np.nanmedian(steps[:, has], axis=0)
+        out[key] = ObjectMotion(step=step, reach=float(np.median([m[1] for m in others])))
+    return out
+
+
+def moved_with_object(xy: np.ndarray, motion: ObjectMotion) -> float | None:
+    """How far the label's landmarks travel compared with the other labels' (1 = as far or
+    farther), when the object clearly moves; None for an object that stays put."""
+    if motion.reach < OBJECT_MOVES_PX:
+        return None
+    _, reach = track_motion(xy)
+    return num(min(reach / motion.reach, 1.0))
 
 
 def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | None:
@@ -96,7 +169,8 @@ def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | 
 
 
 def score_landmarks(camera: CameraModel, label: ViewLabels,
-                    masks: dict[int, np.ndarray] | None = None) -> AssignmentQC:
+                    masks: dict[int, np.ndarray] | None = None,
+                    motion: ObjectMotion | None = None) -> AssignmentQC:
     """Quality of one object-landmark label.
 
     Args:
@@ -104,6 +178,9 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
         label: ViewLabels with xy (F, 2, 2) px and visible (F, 2).
         masks: optional {frame: (H, W) bool} the object's projected silhouette under its known
             pose in that frame.
+        motion: optional ObjectMotion, the object's motion as the other labels show it
+            (object_motion): steps it explains are not jumps, and a label that stays still
+            while it moves scores a low moved_with_object.
 
     Returns:
         AssignmentQC whose metrics hold, against the silhouette (None without masks),
@@ -120,7 +197,8 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["outlier_fraction"] = num((dist[judged] > SILHOUETTE_TOLERANCE_PX).mean()) \
         if judged.any() else None
     metrics["motion_ratio"] = _mask_motion_ratio(xy, masks)
-    jump, typical = jumps(xy)
+    jump, typical = jumps(xy, motion.step if motion is not None else None)
+    metrics["moved_with_object"] = moved_with_object(xy, motion) if motion is not None else None
     steps = np.isfinite(np.linalg.norm(np.diff(xy, axis=0), axis=-1))
     metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
@@ -139,4 +217,24 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
         issues.append({"point": int(p), "frames": [int(f), int(f) + 1],
                        "error_px": num(step[f, p], 1), "about": "jump"})
     return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
-                        per_frame=per_frame, issues=issues, provisional=not judged.any())
+                        per_frame=per_frame, issues=issues,
+                        provisional=not judged.any() and metrics["moved_with_object"] is None)
+
+
+def score_object(cameras: list[CameraModel], labels: list[ViewLabels],
+                 masks: dict[int, dict[int, np.ndarray]] | None = None) -> dict[str, AssignmentQC]:
+    """Every landmark label of one object, each judged alone and against the object's motion as
+    the other labels (other views, other workers) see it.
+
+    Args:
+        cameras: one CameraModel per view (labels refer to them by index).
+        labels: ViewLabels with xy (F, 2, 2) px and visible (F, 2), any number per view.
+        masks: optional {view: {frame: (H, W) bool}} silhouettes under a known pose.
+
+    Returns:
+        {key: AssignmentQC} as score_landmarks, with moved_with_object where the object moved.
+    """
+    motion = object_motion(labels)
+    return {lab.key: score_landmarks(cameras[lab.view], lab, (masks or {}).get(lab.view),
+                                     motion[lab.key])
+            for lab in labels}

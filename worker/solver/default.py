@@ -106,6 +106,7 @@ def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
     if problem.objects:
         _solve_objects(problem, state)
     timings["objects_keypoints"] = time.perf_counter() - tick
+    robust_mm = settings.depth_robust_mm if settings.robust else None
     for _ in range(settings.icp_rounds if problem.clouds else 0):
         tick = time.perf_counter()
         matches = state.match_all(problem)
@@ -114,10 +115,11 @@ def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
         tick = time.perf_counter()
         if problem.subject is not None and len(state.hand_frames):
             depth = problem.depth_data(len(problem.objects),
-                                       [matches[f] for f in state.hand_frames], problem.hand_faces)
+                                       [matches[f] for f in state.hand_frames], problem.hand_faces,
+                                       robust_mm)
             fit_hand(problem, state, depth, settings.lm_iterations, 1, smooth=True)
         for o in range(len(problem.objects)):
-            depth = problem.depth_data(o, matches, problem.object_faces[o])
+            depth = problem.depth_data(o, matches, problem.object_faces[o], robust_mm)
             fit_object(problem, state, o, state.tables[o], depth, settings.lm_iterations, 2)
         timings["depth_refine"] = timings.get("depth_refine", 0.0) + time.perf_counter() - tick
     return state

@@ -153,16 +153,25 @@ class Problem:
         points = subsample(points, self.settings.max_depth_points, rng)
         return match_points(points, trees, poses, margin)
 
-    def depth_data(self, mesh: int, matches: list[Matches | None],
-                   faces: np.ndarray) -> DepthData | None:
-        """DepthData for mesh `mesh` over a batch of frames' matches (padded), or None."""
+    def depth_data(self, mesh: int, matches: list[Matches | None], faces: np.ndarray,
+                   robust_mm: float | None = None) -> DepthData | None:
+        """DepthData for mesh `mesh` over a batch of frames' matches (padded), or None.
+
+        robust_mm: Cauchy scale (mm) of a reweighting by each match's distance, so that a
+        point of another surface (an object point beside a finger) barely pulls this mesh.
+        """
         picked = []
         for m in matches:
             if m is None:
-                picked.append((np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), 1))
+                picked.append((np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)),
+                               np.zeros(0), 1))
                 continue
             sel = m.mesh == mesh
-            picked.append((m.points[sel], faces[m.face[sel]], m.bary[sel], max(len(m.mesh), 1)))
+            weight = np.ones(int(sel.sum()))
+            if robust_mm:
+                weight = 1.0 / (1.0 + (m.dist[sel] * 1000.0 / robust_mm) ** 2)
+            picked.append((m.points[sel], faces[m.face[sel]], m.bary[sel], weight,
+                           max(len(m.mesh), 1)))
         size = max(len(p[0]) for p in picked)
         if size == 0 or self.settings.w_depth <= 0:
             return None
@@ -173,12 +182,12 @@ class Problem:
         ids = np.zeros((batch, width), np.int64)
         points, corners = np.zeros((batch, size, 3)), np.zeros((batch, size, 3), np.int64)
         bary, sqrt_w = np.zeros((batch, size, 3)), np.zeros((batch, size))
-        for b, (pts, cor, bar, total) in enumerate(picked):
+        for b, (pts, cor, bar, weight, total) in enumerate(picked):
             n = len(pts)
             ids[b, :len(frame_ids[b])] = frame_ids[b]
             points[b, :n], bary[b, :n] = pts, bar
             corners[b, :n] = np.searchsorted(frame_ids[b], cor)
-            sqrt_w[b, :n] = np.sqrt(self.settings.w_depth / total)
+            sqrt_w[b, :n] = np.sqrt(self.settings.w_depth * weight / total)
         # Strictly inside the triangle, away from its edges by a relative hair.
         interior = (bary > 1e-6).all(axis=-1) & (sqrt_w > 0)
         return DepthData(self.tensor(points), torch.as_tensor(ids, device=self.device),

@@ -95,7 +95,8 @@ class SolveSettings:
     rounds of renewed depth matches.
     min_views: a frame is solved for the hand only where at least `min_joints` joints are
     labelled visible in at least `min_views` views each.
-    robust_scale_px: Cauchy scale of the robust keypoint loss (default optimiser, robust=True).
+    robust_scale_px: Cauchy scale of the robust keypoint loss (default optimiser, robust=True);
+    depth_robust_mm: the same for depth matches, by their distance when matched.
     depth_stride: take every n-th depth pixel in x and y. depth_margin: keep depth points within
     this distance (m) of a current mesh's box. max_depth_points: per frame, random subset.
     """
@@ -108,6 +109,7 @@ class SolveSettings:
     w_smooth: float = 0.0
     robust: bool = True
     robust_scale_px: float = 8.0
+    depth_robust_mm: float = 5.0
     min_views: int = 2
     min_joints: int = 6
     lr: float = 0.01
