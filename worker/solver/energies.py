@@ -26,8 +26,9 @@ MM_PER_M = 1000.0
 class DepthData:
     """Matched depth points of B frames, padded to N: points (B, N, 3) world m; vertex_ids
     (B, K) the mesh vertices each frame's matches touch (padded); corners (B, N, 3) indices
-    into that frame's vertex_ids of each match's triangle; bary (B, N, 3); sqrt_w (B, N), 0 on padding; interior (B, N) bool, the
-    closest point lies inside its triangle (not on an edge or a corner)."""
+    into that frame's vertex_ids of each match's triangle; bary (B, N, 3); sqrt_w (B, N), 0 on
+    padding; interior (B, N) bool, the closest point lies inside its triangle (not on an edge
+    or a corner)."""
 
     points: torch.Tensor
     vertex_ids: torch.Tensor

@@ -1,0 +1,276 @@
+/**
+ * The admins' review page: sign in, pick a sequence, read its QC reports (waiting work first),
+ * open one to see its per-point and per-frame errors and approve or reject it; worker quality,
+ * the job table with retries, costs, and the overlays of finished solve runs.
+ */
+
+import { AdminApi, ApiError } from "./api.js";
+import { orderReports, parseRoute, pointNames, tallyReports } from "./format.js";
+import {
+  barChart, renderCosts, renderFacts, renderJobs, renderReports, renderRuns, renderSequences,
+  renderSwaps, renderWorkers,
+} from "./views.js";
+
+const api = new AdminApi(window.sessionStorage);
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
+const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
+  "costs-view"];
+
+/** What the sequence view shows, kept so the outcome filter re-renders without a request. */
+const state = {
+  /** @type {number|null} */ sequence: null,
+  /** @type {any[]} */ reports: [],
+  /** @type {number|null} */ assignment: null,
+  /** @type {any[]} */ runs: [],
+  /** @type {string[]} */ serials: [],
+  /** @type {string|null} */ overlayUrl: null,
+};
+
+/** @param {string} id */
+function show(id) {
+  for (const view of VIEWS) $(view).hidden = view !== id;
+  $("nav").hidden = id === "login-view";
+}
+
+/** @param {string} text @param {"info"|"error"} [kind] */
+function notify(text, kind = "info") {
+  const notice = $("notice");
+  notice.textContent = text;
+  notice.className = `notice ${kind}`;
+  notice.hidden = !text;
+}
+
+/** @param {unknown} err */
+function fail(err) {
+  if (err instanceof ApiError && err.status === 401) {
+    show("login-view");
+    notify("Please sign in again.", "error");
+    return;
+  }
+  notify(err instanceof Error ? err.message : String(err), "error");
+}
+
+const body = (/** @type {string} */ id) => /** @type {HTMLTableSectionElement} */ ($(id));
+
+async function showSequences() {
+  const sequences = await api.sequences();
+  renderSequences(body("sequence-rows"), sequences);
+  $("no-sequences").hidden = sequences.length > 0;
+  show("sequences-view");
+}
+
+/** @param {number} sequenceId @param {number|null} assignmentId */
+async function showSequence(sequenceId, assignmentId) {
+  const [sequence, reports, runs] = await Promise.all([api.sequence(sequenceId),
+    api.reports(sequenceId), api.solveRuns(sequenceId)]);
+  $("sequence-title").textContent = `${sequence.subject}/${sequence.name} (#${sequence.id})`;
+  const serials = sequence.cameras.map((/** @type {any} */ c) => c.serial);
+  Object.assign(state, { sequence: sequenceId, reports, assignment: assignmentId, runs, serials });
+  renderReportList();
+  renderRuns(body("run-rows"), runs);
+  $("no-runs").hidden = runs.length > 0;
+  if (!runs.some((/** @type {any} */ r) => String(r.id) === $("overlay").dataset.run)) hideOverlay();
+  $("report-detail").hidden = true;
+  show("sequence-view");
+  if (assignmentId !== null) await showReport(assignmentId);
+}
+
+function renderReportList() {
+  const outcome = /** @type {HTMLSelectElement} */ ($("outcome-filter")).value;
+  const shown = orderReports(state.reports, outcome);
+  renderReports(body("report-rows"), shown, Number(state.sequence), state.assignment);
+  const t = tallyReports(state.reports);
+  $("report-tally").textContent = `${state.reports.length} reports: ${t.approve} approve, `
+    + `${t.review} review, ${t.reject} reject; ${t.waiting} waiting for an admin`;
+  $("no-reports").hidden = shown.length > 0;
+}
+
+/** @param {number} assignmentId */
+async function showReport(assignmentId) {
+  const report = await api.report(assignmentId);
+  $("detail-title").textContent = `Assignment ${report.assignment_id}`;
+  $("detail-close").setAttribute("href", `#/sequences/${report.sequence_id}`);
+  renderFacts($("detail-facts"), report);
+  const names = pointNames(report.target_key, report.per_joint.length);
+  $("joint-chart").replaceChildren(barChart(report.per_joint, names, "per-joint", true));
+  const frames = report.per_frame.map((/** @type {unknown} */ _, /** @type {number} */ i) =>
+    `frame ${i}`);
+  $("frame-chart").replaceChildren(barChart(report.per_frame, frames, "per-frame"));
+  renderSwaps($("detail-swaps"), report.swaps);
+  const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback"));
+  feedback.value = report.feedback || "";
+  $("approve").dataset.assignment = String(report.assignment_id);
+  $("decision-result").hidden = true;
+  $("report-detail").hidden = false;
+}
+
+/** @param {"approve"|"reject"} kind */
+async function decide(kind) {
+  const assignmentId = Number($("approve").dataset.assignment);
+  const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback")).value.trim();
+  const result = $("decision-result");
+  const say = (/** @type {string} */ text, /** @type {string} */ cls) => {
+    result.textContent = text;
+    result.className = `notice ${cls}`;
+    result.hidden = false;
+  };
+  if (kind === "reject" && !feedback) {
+    say("A rejection needs feedback: tell the worker what was wrong.", "error");
+    return;
+  }
+  try {
+    const payment = kind === "approve" ? await api.approve(assignmentId, feedback)
+      : await api.reject(assignmentId, feedback);
+    const verb = kind === "approve" ? "Approved" : "Rejected";
+    state.reports = await api.reports(Number(state.sequence));
+    renderReportList();
+    say(`${verb} assignment ${assignmentId}${payment.already_done ? " (already done)" : ""}.`,
+      "info");
+  } catch (err) {
+    if (err instanceof ApiError && err.status === 401) fail(err);
+    else say(err instanceof Error ? err.message : String(err), "error");
+  }
+}
+
+async function showWorkers() {
+  const workers = await api.workers();
+  renderWorkers(body("worker-rows"), workers);
+  $("no-workers").hidden = workers.length > 0;
+  show("workers-view");
+}
+
+async function showJobs() {
+  const jobs = await api.jobs();
+  renderJobs(body("job-rows"), jobs);
+  $("no-jobs").hidden = jobs.length > 0;
+  show("jobs-view");
+}
+
+/** @param {number} jobId */
+async function retry(jobId) {
+  try {
+    const job = await api.retryJob(jobId);
+    notify(`Job ${job.id} (${job.key}) is ${job.status} again.`);
+    await showJobs();
+  } catch (err) {
+    fail(err);
+  }
+}
+
+async function showCosts() {
+  const costs = await api.costs();
+  renderCosts({
+    summary: $("cost-summary"), sequenceHead: $("cost-head-sequence"),
+    sequences: $("cost-sequence-rows"), workerHead: $("cost-head-worker"),
+    workers: $("cost-worker-rows"),
+  }, costs);
+  show("costs-view");
+}
+
+/** @param {number} runId  a done run of the sequence shown */
+function openOverlay(runId) {
+  const run = state.runs.find((r) => r.id === runId);
+  if (!run) return;
+  const views = run.num_views, serials = state.serials;
+  const overlay = $("overlay");
+  overlay.dataset.run = String(run.id);
+  $("overlay-title").textContent = `Run #${run.id}`;
+  const frame = /** @type {HTMLInputElement} */ ($("overlay-frame"));
+  frame.max = String(Math.max(run.num_frames - 1, 0));
+  frame.value = "0";
+  const select = /** @type {HTMLSelectElement} */ ($("overlay-view"));
+  select.replaceChildren(...Array.from({ length: views }, (_, i) => {
+    const option = document.createElement("option");
+    option.value = String(i);
+    option.textContent = serials.length === views ? `${i} · ${serials[i]}` : String(i);
+    return option;
+  }));
+  overlay.hidden = false;
+  loadOverlay().catch(fail);
+}
+
+async function loadOverlay() {
+  const run = Number($("overlay").dataset.run);
+  const frame = Number(/** @type {HTMLInputElement} */ ($("overlay-frame")).value);
+  const view = /** @type {HTMLSelectElement} */ ($("overlay-view")).value;
+  const blob = await api.overlay(run, frame, view);
+  if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
+  state.overlayUrl = URL.createObjectURL(blob);
+  /** @type {HTMLImageElement} */ ($("overlay-image")).src = state.overlayUrl;
+}
+
+function hideOverlay() {
+  $("overlay").hidden = true;
+  delete $("overlay").dataset.run;
+  if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
+  state.overlayUrl = null;
+  /** @type {HTMLImageElement} */ ($("overlay-image")).removeAttribute("src");
+}
+
+async function route() {
+  if (!api.token) {
+    show("login-view");
+    return;
+  }
+  const where = parseRoute(location.hash);
+  try {
+    if (where.view === "workers") await showWorkers();
+    else if (where.view === "jobs") await showJobs();
+    else if (where.view === "costs") await showCosts();
+    else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
+    else await showSequences();
+  } catch (err) {
+    fail(err);
+  }
+}
+
+/** @param {SubmitEvent} event */
+async function onLogin(event) {
+  event.preventDefault();
+  const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
+  try {
+    await api.login(String(data.get("email")), String(data.get("password")));
+    notify("");
+    await loadMe();
+    await route();
+  } catch (err) {
+    notify(err instanceof Error ? err.message : String(err), "error");
+  }
+}
+
+async function loadMe() {
+  const me = await api.me();
+  $("who").textContent = me.email;
+}
+
+function signOut() {
+  api.setToken(null);
+  notify("");
+  show("login-view");
+}
+
+function start() {
+  $("login").addEventListener("submit", (e) => onLogin(/** @type {SubmitEvent} */ (e)));
+  $("sign-out").addEventListener("click", signOut);
+  $("outcome-filter").addEventListener("change", renderReportList);
+  $("approve").addEventListener("click", () => decide("approve"));
+  $("reject").addEventListener("click", () => decide("reject"));
+  $("job-rows").addEventListener("click", (e) => {
+    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-retry]");
+    if (button) retry(Number(/** @type {HTMLElement} */ (button).dataset.retry));
+  });
+  $("run-rows").addEventListener("click", (e) => {
+    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-show-run]");
+    if (button) openOverlay(Number(/** @type {HTMLElement} */ (button).dataset.showRun));
+  });
+  $("overlay-frame").addEventListener("change", () => loadOverlay().catch(fail));
+  $("overlay-view").addEventListener("change", () => loadOverlay().catch(fail));
+  window.addEventListener("hashchange", () => {
+    notify("");
+    route();
+  });
+  if (api.token) loadMe().catch(fail);
+  route();
+}
+
+start();

@@ -1,0 +1,252 @@
+"""The admins' review page in a real browser: QC reports of real submitted work, a report's
+per-joint chart, worker quality, the job table, costs, and a decision the API refuses.
+
+Work comes in as the annotation page sends it: direct assignment links for three workers (two
+careful ones on the two views of the hand, a spammer on the first view), tracks saved and
+submitted with the assignment token; the submissions queue the hand's QC job, which a queue
+consumer (``dexlabel worker`` on the server's database and queue) runs.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from playwright.sync_api import Page, expect
+
+from backend.crowd.simulate import CaptureTruth
+from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
+from worker.synth.annotators import annotate
+
+QC_TIMEOUT_S = 120.0
+# (worker, view of the hand task, simulated profile): two careful views agree with each other;
+# the spammer's random points cannot.
+CROWD = (("ADMIN-W1", 0, "careful"), ("ADMIN-W2", 1, "careful"), ("ADMIN-W3", 0, "spammer"))
+
+
+def _server_env(server: LiveServer) -> dict[str, str]:
+    """The settings the live server runs with (tests/browser/conftest.py lays out its root)."""
+    root = server.capture.parent
+    return {
+        "DEXLABEL_VAR_DIR": str(root / "var"),
+        "DEXLABEL_DATABASE_URL": f"sqlite:///{root / 'browser.db'}",
+        "DEXLABEL_STORAGE_URL": str(root / "storage"),
+        "DEXLABEL_ENV": "test",
+        "DEXLABEL_INPROCESS_WORKER": "false",
+        "DEXLABEL_PUBLIC_URL": server.base,
+    }
+
+
+@pytest.fixture(scope="module")
+def queue_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
+    """A queue consumer on the live server's database and queue, for the QC job."""
+    log = output_dir / "admin-worker.log"
+    with log.open("w") as log_file:
+        proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
+                                env={**os.environ, **_server_env(live_server)},
+                                stdout=log_file, stderr=subprocess.STDOUT)
+        try:
+            yield
+        finally:
+            proc.terminate()
+            proc.wait(timeout=20)
+
+
+def _submit(server: LiveServer, task: dict, worker: str, profile: str,
+            rng: np.random.Generator) -> int:
+    """One worker's whole assignment through the annotation API; the assignment id."""
+    link = server.assign(task, worker)
+    auth = {"Authorization": f"Bearer {link['token']}"}
+    reply = server.worker_get_task(link["token"])
+    xy, visible = CaptureTruth(server.capture).points(reply["task"], rng)
+    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)
+    body = {"version": reply["assignment"]["version"], "edit_count": 30, "working_time_s": 120.0,
+            "tracks": [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]}
+    saved = httpx.put(f"{server.base}/api/annotate/tracks", json=body, headers=auth, timeout=30)
+    assert saved.status_code == 200, saved.text
+    body["version"] = saved.json()["version"]
+    done = httpx.post(f"{server.base}/api/annotate/submit", json=body, headers=auth, timeout=30)
+    assert done.status_code == 200, done.text
+    assert done.json()["status"] == "submitted"
+    return int(link["assignment_id"])
+
+
+def _wait_qc_done(server: LiveServer, key: str) -> dict:
+    deadline = time.monotonic() + QC_TIMEOUT_S
+    job: dict = {}
+    while time.monotonic() < deadline:
+        job = next((j for j in server.admin("GET", "/api/jobs?kind=qc") if j["key"] == key), {})
+        if job.get("status") in ("done", "failed"):
+            break
+        time.sleep(0.5)
+    assert job.get("status") == "done", f"the QC job did not finish: {job}"
+    return job
+
+
+@pytest.fixture(scope="module")
+def qc_work(live_server: LiveServer, queue_worker: None) -> dict[str, int]:
+    """Submitted, QC-scored work of the hand; worker id -> assignment id."""
+    server = live_server
+    rng = np.random.default_rng(11)
+    ids = {worker: _submit(server, server.task("hand", view), worker, profile, rng)
+           for worker, view, profile in CROWD}
+    server.admin("POST", "/api/qc/runs", {"sequence_id": server.sequence_id,
+                                          "target_key": "hand:0"})
+    _wait_qc_done(server, f"qc:{server.sequence_id}:hand:0")
+    return ids
+
+
+@pytest.fixture
+def admin_page(page: Page, live_server: LiveServer) -> Page:
+    """The review page, signed in."""
+    page.goto(f"{live_server.base}/admin/")
+    page.locator("#login input[name=email]").fill(ADMIN_EMAIL)
+    page.locator("#login input[name=password]").fill(ADMIN_PASSWORD)
+    page.locator("#login button[type=submit]").click()
+    expect(page.locator("#sequences-view")).to_be_visible()
+    return page
+
+
+def test_sign_in_refuses_a_wrong_password(page: Page, live_server: LiveServer) -> None:
+    page.goto(f"{live_server.base}/admin/")
+    page.locator("#login input[name=email]").fill(ADMIN_EMAIL)
+    page.locator("#login input[name=password]").fill("not the password")
+    page.locator("#login button[type=submit]").click()
+    expect(page.locator("#notice")).to_have_class("notice error")
+    expect(page.locator("#notice")).not_to_be_empty()
+    expect(page.locator("#login-view")).to_be_visible()
+    assert page.evaluate("sessionStorage.getItem('dexlabel.admin.token')") is None
+
+
+def test_reports_table_shows_each_outcome_waiting_work_first(
+    admin_page: Page, live_server: LiveServer, qc_work: dict[str, int], output_dir: Path
+) -> None:
+    page, server = admin_page, live_server
+    reports = server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}")
+    ours = {r["assignment_id"]: r for r in reports if r["assignment_id"] in qc_work.values()}
+    assert len(ours) == len(CROWD)
+    spammer, careful = ours[qc_work["ADMIN-W3"]], ours[qc_work["ADMIN-W1"]]
+    # Random points are hundreds of px off the careful view's hand; careful work passes.
+    assert spammer["metrics"]["median_error_px"] > 50
+    assert spammer["outcome"] in ("review", "reject") and careful["outcome"] == "approve"
+
+    page.locator(f'#sequence-rows tr[data-sequence="{server.sequence_id}"] a').click()
+    expect(page.locator("#sequence-view")).to_be_visible()
+    rows = page.locator("#report-rows tr")
+    expect(rows).to_have_count(len(reports))
+    for aid, report in ours.items():
+        row = page.locator(f'#report-rows tr[data-assignment="{aid}"]')
+        expect(row).to_have_attribute("data-outcome", report["outcome"])
+        expect(row).to_contain_text(report["worker_id"])
+        median = report["metrics"]["median_error_px"]
+        expect(row.locator("td").nth(6)).to_have_text("–" if median is None else f"{median:.1f} px")
+    waiting = [r["assignment_id"] for r in reports if r["outcome"] == "review" and not r["action"]]
+    shown = [int(a) for a in rows.evaluate_all("rs => rs.map(r => r.dataset.assignment)")]
+    assert sorted(shown[:len(waiting)]) == sorted(waiting)
+    assert sorted(shown) == sorted(r["assignment_id"] for r in reports)
+
+    runs = server.admin("GET", f"/api/sequences/{server.sequence_id}/solve-runs")
+    expect(page.locator("#run-rows tr")).to_have_count(len(runs))
+    if not runs:
+        expect(page.locator("#no-runs")).to_be_visible()
+
+    page.locator("#outcome-filter").select_option(spammer["outcome"])
+    same = [r for r in reports if r["outcome"] == spammer["outcome"]]
+    expect(rows).to_have_count(len(same))
+    expect(page.locator(f'#report-rows tr[data-assignment="{spammer["assignment_id"]}"]')) \
+        .to_be_visible()
+    page.screenshot(path=str(output_dir / "admin-reports.png"))
+
+
+def test_report_detail_draws_per_joint_errors_and_shows_a_refused_decision(
+    admin_page: Page, live_server: LiveServer, qc_work: dict[str, int], output_dir: Path
+) -> None:
+    page, server = admin_page, live_server
+    aid = qc_work["ADMIN-W3"]
+    detail = server.admin("GET", f"/api/qc/reports/{aid}")
+    page.goto(f"{server.base}/admin/#/sequences/{server.sequence_id}/reports/{aid}")
+    panel = page.locator("#report-detail")
+    expect(panel).to_be_visible()
+    selected = page.locator(f'#report-rows tr[data-assignment="{aid}"]')
+    expect(selected).to_have_class(re.compile(r"\bselected\b"))
+    waits = detail["outcome"] == "review" and not detail["action"]
+    expect(selected).to_have_class(re.compile(r"\bwaiting\b" if waits else r"^(?!.*waiting)"))
+
+    bars = page.locator('#joint-chart svg[data-chart="per-joint"] rect')
+    expect(bars).to_have_count(21)
+    labels = bars.evaluate_all("rs => rs.map(r => r.dataset.label)")
+    assert labels[0] == "wrist" and labels[1] == "thumb_mcp" and labels[20] == "little_tip"
+    heights = bars.evaluate_all("rs => rs.map(r => Number(r.getAttribute('height')))")
+    known = [(h, v) for h, v in zip(heights, detail["per_joint"], strict=True) if v is not None]
+    tallest = max(known, key=lambda hv: hv[1])
+    assert tallest[0] == pytest.approx(140.0) and all(h <= 140.0 for h, _ in known)
+    expect(page.locator('#frame-chart svg[data-chart="per-frame"] rect')) \
+        .to_have_count(len(detail["per_frame"]))
+    expect(page.locator('[data-fact="median_error_px"]')) \
+        .to_have_text(f"{detail['metrics']['median_error_px']:.1f} px")
+    expect(page.locator("#decision-feedback")).to_have_value(detail["feedback"])
+    page.screenshot(path=str(output_dir / "admin-report.png"))
+
+    # Work from a direct link has no marketplace submission: the API refuses to pay for it,
+    # and the page says why.
+    page.locator("#approve").click()
+    result = page.locator("#decision-result")
+    expect(result).to_contain_text(f"assignment {aid} has no submission confirmed by the "
+                                   "marketplace")
+    expect(result).to_have_class("notice error")
+    assert server.admin("GET", f"/api/qc/reports/{aid}")["action"] == detail["action"]
+
+    page.locator("#decision-feedback").fill("")
+    page.locator("#reject").click()
+    expect(result).to_contain_text("A rejection needs feedback")
+
+
+def test_jobs_workers_and_costs_panels_show_the_api_state(
+    admin_page: Page, live_server: LiveServer, qc_work: dict[str, int], output_dir: Path
+) -> None:
+    page, server = admin_page, live_server
+    job = next(j for j in server.admin("GET", "/api/jobs?kind=qc")
+               if j["key"] == f"qc:{server.sequence_id}:hand:0")
+    page.locator("#nav-jobs").click()
+    row = page.locator(f'#job-rows tr[data-job="{job["id"]}"]')
+    expect(row).to_have_attribute("data-status", "done")
+    expect(row).to_contain_text(job["key"])
+    expect(row.locator("button[data-retry]")).to_have_count(0)
+
+    quality = {w["worker_id"]: w for w in server.admin("GET", "/api/qc/workers")}
+    page.locator("#nav-workers").click()
+    for worker in qc_work:
+        if worker in quality:
+            expect(page.locator(f'#worker-rows tr[data-worker="{worker}"]')).to_contain_text(
+                f"{quality[worker]['score'] * 100:.1f}%")
+    expect(page.locator("#worker-rows tr")).to_have_count(len(quality))
+
+    costs = server.admin("GET", "/api/crowd/costs")
+    page.locator("#nav-costs").click()
+    expect(page.locator("#cost-spent")).to_contain_text(f"${float(costs['total']['spent']):.2f}")
+    expect(page.locator("#cost-committed")).to_contain_text(
+        f"${float(costs['total']['committed']):.2f}")
+    expect(page.locator("#cost-head-sequence th")).to_have_count(9)
+    expect(page.locator("#cost-sequence-rows tr")).to_have_count(len(costs["by_sequence"]))
+    expect(page.locator("#cost-worker-rows tr")).to_have_count(len(costs["by_worker"]))
+    page.screenshot(path=str(output_dir / "admin-costs.png"))
+
+
+def test_an_expired_session_shows_the_sign_in_form_again(
+    admin_page: Page, live_server: LiveServer
+) -> None:
+    page = admin_page
+    page.evaluate("sessionStorage.setItem('dexlabel.admin.token', 'not-a-valid-token')")
+    page.reload()
+    expect(page.locator("#login-view")).to_be_visible()
+    expect(page.locator("#notice")).to_contain_text("sign in again")
+    assert page.evaluate("sessionStorage.getItem('dexlabel.admin.token')") is None
+

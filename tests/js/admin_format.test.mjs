@@ -1,0 +1,144 @@
+// The review page's pure helpers: numbers, point names, report order, bar geometry, routes.
+import assert from "node:assert/strict";
+import { test } from "node:test";
+
+import {
+  HAND_JOINTS, barLayout, canRetry, costCells, dollars, metric, orderReports, parseRoute, percent,
+  pointNames, px, tallyReports, when,
+} from "../../frontend/admin/format.js";
+
+test("px writes pixels with one decimal and a dash where unknown", () => {
+  assert.equal(px(3.14159), "3.1 px");
+  assert.equal(px(0), "0.0 px");
+  assert.equal(px(12.96), "13.0 px");
+  assert.equal(px(null), "–");
+  assert.equal(px(undefined), "–");
+  assert.equal(px(Number.NaN), "–");
+});
+
+test("percent writes a fraction as a percentage with one decimal", () => {
+  assert.equal(percent(0.125), "12.5%");
+  assert.equal(percent(1), "100.0%");
+  assert.equal(percent(0), "0.0%");
+  assert.equal(percent(null), "–");
+});
+
+test("dollars writes the API's decimal strings with two decimals", () => {
+  assert.equal(dollars("0.5"), "$0.50");
+  assert.equal(dollars("12.345"), "$12.35");
+  assert.equal(dollars(3), "$3.00");
+  assert.equal(dollars("-1.2"), "-$1.20");
+  assert.equal(dollars(""), "–");
+  assert.equal(dollars(null), "–");
+  assert.equal(dollars("abc"), "–");
+});
+
+test("when reads ISO times with or without a zone as UTC minutes", () => {
+  assert.equal(when("2026-11-23T14:05:59.123456"), "2026-11-23 14:05");
+  assert.equal(when("2026-11-23T14:05:00+02:00"), "2026-11-23 12:05");
+  assert.equal(when("2026-11-23T14:05:00Z"), "2026-11-23 14:05");
+  assert.equal(when(null), "–");
+  assert.equal(when("not a date"), "–");
+});
+
+test("hand joints follow DexYCB order: wrist, then each finger from thumb to little", () => {
+  assert.equal(HAND_JOINTS.length, 21);
+  assert.equal(HAND_JOINTS[0], "wrist");
+  assert.deepEqual(HAND_JOINTS.slice(1, 5), ["thumb_mcp", "thumb_pip", "thumb_dip", "thumb_tip"]);
+  assert.equal(HAND_JOINTS[5], "index_mcp");
+  assert.equal(HAND_JOINTS[20], "little_tip");
+});
+
+test("pointNames names hand joints and object landmarks", () => {
+  assert.deepEqual(pointNames("hand:0", 21), HAND_JOINTS);
+  assert.deepEqual(pointNames("object:2", 2), ["landmark_1", "landmark_2"]);
+  // A hand report of an unexpected size is not given wrong joint names.
+  assert.deepEqual(pointNames("hand:0", 3), ["landmark_1", "landmark_2", "landmark_3"]);
+});
+
+const REPORTS = [
+  { assignment_id: 4, outcome: "approve", action: "recorded", provisional: false },
+  { assignment_id: 7, outcome: "review", action: null, provisional: false },
+  { assignment_id: 2, outcome: "reject", action: "rejected", provisional: false },
+  { assignment_id: 9, outcome: "review", action: "approved", provisional: false },
+  { assignment_id: 5, outcome: "review", action: null, provisional: true },
+];
+
+test("orderReports puts work waiting for an admin first, then by assignment", () => {
+  assert.deepEqual(orderReports([...REPORTS]).map((r) => r.assignment_id), [5, 7, 2, 4, 9]);
+});
+
+test("orderReports keeps only the outcome asked for and leaves its input as it was", () => {
+  const input = [...REPORTS];
+  assert.deepEqual(orderReports(input, "review").map((r) => r.assignment_id), [5, 7, 9]);
+  assert.deepEqual(orderReports(input, "approve").map((r) => r.assignment_id), [4]);
+  assert.deepEqual(input.map((r) => r.assignment_id), [4, 7, 2, 9, 5]);
+});
+
+test("tallyReports counts outcomes and the reports awaiting an admin", () => {
+  assert.deepEqual(tallyReports(REPORTS), { approve: 1, review: 3, reject: 1, waiting: 2 });
+  assert.deepEqual(tallyReports([]), { approve: 0, review: 0, reject: 0, waiting: 0 });
+});
+
+test("canRetry allows only failed and waiting jobs", () => {
+  for (const status of ["failed", "waiting"]) assert.equal(canRetry({ status }), true);
+  for (const status of ["queued", "running", "retrying", "done"]) {
+    assert.equal(canRetry({ status }), false);
+  }
+});
+
+test("barLayout scales the largest value to the plot height and flattens unknowns", () => {
+  const layout = barLayout([2, null, 8, 4], ["a", "b", "c", "d"], { width: 400, height: 100, gap: 0 });
+  assert.equal(layout.max, 8);
+  assert.deepEqual(layout.bars.map((b) => b.height), [25, 0, 100, 50]);
+  assert.deepEqual(layout.bars.map((b) => b.y), [75, 100, 0, 50]);
+  assert.deepEqual(layout.bars.map((b) => b.x), [0, 100, 200, 300]);
+  assert.deepEqual(layout.bars.map((b) => b.width), [100, 100, 100, 100]);
+  assert.equal(layout.bars[1].value, null);
+  assert.equal(layout.bars[2].label, "c");
+});
+
+test("barLayout of only unknown or zero values draws no heights", () => {
+  const layout = barLayout([null, 0], ["a", "b"], { width: 10, height: 10 });
+  assert.equal(layout.max, 0);
+  assert.deepEqual(layout.bars.map((b) => b.height), [0, 0]);
+});
+
+test("barLayout refuses labels that do not match the values", () => {
+  assert.throws(() => barLayout([1, 2], ["a"]), /2 values but 1 labels/);
+});
+
+test("costCells writes a cost line's key and money columns in dollars", () => {
+  const line = { key: "W1", spent: "1.2", spent_rewards: "1", spent_bonuses: "0",
+    spent_fees: "0.2", committed: "0.6", committed_rewards: "0.5", committed_bonuses: "0",
+    committed_fees: "0.1" };
+  assert.deepEqual(costCells(line),
+    ["W1", "$1.20", "$1.00", "$0.00", "$0.20", "$0.60", "$0.50", "$0.00", "$0.10"]);
+});
+
+test("parseRoute maps each hash to its view, sequence and assignment", () => {
+  const none = { sequence: null, assignment: null };
+  assert.deepEqual(parseRoute(""), { view: "sequences", ...none });
+  assert.deepEqual(parseRoute("#/sequences"), { view: "sequences", ...none });
+  assert.deepEqual(parseRoute("#/sequences/3"), { view: "sequence", sequence: 3, assignment: null });
+  assert.deepEqual(parseRoute("#/sequences/3/reports/17"),
+    { view: "report", sequence: 3, assignment: 17 });
+  assert.deepEqual(parseRoute("#/sequences/3/reports/x"),
+    { view: "sequence", sequence: 3, assignment: null });
+  assert.deepEqual(parseRoute("#/sequences/abc"), { view: "sequences", ...none });
+  assert.deepEqual(parseRoute("#/workers"), { view: "workers", ...none });
+  assert.deepEqual(parseRoute("#/jobs"), { view: "jobs", ...none });
+  assert.deepEqual(parseRoute("#/costs"), { view: "costs", ...none });
+  assert.deepEqual(parseRoute("#/nowhere"), { view: "sequences", ...none });
+});
+
+test("metric writes each QC metric in its unit by name", () => {
+  assert.equal(metric("median_error_px", 3.14), "3.1 px");
+  assert.equal(metric("outlier_fraction", 0.25), "25.0%");
+  assert.equal(metric("visibility_disagreement", 0.4931), "49.3%");
+  assert.equal(metric("completeness", 1), "100.0%");
+  assert.equal(metric("working_time_s", 119.6), "120 s");
+  assert.equal(metric("motion_ratio", 0.987), "0.99");
+  assert.equal(metric("views", 3), "3");
+  assert.equal(metric("jitter_px", null), "–");
+});
