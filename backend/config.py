@@ -112,6 +112,10 @@ class Settings(BaseSettings):
     # device the solver runs on ("cpu", or "cuda" where a GPU is present).
     solve_optimiser: Literal["paper", "default"] = "default"
     solve_device: str = "cpu"
+    # The deployment's solver settings (energy weights w_kpt, w_depth, w_reg, w_smooth, robust
+    # scales, iterations: worker.solver.SolveSettings fields) as JSON, e.g.
+    # DEXLABEL_SOLVE_PARAMS='{"w_depth": 5.0}'; a solve request's own params come on top.
+    solve_params: dict[str, float | int | bool] = Field(default_factory=dict)
     # Quality control: act on clear decisions (approve / reject + re-open) without an admin;
     # block a worker after this many rejected assignments (0: never); bounds of the learned
     # thresholds as JSON of worker.quality.decide.QCThresholds fields, e.g.

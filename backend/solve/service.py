@@ -71,10 +71,11 @@ _FIXED_PARAMS = ("optimiser", "device")
 
 
 def solver_params(optimiser: str, overrides: dict | None = None) -> dict:
-    """The solver settings a run records and uses (JSON): defaults, then ``overrides``."""
+    """The solver settings a run records and uses (JSON): defaults, then the deployment's
+    DEXLABEL_SOLVE_PARAMS, then ``overrides``."""
     settings = dataclasses.asdict(SolveSettings(optimiser=optimiser,
                                                 device=get_settings().solve_device))
-    for name, value in (overrides or {}).items():
+    for name, value in {**get_settings().solve_params, **(overrides or {})}.items():
         if name not in settings or name in _FIXED_PARAMS:
             allowed = sorted(set(settings) - set(_FIXED_PARAMS))
             raise InvalidSolveRequest(f"params.{name} is not a solver setting; one of "

@@ -254,6 +254,24 @@ def test_solve_is_refused_without_initial_pose_betas_or_accepted_tracks(
     assert runs == []
 
 
+def test_the_deployment_s_solver_settings_apply_under_a_request_s_own(
+    client: TestClient, admin_headers: dict, approved: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from backend.config import get_settings
+
+    monkeypatch.setenv("DEXLABEL_SOLVE_PARAMS", '{"w_depth": 5.0, "lm_iterations": 3}')
+    get_settings.cache_clear()
+    url = f"/api/sequences/{approved}/solve"
+    run = client.post(url, headers=admin_headers).json()
+    assert (run["params"]["w_depth"], run["params"]["lm_iterations"]) == (5.0, 3)
+    own = client.post(url, json={"params": {"w_depth": 2.0}}, headers=admin_headers).json()
+    assert (own["params"]["w_depth"], own["params"]["lm_iterations"]) == (2.0, 3)
+    monkeypatch.setenv("DEXLABEL_SOLVE_PARAMS", '{"w_nothing": 1}')
+    get_settings.cache_clear()
+    bad = client.post(url, headers=admin_headers)
+    assert bad.status_code == 422 and "w_nothing is not a solver setting" in bad.json()["detail"]
+
+
 def test_a_failing_solve_leaves_the_previous_run_current(
     client: TestClient, admin_headers: dict, approved: int
 ) -> None:

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
-from backend.crowd.simulate import CaptureTruth
+from backend.crowd.simulate import CaptureTruth, simulate
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
 from worker.synth.annotators import annotate
 
@@ -30,6 +30,9 @@ QC_TIMEOUT_S = 120.0
 # (worker, view of the hand task, simulated profile): two careful views agree with each other;
 # the spammer's random points cannot.
 CROWD = (("ADMIN-W1", 0, "careful"), ("ADMIN-W2", 1, "careful"), ("ADMIN-W3", 0, "spammer"))
+# One simulated marketplace worker per task of the capture (a hand and an object in 2 views).
+MARKET_WORKERS = 4
+REWARD, FEE = 0.40, 0.08  # the HITs' reward and MTurk's 20% fee on it (dollars)
 
 
 def _server_env(server: LiveServer) -> dict[str, str]:
@@ -250,3 +253,89 @@ def test_an_expired_session_shows_the_sign_in_form_again(
     expect(page.locator("#notice")).to_contain_text("sign in again")
     assert page.evaluate("sessionStorage.getItem('dexlabel.admin.token')") is None
 
+
+
+@pytest.fixture(scope="module")
+def market_work(live_server: LiveServer, qc_work: dict[str, int]) -> set[str]:
+    """The sequence's tasks published on the built-in marketplace and worked by simulated
+    careful workers through the portal; their submissions confirmed and QC-scored."""
+    server = live_server
+    server.admin("POST", "/api/crowd/publish", {
+        "sequence_id": server.sequence_id, "max_assignments": 1, "min_approval_rate": None,
+        "reward": "0.40"})
+    outcomes = simulate(server.base, server.capture, MARKET_WORKERS, "careful", ADMIN_EMAIL,
+                        ADMIN_PASSWORD, seed=3)
+    workers = {o.worker_id for o in outcomes if o.status == "submitted"}
+    assert len(workers) == MARKET_WORKERS, outcomes
+    _wait_reports(server, workers)
+    return workers
+
+
+def _wait_reports(server: LiveServer, workers: set[str]) -> None:
+    """Until every worker's submission is confirmed and QC-scored and no job is pending."""
+    deadline = time.monotonic() + QC_TIMEOUT_S
+    while time.monotonic() < deadline:
+        scored = {r["worker_id"] for r in server.admin(
+            "GET", f"/api/qc/reports?sequence_id={server.sequence_id}")}
+        busy = [j for j in server.admin("GET", "/api/jobs")
+                if j["status"] in ("queued", "running", "retrying")]
+        if workers <= scored and not busy:
+            return
+        time.sleep(0.5)
+    raise AssertionError(f"no QC reports for {workers - scored} in {QC_TIMEOUT_S} s")
+
+
+
+def _api_approve(server: LiveServer, assignment_id: int) -> httpx.Response:
+    return httpx.post(f"{server.base}/api/crowd/assignments/{assignment_id}/approve", json={},
+                      headers={"Authorization": f"Bearer {server.admin_token}"}, timeout=30)
+
+
+def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
+    admin_page: Page, live_server: LiveServer, market_work: set[str], output_dir: Path
+) -> None:
+    page, server = admin_page, live_server
+    reports = server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}")
+    waiting = [r for r in reports if r["worker_id"] in market_work
+               and r["outcome"] == "review" and not r["action"] and not r["provisional"]]
+    assert waiting, f"no marketplace work left for review: {reports}"
+    report = waiting[0]
+    aid, before = report["assignment_id"], server.admin("GET", "/api/crowd/costs")["total"]
+
+    page.locator(f'#sequence-rows tr[data-sequence="{server.sequence_id}"] a').click()
+    page.locator("#outcome-filter").select_option("review")
+    row = page.locator(f'#report-rows tr[data-assignment="{aid}"]')
+    expect(row).to_have_class(re.compile(r"\bwaiting\b"))
+    expect(row).to_contain_text("waiting for you")
+    row.locator("a").click()
+    expect(page.locator("#detail-title")).to_have_text(f"Assignment {aid}")
+    expect(page.locator("#joint-chart rect")).to_have_count(2)
+    expect(page.locator("#joint-chart rect").first).to_have_attribute("data-label", "landmark_1")
+    feedback = page.locator("#decision-feedback")
+    expect(feedback).to_have_value(report["feedback"])
+    feedback.fill("Checked by hand: both landmarks sit on the object.")
+    page.locator("#approve").click()
+    result = page.locator("#decision-result")
+    expect(result).to_have_text(f"Approved assignment {aid}.")
+    page.screenshot(path=str(output_dir / "admin-approved.png"))
+
+    # The API holds the decision: a second approval is refused, and the reward and its fee
+    # moved from committed to spent.
+    again = _api_approve(server, aid)
+    assert again.status_code == 409 and again.json()["detail"] == \
+        f"assignment {aid} is already approved"
+    after = server.admin("GET", "/api/crowd/costs")
+    total = after["total"]
+    assert float(total["spent"]) == pytest.approx(float(before["spent"]) + REWARD + FEE)
+    assert float(total["committed"]) == pytest.approx(float(before["committed"]) - REWARD - FEE)
+    line = next(w for w in after["by_worker"] if w["key"] == report["worker_id"])
+    assert float(line["spent_rewards"]) == pytest.approx(REWARD)
+
+    # The page shows the API's refusal of a second decision, and the new spend.
+    page.locator("#approve").click()
+    expect(result).to_have_text(f"assignment {aid} is already approved")
+    expect(result).to_have_class("notice error")
+    page.locator("#nav-costs").click()
+    expect(page.locator("#cost-spent")).to_contain_text(f"${float(total['spent']):.2f}")
+    expect(page.locator(f'#cost-worker-rows tr[data-worker="{report["worker_id"]}"] td')
+           .nth(2)).to_have_text(f"${REWARD:.2f}")

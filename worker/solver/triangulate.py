@@ -1,4 +1,4 @@
-"""Linear (DLT) triangulation of labelled keypoints with robust reweighting, and a linear
+"""Triangulation of labelled keypoints in the solver's (view-first) layout, and a linear
 multi-view pose estimate for rigid objects. NumPy, float64; world frame, metres; pixels."""
 
 from __future__ import annotations
@@ -6,12 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.geometry.cameras import CameraModel, pixels_to_rays, project_points
-
-
-def _normalised(cameras: list[CameraModel], pixels: np.ndarray) -> np.ndarray:
-    """(V, ..., 2) pixels -> undistorted normalised image coordinates (V, ..., 2)."""
-    return np.stack([pixels_to_rays(np.nan_to_num(px), c.K, c.dist)[..., :2]
-                     for c, px in zip(cameras, pixels, strict=True)])
+from worker.geometry.triangulate import triangulate_dlt, triangulate_points
 
 
 def _world_to_cam(cameras: list[CameraModel]) -> np.ndarray:
@@ -32,40 +27,27 @@ def reprojection_px(cameras: list[CameraModel], points: np.ndarray,
 
 
 def triangulate(cameras: list[CameraModel], pixels: np.ndarray, mask: np.ndarray,
-                robust_scale_px: float | None = 8.0, rounds: int = 4
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulate points seen in V views.
+                robust_scale_px: float | None = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate points seen in V views (worker.geometry.triangulate, in the solver's layout).
 
     pixels: (V, ..., 2) px; mask: (V, ...) bool, which observations to use.
-    robust_scale_px: Cauchy scale for iteratively reweighted DLT (None: plain DLT, 1 round).
+    robust_scale_px: None for the plain linear DLT of every used observation; otherwise the
+        robust triangulation (view-pair hypotheses, outliers beyond twice this scale rejected,
+        Levenberg-Marquardt refinement with lens distortion).
     Returns points (..., 3) world metres (NaN where fewer than 2 views) and a (...,) bool of
     where a point was triangulated.
     """
     pixels = np.asarray(pixels, dtype=np.float64)
     mask = np.asarray(mask, dtype=bool) & np.isfinite(pixels).all(axis=-1)
-    xy = _normalised(cameras, pixels)
-    proj = _world_to_cam(cameras)
     shape = mask.shape[1:]
-    # Rows u P3 - P1 and v P3 - P2 per view: (V, ..., 2, 4).
-    extra = (None,) * len(shape)
-    p = proj[(slice(None),) + extra]
-    rows = np.stack([xy[..., 0, None] * p[..., 2, :] - p[..., 0, :],
-                     xy[..., 1, None] * p[..., 2, :] - p[..., 1, :]], axis=-2)
-    rows = np.moveaxis(rows, 0, -3).reshape(shape + (-1, 4))  # (..., 2V, 4)
-    weight = mask.astype(np.float64)
-    ok = mask.sum(axis=0) >= 2
-    points = np.full(shape + (3,), np.nan)
-    for _ in range(rounds if robust_scale_px else 1):
-        w = np.repeat(np.moveaxis(weight, 0, -1), 2, axis=-1)
-        _, _, vt = np.linalg.svd(rows * w[..., None])
-        h = vt[..., -1, :]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            points = h[..., :3] / h[..., 3:4]
-        if not robust_scale_px:
-            break
-        err = reprojection_px(cameras, np.nan_to_num(points), pixels)
-        weight = mask / (1.0 + (np.nan_to_num(err, nan=1e6) / robust_scale_px) ** 2)
-    points[~ok] = np.nan
+    used = np.where(mask[..., None], pixels, np.nan)
+    flat = np.moveaxis(used.reshape(len(cameras), -1, 2), 0, 1)  # (N, V, 2)
+    if robust_scale_px:
+        points = triangulate_points(cameras, flat, outlier_px=2.0 * robust_scale_px).points
+    else:
+        points = triangulate_dlt(cameras, flat)
+    points = points.reshape(shape + (3,))
+    ok = np.isfinite(points).all(axis=-1)
     return points, ok
 
 
