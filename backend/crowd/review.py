@@ -89,6 +89,10 @@ def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str
     assignment.status = _DONE[kind]
     submission.market_status = _MARKET_STATUS[kind]
     session.flush()
+    # The target's QC sees the decision (and, once every task is accepted, queues the solve).
+    from backend.review.service import request_qc
+
+    request_qc(session, assignment.task)
     return _payment_read(row)
 
 

@@ -24,6 +24,8 @@ const state = {
   /** @type {any[]} */ runs: [],
   /** @type {string[]} */ serials: [],
   /** @type {string|null} */ overlayUrl: null,
+  /** Counts overlay requests: a reply that is no longer the newest is dropped. */
+  overlayRequest: 0,
 };
 
 /** @param {string} id */
@@ -69,7 +71,8 @@ async function showSequence(sequenceId, assignmentId) {
   renderReportList();
   renderRuns(body("run-rows"), runs);
   $("no-runs").hidden = runs.length > 0;
-  if (!runs.some((/** @type {any} */ r) => String(r.id) === $("overlay").dataset.run)) hideOverlay();
+  const shown = $("overlay").dataset.run;
+  if (!runs.some((/** @type {any} */ r) => String(r.id) === shown)) hideOverlay();
   $("report-detail").hidden = true;
   show("sequence-view");
   if (assignmentId !== null) await showReport(assignmentId);
@@ -193,7 +196,9 @@ async function loadOverlay() {
   const run = Number($("overlay").dataset.run);
   const frame = Number(/** @type {HTMLInputElement} */ ($("overlay-frame")).value);
   const view = /** @type {HTMLSelectElement} */ ($("overlay-view")).value;
+  const request = ++state.overlayRequest;
   const blob = await api.overlay(run, frame, view);
+  if (request !== state.overlayRequest || $("overlay").hidden) return;
   if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
   state.overlayUrl = URL.createObjectURL(blob);
   /** @type {HTMLImageElement} */ ($("overlay-image")).src = state.overlayUrl;
@@ -202,6 +207,7 @@ async function loadOverlay() {
 function hideOverlay() {
   $("overlay").hidden = true;
   delete $("overlay").dataset.run;
+  state.overlayRequest += 1;
   if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
   state.overlayUrl = null;
   /** @type {HTMLImageElement} */ ($("overlay-image")).removeAttribute("src");

@@ -70,7 +70,8 @@ export function pointNames(targetKey, count) {
 }
 
 /**
- * @typedef {{assignment_id: number, outcome: string, action: string|null, provisional: boolean}} ReportLike
+ * @typedef {{assignment_id: number, outcome: string, action: string|null,
+ *            provisional: boolean}} ReportLike
  */
 
 /**

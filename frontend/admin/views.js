@@ -78,12 +78,18 @@ export function renderReports(body, reports, sequenceId, selected) {
       el("td", { class: "num" }, [px(r.metrics.median_error_px)]),
       el("td", { class: "num" }, [px(r.metrics.p90_error_px)]),
       el("td", { class: "num" }, [percent(r.metrics.outlier_fraction)]),
-      el("td", { class: "action-cell" }, [r.action ? badge(r.action, "action") : el("span", { class: "muted" },
-        [awaitsAdmin(r) ? "waiting for you" : "none"]),
-      r.action_detail ? el("div", { class: "muted" }, [r.action_detail]) : ""]),
+      el("td", { class: "action-cell" }, [actionBadge(r),
+        r.action_detail ? el("div", { class: "muted" }, [r.action_detail]) : ""]),
     ]);
     return row;
   }));
+}
+
+/** @param {any} report */
+function actionBadge(report) {
+  if (report.action) return badge(report.action, "action");
+  if (awaitsAdmin(report)) return badge("waiting for you", "review");
+  return el("span", { class: "muted" }, ["none"]);
 }
 
 /**
@@ -97,7 +103,8 @@ export function renderFacts(list, report) {
     ["Outcome", badge(report.outcome)],
     ["Worker", report.worker_id],
     ["Target", `${report.target_key} (task ${report.task_id})`],
-    ["Method", `${report.method}, ${report.views} views${report.provisional ? ", provisional" : ""}`],
+    ["Method", `${report.method}, ${report.views} views`
+      + (report.provisional ? ", provisional" : "")],
     ["Reasons", report.reasons.length ? report.reasons.join("; ") : "–"],
     ["Action", report.action ? `${report.action}${report.action_detail
       ? ` (${report.action_detail})` : ""}` : (report.action_detail || "none yet")],

@@ -9,6 +9,7 @@ consumer (``dexlabel worker`` on the server's database and queue) runs.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import subprocess
@@ -32,7 +33,16 @@ QC_TIMEOUT_S = 120.0
 CROWD = (("ADMIN-W1", 0, "careful"), ("ADMIN-W2", 1, "careful"), ("ADMIN-W3", 0, "spammer"))
 # One simulated marketplace worker per task of the capture (a hand and an object in 2 views).
 MARKET_WORKERS = 4
-REWARD, FEE = 0.40, 0.08  # the HITs' reward and MTurk's 20% fee on it (dollars)
+REWARD, FEE = 0.40, 0.08
+# The overlay <img>'s picture: [SHA-256 of its blob, natural width, height], or null.
+SHOWN_PNG = """async () => {
+  const img = document.getElementById("overlay-image");
+  if (!img.src.startsWith("blob:") || !img.complete || !img.naturalWidth) return null;
+  const bytes = await (await fetch(img.src)).arrayBuffer();
+  const digest = new Uint8Array(await crypto.subtle.digest("SHA-256", bytes));
+  const hex = Array.from(digest, (b) => b.toString(16).padStart(2, "0")).join("");
+  return [hex, img.naturalWidth, img.naturalHeight];
+}"""  # the HITs' reward and MTurk's 20% fee on it (dollars)
 
 
 def _server_env(server: LiveServer) -> dict[str, str]:
@@ -223,6 +233,7 @@ def test_jobs_workers_and_costs_panels_show_the_api_state(
     expect(row).to_have_attribute("data-status", "done")
     expect(row).to_contain_text(job["key"])
     expect(row.locator("button[data-retry]")).to_have_count(0)
+    page.screenshot(path=str(output_dir / "admin-jobs.png"))
 
     quality = {w["worker_id"]: w for w in server.admin("GET", "/api/qc/workers")}
     page.locator("#nav-workers").click()
@@ -339,3 +350,55 @@ def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
     expect(page.locator("#cost-spent")).to_contain_text(f"${float(total['spent']):.2f}")
     expect(page.locator(f'#cost-worker-rows tr[data-worker="{report["worker_id"]}"] td')
            .nth(2)).to_have_text(f"${REWARD:.2f}")
+    page.screenshot(path=str(output_dir / "admin-costs-after.png"))
+
+
+
+def _png_size(data: bytes) -> tuple[int, int]:
+    """(width, height) from a PNG's IHDR chunk."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def _solved_run(server: LiveServer, market_work: set[str]) -> dict:
+    """Every marketplace submission approved (admin decisions), then a finished solve run."""
+    for report in server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}"):
+        if report["worker_id"] in market_work:
+            assert _api_approve(server, report["assignment_id"]).status_code in (200, 409)
+    run = server.admin("POST", f"/api/sequences/{server.sequence_id}/solve", {})
+    deadline = time.monotonic() + QC_TIMEOUT_S
+    while run["status"] not in ("done", "failed") and time.monotonic() < deadline:
+        time.sleep(0.5)
+        run = server.admin("GET", f"/api/solve-runs/{run['id']}")
+    assert run["status"] == "done", run
+    return run
+
+
+def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
+    admin_page: Page, live_server: LiveServer, market_work: set[str], output_dir: Path
+) -> None:
+    page, server = admin_page, live_server
+    run = _solved_run(server, market_work)
+    page.goto(f"{server.base}/admin/#/sequences/{server.sequence_id}")
+    row = page.locator(f'#run-rows tr[data-run="{run["id"]}"]')
+    expect(row).to_contain_text("done")
+    row.locator("button[data-show-run]").click()
+    image = page.locator("#overlay-image")
+    expect(image).to_have_attribute("src", re.compile(r"^blob:"))
+    expect(page.locator("#overlay-view option")).to_have_count(run["num_views"])
+
+    for frame, view in ((0, "0"), (run["num_frames"] - 1, str(run["num_views"] - 1))):
+        page.locator("#overlay-frame").fill(str(frame))
+        page.locator("#overlay-frame").dispatch_event("change")
+        page.locator("#overlay-view").select_option(view)
+        png = httpx.get(f"{server.base}/api/solve-runs/{run['id']}/frames/{frame}/views/{view}.png",
+                        headers={"Authorization": f"Bearer {server.admin_token}"}, timeout=30)
+        assert png.status_code == 200
+        width, height = _png_size(png.content)
+        # The picture shown is the API's PNG of this frame and view, byte for byte.
+        want = [hashlib.sha256(png.content).hexdigest(), width, height]
+        deadline = time.monotonic() + 15
+        while page.evaluate(SHOWN_PNG) != want and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert page.evaluate(SHOWN_PNG) == want
+    page.screenshot(path=str(output_dir / "admin-overlay.png"), full_page=True)

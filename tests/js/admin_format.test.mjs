@@ -88,7 +88,8 @@ test("canRetry allows only failed and waiting jobs", () => {
 });
 
 test("barLayout scales the largest value to the plot height and flattens unknowns", () => {
-  const layout = barLayout([2, null, 8, 4], ["a", "b", "c", "d"], { width: 400, height: 100, gap: 0 });
+  const size = { width: 400, height: 100, gap: 0 };
+  const layout = barLayout([2, null, 8, 4], ["a", "b", "c", "d"], size);
   assert.equal(layout.max, 8);
   assert.deepEqual(layout.bars.map((b) => b.height), [25, 0, 100, 50]);
   assert.deepEqual(layout.bars.map((b) => b.y), [75, 100, 0, 50]);
@@ -120,7 +121,8 @@ test("parseRoute maps each hash to its view, sequence and assignment", () => {
   const none = { sequence: null, assignment: null };
   assert.deepEqual(parseRoute(""), { view: "sequences", ...none });
   assert.deepEqual(parseRoute("#/sequences"), { view: "sequences", ...none });
-  assert.deepEqual(parseRoute("#/sequences/3"), { view: "sequence", sequence: 3, assignment: null });
+  assert.deepEqual(parseRoute("#/sequences/3"),
+    { view: "sequence", sequence: 3, assignment: null });
   assert.deepEqual(parseRoute("#/sequences/3/reports/17"),
     { view: "report", sequence: 3, assignment: 17 });
   assert.deepEqual(parseRoute("#/sequences/3/reports/x"),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.worker.test_solver_scene import box, cameras, pose
-from worker.solver.landmarks import back_project, camera_ray, map_landmark
+from worker.solver.landmarks import back_project, back_project_point, camera_ray, map_landmark
 from worker.solver.mesh_query import ray_hits
 
 
@@ -82,7 +82,8 @@ class TestMapLandmark:
             asked.append(frame)
             return posed[frame], []
 
-        assert map_landmark(camera, xy, visible, scene_at) == (vid, 2)
+        point, frame = map_landmark(camera, xy, visible, scene_at)
+        assert frame == 2 and np.allclose(point, posed[2][0][vid], atol=1e-9)
         assert asked == [2]
 
     @pytest.mark.parametrize("known", [None, 3])
@@ -92,6 +93,25 @@ class TestMapLandmark:
         posed = _posed(model, faces, pose([0, 0, 0], [0, 0, 0]))
         vid = _front_vertices(camera, *posed, 1)[0]
         xy = np.repeat(camera.project(posed[0][vid])[None], 4, axis=0)
-        got = map_landmark(camera, xy, np.ones(4, bool),
-                           lambda f: (posed, []) if f == known else None)
-        assert got == ((vid, 3) if known == 3 else (-1, -1))
+        point, frame = map_landmark(camera, xy, np.ones(4, bool),
+                                    lambda f: (posed, []) if f == known else None)
+        if known is None:
+            assert (point, frame) == (None, -1)
+        else:
+            assert frame == 3 and np.allclose(point, posed[0][vid], atol=1e-9)
+
+
+class TestSurfacePoint:
+    def test_a_landmark_inside_a_face_maps_to_the_hit_point_not_a_corner(self):
+        camera = cameras(1)[0]
+        model, faces = box()
+        posed = _posed(model, faces, pose([0, 0, 0], [0, 0, 0]))
+        vid = _front_vertices(camera, *posed, 1)[0]
+        # A point on the segment from a front corner towards the box's centre, on its surface.
+        centre_ray = camera_ray(camera, camera.project(posed[0].mean(axis=0)))
+        xy = 0.5 * camera.project(posed[0][vid]) + 0.5 * camera.project(
+            centre_ray[0] + 0.5 * centre_ray[1])
+        point = back_project_point(camera, xy, posed, [])
+        assert point is not None and np.allclose(camera.project(point), xy, atol=1e-6)
+        corners = np.linalg.norm(posed[0] - point, axis=1)
+        assert corners.min() > 1e-3  # a corner would be the paper's vertex, millimetres away

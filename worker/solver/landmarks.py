@@ -1,12 +1,14 @@
-"""Mapping each object landmark to a mesh vertex by back-projection (done once, then fixed).
+"""Mapping each object landmark to a point of its object's surface by back-projection (done
+once, then fixed).
 
 A landmark is cast as a ray from its camera through its (undistorted) pixel at the first frame
 where it is labelled visible; the first surface hit among all meshes in the scene decides: if
-it is the landmark's object, the landmark becomes the object's vertex nearest the hit point
-(not only the hit triangle's corners: on a coarse mesh the vertex meant may belong to the
-neighbouring triangle of the same face); if another mesh (the hand, another object) is hit
-first, the landmark is occluded there and the next visible frame is tried. Frames are world,
-lengths metres, pixels x right, y down.
+it is the landmark's object, the landmark becomes the hit point on that object's surface (on a
+dense scanned mesh the paper's "nearest vertex" is the same point to within a millimetre; on a
+coarse mesh, such as an 8-vertex box, only the hit point is right); if another mesh (the hand,
+another object) is hit first, the landmark is occluded there and the next visible frame is
+tried. A label just off the silhouette that misses every face maps to the object's vertex
+nearest the ray. Frames are world, lengths metres, pixels x right, y down.
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ def camera_ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndar
     return camera.T_cam_to_world[:, 3].copy(), direction / np.linalg.norm(direction)
 
 
-def back_project(camera: CameraModel, xy: np.ndarray, target: tuple[np.ndarray, np.ndarray],
-                 occluders: list[tuple[np.ndarray, np.ndarray]]) -> int:
-    """Vertex id of `target` under pixel xy, or -1 when it is occluded or missed.
+def back_project_point(camera: CameraModel, xy: np.ndarray,
+                       target: tuple[np.ndarray, np.ndarray],
+                       occluders: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray | None:
+    """World point (3,) of `target`'s surface under pixel xy, or None when it is occluded or
+    missed: the ray's first hit on its faces, or (just off the silhouette) its nearest vertex.
 
     target, occluders: (vertices (N, 3) world, faces (M, 3)) meshes posed at the frame.
     """
@@ -45,10 +49,24 @@ def back_project(camera: CameraModel, xy: np.ndarray, target: tuple[np.ndarray, 
                   default=np.inf)
     face = int(np.argmin(hits))
     if np.isfinite(hits[face]):
-        if hits[face] > blocked:
-            return -1
-        point = origin + hits[face] * direction
-        return int(np.argmin(np.linalg.norm(vertices - point, axis=1)))
+        return None if hits[face] > blocked else origin + hits[face] * direction
+    vertex = _vertex_near_ray(origin, direction, vertices, blocked)
+    return None if vertex < 0 else vertices[vertex].copy()
+
+
+def back_project(camera: CameraModel, xy: np.ndarray, target: tuple[np.ndarray, np.ndarray],
+                 occluders: list[tuple[np.ndarray, np.ndarray]]) -> int:
+    """Vertex id of `target` nearest the surface point under pixel xy (the paper's mapping),
+    or -1 when it is occluded or missed. Meshes as in back_project_point."""
+    point = back_project_point(camera, xy, target, occluders)
+    if point is None:
+        return -1
+    return int(np.argmin(np.linalg.norm(target[0] - point, axis=1)))
+
+
+def _vertex_near_ray(origin: np.ndarray, direction: np.ndarray, vertices: np.ndarray,
+                     blocked: float) -> int:
+    """The vertex nearest a ray that misses every face (a label on the silhouette), or -1."""
     rel = vertices - origin
     along = rel @ direction
     off_ray = np.linalg.norm(rel - along[:, None] * direction, axis=1)
@@ -69,8 +87,8 @@ def first_visible_frames(visible: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 def map_landmark(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
                  scene_at: Callable[[int], tuple[tuple, list] | None],
-                 ) -> tuple[int, int]:
-    """(vertex id, frame used) for one landmark, or (-1, -1).
+                 ) -> tuple[np.ndarray | None, int]:
+    """(world surface point (3,), frame used) for one landmark, or (None, -1).
 
     xy: (F, 2) px, visible: (F,) bool. scene_at(frame) -> (target mesh, occluder meshes) posed
     at that frame, or None when no accurate pose is known there yet (the frame is skipped).
@@ -79,7 +97,7 @@ def map_landmark(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
         scene = scene_at(int(frame))
         if scene is None:
             continue
-        vertex = back_project(camera, xy[frame], scene[0], scene[1])
-        if vertex >= 0:
-            return vertex, int(frame)
-    return -1, -1
+        point = back_project_point(camera, xy[frame], scene[0], scene[1])
+        if point is not None:
+            return point, int(frame)
+    return None, -1

@@ -1,5 +1,7 @@
-"""Landmark-to-vertex mapping over a sequence: which frames' poses are trusted, and the result
-as `MappedLandmarks` tables for the energies. See `landmarks` for the ray casting itself."""
+"""Landmark mapping over a sequence: which frames' poses are trusted, and the result as
+`MappedLandmarks` tables for the energies. A mapped landmark is a surface point of its object,
+kept as an extra vertex of the object (after the mesh's own, referenced by no face). See
+`landmarks` for the ray casting itself."""
 
 from __future__ import annotations
 
@@ -16,8 +18,9 @@ HandAt = Callable[[int], np.ndarray | None]  # frame -> (N, 3) hand vertices, or
 
 def map_landmarks(problem: Problem, state: list[list[int]], poses_at: PosesAt,
                   hand_at: HandAt) -> list[list[int]]:
-    """Fill in the vertex of every landmark still at -1 in `state` (per object, per landmark)
-    whose first visible frames have trusted poses; the others stay -1 for a later call."""
+    """Fill in the vertex id of every landmark still at -1 in `state` (per object, per landmark)
+    whose first visible frames have trusted poses (a new extra vertex at its surface point);
+    the others stay -1 for a later call."""
     meshes = list(zip(problem.object_vertices, problem.object_faces, strict=True))
     out = [list(s) for s in state]
     for o, obj in enumerate(problem.objects):
@@ -37,9 +40,11 @@ def map_landmarks(problem: Problem, state: list[list[int]], poses_at: PosesAt,
                     occluders.append((hand, problem.hand_faces))
                 return posed[o], occluders
 
-            vertex, _ = map_landmark(problem.cameras[mark.view], np.asarray(mark.xy, float),
-                                     np.asarray(mark.visible, bool), scene_at)
-            out[o][k] = vertex
+            point, frame = map_landmark(problem.cameras[mark.view], np.asarray(mark.xy, float),
+                                        np.asarray(mark.visible, bool), scene_at)
+            if point is not None:
+                pose = poses_at(frame)[o]
+                out[o][k] = problem.add_landmark_point(o, (point - pose[:, 3]) @ pose[:, :3])
     return out
 
 

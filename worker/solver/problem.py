@@ -66,6 +66,13 @@ class Problem:
         self.workspace = self._workspace()
         self._setup_hand(inputs)
 
+    def add_landmark_point(self, index: int, point: np.ndarray) -> int:
+        """Append a landmark's surface point (3,) in object `index`'s frame, metres, as an extra
+        vertex of that object (no face uses it); its vertex id."""
+        self.object_vertices[index] = np.vstack([self.object_vertices[index], point[None]])
+        self.object_tensors[index] = self.tensor(self.object_vertices[index])
+        return len(self.object_vertices[index]) - 1
+
     def tensor(self, array) -> torch.Tensor:
         return torch.as_tensor(np.asarray(array, dtype=np.float64), device=self.device)
 

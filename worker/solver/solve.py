@@ -57,6 +57,8 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
         hand_pose_m=pose, hand_joints=joints, object_poses=state.object_poses.copy(),
         labelled=labelled, reasons=list(problem.reasons), kpt_error_px=errors,
         depth_rms_mm=depth_rms, landmark_vertices=[list(v) for v in state.landmarks],
+        landmark_points=[[problem.object_vertices[o][v].tolist() if v >= 0 else None
+                          for v in ids] for o, ids in enumerate(state.landmarks)],
         timings=timings,
         betas=None if problem.subject is None else problem.betas.copy(),
         side=None if problem.hand is None else problem.hand.side)

@@ -135,8 +135,10 @@ class SolveResult:
     object-to-world. labelled: (F,) bool. reasons: per frame None or why it is unlabelled.
     kpt_error_px: (F, V, 21) reprojection error of each labelled visible joint, NaN elsewhere.
     depth_rms_mm: (F,) RMS distance of the cropped depth points to the meshes (NaN: none).
-    landmark_vertices: per object, per landmark the mesh vertex id (-1 if it could not be
-    mapped). timings: seconds per stage.
+    landmark_vertices: per object, per landmark the vertex id it was mapped to (-1 if it could
+    not be): ids from the mesh's vertex count on are surface points added for landmarks.
+    landmark_points: per object, per landmark that surface point (3,) in the object's frame,
+    metres (None if unmapped). timings: seconds per stage.
     """
 
     hand_pose_m: np.ndarray
@@ -148,6 +150,7 @@ class SolveResult:
     depth_rms_mm: np.ndarray
     landmark_vertices: list[list[int]]
     timings: dict[str, float]
+    landmark_points: list[list[list[float] | None]] = field(default_factory=list)
     betas: np.ndarray | None = None
     side: str | None = None
 
@@ -167,5 +170,6 @@ class SolveResult:
             "kpt_error_px_median": stat(np.median(kpt)) if kpt.size else None,
             "depth_rms_mm_mean": stat(depth.mean()) if depth.size else None,
             "landmark_vertices": [list(map(int, v)) for v in self.landmark_vertices],
+            "landmark_points": self.landmark_points,
             "timings": {k: float(v) for k, v in self.timings.items()},
         }
