@@ -31,7 +31,7 @@ from backend.captures.layout import read_sequence  # noqa: E402
 from worker.geometry.cameras import CameraModel, intrinsics_matrix  # noqa: E402
 from worker.geometry.mesh_io import read_mesh  # noqa: E402
 from worker.hand.joints import JOINT_NAMES, TIP_NAMES  # noqa: E402
-from worker.synth.annotators import hand_visibility  # noqa: E402
+from worker.synth.annotators import hand_visibility, mesh_landmarks  # noqa: E402
 from worker.synth.capture import generate_capture  # noqa: E402
 
 SEED = 7
@@ -44,35 +44,6 @@ def capture_dir(work: Path) -> Path:
     if not out.is_dir():
         generate_capture(out, seed=SEED)
     return out
-
-
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    tri = vertices[faces]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    out = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(out, faces[:, k], normal)
-    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
-
-
-def _vertex_visible(cam: CameraModel, seg: np.ndarray, value: int, points: np.ndarray,
-                    normals: np.ndarray) -> np.ndarray:
-    """(N,) whether world points with world normals show in this view: facing the camera, in
-    the image, and most of the segmentation's 3x3 neighbourhood is this object (a box corner
-    is a vertex on the silhouette, so all nine cannot be asked for)."""
-    centre = cam.T_cam_to_world[:, 3]
-    facing = np.einsum("ni,ni->n", normals, centre - points) > 0
-    px = np.rint(cam.project(points)).astype(int)
-    inside = (px[:, 0] >= 1) & (px[:, 0] < cam.width - 1) & (px[:, 1] >= 1) & \
-        (px[:, 1] < cam.height - 1)
-    count = np.zeros(len(points), int)
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            x = np.clip(px[:, 0] + dx, 0, cam.width - 1)
-            y = np.clip(px[:, 1] + dy, 0, cam.height - 1)
-            count += seg[y, x] == value
-    return facing & inside & (count >= 3) & (seg[np.clip(px[:, 1], 0, cam.height - 1),
-                                                 np.clip(px[:, 0], 0, cam.width - 1)] == value)
 
 
 def build_cache(capture: Path, cache: Path) -> None:
@@ -124,20 +95,12 @@ def build_cache(capture: Path, cache: Path) -> None:
 
 def _pick_landmarks(cams, segs, value, vertices, faces, poses, rng):
     """Per view, 2 vertices visible where the object first shows; (V, 2) ids, (V, 2, F) vis."""
-    normals = _vertex_normals(vertices, faces)
     views, frames = segs.shape[:2]
     ids = np.full((views, 2), -1)
     vis = np.zeros((views, 2, frames), bool)
     for v, cam in enumerate(cams):
-        seen = None
-        for f in range(frames):
-            world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
-            ok = _vertex_visible(cam, segs[v, f], value, world, normals @ poses[f, :, :3].T)
-            if seen is None and ok.sum() >= 2:
-                ids[v] = rng.choice(np.flatnonzero(ok), 2, replace=False)
-                seen = f
-            if seen is not None:
-                vis[v, :, f] = ok[ids[v]]
+        _, seen, ids[v] = mesh_landmarks(cam, segs[v], value, vertices, faces, poses, rng)
+        vis[v] = seen.T
     return ids, vis
 
 

@@ -17,10 +17,12 @@ from urllib.parse import parse_qs, urlsplit
 
 import httpx
 import numpy as np
-import yaml
 
 from backend.errors import DexlabelError
-from worker.synth.annotators import annotate, draw_profiles, hand_visibility, object_landmarks
+from backend.captures.layout import read_sequence
+from worker.geometry.cameras import CameraModel, intrinsics_matrix
+from worker.geometry.mesh_io import read_mesh
+from worker.synth.annotators import annotate, draw_profiles, hand_visibility, mesh_landmarks
 
 WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
 WORKER_PASSWORD = "simulated worker {index:03d}"
@@ -78,17 +80,31 @@ class CaptureTruth:
             self._views[serial] = (np.stack(joints), np.stack(segs))
         return self._views[serial]
 
-    def object_value(self, serial: str, target_key: str) -> int:
-        """The seg value (YCB id) of the task's object, from the sequence's meta.yml."""
-        meta = yaml.safe_load((self._folder(serial).parent / "meta.yml").read_text())
-        return int(meta["ycb_ids"][int(target_key.split(":")[1])])
+    def object_points(self, serial: str, index: int, frames: int, seg: np.ndarray,
+                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Two landmarks on object ``index`` in one view: mesh vertices visible where it first
+        shows, followed through its true poses; (F, 2, 2) px and (F, 2) visibility."""
+        folder = self._folder(serial)
+        plan = read_sequence(folder.parent)
+        cam = next(c for c in plan.cameras if c.serial == serial)
+        # The view's own camera frame as the world: the labels' pose_y are object-to-camera.
+        camera = CameraModel(intrinsics_matrix(cam.fx, cam.fy, cam.ppx, cam.ppy),
+                             np.asarray(cam.distortion), np.eye(3, 4), cam.width, cam.height)
+        mesh = read_mesh(plan.objects[index].mesh_path)
+        poses = np.stack([np.load(folder / f"labels_{f:06d}.npz")["pose_y"][index]
+                          for f in range(frames)])
+        xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id),
+                                        np.asarray(mesh.vertices, float),
+                                        np.asarray(mesh.faces, int), poses, rng)
+        return xy, visible
 
     def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """The task's true points (F, P, 2) px and visibility (F, P)."""
         joint_2d, seg = self.view(task["serial"], task["num_frames"])
         if task["kind"] == "hand":
             return joint_2d, hand_visibility(joint_2d, seg)
-        return object_landmarks(seg, self.object_value(task["serial"], task["target_key"]), rng)
+        return self.object_points(task["serial"], int(task["target_key"].split(":")[1]),
+                                  task["num_frames"], seg, rng)
 
 
 class WorkerClient:

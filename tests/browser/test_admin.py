@@ -1,10 +1,13 @@
 """The admins' review page in a real browser: QC reports of real submitted work, a report's
-per-joint chart, worker quality, the job table, costs, and a decision the API refuses.
+charts, an admin's approval that pays, the API's refusals shown, worker quality, the job table,
+costs and a solve run's overlays.
 
-Work comes in as the annotation page sends it: direct assignment links for three workers (two
-careful ones on the two views of the hand, a spammer on the first view), tracks saved and
-submitted with the assignment token; the submissions queue the hand's QC job, which a queue
-consumer (``dexlabel worker`` on the server's database and queue) runs.
+Work comes in two ways. Direct assignment links (no marketplace) for three workers, two careful
+ones on the two views of the hand and a spammer, with tracks saved and submitted as the
+annotation page does. Then the sequence's tasks published on the built-in marketplace and
+worked through the portal by simulated careful workers (backend.crowd.simulate). Submissions
+queue confirm and QC jobs, which a queue consumer (``dexlabel worker`` on the live server's
+database and queue) runs.
 """
 
 from __future__ import annotations
@@ -33,16 +36,21 @@ QC_TIMEOUT_S = 120.0
 CROWD = (("ADMIN-W1", 0, "careful"), ("ADMIN-W2", 1, "careful"), ("ADMIN-W3", 0, "spammer"))
 # One simulated marketplace worker per task of the capture (a hand and an object in 2 views).
 MARKET_WORKERS = 4
-REWARD, FEE = 0.40, 0.08
+REWARD, FEE = 0.40, 0.08  # the HITs' reward and MTurk's 20% fee on it (dollars)
 # The overlay <img>'s picture: [SHA-256 of its blob, natural width, height], or null.
 SHOWN_PNG = """async () => {
   const img = document.getElementById("overlay-image");
   if (!img.src.startsWith("blob:") || !img.complete || !img.naturalWidth) return null;
-  const bytes = await (await fetch(img.src)).arrayBuffer();
+  let bytes;
+  try {  // the page revokes a picture's URL when the next one arrives
+    bytes = await (await fetch(img.src)).arrayBuffer();
+  } catch {
+    return null;
+  }
   const digest = new Uint8Array(await crypto.subtle.digest("SHA-256", bytes));
   const hex = Array.from(digest, (b) => b.toString(16).padStart(2, "0")).join("");
   return [hex, img.naturalWidth, img.naturalHeight];
-}"""  # the HITs' reward and MTurk's 20% fee on it (dollars)
+}"""
 
 
 def _server_env(server: LiveServer) -> dict[str, str]:
@@ -60,7 +68,7 @@ def _server_env(server: LiveServer) -> dict[str, str]:
 
 @pytest.fixture(scope="module")
 def queue_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
-    """A queue consumer on the live server's database and queue, for the QC job."""
+    """A queue consumer on the live server's database and queue (confirm, QC, solve jobs)."""
     log = output_dir / "admin-worker.log"
     with log.open("w") as log_file:
         proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
@@ -273,7 +281,7 @@ def market_work(live_server: LiveServer, qc_work: dict[str, int]) -> set[str]:
     server = live_server
     server.admin("POST", "/api/crowd/publish", {
         "sequence_id": server.sequence_id, "max_assignments": 1, "min_approval_rate": None,
-        "reward": "0.40"})
+        "reward": f"{REWARD:.2f}"})
     outcomes = simulate(server.base, server.capture, MARKET_WORKERS, "careful", ADMIN_EMAIL,
                         ADMIN_PASSWORD, seed=3)
     workers = {o.worker_id for o in outcomes if o.status == "submitted"}
@@ -397,7 +405,7 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
         width, height = _png_size(png.content)
         # The picture shown is the API's PNG of this frame and view, byte for byte.
         want = [hashlib.sha256(png.content).hexdigest(), width, height]
-        deadline = time.monotonic() + 15
+        deadline = time.monotonic() + 30
         while page.evaluate(SHOWN_PNG) != want and time.monotonic() < deadline:
             time.sleep(0.1)
         assert page.evaluate(SHOWN_PNG) == want

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from worker.geometry.cameras import CameraModel, intrinsics_matrix
 from worker.synth.annotators import (
     LITTLE, PROFILES, RING, swap_window, annotate, draw_profiles, hand_visibility,
-    object_landmarks,
+    mesh_landmarks,
 )
 
 FRAMES, WIDTH, HEIGHT = 72, 640, 480
@@ -126,19 +127,43 @@ def test_visibility_hand_and_background_visible_object_covered() -> None:
         hand_visibility(joints[0], seg)
 
 
-def test_object_landmarks_follow_the_silhouette() -> None:
-    seg = np.zeros((3, 60, 80), dtype=np.uint8)
-    for f in range(3):
-        seg[f, 10:30, 10 + 5 * f:30 + 5 * f] = 4
-    points, visible = object_landmarks(seg, 4, np.random.default_rng(0))
-    assert points.shape == (3, 2, 2) and visible.all()
-    assert np.allclose(points[2] - points[0], [[10.0, 0.0], [10.0, 0.0]])
-    assert seg[0, int(points[0, 0, 1]), int(points[0, 0, 0])] == 4
+def _box() -> tuple[np.ndarray, np.ndarray]:
+    """A 10 cm cube's 8 corners and 12 triangles, outward facing, object frame in metres."""
+    v = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.05, 0.05) for z in (-0.05, 0.05)])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return v, np.array(faces)
+
+
+def _cube_view(frames: int) -> tuple[CameraModel, np.ndarray, np.ndarray]:
+    """A camera, the cube's poses sliding 1 cm per frame, and its (F, H, W) silhouette."""
+    camera = CameraModel(intrinsics_matrix(300.0, 300.0, 80.0, 60.0), None, np.eye(3, 4), 160, 120)
+    poses = np.stack([np.hstack([np.eye(3), [[0.01 * f], [0.0], [0.6]]]) for f in range(frames)])
+    v, _ = _box()
+    seg = np.zeros((frames, 120, 160), np.uint8)
+    for f in range(frames):
+        px = camera.project(v + poses[f, :, 3])
+        lo, hi = np.floor(px.min(0)).astype(int), np.ceil(px.max(0)).astype(int)
+        seg[f, lo[1]:hi[1] + 1, lo[0]:hi[0] + 1] = 4
+    return camera, poses, seg
+
+
+def test_mesh_landmarks_are_visible_vertices_carried_by_the_true_motion() -> None:
+    camera, poses, seg = _cube_view(4)
+    v, faces = _box()
+    xy, visible, ids = mesh_landmarks(camera, seg, 4, v, faces, poses, np.random.default_rng(0))
+    assert xy.shape == (4, 2, 2) and visible.all() and len(set(ids.tolist())) == 2
+    assert (v[ids][:, 2] < 0).all()  # corners on the face towards the camera
+    truth = np.stack([camera.project(v[ids] + poses[f, :, 3]) for f in range(4)])
+    assert np.allclose(xy, truth)
 
 
 def test_object_never_shown_is_marked_occluded_without_positions() -> None:
-    seg = np.zeros((5, 30, 40), dtype=np.uint8)
-    points, visible = object_landmarks(seg, 9, np.random.default_rng(0))
-    assert np.isnan(points).all() and not visible.any()
-    work = annotate(points, visible, (40, 30), "careful", np.random.default_rng(0))
+    camera, poses, _ = _cube_view(5)
+    v, faces = _box()
+    seg = np.zeros((5, 120, 160), np.uint8)
+    points, visible, ids = mesh_landmarks(camera, seg, 9, v, faces, poses,
+                                          np.random.default_rng(0))
+    assert np.isnan(points).all() and not visible.any() and (ids == -1).all()
+    work = annotate(points, visible, (160, 120), "careful", np.random.default_rng(0))
     assert work.tracks[0] == [[0, None, None, 0], [4, None, None, 0]]

@@ -28,6 +28,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from worker.dataset import HAND_SEG_VALUE
+from worker.geometry.cameras import CameraModel
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder"]
 PROFILES: tuple[str, ...] = get_args(Profile)
@@ -99,34 +100,60 @@ def hand_visibility(joint_2d: np.ndarray, seg: np.ndarray) -> np.ndarray:
     return on_hand | on_background
 
 
-def object_landmarks(seg: np.ndarray, value: int,
-                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Two landmarks on the object labelled ``value``, followed by its silhouette's centroid.
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(N, 3) unit normals of a mesh's vertices (area-weighted face normals summed)."""
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    out = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(out, faces[:, k], normal)
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
 
-    Two pixels of the object's mask in the first frame where it shows are moved, frame by frame,
-    by the shift of the mask's centroid (a cheap stand-in for the object's motion); where the
-    object does not show, the last centroid is kept. Returns (F, 2, 2) px and (F, 2) visibility
-    (the landmark's pixel still on the object). An object that never shows in this view gets
-    NaN positions, never visible (a person marks it occluded throughout).
+
+def visible_vertices(camera: CameraModel, seg: np.ndarray, value: int, points: np.ndarray,
+                     normals: np.ndarray) -> np.ndarray:
+    """(N,) whether points (N, 3) with normals (N, 3), in the camera's world frame, show in the
+    view: facing the camera, inside the image, on a pixel labelled ``value`` with at least a
+    third of its 3x3 neighbourhood too (a box corner sits on the silhouette)."""
+    centre = camera.T_cam_to_world[:, 3]
+    facing = np.einsum("ni,ni->n", normals, centre - points) > 0
+    px = np.rint(camera.project(points)).astype(int)
+    inside = ((px[:, 0] >= 1) & (px[:, 0] < camera.width - 1) & (px[:, 1] >= 1)
+              & (px[:, 1] < camera.height - 1))
+    xs = np.clip(px[:, 0], 0, camera.width - 1)
+    ys = np.clip(px[:, 1], 0, camera.height - 1)
+    count = np.zeros(len(points), int)
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            count += seg[np.clip(ys + dy, 0, camera.height - 1),
+                         np.clip(xs + dx, 0, camera.width - 1)] == value
+    return facing & inside & (count >= 3) & (seg[ys, xs] == value)
+
+
+def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
+                   faces: np.ndarray, poses: np.ndarray, rng: np.random.Generator,
+                   count: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` landmarks a person would pick on an object in one view: mesh vertices visible
+    where the object first shows, followed through the object's true motion.
+
+    seg: (F, H, W) labels; vertices (N, 3) object frame, metres; poses (F, 3, 4) object to the
+    camera's world frame. Returns (F, count, 2) px (NaN before the object shows), (F, count)
+    visibility, and the vertex ids (count,) (-1 when the object never shows enough).
     """
     frames = seg.shape[0]
-    centroids = np.full((frames, 2), np.nan)
+    normals = vertex_normals(vertices, faces)
+    ids = np.full(count, -1)
+    xy = np.full((frames, count, 2), np.nan)
+    visible = np.zeros((frames, count), dtype=bool)
     for f in range(frames):
-        ys, xs = np.nonzero(seg[f] == value)
-        if xs.size:
-            centroids[f] = xs.mean(), ys.mean()
-    shown = np.flatnonzero(~np.isnan(centroids[:, 0]))
-    if shown.size == 0:
-        return np.full((frames, 2, 2), np.nan), np.zeros((frames, 2), dtype=bool)
-    first = int(shown[0])
-    ys, xs = np.nonzero(seg[first] == value)
-    picks = rng.choice(xs.size, size=2, replace=xs.size < 2)
-    start = np.stack([xs[picks], ys[picks]], axis=1).astype(np.float64)
-    for f in range(frames):  # carry the last known centroid over frames without the object
-        if np.isnan(centroids[f, 0]):
-            centroids[f] = centroids[f - 1] if f > 0 else centroids[first]
-    points = start[None] + (centroids - centroids[first])[:, None, :]
-    return points, _labelled_near(seg, points, value)
+        world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
+        ok = visible_vertices(camera, seg[f], value, world, normals @ poses[f, :, :3].T)
+        if ids[0] < 0 and ok.sum() >= count:
+            ids = rng.choice(np.flatnonzero(ok), count, replace=False)
+        if ids[0] >= 0:
+            xy[f] = camera.project(world[ids])
+            visible[f] = ok[ids]
+    return xy, visible, ids
 
 
 def swap_window(frames: int) -> tuple[int, int]:
