@@ -89,9 +89,11 @@ def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str
     assignment.status = _DONE[kind]
     submission.market_status = _MARKET_STATUS[kind]
     session.flush()
-    # The target's QC sees the decision (and, once every task is accepted, queues the solve).
-    from backend.review.service import request_qc
+    # The decision shows on the assignment's QC report at once, and the target's QC runs again
+    # (once every task is accepted, it queues the solve).
+    from backend.review.service import record_decision, request_qc
 
+    record_decision(session, assignment.id, _DONE[kind])
     request_qc(session, assignment.task)
     return _payment_read(row)
 

@@ -159,6 +159,14 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     return counts
 
 
+def record_decision(session: Session, assignment_id: int, decision: str) -> None:
+    """An approval or rejection made outside the QC job (by an admin) on the assignment's
+    report, if it has one not acted on yet."""
+    row = session.scalar(select(QCReport).where(QCReport.assignment_id == assignment_id))
+    if row is not None and row.action is None:
+        row.action, row.action_detail = decision, "decided by an admin"
+
+
 def get_report_or_raise(session: Session, assignment_id: int) -> QCReport:
     row = session.scalar(select(QCReport).where(QCReport.assignment_id == assignment_id))
     if row is None:

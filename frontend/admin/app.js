@@ -121,6 +121,9 @@ async function decide(kind) {
     say("A rejection needs feedback: tell the worker what was wrong.", "error");
     return;
   }
+  const buttons = [$("approve"), $("reject")].map((b) => /** @type {HTMLButtonElement} */ (b));
+  // One decision at a time: a second click while the first is on its way would only be refused.
+  for (const button of buttons) button.disabled = true;
   try {
     const payment = kind === "approve" ? await api.approve(assignmentId, feedback)
       : await api.reject(assignmentId, feedback);
@@ -132,6 +135,8 @@ async function decide(kind) {
   } catch (err) {
     if (err instanceof ApiError && err.status === 401) fail(err);
     else say(err instanceof Error ? err.message : String(err), "error");
+  } finally {
+    for (const button of buttons) button.disabled = false;
   }
 }
 

@@ -50,6 +50,8 @@ class LiveServer:
     sequence_id: int
     admin_token: str
     tasks: list[dict] = field(default_factory=list)
+    # The settings the server runs with (for a queue worker started beside it).
+    env: dict[str, str] = field(default_factory=dict)
 
     def admin(self, method: str, path: str, json: dict | None = None) -> dict | list:
         headers = {"Authorization": f"Bearer {self.admin_token}"}
@@ -149,7 +151,7 @@ def live_server(tmp_path_factory: pytest.TempPathFactory, output_dir: Path) -> I
             token = httpx.post(f"{base}/api/auth/token", timeout=30, json={
                 "email": ADMIN_EMAIL, "password": ADMIN_PASSWORD}).json()["access_token"]
             server = LiveServer(base=base, capture=capture, sequence_id=sequence_id,
-                                admin_token=token)
+                                admin_token=token, env=env)
             server.tasks = server.admin("POST", f"/api/sequences/{sequence_id}/tasks")
             yield server
         finally:

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
-from backend.crowd.simulate import CaptureTruth, simulate
+from backend.crowd.simulate import WORKER_PASSWORD, CaptureTruth, simulate
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
 from worker.synth.annotators import annotate
 
@@ -53,26 +53,13 @@ SHOWN_PNG = """async () => {
 }"""
 
 
-def _server_env(server: LiveServer) -> dict[str, str]:
-    """The settings the live server runs with (tests/browser/conftest.py lays out its root)."""
-    root = server.capture.parent
-    return {
-        "DEXLABEL_VAR_DIR": str(root / "var"),
-        "DEXLABEL_DATABASE_URL": f"sqlite:///{root / 'browser.db'}",
-        "DEXLABEL_STORAGE_URL": str(root / "storage"),
-        "DEXLABEL_ENV": "test",
-        "DEXLABEL_INPROCESS_WORKER": "false",
-        "DEXLABEL_PUBLIC_URL": server.base,
-    }
-
-
 @pytest.fixture(scope="module")
 def queue_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
     """A queue consumer on the live server's database and queue (confirm, QC, solve jobs)."""
     log = output_dir / "admin-worker.log"
     with log.open("w") as log_file:
         proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
-                                env={**os.environ, **_server_env(live_server)},
+                                env={**os.environ, **live_server.env},
                                 stdout=log_file, stderr=subprocess.STDOUT)
         try:
             yield
@@ -275,18 +262,19 @@ def test_an_expired_session_shows_the_sign_in_form_again(
 
 
 @pytest.fixture(scope="module")
-def market_work(live_server: LiveServer, qc_work: dict[str, int]) -> set[str]:
+def market_work(live_server: LiveServer, qc_work: dict[str, int]) -> dict[str, str]:
     """The sequence's tasks published on the built-in marketplace and worked by simulated
-    careful workers through the portal; their submissions confirmed and QC-scored."""
+    careful workers through the portal; their submissions confirmed and QC-scored.
+    Marketplace worker id -> the worker's portal email."""
     server = live_server
     server.admin("POST", "/api/crowd/publish", {
         "sequence_id": server.sequence_id, "max_assignments": 1, "min_approval_rate": None,
         "reward": f"{REWARD:.2f}"})
     outcomes = simulate(server.base, server.capture, MARKET_WORKERS, "careful", ADMIN_EMAIL,
                         ADMIN_PASSWORD, seed=3)
-    workers = {o.worker_id for o in outcomes if o.status == "submitted"}
+    workers = {o.worker_id: o.email for o in outcomes if o.status == "submitted"}
     assert len(workers) == MARKET_WORKERS, outcomes
-    _wait_reports(server, workers)
+    _wait_reports(server, set(workers))
     return workers
 
 
@@ -311,7 +299,7 @@ def _api_approve(server: LiveServer, assignment_id: int) -> httpx.Response:
 
 
 def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
-    admin_page: Page, live_server: LiveServer, market_work: set[str], output_dir: Path
+    admin_page: Page, live_server: LiveServer, market_work: dict[str, str], output_dir: Path
 ) -> None:
     page, server = admin_page, live_server
     reports = server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}")
@@ -332,7 +320,8 @@ def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
     expect(page.locator("#joint-chart rect").first).to_have_attribute("data-label", "landmark_1")
     feedback = page.locator("#decision-feedback")
     expect(feedback).to_have_value(report["feedback"])
-    feedback.fill("Checked by hand: both landmarks sit on the object.")
+    note = "Checked by hand: both landmarks sit on the object."
+    feedback.fill(note)
     page.locator("#approve").click()
     result = page.locator("#decision-result")
     expect(result).to_have_text(f"Approved assignment {aid}.")
@@ -349,6 +338,7 @@ def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
     assert float(total["committed"]) == pytest.approx(float(before["committed"]) - REWARD - FEE)
     line = next(w for w in after["by_worker"] if w["key"] == report["worker_id"])
     assert float(line["spent_rewards"]) == pytest.approx(REWARD)
+    assert _portal_feedback(server, market_work[report["worker_id"]]) == [note]
 
     # The page shows the API's refusal of a second decision, and the new spend.
     page.locator("#approve").click()
@@ -362,13 +352,53 @@ def test_admin_approves_marketplace_work_left_for_review_and_it_is_paid(
 
 
 
+
+def test_admin_rejects_marketplace_work_with_edited_feedback_and_nothing_is_spent(
+    admin_page: Page, live_server: LiveServer, market_work: dict[str, str]
+) -> None:
+    page, server = admin_page, live_server
+    decided = {p["key"] for p in server.admin("GET", "/api/crowd/costs")["by_worker"]
+               if float(p["spent"]) > 0}
+    reports = server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}")
+    report = next(r for r in reports if r["worker_id"] in set(market_work) - decided
+                  and not r["action"])
+    aid, before = report["assignment_id"], server.admin("GET", "/api/crowd/costs")["total"]
+    page.goto(f"{server.base}/admin/#/sequences/{server.sequence_id}/reports/{aid}")
+    expect(page.locator("#detail-title")).to_have_text(f"Assignment {aid}")
+    why = "The index tip drifts off the finger in the last frames; please recheck them."
+    page.locator("#decision-feedback").fill(why)
+    page.locator("#reject").click()
+    expect(page.locator("#decision-result")).to_have_text(f"Rejected assignment {aid}.")
+
+    again = httpx.post(f"{server.base}/api/crowd/assignments/{aid}/reject", json={"feedback": "x"},
+                       headers={"Authorization": f"Bearer {server.admin_token}"}, timeout=30)
+    assert again.status_code == 409 and again.json()["detail"] == \
+        f"assignment {aid} is already rejected"
+    total = server.admin("GET", "/api/crowd/costs")["total"]
+    assert total["spent"] == before["spent"]
+    assert float(total["committed"]) == pytest.approx(float(before["committed"]) - REWARD - FEE)
+    # The worker reads the admin's words in the portal.
+    assert _portal_feedback(server, market_work[report["worker_id"]]) == [why]
+
+def _portal_feedback(server: LiveServer, email: str) -> list[str | None]:
+    """The feedback on each of the worker's assignments, as the portal shows it."""
+    index = int(email.split("@")[0].rsplit("-", 1)[1])
+    login = httpx.post(f"{server.base}/api/portal/login", timeout=30, json={
+        "email": email, "password": WORKER_PASSWORD.format(index=index)})
+    assert login.status_code == 200, login.text
+    mine = httpx.get(f"{server.base}/api/portal/assignments", timeout=30,
+                     headers={"Authorization": f"Bearer {login.json()['access_token']}"})
+    assert mine.status_code == 200, mine.text
+    return [a["feedback"] for a in mine.json()["assignments"]]
+
+
 def _png_size(data: bytes) -> tuple[int, int]:
     """(width, height) from a PNG's IHDR chunk."""
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
 
 
-def _solved_run(server: LiveServer, market_work: set[str]) -> dict:
+def _solved_run(server: LiveServer, market_work: dict[str, str]) -> dict:
     """Every marketplace submission approved (admin decisions), then a finished solve run."""
     for report in server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}"):
         if report["worker_id"] in market_work:
@@ -383,7 +413,7 @@ def _solved_run(server: LiveServer, market_work: set[str]) -> dict:
 
 
 def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
-    admin_page: Page, live_server: LiveServer, market_work: set[str], output_dir: Path
+    admin_page: Page, live_server: LiveServer, market_work: dict[str, str], output_dir: Path
 ) -> None:
     page, server = admin_page, live_server
     run = _solved_run(server, market_work)
