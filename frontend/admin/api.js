@@ -3,67 +3,14 @@
  * sessionStorage, never in a cookie.
  */
 
-const TOKEN_KEY = "dexlabel.admin.token";
+import { ApiError, BearerClient } from "../common/bearer.js";
 
-export class ApiError extends Error {
-  /** @param {number} status @param {any} data */
-  constructor(status, data) {
-    const detail = data && data.detail;
-    super(typeof detail === "string" ? detail : `request failed (${status})`);
-    this.status = status;
-  }
-}
+export { ApiError };
 
-export class AdminApi {
+export class AdminApi extends BearerClient {
   /** @param {Storage} storage */
   constructor(storage) {
-    this.storage = storage;
-    /** @type {string|null} */
-    this.token = storage.getItem(TOKEN_KEY);
-  }
-
-  /** @param {string|null} token */
-  setToken(token) {
-    this.token = token;
-    if (token) this.storage.setItem(TOKEN_KEY, token);
-    else this.storage.removeItem(TOKEN_KEY);
-  }
-
-  /**
-   * @param {string} method
-   * @param {string} path   below /api
-   * @param {object} [body]
-   * @param {string} [accept]
-   */
-  async send(method, path, body, accept = "application/json") {
-    /** @type {Record<string, string>} */
-    const headers = { Accept: accept };
-    if (body !== undefined) headers["Content-Type"] = "application/json";
-    if (this.token) headers.Authorization = `Bearer ${this.token}`;
-    /** @type {RequestInit} */
-    const init = { method, headers, credentials: "omit", cache: "no-store" };
-    if (body !== undefined) init.body = JSON.stringify(body);
-    const resp = await fetch(`/api${path}`, init);
-    if (resp.status === 401 && this.token) this.setToken(null);
-    if (!resp.ok) {
-      let data = null;
-      try {
-        data = await resp.json();
-      } catch {
-        data = null;
-      }
-      throw new ApiError(resp.status, data);
-    }
-    return resp;
-  }
-
-  /**
-   * A JSON request; the reply's body, or an ApiError with the API's detail.
-   * @param {string} method @param {string} path @param {object} [body]
-   */
-  async request(method, path, body) {
-    const resp = await this.send(method, path, body);
-    return resp.json();
+    super(storage, "dexlabel.admin.token", "/api");
   }
 
   /** @param {string} email @param {string} password */

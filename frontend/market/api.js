@@ -3,55 +3,14 @@
  * kept in sessionStorage, never in a cookie.
  */
 
-const TOKEN_KEY = "dexlabel.portal.token";
+import { ApiError, BearerClient } from "../common/bearer.js";
 
-export class ApiError extends Error {
-  /** @param {number} status @param {any} data */
-  constructor(status, data) {
-    const detail = data && data.detail;
-    super(typeof detail === "string" ? detail : `request failed (${status})`);
-    this.status = status;
-  }
-}
+export { ApiError };
 
-export class PortalApi {
+export class PortalApi extends BearerClient {
   /** @param {Storage} storage */
   constructor(storage) {
-    this.storage = storage;
-    /** @type {string|null} */
-    this.token = storage.getItem(TOKEN_KEY);
-  }
-
-  /** @param {string|null} token */
-  setToken(token) {
-    this.token = token;
-    if (token) this.storage.setItem(TOKEN_KEY, token);
-    else this.storage.removeItem(TOKEN_KEY);
-  }
-
-  /**
-   * @param {string} method
-   * @param {string} path   below /api/portal
-   * @param {object} [body]
-   */
-  async request(method, path, body) {
-    /** @type {Record<string, string>} */
-    const headers = { Accept: "application/json" };
-    if (body !== undefined) headers["Content-Type"] = "application/json";
-    if (this.token) headers.Authorization = `Bearer ${this.token}`;
-    /** @type {RequestInit} */
-    const init = { method, headers, credentials: "omit", cache: "no-store" };
-    if (body !== undefined) init.body = JSON.stringify(body);
-    const resp = await fetch(`/api/portal${path}`, init);
-    let data = null;
-    try {
-      data = await resp.json();
-    } catch {
-      data = null;
-    }
-    if (resp.status === 401 && this.token) this.setToken(null);
-    if (!resp.ok) throw new ApiError(resp.status, data);
-    return data;
+    super(storage, "dexlabel.portal.token", "/api/portal");
   }
 
   /** @param {string} email @param {string} password */
