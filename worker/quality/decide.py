@@ -156,7 +156,8 @@ _ADVICE = {
     "occluded_on_surface": lambda v, t: (
         f"You marked points occluded in {_pct(v)} of the frames where the depth camera sees them "
         "on the surface; mark a point occluded only while something hides it."),
-    "completeness": lambda v, t: f"Only {_pct(v)} of the points have a position; place them all.",
+    "completeness": lambda v, t: (f"Only {_pct(v)} of the points are placed or marked "
+                                  "occluded; place every visible point."),
     "working_time_s": lambda v, t: f"You spent only {v:.0f} s on this task.",
     "jump_fraction": lambda v, t: ("Your landmarks jump between frames; keep each one on the "
                                    "same spot of the object all through the clip."),

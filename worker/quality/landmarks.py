@@ -17,6 +17,7 @@ from worker.geometry.cameras import CameraModel
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import (
     AssignmentQC,
+    completeness,
     error_issues,
     error_summary,
     num,
@@ -207,7 +208,7 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     acc = np.linalg.norm(xy[2:] - 2.0 * xy[1:-1] + xy[:-2], axis=-1)
     metrics["jitter_px"] = num(np.sqrt(np.nanmean(acc ** 2))) if np.isfinite(acc).any() else None
     metrics["static_fraction"] = static_fraction(xy)
-    metrics["completeness"] = num(np.isfinite(xy).all(axis=-1).mean())
+    metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())
     metrics["working_time_s"] = num(label.working_time_s, 1)
     per_joint, per_frame = per_point_and_frame(dist)

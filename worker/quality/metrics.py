@@ -123,6 +123,12 @@ def static_fraction(xy: np.ndarray, still_px: float = 0.25) -> float | None:
     return num(1.0 - moving[has].mean())
 
 
+def completeness(xy: np.ndarray, visible: np.ndarray) -> float | None:
+    """Share of (frame, point) entries that are placed or marked occluded: a point hidden all
+    clip long needs no position. xy: (F, P, 2) px, NaN = no position; visible: (F, P)."""
+    return num((np.isfinite(xy).all(axis=-1) | ~np.asarray(visible, bool)).mean())
+
+
 def track_metrics(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
                   working_time_s: float | None) -> dict[str, float | None]:
     """The label's own behaviour against a reference (consensus or gold) of the same view.
@@ -133,7 +139,7 @@ def track_metrics(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
     shown = np.where(visible[..., None], xy, np.nan)
     return {"jitter_px": jitter_px(shown, reference),
             "motion_ratio": motion_ratio(xy, reference),
-            "completeness": num(np.isfinite(xy).all(axis=-1).mean()),
+            "completeness": completeness(xy, visible),
             "visible_fraction": num(visible.mean()),
             "working_time_s": num(working_time_s, 1)}
 
