@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -19,6 +21,9 @@ def isolated_workdir(name: str, **settings: str) -> Path:
     URL set outside), so the benchmark and the server it starts measure a fresh embedded setup.
     """
     work = Path(tempfile.mkdtemp(prefix=f"dexlabel-bench-{name}-"))
+    # Removed when the benchmark exits (pass DEXLABEL_BENCH_KEEP=1 to inspect it afterwards).
+    if not os.environ.get("DEXLABEL_BENCH_KEEP"):
+        atexit.register(shutil.rmtree, work, ignore_errors=True)
     os.environ.update({"DEXLABEL_VAR_DIR": str(work / "var"), "DEXLABEL_ENV": "test",
                        "DEXLABEL_INPROCESS_WORKER": "false", **settings})
     for key in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_URL"):
