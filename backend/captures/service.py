@@ -191,6 +191,12 @@ def _frame_sources(
         yield index, color_key, None, len(data)
 
 
+def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
+    """A sequence's cameras in view order (the index every view refers to)."""
+    return list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
+                                .order_by(Camera.view_index, Camera.id)))
+
+
 def camera_model(camera: Camera) -> CameraModel:
     """A camera row as the worker packages take it (pixels, camera-to-world metres)."""
     K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])

@@ -60,7 +60,8 @@ class CaptureTruth:
 
     def __init__(self, root: Path) -> None:
         self.root = Path(root)
-        self._views: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._views: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._plans: dict[Path, Any] = {}
 
     def _folder(self, serial: str) -> Path:
         found = sorted(p for p in self.root.glob(f"*/*/{serial}") if p.is_dir())
@@ -68,43 +69,53 @@ class CaptureTruth:
             raise SimulationError(f"the capture at {self.root} has no view {serial!r}")
         return found[0]
 
-    def view(self, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
-        """(F, 21, 2) joint_2d px and (F, H, W) seg of one view."""
+    def _labels(self, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F, 21, 2) joint_2d px, (F, H, W) seg and (F, O, 3, 4) object-to-camera pose_y of
+        one view, each label file read once."""
         if serial not in self._views:
             folder = self._folder(serial)
-            joints, segs = [], []
+            joints, segs, poses = [], [], []
             for f in range(frames):
                 with np.load(folder / f"labels_{f:06d}.npz") as labels:
                     joints.append(labels["joint_2d"][0].astype(np.float64))
                     segs.append(labels["seg"])
-            self._views[serial] = (np.stack(joints), np.stack(segs))
+                    poses.append(labels["pose_y"].astype(np.float64))
+            self._views[serial] = (np.stack(joints), np.stack(segs), np.stack(poses))
         return self._views[serial]
 
-    def object_points(self, serial: str, index: int, frames: int, seg: np.ndarray,
+    def view(self, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 21, 2) joint_2d px and (F, H, W) seg of one view."""
+        joint_2d, seg, _ = self._labels(serial, frames)
+        return joint_2d, seg
+
+    def _plan(self, folder: Path):  # -> backend.captures.layout.SequencePlan
+        if folder not in self._plans:
+            self._plans[folder] = read_sequence(folder)
+        return self._plans[folder]
+
+    def object_points(self, serial: str, index: int, frames: int,
                       rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Two landmarks on object ``index`` in one view: mesh vertices visible where it first
         shows, followed through its true poses; (F, 2, 2) px and (F, 2) visibility."""
-        folder = self._folder(serial)
-        plan = read_sequence(folder.parent)
+        plan = self._plan(self._folder(serial).parent)
         cam = next(c for c in plan.cameras if c.serial == serial)
         # The view's own camera frame as the world: the labels' pose_y are object-to-camera.
         camera = CameraModel(intrinsics_matrix(cam.fx, cam.fy, cam.ppx, cam.ppy),
                              np.asarray(cam.distortion), np.eye(3, 4), cam.width, cam.height)
         mesh = read_mesh(plan.objects[index].mesh_path)
-        poses = np.stack([np.load(folder / f"labels_{f:06d}.npz")["pose_y"][index]
-                          for f in range(frames)])
+        _, seg, poses = self._labels(serial, frames)
         xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id),
                                         np.asarray(mesh.vertices, float),
-                                        np.asarray(mesh.faces, int), poses, rng)
+                                        np.asarray(mesh.faces, int), poses[:, index], rng)
         return xy, visible
 
     def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """The task's true points (F, P, 2) px and visibility (F, P)."""
-        joint_2d, seg = self.view(task["serial"], task["num_frames"])
         if task["kind"] == "hand":
+            joint_2d, seg = self.view(task["serial"], task["num_frames"])
             return joint_2d, hand_visibility(joint_2d, seg)
         return self.object_points(task["serial"], int(task["target_key"].split(":")[1]),
-                                  task["num_frames"], seg, rng)
+                                  task["num_frames"], rng)
 
 
 class WorkerClient:

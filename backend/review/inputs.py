@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
-from backend.captures.service import camera_model
+from backend.captures.service import camera_model, sequence_cameras
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracks import dense_points
@@ -45,6 +45,7 @@ class TargetInputs:
     kind: str
     num_frames: int
     cameras: list[CameraModel]
+    camera_rows: list[Camera]
     # view index (into cameras) -> camera row id, serial
     serials: list[str]
     labels: list = field(default_factory=list)  # worker.quality.consensus.ViewLabels
@@ -67,15 +68,15 @@ def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: 
 def target_inputs(session: Session, sequence_id: int, target_key: str) -> TargetInputs:
     """Cameras of the sequence and the scored assignments of every task of one target."""
     sequence = session.get_one(Sequence, sequence_id)
-    cameras = list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
-                                   .order_by(Camera.view_index, Camera.id)))
+    cameras = sequence_cameras(session, sequence_id)
     view_of = {camera.id: i for i, camera in enumerate(cameras)}
     tasks = list(session.scalars(select(Task).where(
         Task.sequence_id == sequence_id, Task.target_key == target_key).order_by(Task.id)))
     if not tasks:
         raise ValueError(f"sequence {sequence_id} has no tasks for target {target_key!r}")
     out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
-                       num_frames=sequence.num_frames, cameras=[camera_model(c) for c in cameras],
+                       num_frames=sequence.num_frames, camera_rows=cameras,
+                       cameras=[camera_model(c) for c in cameras],
                        serials=[c.serial for c in cameras], tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
@@ -131,10 +132,10 @@ class DepthStack:
         return out.copy()
 
 
-def depth_maps(session: Session, sequence_id: int, views: set[int]) -> dict[int, DepthStack]:
-    """The depth maps of each listed view that has depth, as lazily read stacks."""
-    cameras = list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
-                                   .order_by(Camera.view_index, Camera.id)))
+def depth_maps(session: Session, cameras: list[Camera], views: set[int]
+               ) -> dict[int, DepthStack]:
+    """The depth maps of each listed view (index into ``cameras``) that has depth, as lazily
+    read stacks."""
     out: dict[int, DepthStack] = {}
     for view, camera in enumerate(cameras):
         if view not in views or not camera.has_depth:

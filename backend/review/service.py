@@ -83,7 +83,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
     provisional = False
     if inputs.kind == "hand" and crowd:
         started = time.perf_counter()
-        depth = depth_maps(session, inputs.sequence_id, {lab.view for lab in crowd})
+        depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
         timings["read_depth_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
         report = score_hand(inputs.cameras, crowd, depth=depth)

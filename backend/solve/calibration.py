@@ -12,13 +12,12 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session
 
-from backend.captures.service import camera_model, get_sequence_or_raise
+from backend.captures.service import camera_model, get_sequence_or_raise, sequence_cameras
 from backend.errors import Conflict, NotFound
 from backend.solve.inputs import (
     approved_labels,
     hand_model_for,
     hand_target,
-    sequence_cameras,
 )
 from backend.solve.service import SolveNotReady
 from worker.geometry.cameras import CameraModel

@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
-from backend.captures.service import camera_model
+from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
 from backend.storage import Storage, get_storage
 from worker.geometry.mesh_io import Mesh, read_mesh
@@ -29,11 +29,6 @@ from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
 from worker.tracks import dense_points
 
 ACCEPTED = "approved"
-
-
-def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
-    return list(session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)
-                                .order_by(Camera.view_index, Camera.id)))
 
 
 def dense_labels(assignment: Assignment, num_frames: int,

@@ -22,20 +22,13 @@ from worker.solver.lm import jacobian, levenberg_marquardt
 from worker.solver.mesh_query import AABBTree, closest_on_triangles
 from worker.solver.projection import Rig
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 RNG_SEED = 3
 
 
 def t64(a) -> torch.Tensor:
     return torch.as_tensor(np.asarray(a, dtype=np.float64))
-
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Small tensors: one intra-op thread avoids oversubscribing a shared machine."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 @pytest.fixture(scope="module")

@@ -27,18 +27,11 @@ from worker.solver import (
     solve,
 )
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 FRAMES = 3
 BETAS = np.linspace(-0.5, 0.5, 10)
 BOX_POSE = pose([0.2, 0.1, -0.3], [0.09, 0.06, -0.02])
-
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Small tensors: one intra-op thread avoids oversubscribing a shared machine."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def _rotation_deg(a: np.ndarray, b: np.ndarray) -> float:

@@ -200,9 +200,9 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["motion_ratio"] = _mask_motion_ratio(xy, masks)
     jump, typical = jumps(xy, motion.step if motion is not None else None)
     metrics["moved_with_object"] = moved_with_object(xy, motion) if motion is not None else None
-    steps = np.isfinite(np.linalg.norm(np.diff(xy, axis=0), axis=-1))
-    metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    steps = np.isfinite(step)
+    metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
     metrics["max_step_ratio"] = num(np.nanmax(step) / max(typical, 0.5)) \
         if typical is not None else None
     acc = np.linalg.norm(xy[2:] - 2.0 * xy[1:-1] + xy[:-2], axis=-1)
