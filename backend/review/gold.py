@@ -13,7 +13,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.annotation.models import Assignment, Task
+from backend.annotation.models import Task
 from backend.annotation.service import get_assignment_or_raise, get_task_or_raise
 from backend.errors import Conflict, DexlabelError
 from backend.review.models import TrainingClip
@@ -72,14 +72,6 @@ def create_clip(session: Session, body: TrainingClipCreate) -> TrainingClip:
 
 def clip_of(session: Session, task_id: int) -> TrainingClip | None:
     return session.scalar(select(TrainingClip).where(TrainingClip.task_id == task_id))
-
-
-def training_task_ids(session: Session) -> set[int]:
-    return set(session.scalars(select(TrainingClip.task_id)))
-
-
-def assignment_is_training(session: Session, assignment: Assignment) -> bool:
-    return clip_of(session, assignment.task_id) is not None
 
 
 def truth_tracks(session: Session, task_id: int, capture: Path) -> list[list[list[Any]]]:

@@ -34,8 +34,6 @@ class ScoredAssignment:
     assignment_id: int
     task_id: int
     worker_id: str
-    status: str
-    view: int
 
 
 @dataclass
@@ -44,10 +42,9 @@ class TargetInputs:
     target_key: str
     kind: str
     num_frames: int
+    # One per view, in view order: as the worker packages take them, and the rows.
     cameras: list[CameraModel]
     camera_rows: list[Camera]
-    # view index (into cameras) -> camera row id, serial
-    serials: list[str]
     labels: list = field(default_factory=list)  # worker.quality.consensus.ViewLabels
     who: dict[str, ScoredAssignment] = field(default_factory=dict)
     tasks: dict[int, Task] = field(default_factory=dict)
@@ -77,7 +74,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
     out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
                        num_frames=sequence.num_frames, camera_rows=cameras,
                        cameras=[camera_model(c) for c in cameras],
-                       serials=[c.serial for c in cameras], tasks={t.id: t for t in tasks},
+                       tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
                                      Assignment.status.in_(SCORED_STATUSES))
@@ -87,7 +84,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
         view = view_of[task.camera_id]
         out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))
         out.who[str(assignment.id)] = ScoredAssignment(
-            assignment.id, task.id, assignment.worker_id, assignment.status, view)
+            assignment.id, task.id, assignment.worker_id)
     return out
 
 
