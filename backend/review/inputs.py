@@ -5,7 +5,6 @@ Arrays only leave this module; the scoring itself is pure (worker.quality).
 
 from __future__ import annotations
 
-import hashlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -102,7 +101,6 @@ class DepthStack:
     def __init__(self, keys: list[str], height: int, width: int) -> None:
         self.keys = keys
         self.shape = (len(keys), height, width)
-        self._last: tuple[bytes, np.ndarray] | None = None
 
     def _load(self, frame: int) -> np.ndarray:
         data = get_storage().get_bytes(self.keys[frame])
@@ -114,19 +112,13 @@ class DepthStack:
 
     def __getitem__(self, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
         frames, rows, cols = (np.asarray(i, dtype=np.int64) for i in index)
-        # Every assignment of a view asks for the same pixels (the consensus projected into
-        # the view): the last answer is kept so the maps are decoded once per view.
-        asked = hashlib.sha1(b"".join(a.tobytes() for a in (frames, rows, cols))).digest()
-        if self._last is not None and self._last[0] == asked:
-            return self._last[1].copy()
         out = np.zeros(frames.shape, dtype=np.uint16)
         needed = [int(f) for f in np.unique(frames)]
         with ThreadPoolExecutor(max_workers=DECODE_THREADS) as pool:
             for frame, depth in zip(needed, pool.map(self._load, needed)):
                 at = frames == frame
                 out[at] = depth[rows[at], cols[at]]
-        self._last = (asked, out)
-        return out.copy()
+        return out
 
 
 def depth_maps(session: Session, cameras: list[Camera], views: set[int]

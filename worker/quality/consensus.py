@@ -41,11 +41,13 @@ from worker.quality.metrics import (
     HIDDEN_MARGIN_M,
     SURFACE_MARGIN_M,
     AssignmentQC,
+    SurfaceCheck,
     depth_visibility,
     error_issues,
     error_summary,
     num,
     per_point_and_frame,
+    surface_check,
     track_metrics,
 )
 from worker.quality.swaps import find_swaps, swap_corrections, undo_swaps
@@ -260,10 +262,11 @@ def _fit(cameras: list[CameraModel], labels: list[ViewLabels], opts: HandOptions
 
 
 def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors: np.ndarray,
-            outlier: np.ndarray, other_views: np.ndarray, depth_mm: np.ndarray | None,
+            outlier: np.ndarray, other_views: np.ndarray, surface: SurfaceCheck | None,
             opts: HandOptions) -> AssignmentQC:
     """Metrics of one label. consensus (F, P, 3) world m; errors, outlier, other_views (F, P):
-    leave-one-out error px (NaN where not scored), not an inlier, other distinct views."""
+    leave-one-out error px (NaN where not scored), not an inlier, other distinct views;
+    surface: the view's depth map looked up at the consensus (None without depth)."""
     xy = np.asarray(lab.xy, dtype=np.float64)
     visible = np.asarray(lab.visible, bool)
     reference = camera.project(consensus)
@@ -274,9 +277,8 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors:
     metrics["outlier_fraction"] = num(outlier[scored].mean()) if scored.any() else None
     vis_metrics = dict.fromkeys(("visibility_disagreement", "occluded_on_surface",
                                  "visible_behind_surface"))
-    if depth_mm is not None:
-        vis_metrics = depth_visibility(camera, consensus, visible, depth_mm,
-                                       opts.surface_margin_m, opts.hidden_margin_m)
+    if surface is not None:
+        vis_metrics = depth_visibility(visible, surface)
     metrics.update(vis_metrics)
     metrics.update(track_metrics(xy, visible, judged_reference, lab.working_time_s))
     metrics["scored_fraction"] = num(scored.mean())
@@ -360,6 +362,10 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
     has_point = np.isfinite(fitted).all(axis=1)
     provisional = not has_point.any() or float(np.median(support[has_point])) < 3
     errors = np.linalg.norm(loo, axis=-1)
+    # Each view's depth map is looked up once, at the consensus every label of it is judged by.
+    surfaces = {view: surface_check(cameras[view], consensus, dm, opts.surface_margin_m,
+                                    opts.hidden_margin_m)
+                for view, dm in (depth or {}).items() if view in {lab.view for lab in labels}}
     assignments = {}
     for col, lab in enumerate(labels):
         own = distinct[:, np.searchsorted(view_ids, lab.view)]
@@ -371,7 +377,7 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
             err, outlier = _as_sent(lab, fit_labels[col], cameras[lab.view], consensus, err,
                                     outlier, opts.outlier_px)
         qc = _assess(lab, cameras[lab.view], consensus, err, outlier, other,
-                     None if depth is None else depth.get(lab.view), opts)
+                     surfaces.get(lab.view), opts)
         qc.provisional = qc.provisional or provisional
         assignments[lab.key] = qc
     report = HandReport(consensus=consensus, support=support.reshape(frames, points),

@@ -144,24 +144,27 @@ def track_metrics(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
             "working_time_s": num(working_time_s, 1)}
 
 
-def depth_visibility(camera: CameraModel, points_world: np.ndarray, visible: np.ndarray,
-                     depth_mm: np.ndarray, surface_margin_m: float = SURFACE_MARGIN_M,
-                     hidden_margin_m: float = HIDDEN_MARGIN_M) -> dict[str, float | None]:
-    """How often the label's visibility flags contradict the view's depth map.
+@dataclass(frozen=True)
+class SurfaceCheck:
+    """What one view's depth map says of the reference points, (F, P) bool each: on_surface
+    (the reading is at most the surface margin nearer than the point) and hidden (more than
+    the hidden margin nearer). Points in between, off-image or without a reading are neither."""
+
+    on_surface: np.ndarray
+    hidden: np.ndarray
+
+
+def surface_check(camera: CameraModel, points_world: np.ndarray, depth_mm: np.ndarray,
+                  surface_margin_m: float = SURFACE_MARGIN_M,
+                  hidden_margin_m: float = HIDDEN_MARGIN_M) -> SurfaceCheck:
+    """Look the reference points up in the view's depth map (once per view: every label of the
+    view is judged against the same points).
 
     Args:
         camera: the view. points_world: (F, P, 3) reference points, world metres (NaN: none).
-        visible: (F, P) the label's flags. depth_mm: (F, H, W) uint16 depth along the camera's
-            z axis, millimetres, 0 = no reading.
-        surface_margin_m: the point is on the visible surface where the depth reads at most this
-            much nearer than the point. hidden_margin_m: hidden where it reads more than this
-            much nearer. Points in between, off-image or without a reading are not judged.
-
-    Returns:
-        visibility_disagreement (contradicted fraction of the judged points),
-        occluded_on_surface (of the points on the surface, fraction marked occluded),
-        visible_behind_surface (of the hidden points, fraction marked visible); None where
-        nothing was judged.
+        depth_mm: (F, H, W) uint16 depth along the camera's z axis, millimetres, 0 = no
+            reading (any array-like that supports ``shape`` and (frames, rows, cols) indexing).
+        surface_margin_m, hidden_margin_m: see SurfaceCheck.
     """
     frames, height, width = depth_mm.shape
     if depth_mm.shape[0] != points_world.shape[0]:
@@ -177,8 +180,20 @@ def depth_visibility(camera: CameraModel, points_world: np.ndarray, visible: np.
                                col[inside].astype(int)] / 1000.0
     judged = inside & (reading > 0)
     nearer = z - reading
-    on_surface = judged & (nearer <= surface_margin_m)
-    hidden = judged & (nearer > hidden_margin_m)
+    return SurfaceCheck(on_surface=judged & (nearer <= surface_margin_m),
+                        hidden=judged & (nearer > hidden_margin_m))
+
+
+def depth_visibility(visible: np.ndarray, check: SurfaceCheck) -> dict[str, float | None]:
+    """How often the label's visibility flags (F, P) contradict the view's depth map.
+
+    Returns:
+        visibility_disagreement (contradicted fraction of the judged points),
+        occluded_on_surface (of the points on the surface, fraction marked occluded),
+        visible_behind_surface (of the hidden points, fraction marked visible); None where
+        nothing was judged.
+    """
+    on_surface, hidden = check.on_surface, check.hidden
     wrong = (on_surface & ~visible) | (hidden & visible)
     n_judged = on_surface.sum() + hidden.sum()
 
