@@ -177,15 +177,15 @@ def execute(key: str) -> None:
 
 
 def _after_failure(key: str, attempt: int, exc: Exception) -> None:
-    text = f"{type(exc).__name__}: {exc}"
-    detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+    # "ValueError: boom" (the exception's type and message, as a traceback's last line).
+    error = "".join(traceback.format_exception_only(type(exc), exc)).strip()
     with session_scope() as session:
         job = session.scalar(select(Job).where(Job.key == key))
         final = job is None or attempt >= job.max_attempts
     if final:
-        _finish(key, attempt, status="failed", error=detail or text, finished_at=_now())
+        _finish(key, attempt, status="failed", error=error, finished_at=_now())
         return
-    if _finish(key, attempt, status="retrying", error=detail or text):
+    if _finish(key, attempt, status="retrying", error=error):
         run_job.schedule((key,), delay=_retry_delay(attempt))
 
 
