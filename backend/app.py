@@ -16,7 +16,7 @@ from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.portal.router import router as portal_router
 from backend.solve.router import router as solve_router
-from backend.review.router import router as review_router
+from backend.quality.router import router as review_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 

@@ -381,7 +381,8 @@ def crowd_simulate(
     typer.echo(f"{done} of {len(outcomes)} simulated workers submitted")
 
 def _register_domain_commands() -> None:
-    from backend.review.cli import jobs_app, qc_app, training_app
+    from backend.jobs.cli import jobs_app
+    from backend.quality.cli import qc_app, training_app
     from backend.solve.cli import calibrate_hand_command, solve_command
 
     app.command("solve")(solve_command)

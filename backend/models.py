@@ -8,7 +8,7 @@ from backend.db import Base
 from backend.jobs.models import Job
 from backend.market import models as market
 from backend.portal import models as portal
-from backend.review.models import QCReport, TrainingClip
+from backend.quality.models import QCReport, TrainingClip
 from backend.solve.models import SolveRun
 
 __all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject",

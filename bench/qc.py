@@ -4,7 +4,7 @@ A default synthetic capture (8 views x 72 frames) is imported into a fresh embed
 its hand tasks get submissions from simulated workers (worker.synth.annotators): in each of
 ``--rounds`` rounds every view gets one careful worker and one worker of a bad profile
 (sloppy, swapper, lazy, spammer, occluder, taken in turn). The product's own QC job
-(backend.review.flows.run_qc, the code a queue worker runs) scores and decides them all.
+(backend.quality.flows.run_qc, the code a queue worker runs) scores and decides them all.
 good = careful; bad = every other profile; "flagged" = review or reject.
 
 Then the job size the issue names is timed alone: one hand target with one assignment per
@@ -96,7 +96,7 @@ def _submit(task: dict, profile: str, worker: str, truth, rng: np.random.Generat
 
 def _run_qc(sequence_id: int, target_key: str = "hand:0") -> tuple[float, dict[str, float]]:
     """Seconds of one whole QC job of a target, and its own breakdown."""
-    from backend.review.flows import run_qc
+    from backend.quality.flows import run_qc
 
     t0 = time.perf_counter()
     result = run_qc(sequence_id, target_key)
@@ -233,7 +233,7 @@ class _Tally:
 
     def add(self, sequence_id: int, profile_of: dict[int, str], frames: int) -> None:
         from backend.db import session_scope
-        from backend.review.models import QCReport
+        from backend.quality.models import QCReport
 
         with session_scope() as session:
             for report in session.query(QCReport).filter(

@@ -55,8 +55,8 @@ def reap_jobs() -> None:
 
 @job_handler("qc")
 def quality_check(args: dict) -> dict:
-    """Score one target of a sequence and act on the decisions (backend.review.flows)."""
-    from backend.review.flows import run_qc
+    """Score one target of a sequence and act on the decisions (backend.quality.flows)."""
+    from backend.quality.flows import run_qc
 
     return run_qc(int(args["sequence_id"]), str(args["target_key"]))
 

@@ -3,7 +3,7 @@
 ``publish`` works inside the caller's unit of work (the API request). ``publish_each`` is the
 CLI's run: one unit of work per task, so an interrupted run keeps every HIT it recorded and a
 re-run only has the rest to do. ``pay_bonus`` commits its ledger row before it pays and again
-after, so a bonus is never paid twice (review.py says how).
+after, so a bonus is never paid twice (decisions.py says how).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
-from backend.crowd import pricing, review
+from backend.crowd import pricing, decisions
 from backend.crowd.client import MTurkClient
 from backend.crowd.models import CrowdHit
 from backend.crowd.publish import check_assignments, publish_task, requirements
@@ -98,12 +98,12 @@ def pay_bonus(client: MTurkClient, assignment_id: int, amount_cents: int, reason
     commit is finished by the next one, which checks the marketplace before paying.
     """
     with session_scope() as session:
-        intent = review.begin_bonus(session, assignment_id, amount_cents, reason, key)
+        intent = decisions.begin_bonus(session, assignment_id, amount_cents, reason, key)
     if intent.payment is not None:
         return intent.payment
-    review.send_bonus(client, intent)
+    decisions.send_bonus(client, intent)
     with session_scope() as session:
-        return review.finish_bonus(session, intent.token)
+        return decisions.finish_bonus(session, intent.token)
 
 
 def _count(result: PublishResult, hit_id: str, outcome: str) -> None:

@@ -137,7 +137,7 @@ def _recovered_hit_id(exc: MarketplaceError) -> str:
 
 
 def _is_training_clip(session: Session, task_id: int) -> bool:
-    from backend.review.models import TrainingClip
+    from backend.quality.models import TrainingClip
 
     return session.scalar(select(TrainingClip.id).where(TrainingClip.task_id == task_id)) \
         is not None

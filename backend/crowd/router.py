@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Query
 
 from backend.accounts.deps import CurrentAdmin
 from backend.config import get_settings
-from backend.crowd import actions, flows, pricing, review
+from backend.crowd import actions, flows, pricing, decisions
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
 from backend.crowd.schemas import (
@@ -53,13 +53,13 @@ def sync_submissions(session: SessionDep, _: CurrentAdmin, client: MTurk) -> Syn
 @router.post("/assignments/{assignment_id}/approve", response_model=PaymentRead)
 def approve(assignment_id: int, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
             client: MTurk) -> PaymentRead:
-    return review.approve(session, client, assignment_id, body.feedback)
+    return decisions.approve(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/reject", response_model=PaymentRead)
 def reject(assignment_id: int, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
            client: MTurk) -> PaymentRead:
-    return review.reject(session, client, assignment_id, body.feedback)
+    return decisions.reject(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)

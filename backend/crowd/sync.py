@@ -31,7 +31,7 @@ def verified_submission(session: Session, assignment: Assignment) -> CrowdSubmis
 
 def _accept(session: Session, ours: Assignment, record: dict) -> bool:
     """Record a matching submission and queue its quality check; False when already recorded."""
-    from backend.review.service import request_qc
+    from backend.quality.service import request_qc
 
     row = session.scalar(select(CrowdSubmission).where(
         CrowdSubmission.assignment_id == ours.id))

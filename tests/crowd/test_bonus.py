@@ -11,7 +11,7 @@ from sqlalchemy import select
 
 from backend.annotation.service import get_assignment_or_raise
 from backend.config import get_settings
-from backend.crowd import flows, review
+from backend.crowd import flows, decisions
 from backend.crowd.client import MarketplaceError, make_client
 from backend.crowd.models import CrowdPayment
 from backend.db import session_scope
@@ -47,7 +47,7 @@ def approved(crowd_url: str, hit_ids: list[str], mturk: Any) -> int:
     """An approved assignment of WORKER; our id."""
     ours = synced_submission(crowd_url, hit_ids[0], WORKER)
     with session_scope() as session:
-        review.approve(session, mturk, ours)
+        decisions.approve(session, mturk, ours)
     return ours
 
 
@@ -56,8 +56,8 @@ def test_a_lost_final_commit_rerun_after_a_day_pays_once(approved: int, mturk: A
     # The first run: its pending row is committed and SendBonus succeeds, then the process
     # dies before its last commit (the row stays pending).
     with session_scope() as session:
-        intent = review.begin_bonus(session, approved, 100, REASON)
-    review.send_bonus(mturk, intent)
+        intent = decisions.begin_bonus(session, approved, 100, REASON)
+    decisions.send_bonus(mturk, intent)
     assert _ledger(approved) == [("bonus", 100, "pending")]
     clock.advance(timedelta(hours=25))  # the marketplace no longer knows the token
     paid = flows.pay_bonus(mturk, approved, 100, REASON)
@@ -73,8 +73,8 @@ def test_a_rerun_with_reworded_reason_finds_the_bonus_it_started(
     approved: int, mturk: Any,
 ) -> None:
     with session_scope() as session:
-        intent = review.begin_bonus(session, approved, 100, REASON)
-    review.send_bonus(mturk, intent)  # paid; the run dies before its last commit
+        intent = decisions.begin_bonus(session, approved, 100, REASON)
+    decisions.send_bonus(mturk, intent)  # paid; the run dies before its last commit
     clock.advance(timedelta(hours=25))
     flows.pay_bonus(mturk, approved, 100, "Thanks for the careful work")
     assert _market_bonuses(mturk, approved) == [("1.00", REASON)]
@@ -97,7 +97,7 @@ def test_a_lost_reply_without_retries_leaves_it_pending_and_a_late_rerun_pays_on
 
 def test_a_run_that_died_before_paying_is_paid_by_the_rerun(approved: int, mturk: Any) -> None:
     with session_scope() as session:
-        review.begin_bonus(session, approved, 100, REASON)  # committed, never sent
+        decisions.begin_bonus(session, approved, 100, REASON)  # committed, never sent
     clock.advance(timedelta(hours=25))
     flows.pay_bonus(mturk, approved, 100, REASON)
     assert _market_bonuses(mturk, approved) == [("1.00", REASON)]
@@ -109,7 +109,7 @@ def test_an_identical_bonus_under_another_key_is_not_mistaken_for_a_pending_one(
 ) -> None:
     flows.pay_bonus(mturk, approved, 100, REASON, key="week-1")
     with session_scope() as session:
-        review.begin_bonus(session, approved, 100, REASON, key="week-2")  # died before paying
+        decisions.begin_bonus(session, approved, 100, REASON, key="week-2")  # died before paying
     flows.pay_bonus(mturk, approved, 100, REASON, key="week-2")
     assert _market_bonuses(mturk, approved) == [("1.00", REASON)] * 2
     assert _ledger(approved) == [("bonus", 100, "done")] * 2

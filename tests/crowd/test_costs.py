@@ -9,7 +9,7 @@ import pytest
 from sqlalchemy import select
 from typer.testing import CliRunner
 
-from backend.crowd import actions, costs, flows, review
+from backend.crowd import actions, costs, flows, decisions
 from backend.crowd.schemas import CostLine, PublishOptions
 from backend.db import session_scope
 from tests.crowd.helpers import make_tasks, synced_submission
@@ -42,12 +42,12 @@ def reviewed(crowd_url: str, mturk: Any) -> tuple[int, int]:
     rejected = synced_submission(crowd_url, hits[1], WORKER_2)
     synced_submission(crowd_url, hits[3], WORKER_3)
     with session_scope() as session:
-        review.approve(session, mturk, approved)
+        decisions.approve(session, mturk, approved)
     with session_scope() as session:
-        review.reject(session, mturk, rejected, "The joints were placed on the other hand.")
+        decisions.reject(session, mturk, rejected, "The joints were placed on the other hand.")
     flows.pay_bonus(mturk, approved, 100, "Careful work on occluded frames")
     with session_scope() as session:  # a bonus whose run stopped before paying
-        review.begin_bonus(session, approved, 50, "Extra frames", key="extra")
+        decisions.begin_bonus(session, approved, 50, "Extra frames", key="extra")
     with session_scope() as session:
         actions.expire_hit(session, mturk, hits[4])
     return _sequence_of(first[0]), _sequence_of(second[0])

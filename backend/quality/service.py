@@ -31,9 +31,9 @@ from backend.crowd.models import CrowdHit, CrowdSubmission, CrowdWorkerAction
 from backend.errors import NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
-from backend.review import gold
-from backend.review.inputs import SCORED_STATUSES, TargetInputs, depth_maps, highlight_mask, target_inputs
-from backend.review.models import QCReport, TrainingClip
+from backend.quality import gold
+from backend.quality.inputs import SCORED_STATUSES, TargetInputs, depth_maps, highlight_mask, target_inputs
+from backend.quality.models import QCReport, TrainingClip
 
 log = logging.getLogger(__name__)
 

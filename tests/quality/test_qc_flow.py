@@ -12,7 +12,7 @@ from sqlalchemy import func, select
 from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
 from backend.db import session_scope
 from tests.market.helpers import make_client as boto3_client
-from tests.review.helpers import (
+from tests.quality.helpers import (
     ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, publish_hand_tasks, sync_submissions,
 )
 
@@ -38,8 +38,8 @@ def test_qc_job_pays_careful_work_and_rejects_spam_once(crowd_url: str, qc_captu
     get_settings.cache_clear()
     from backend.jobs.models import Job
     from backend.jobs.service import enqueue_job, execute
-    from backend.review.models import QCReport
-    from backend.review.service import qc_key
+    from backend.quality.models import QCReport
+    from backend.quality.service import qc_key
 
     sequence_id, hit_ids = publish_hand_tasks(qc_capture, max_assignments=2)
     outcomes = crowd_submits(crowd_url, qc_capture, ["careful", "spammer"] * 6)
@@ -99,7 +99,7 @@ def test_qc_job_pays_careful_work_and_rejects_spam_once(crowd_url: str, qc_captu
 def test_admin_reads_reports_and_worker_quality(crowd_url: str, qc_capture: Path) -> None:
     from backend.app import create_app
     from backend.jobs.service import execute
-    from backend.review.service import qc_key
+    from backend.quality.service import qc_key
 
     sequence_id, _ = publish_hand_tasks(qc_capture, max_assignments=1)
     crowd_submits(crowd_url, qc_capture, ["careful"] * 5 + ["lazy"])

@@ -10,7 +10,7 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from backend.db import session_scope
-from tests.review.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, sync_submissions
+from tests.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, sync_submissions
 
 
 def _publish_with_training(capture: Path) -> tuple[int, int, list[str]]:
@@ -64,8 +64,8 @@ def test_passing_the_training_clip_grants_the_qualification(crowd_url: str,
                                                             training_capture: Path) -> None:
     from backend.crowd.models import CrowdWorkerAction
     from backend.jobs.service import execute
-    from backend.review.models import QCReport
-    from backend.review.service import qc_key
+    from backend.quality.models import QCReport
+    from backend.quality.service import qc_key
 
     sequence_id, clip_task, hit_ids = _publish_with_training(training_capture)
     # New workers see only the training HIT; one labels it well, one spams it.

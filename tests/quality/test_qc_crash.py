@@ -15,7 +15,7 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.review.helpers import crowd_submits, publish_hand_tasks, sync_submissions
+from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
 
 
 def _worker(env: dict[str, str], log: Path) -> subprocess.Popen:
@@ -53,8 +53,8 @@ def _job(key: str):
 def test_killed_worker_mid_qc_job_is_retried_and_acts_once(crowd_url: str, qc_capture: Path,
                                                             tmp_path: Path) -> None:
     from backend.crowd.models import CrowdPayment
-    from backend.review.models import QCReport
-    from backend.review.service import qc_key
+    from backend.quality.models import QCReport
+    from backend.quality.service import qc_key
 
     sequence_id, _ = publish_hand_tasks(qc_capture, max_assignments=1)
     crowd_submits(crowd_url, qc_capture, ["careful"] * 5 + ["spammer"])

@@ -16,8 +16,8 @@ from sqlalchemy.orm import Session
 from backend.annotation.models import Task
 from backend.annotation.service import get_assignment_or_raise, get_task_or_raise
 from backend.errors import Conflict, DexlabelError
-from backend.review.models import TrainingClip
-from backend.review.schemas import TrainingClipCreate
+from backend.quality.models import TrainingClip
+from backend.quality.schemas import TrainingClipCreate
 from worker.tracks import completeness, validate_keyframes
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.review.helpers import crowd_submits, publish_hand_tasks
+from tests.quality.helpers import crowd_submits, publish_hand_tasks
 
 
 def _job(key: str):
@@ -27,7 +27,7 @@ def test_submit_in_the_page_is_confirmed_without_a_sync(crowd_url: str,
     from backend.annotation.models import Assignment
     from backend.crowd.models import CrowdSubmission
     from backend.jobs.service import execute
-    from backend.review.service import qc_key
+    from backend.quality.service import qc_key
 
     sequence_id, _ = publish_hand_tasks(training_capture, max_assignments=1)
     [outcome] = crowd_submits(crowd_url, training_capture, ["careful"])

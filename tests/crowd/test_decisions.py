@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from backend.config import get_settings
-from backend.crowd import actions, costs, flows, review
+from backend.crowd import actions, costs, flows, decisions
 from backend.crowd.client import make_client
 from backend.crowd.publish import TooManyAssignments
 from backend.crowd.sync import sync
@@ -38,7 +38,7 @@ def test_sync_accepts_a_matching_submission_and_refuses_a_mismatched_worker(
         again = sync(session, make_client(get_settings()))
         assert (again.accepted, again.already_accepted) == (0, 1)
         with pytest.raises(Conflict, match="sync"):
-            review.approve(session, make_client(get_settings()), forged_ours)
+            decisions.approve(session, make_client(get_settings()), forged_ours)
     assert good not in result.unknown
     from typer.testing import CliRunner
 
@@ -77,7 +77,7 @@ def test_reject_without_feedback_is_422_and_with_it_rejects(
                     json={"feedback": "The joints were placed on the wrong hand."})
     assert resp.status_code == 200, resp.text
     with session_scope() as session:
-        assert review._market_status(mturk, _assignment(session, ours)) == "Rejected"
+        assert decisions._market_status(mturk, _assignment(session, ours)) == "Rejected"
 
 
 def _assignment(session: Any, assignment_id: int) -> Any:
@@ -95,7 +95,7 @@ def test_a_bonus_retried_after_service_faults_pays_once(
 ) -> None:
     ours = _synced(crowd_url, hit_ids[0])
     with session_scope() as session:
-        review.approve(session, mturk, ours)
+        decisions.approve(session, mturk, ours)
     before = _balance(mturk)
     # Two faults before the marketplace commits, then one that loses the committed reply:
     # botocore retries all three, and the fourth attempt replays the token.

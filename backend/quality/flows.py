@@ -15,14 +15,14 @@ from sqlalchemy import func, select
 
 from backend.annotation.models import Assignment, Task
 from backend.config import get_settings
-from backend.crowd import actions, review
+from backend.crowd import actions, decisions
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
 from backend.jobs.service import checkpoint, mark_waiting
-from backend.review.models import QCReport
-from backend.review.service import hit_of, score_target
+from backend.quality.models import QCReport
+from backend.quality.service import hit_of, score_target
 from backend.solve.service import request_solve
 
 log = logging.getLogger(__name__)
@@ -96,13 +96,13 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
             report.action, report.action_detail = "recorded", "no marketplace submission"
             return "recorded"
         elif report.outcome == "approve":
-            review.approve(session, client, assignment_id, None)
+            decisions.approve(session, client, assignment_id, None)
             report.action, report.action_detail = "approved", "approved automatically"
             if report.method != "gold":
                 return "approved"
             report.action_detail, follow_up = GRANT_PENDING, _grant
         else:
-            review.reject(session, client, assignment_id, report.feedback)
+            decisions.reject(session, client, assignment_id, report.feedback)
             report.action, report.action_detail = "rejected", REOPEN_PENDING
             follow_up = _reopen
     follow_up(client, report_id, assignment_id)

@@ -1,5 +1,4 @@
-"""CLI of quality control and the job table: `dexlabel qc ...`, `dexlabel jobs ...`,
-`dexlabel training ...`."""
+"""CLI of quality control: `dexlabel qc ...`, `dexlabel training ...`."""
 
 from __future__ import annotations
 
@@ -12,7 +11,6 @@ from backend.db import session_scope
 from backend.errors import DexlabelError
 
 qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True)
-jobs_app = typer.Typer(help="Queue jobs: status, attempts, errors.", no_args_is_help=True)
 training_app = typer.Typer(help="Training clips (gold) for the qualification.",
                            no_args_is_help=True)
 
@@ -31,7 +29,7 @@ def qc_run(
 ) -> None:
     """Score the submitted work of a sequence's targets and act on the decisions."""
     from backend.jobs.service import execute
-    from backend.review.service import request_qc_for
+    from backend.quality.service import request_qc_for
 
     try:
         with session_scope() as session:
@@ -50,7 +48,7 @@ def qc_run(
 @qc_app.command("reports")
 def qc_reports(sequence_id: Annotated[int, typer.Argument()]) -> None:
     """One line per scored assignment: outcome, errors, action, and the worker's feedback."""
-    from backend.review.service import list_reports
+    from backend.quality.service import list_reports
 
     with session_scope() as session:
         rows = list_reports(session, sequence_id)
@@ -68,41 +66,12 @@ def qc_reports(sequence_id: Annotated[int, typer.Argument()]) -> None:
 @qc_app.command("workers")
 def qc_workers() -> None:
     """Each worker's running quality score."""
-    from backend.review.service import worker_quality
+    from backend.quality.service import worker_quality
 
     with session_scope() as session:
         for row in worker_quality(session):
             typer.echo(f"{row['worker_id']:24s} score {row['score']:.2f} scored {row['scored']} "
                        f"rejected {row['rejected']}{' BLOCKED' if row['blocked'] else ''}")
-
-
-@jobs_app.command("list")
-def jobs_list(
-    status: Annotated[str | None, typer.Option(help="queued, running, retrying, waiting, "
-                                                    "done or failed")] = None,
-    kind: Annotated[str | None, typer.Option()] = None,
-) -> None:
-    """The newest jobs with their status, attempts and last error."""
-    from backend.jobs.service import list_jobs
-
-    with session_scope() as session:
-        for job in list_jobs(session, status, kind):
-            error = f"  {job.error.splitlines()[-1][:120]}" if job.error else ""
-            typer.echo(f"{job.id:5d} {job.key:32s} {job.status:8s} "
-                       f"attempts {job.attempts}/{job.max_attempts}{error}")
-
-
-@jobs_app.command("retry")
-def jobs_retry(job_id: Annotated[int, typer.Argument()]) -> None:
-    """Queue a failed or waiting job again."""
-    from backend.jobs.service import retry_job
-
-    try:
-        with session_scope() as session:
-            job = retry_job(session, job_id)
-            typer.echo(f"{job.key}: queued")
-    except DexlabelError as exc:
-        _fail(exc)
 
 
 @training_app.command("create")
@@ -113,8 +82,8 @@ def training_create(
         help="a synthetic capture whose ground truth is the gold")] = None,
 ) -> None:
     """Make a task a training clip whose known labels score new workers."""
-    from backend.review.gold import create_clip, truth_tracks
-    from backend.review.schemas import TrainingClipCreate
+    from backend.quality.gold import create_clip, truth_tracks
+    from backend.quality.schemas import TrainingClipCreate
 
     try:
         with session_scope() as session:

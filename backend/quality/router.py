@@ -9,8 +9,8 @@ from fastapi import APIRouter, Query
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
 from backend.jobs.schemas import JobRead
-from backend.review import gold, service
-from backend.review.schemas import (
+from backend.quality import gold, service
+from backend.quality.schemas import (
     QCReportDetail, QCReportRead, QCRunRequest, TrainingClipCreate, TrainingClipRead,
     WorkerQualityRead,
 )
