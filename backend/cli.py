@@ -1,23 +1,61 @@
-"""The `dexlabel` command line."""
+"""The `dexlabel` command line.
+
+Every command but ``migrate``, ``synth`` and ``demo`` works on an instance: before it runs, a
+migrated database must be where the settings point (``DEXLABEL_VAR_DIR``), or the command
+stops with one line saying so, creating nothing. Bad input is refused the same way everywhere
+(backend.console: ``error: ...``, exit 2), and sequences are named by id or SUBJECT/NAME.
+"""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
+from typer.core import TyperGroup
 
 from backend.config import get_settings
-from backend.errors import DexlabelError
+from backend.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
+from backend.instance import (
+    adopt_recorded_server, client_url, forget_server, record_server, require_database, serve_at,
+)
 
-app = typer.Typer(help="dexlabel: crowd-labelled multi-view video to 3D hand and object poses.",
+# Commands that make their own instance (or none) instead of needing one.
+NO_INSTANCE = frozenset({"migrate", "synth", "demo"})
+# Commands that run for long and find the server's address each time they need it.
+LONG_RUNNING = frozenset({"serve", "worker"})
+_ARGS = "dexlabel.args"
+
+
+class _Commands(TyperGroup):
+    """The root group; it keeps the arguments after the command name, so the instance check
+    can let ``--help`` through."""
+
+    def resolve_command(self, ctx: typer.Context, args: list[str]) -> Any:
+        ctx.meta[_ARGS] = tuple(args)
+        return super().resolve_command(ctx, args)
+
+
+app = typer.Typer(cls=_Commands,
+                  help="dexlabel: crowd-labelled multi-view video to 3D hand and object poses.",
                   no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
 
 
-def _fail(exc: DexlabelError) -> None:
-    typer.secho(f"error: {exc.detail}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(2)
+def _asks_for_help(ctx: typer.Context) -> bool:
+    args = ctx.meta.get(_ARGS, ())
+    command = ctx.command.get_command(ctx, ctx.invoked_subcommand or "")  # type: ignore[attr-defined]
+    return "--help" in args or (isinstance(command, TyperGroup) and len(args) <= 1)
+
+
+@app.callback()
+def _instance(ctx: typer.Context) -> None:
+    if ctx.resilient_parsing or ctx.invoked_subcommand in NO_INSTANCE or _asks_for_help(ctx):
+        return
+    with refusing_bad_input():
+        require_database(get_settings())
+    if ctx.invoked_subcommand not in LONG_RUNNING:
+        adopt_recorded_server()
 
 
 @app.command()
@@ -26,17 +64,13 @@ def migrate(
     down: Annotated[bool, typer.Option("--down", help="downgrade to --to (e.g. base)")] = False,
 ) -> None:
     """Create or update the database schema (Alembic migrations)."""
+    from sqlalchemy.engine import make_url
+
     from backend import migrate as m
 
     url = get_settings().database_url
     (m.downgrade if down else m.upgrade)(url, to)
-    typer.echo(f"database at {to} ({_safe_url(url)})")
-
-
-def _safe_url(url: str) -> str:
-    from sqlalchemy.engine import make_url
-
-    return make_url(url).render_as_string(hide_password=True)
+    typer.echo(f"database at {to} ({make_url(url).render_as_string(hide_password=True)})")
 
 
 @app.command()
@@ -50,25 +84,35 @@ def synth(
     """Write a synthetic capture (DexYCB layout) with its ground-truth labels."""
     from worker.synth import generate_capture
 
-    summary = generate_capture(out, seed=seed, frames=frames, views=views, objects=objects)
+    with progress(f"synthesising {views} views x {frames} frames") as step:
+        try:
+            summary = generate_capture(out, seed=seed, frames=frames, views=views,
+                                       objects=objects)
+        except (FileExistsError, ValueError) as exc:
+            fail(str(exc))
+        step(f"{summary.subject}/{summary.sequence}")
     typer.echo(f"wrote {summary.subject}/{summary.sequence}: {len(summary.serials)} views x "
                f"{summary.num_frames} frames, objects {summary.ycb_ids} -> {out}")
+
+
+def _import(path: Path) -> list[Any]:
+    from backend.captures.flows import import_path
+
+    with refusing_bad_input(), progress(f"importing {path}") as step:
+        results = import_path(path)
+        for r in results:
+            step(f"{r.subject}/{r.name}")
+    for r in results:
+        state = "imported" if r.created else "already imported, unchanged:"
+        typer.echo(f"{state} {r.subject}/{r.name} (id {r.sequence_id}): "
+                   f"{r.num_cameras} cameras x {r.num_frames} frames")
+    return results
 
 
 @app.command("import")
 def import_(path: Annotated[Path, typer.Argument(help="capture root or one sequence folder")]) -> None:
     """Import a capture (DexYCB raw layout, or one video per camera)."""
-    from backend.captures.flows import import_path
-
-    try:
-        results = import_path(path)
-    except DexlabelError as exc:
-        _fail(exc)
-        return
-    for r in results:
-        state = "imported" if r.created else "already imported, unchanged:"
-        typer.echo(f"{state} {r.subject}/{r.name} (id {r.sequence_id}): "
-                   f"{r.num_cameras} cameras x {r.num_frames} frames")
+    _import(path)
 
 
 @app.command("create-admin")
@@ -83,12 +127,9 @@ def create_admin(
 
     if password is None:
         password = typer.prompt("password", hide_input=True, confirmation_prompt=True)
-    try:
-        with session_scope() as session:
-            admin = create(session, email, password, reset=reset)
-            typer.echo(f"admin {admin.email} ready (id {admin.id})")
-    except DexlabelError as exc:
-        _fail(exc)
+    with refusing_bad_input(), session_scope() as session:
+        admin = create(session, email, password, reset=reset)
+        typer.echo(f"admin {admin.email} ready (id {admin.id})")
 
 
 @app.command()
@@ -96,22 +137,21 @@ def serve(
     host: Annotated[str, typer.Option()] = "127.0.0.1",
     port: Annotated[int, typer.Option()] = 8000,
 ) -> None:
-    """Run the API and pages (plus an in-process queue consumer on the embedded default)."""
-    _serve(host, port)
-
-
-def _serve(host: str, port: int) -> None:
+    """Run the API and pages (plus an in-process queue consumer on the embedded default);
+    the address is recorded in the instance for the other commands."""
     import uvicorn
 
     from backend.queue import start_inprocess_consumer
 
-    settings = get_settings()
+    settings = serve_at(host, port)
     consumer = None
     if settings.inprocess_worker and not settings.redis_url:
         consumer = start_inprocess_consumer(settings.worker_threads)
+    record_server(settings, client_url(host, port))
     try:
         uvicorn.run("backend.app:create_app", factory=True, host=host, port=port)
     finally:
+        forget_server(settings)
         if consumer is not None:
             consumer.stop(graceful=True)
 
@@ -139,43 +179,52 @@ def demo(
     objects: Annotated[int, typer.Option(min=1, max=10, help="objects of a new capture")] = 3,
     assignments: Annotated[int, typer.Option(min=1, max=9, help="assignments per HIT")] = 2,
     workers: Annotated[int | None, typer.Option(
-        min=1, max=1000, help="simulated workers (default: assignments x hand tasks)")] = None,
+        min=1, max=1000, help="simulated workers per round (default: one per open "
+                              "assignment)")] = None,
     simulate_: Annotated[bool, typer.Option(
         "--simulate/--no-simulate", help="fill the demo with simulated submissions")] = True,
 ) -> None:
-    """Migrate, synthesise a capture if none, import it, create and publish its tasks on the
-    built-in marketplace, start the server, let a simulated crowd (mixed profiles) submit work,
-    print it all, and keep serving. Re-running adds nothing that is already there."""
-    from backend import migrate as m
-    from backend.captures.flows import import_path
-    from backend.demo import (
-        DemoServer, demo_admin, demo_annotation_links, demo_crowd, demo_print, demo_settings,
-    )
+    """Migrate, synthesise a capture if none, import it, publish its tasks on the built-in
+    marketplace, start the server, let a simulated crowd (mixed profiles) work until every
+    task has accepted work, wait for the quality checks and the solve, print the links with
+    ready logins, and keep serving. Re-running adds nothing that is already there."""
+    import time
 
-    settings = demo_settings(host, port)
+    from backend import demo as d
+    from backend import migrate as m
+
+    started = time.perf_counter()
+    settings = serve_at(host, port)
     m.upgrade(settings.database_url)
     capture = settings.var_dir / "demo-capture"
     if not any(capture.glob("*/*/meta.yml")):
-        typer.echo(f"synthesising a demo capture in {capture} ...")
         synth(capture, seed=7, frames=frames, views=views, objects=objects)
+    seq = _import(capture)[0]
+    with refusing_bad_input():
+        logins = d.demo_logins()
+        annotate = d.demo_annotation_link(seq.sequence_id, settings.public_url)
+    server = d.DemoServer(host, port)
     try:
-        seq = import_path(capture)[0]
-        password = demo_admin()
-        annotate, preview = demo_annotation_links(seq.sequence_id, settings.public_url)
-    except DexlabelError as exc:
-        _fail(exc)
-        return
-    server = DemoServer(host, port)
-    try:
-        server.start(consumer=serve_)
-        demo_crowd(seq.sequence_id, capture, password, assignments, workers, simulate_)
-        demo_print(seq, settings.public_url, password, annotate, preview)
+        with refusing_bad_input():
+            server.start()
+            d.demo_publish(seq.sequence_id, assignments)
+            if simulate_:
+                d.demo_crowd(seq.sequence_id, capture, logins["admin"], workers,
+                             server.has_consumer)
+            if server.has_consumer:
+                d.wait_for_jobs()
+            else:
+                typer.echo("no queue consumer here: quality checks wait for `dexlabel worker`")
+            d.demo_print(seq, settings.public_url, logins, annotate)
+            typer.echo(f"{d.demo_summary(seq.sequence_id)} (demo ready in "
+                       f"{time.perf_counter() - started:.0f} s)")
         if serve_:
-            typer.echo("serving; Ctrl+C stops")
+            typer.echo(f"serving at {settings.public_url}; Ctrl+C stops")
             sys.stdout.flush()
             server.wait()
-    except DexlabelError as exc:
-        _fail(exc)
+        else:
+            typer.echo(f"--no-serve: nothing is being served now; `dexlabel serve --port {port}` "
+                       "serves these links")
     finally:
         server.stop()
 
@@ -184,35 +233,18 @@ tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).", no_
 app.add_typer(tasks_app, name="tasks")
 
 
-def _resolve_sequence(session, ref: str) -> int:  # type: ignore[no-untyped-def]
-    from backend.captures.service import find_sequence, get_sequence_or_raise
-
-    if ref.isdigit():
-        return get_sequence_or_raise(session, int(ref)).id
-    subject, _, name = ref.partition("/")
-    seq = find_sequence(session, subject, name) if name else None
-    if seq is None:
-        raise DexlabelError(f"no sequence {ref!r} (give an id or SUBJECT/SEQUENCE)")
-    return seq.id
-
-
 @tasks_app.command("create")
-def tasks_create(
-    sequence: Annotated[str, typer.Argument(help="sequence id or SUBJECT/SEQUENCE")],
-) -> None:
+def tasks_create(sequence: SequenceArg) -> None:
     """Create one task per view and target of a sequence (idempotent)."""
     from backend.annotation.service import create_tasks
     from backend.db import session_scope
     from backend.storage import get_storage
 
-    try:
-        with session_scope() as session:
-            tasks = create_tasks(session, get_storage(), _resolve_sequence(session, sequence))
-            hands = sum(t.kind == "hand" for t in tasks)
-            typer.echo(f"{len(tasks)} tasks: {hands} hand, {len(tasks) - hands} object "
-                       f"(ids {tasks[0].id}-{tasks[-1].id})")
-    except DexlabelError as exc:
-        _fail(exc)
+    with refusing_bad_input(), session_scope() as session:
+        tasks = create_tasks(session, get_storage(), resolve_sequence(session, sequence))
+        hands = sum(t.kind == "hand" for t in tasks)
+        typer.echo(f"{len(tasks)} tasks: {hands} hand, {len(tasks) - hands} object "
+                   f"(ids {tasks[0].id}-{tasks[-1].id})")
 
 
 def _publish_options(  # type: ignore[no-untyped-def]
@@ -229,13 +261,12 @@ def _publish_options(  # type: ignore[no-untyped-def]
                               min_approval_rate=min_approval_rate,
                               require_training=require_training)
     except ValidationError as exc:
-        problems = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
-        _fail(DexlabelError(problems))
+        fail("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()))
 
 
 @app.command()
 def publish(
-    sequence: Annotated[str | None, typer.Option(help="sequence id or SUBJECT/SEQUENCE")] = None,
+    sequence: Annotated[str | None, typer.Option(help="sequence id or SUBJECT/NAME")] = None,
     dry_run: Annotated[bool, typer.Option(
         "--dry-run", help="print the cost, publish nothing")] = False,
     reward: Annotated[str, typer.Option(help="reward per assignment in US dollars")] = "0.50",
@@ -249,16 +280,15 @@ def publish(
         help="require our training qualification")] = False,
 ) -> None:
     """Publish one HIT per task not yet published in this round (safe to re-run)."""
-    from backend.config import get_settings
     from backend.crowd import flows
     from backend.crowd.client import make_client
     from backend.db import session_scope
 
     options = _publish_options(reward, assignments, allow_large_hits, round_, min_approval_rate,
                                require_training)
-    try:
+    with refusing_bad_input():
         with session_scope() as session:
-            sequence_id = _resolve_sequence(session, sequence) if sequence else None
+            sequence_id = resolve_sequence(session, sequence) if sequence else None
             plan = flows.plan(session, options, sequence_id)
         c = plan.cost
         typer.echo(f"{c.hits} HITs x {c.assignments_per_hit} assignment(s) at ${c.reward} "
@@ -267,11 +297,11 @@ def publish(
         if dry_run:
             typer.echo("dry run: nothing published")
             return
-        result = flows.publish_each(make_client(get_settings()), options, sequence_id)
+        with progress(f"publishing {c.hits} HITs") as step:
+            result = flows.publish_each(make_client(get_settings()), options, sequence_id)
+            step(f"{result.created + result.recovered + result.already_published} HITs")
         typer.echo(f"published: {result.created} created, {result.recovered} recovered, "
                    f"{result.already_published} already published")
-    except DexlabelError as exc:
-        _fail(exc)
 
 
 crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.", no_args_is_help=True)
@@ -280,30 +310,26 @@ app.add_typer(crowd_app, name="crowd")
 
 @crowd_app.command("sync")
 def crowd_sync() -> None:
-    """Collect submitted assignments and check them against the requester API's records."""
-    from backend.config import get_settings
+    """Collect submitted assignments, check them against the requester API's records, and
+    queue the quality check of each new one."""
     from backend.crowd.client import make_client
-    from backend.crowd.sync import sync
     from backend.db import session_scope
+    from backend.pipeline import sync
 
-    try:
-        with session_scope() as session:
-            result = sync(session, make_client(get_settings()))
-        typer.echo(f"{result.hits} HITs: {result.accepted} new submissions accepted, "
-                   f"{result.already_accepted} known, {len(result.mismatched)} refused "
-                   f"(HIT or worker mismatch), {len(result.unknown)} unknown")
-        for assignment_id in result.mismatched:
-            typer.echo(f"refused {assignment_id}: HIT or worker differs from our record")
-    except DexlabelError as exc:
-        _fail(exc)
-
+    with refusing_bad_input(), session_scope() as session:
+        result = sync(session, make_client(get_settings()))
+    typer.echo(f"{result.hits} HITs: {result.accepted} new submissions accepted, "
+               f"{result.already_accepted} known, {len(result.mismatched)} refused "
+               f"(HIT or worker mismatch), {len(result.unknown)} unknown")
+    for assignment_id in result.mismatched:
+        typer.echo(f"refused {assignment_id}: HIT or worker differs from our record")
 
 
 _COST_COLUMNS = ("spent_rewards", "spent_bonuses", "spent_fees", "spent",
                  "committed_rewards", "committed_bonuses", "committed_fees", "committed")
 
 
-def _cost_row(label: str, line) -> str:  # type: ignore[no-untyped-def]
+def _cost_row(label: str, line: Any) -> str:
     return f"{label:<32}" + "".join(f"{getattr(line, c):>10}" for c in _COST_COLUMNS)
 
 
@@ -329,7 +355,7 @@ def crowd_costs() -> None:
 @crowd_app.command("bonus")
 def crowd_bonus(
     assignment: Annotated[int, typer.Argument(help="our assignment id")],
-    amount: Annotated[str, typer.Argument(help="US dollars, e.g. 1.00")],
+    amount: Annotated[str, typer.Argument(help="US dollars, more than 0, e.g. 1.00")],
     reason: Annotated[str, typer.Option(help="what the worker reads")],
     key: Annotated[str, typer.Option(help="names this bonus: one key pays once")] = "1",
 ) -> None:
@@ -339,13 +365,12 @@ def crowd_bonus(
 
     try:
         cents = pricing.dollars_to_cents(amount)
-        paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
     except ValueError as exc:
-        _fail(DexlabelError(str(exc)))
-        return
-    except DexlabelError as exc:
-        _fail(exc)
-        return
+        fail(str(exc))
+    if cents <= 0:
+        fail(f"a bonus must be more than $0.00 (got {amount!r})")
+    with refusing_bad_input():
+        paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
     state = "already paid" if paid.already_done else "paid"
     typer.echo(f"bonus {key!r} of assignment {assignment} {state}: ${paid.amount} "
                f"(+ ${paid.fee} fee) to {paid.worker_id}")
@@ -357,28 +382,30 @@ def crowd_simulate(
     workers: Annotated[int, typer.Option(min=1, max=1000)] = 5,
     profile: Annotated[str, typer.Option(
         help="mixed, careful, sloppy, swapper, lazy, spammer or occluder")] = "mixed",
-    base: Annotated[str | None, typer.Option(help="the app's URL (default: PUBLIC_URL)")] = None,
+    base: Annotated[str | None, typer.Option(
+        help="the app's URL (default: PUBLIC_URL, or this instance's running server)")] = None,
     admin_email: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_EMAIL")] = None,
     admin_password: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_PASSWORD")] = None,
     seed: Annotated[int, typer.Option(help="random seed of profiles and labels")] = 0,
+    first: Annotated[int, typer.Option(min=1, help="number of the first simulated worker")] = 1,
 ) -> None:
     """Simulated workers accept, label and submit HITs through the portal, over HTTP."""
     from backend.crowd.simulate import simulate
 
+    if not admin_email or not admin_password:
+        fail("give --admin-email and --admin-password (an admin of the app)")
     try:
-        if not admin_email or not admin_password:
-            raise DexlabelError("give --admin-email and --admin-password (an admin of the app)")
-        outcomes = simulate(base or get_settings().public_url, capture, workers, profile,
-                            admin_email, admin_password, seed)
+        with refusing_bad_input():
+            outcomes = simulate(base or get_settings().public_url, capture, workers, profile,
+                                admin_email, admin_password, seed, first_index=first)
     except ValueError as exc:
-        _fail(DexlabelError(str(exc)))
-    except DexlabelError as exc:
-        _fail(exc)
+        fail(str(exc))
     for o in outcomes:
         typer.echo(f"{o.worker_id} {o.profile:9s} {o.status:17s} HIT {o.hit_id or '-'} "
                    f"assignment {o.assignment_id or '-'} task {o.task_id or '-'}")
     done = sum(o.status == "submitted" for o in outcomes)
     typer.echo(f"{done} of {len(outcomes)} simulated workers submitted")
+
 
 def _register_domain_commands() -> None:
     from backend.jobs.cli import jobs_app

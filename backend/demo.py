@@ -1,34 +1,47 @@
-"""The demo's moving parts: a server in a thread, the published tasks, a simulated crowd, and
-the links printed for a first look (`dexlabel demo` in backend/cli.py drives them)."""
+"""The demo's moving parts (`dexlabel demo` in backend/cli.py drives them): a server and a queue
+consumer in this process, ready logins kept in the instance, the published tasks, a simulated
+crowd that works until every task has accepted work, and the links printed for a first look.
+"""
 
 from __future__ import annotations
 
+import json
+import os
 import secrets
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import typer
+from sqlalchemy import func, select
 
 from backend.config import get_settings
+from backend.db import session_scope
 from backend.errors import DexlabelError
+from backend.instance import client_url, forget_server, record_server
 
 DEMO_ADMIN_EMAIL = "demo@dexlabel.local"
+DEMO_WORKER_EMAIL = "demo-worker@dexlabel.local"
+LOGINS_FILE = "demo-logins.json"
+# The simulated crowd works in rounds: rejected work re-opens its HIT with one more
+# assignment, which the next round's new workers take. Mixed profiles reject about a third
+# of the work, so six rounds leave a task without accepted work only rarely.
+MAX_ROUNDS = 6
+ACTIVE_JOBS = ("queued", "running", "retrying")
+# How long the demo waits for the queue to go idle (QC and the solve), and how often it looks.
+JOBS_TIMEOUT_S = 1800.0
+POLL_S = 0.5
 
 
-def demo_settings(host: str, port: int):  # type: ignore[no-untyped-def]
-    """The settings, with PUBLIC_URL at the server started here unless one was configured:
-    the HITs' page links and the requester client must reach it."""
-    import os
-
-    from backend.config import Settings
-
-    if get_settings().public_url == Settings.model_fields["public_url"].default:
-        os.environ["DEXLABEL_PUBLIC_URL"] = f"http://{host}:{port}"
-        get_settings.cache_clear()
-    return get_settings()
+@dataclass(frozen=True)
+class Login:
+    email: str
+    password: str
 
 
 class DemoServer:
-    """The app served by uvicorn in a thread of this process (the demo's crowd runs meanwhile)."""
+    """The app served by uvicorn in a thread of this process, with a queue consumer (QC and
+    the solve run while the crowd works); its address is recorded in the instance."""
 
     def __init__(self, host: str, port: int) -> None:
         self.host, self.port = host, port
@@ -36,9 +49,12 @@ class DemoServer:
         self.thread = None  # type: ignore[var-annotated]
         self.consumer = None  # type: ignore[var-annotated]
 
-    def start(self, consumer: bool) -> None:
+    @property
+    def has_consumer(self) -> bool:
+        return self.consumer is not None
+
+    def start(self) -> None:
         import threading
-        import time
 
         import uvicorn
 
@@ -46,7 +62,7 @@ class DemoServer:
         from backend.queue import start_inprocess_consumer
 
         settings = get_settings()
-        if consumer and settings.inprocess_worker and not settings.redis_url:
+        if settings.inprocess_worker and not settings.redis_url:
             self.consumer = start_inprocess_consumer(settings.worker_threads)
         config = uvicorn.Config(create_app(), host=self.host, port=self.port,
                                 log_level="warning")
@@ -56,8 +72,10 @@ class DemoServer:
         deadline = time.monotonic() + 30
         while not self.server.started:
             if not self.thread.is_alive() or time.monotonic() > deadline:
-                raise DexlabelError(f"the server did not start on {self.host}:{self.port}")
+                raise DexlabelError(f"the server did not start on {self.host}:{self.port} "
+                                    "(is the port taken? try --port)")
             time.sleep(0.05)
+        record_server(settings, client_url(self.host, self.port))
 
     def wait(self) -> None:
         """Serve until Ctrl+C or SIGTERM: uvicorn installs its own signal handlers only in
@@ -74,6 +92,7 @@ class DemoServer:
             self.thread.join(0.5)
 
     def stop(self) -> None:
+        forget_server(get_settings())
         if self.server is not None:
             self.server.should_exit = True
         if self.thread is not None:
@@ -82,111 +101,62 @@ class DemoServer:
             self.consumer.stop(graceful=True)
 
 
-def demo_crowd(sequence_id: int, capture: Path, password: str, assignments: int,
-                workers: int | None, simulate_: bool) -> None:
-    """Publish the sequence's tasks (hand tasks first, so they are offered first), let the
-    simulated crowd work unless the demo already has submissions, and sync them."""
-    from backend.crowd import flows
-    from backend.crowd.client import make_client
-    from backend.crowd.schemas import PublishOptions
-    from backend.crowd.simulate import simulate
-    from backend.crowd.sync import sync
-    from backend.db import session_scope
+# --- logins ------------------------------------------------------------------------------
 
-    client = make_client(get_settings())
-    options = PublishOptions(max_assignments=assignments)
-    for kind in ("hand", "object"):
-        result = flows.publish_each(client, options, sequence_id, kind)
-        typer.echo(f"{kind} tasks: {result.created} HITs created, {result.recovered} "
-                   f"recovered, {_demo_hits(sequence_id, kind)} published in all")
-    done, hand_tasks = _demo_counts(sequence_id)
-    if not simulate_ or done:
-        typer.echo(f"simulated crowd skipped: {done} submissions already in the demo"
-                   if simulate_ else "simulated crowd skipped (--no-simulate)")
-        return
-    count = workers or assignments * hand_tasks
-    typer.echo(f"{count} simulated workers (mixed profiles) at work ...")
-    outcomes = simulate(get_settings().public_url, capture, count, "mixed",
-                        DEMO_ADMIN_EMAIL, password, seed=7)
-    for o in outcomes:
-        typer.echo(f"  {o.worker_id} {o.profile:9s} {o.status:17s} HIT {o.hit_id or '-'} "
-                   f"task {o.task_id or '-'}")
+
+def _saved_logins(path: Path) -> dict[str, Login]:
+    try:
+        data = json.loads(path.read_text())
+        return {role: Login(str(v["email"]), str(v["password"])) for role, v in data.items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def _save_logins(path: Path, logins: dict[str, Login]) -> None:
+    """Written readable by the owner only (0600): the file holds passwords."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as out:
+        json.dump({role: vars(login) for role, login in logins.items()}, out, indent=2)
+    os.chmod(path, 0o600)
+
+
+def demo_logins() -> dict[str, Login]:
+    """The demo's admin and portal worker, ready to sign in; their passwords are made once
+    and kept in ``{var_dir}/demo-logins.json``, so a re-run prints the same ones."""
+    from backend.accounts.service import create_admin
+    from backend.market.clock import now
+    from backend.portal.accounts import authenticate, create_account
+    from backend.portal.models import PortalAccount
+    from backend.security import hash_password
+
+    path = get_settings().var_dir / LOGINS_FILE
+    saved = _saved_logins(path)
+    logins = {role: saved.get(role) or Login(email, secrets.token_urlsafe(12))
+              for role, email in (("admin", DEMO_ADMIN_EMAIL), ("worker", DEMO_WORKER_EMAIL))}
+    _save_logins(path, logins)
+    admin, worker = logins["admin"], logins["worker"]
     with session_scope() as session:
-        synced = sync(session, client)
-    done, _ = _demo_counts(sequence_id)
-    typer.echo(f"{sum(o.status == 'submitted' for o in outcomes)} of {len(outcomes)} "
-               f"simulated workers submitted; {synced.accepted} submissions synced; "
-               f"{done} submissions in the demo")
-    typer.echo("quality checks are queued for every target with submissions: see "
-               f"`dexlabel qc reports {sequence_id}`, `dexlabel jobs list` or /api/qc/reports")
+        create_admin(session, admin.email, admin.password, reset=True)
+        account = session.scalar(select(PortalAccount).where(PortalAccount.email == worker.email))
+        if account is None:
+            create_account(session, worker.email, worker.password, now())
+        else:
+            try:
+                authenticate(session, worker.email, worker.password)
+            except DexlabelError:  # the logins file was lost: the kept password wins
+                account.password_hash = hash_password(worker.password)
+                account.active = True
+    return logins
 
 
-def _demo_hits(sequence_id: int, kind: str) -> int:
-    from sqlalchemy import func, select
-
-    from backend.annotation.models import Task
-    from backend.crowd.models import CrowdHit
-    from backend.db import session_scope
-
-    with session_scope() as session:
-        return int(session.scalar(
-            select(func.count()).select_from(CrowdHit).join(Task, Task.id == CrowdHit.task_id)
-            .where(Task.sequence_id == sequence_id, Task.kind == kind,
-                   CrowdHit.hit_id.is_not(None))) or 0)
-
-
-def _demo_counts(sequence_id: int) -> tuple[int, int]:
-    """(submitted assignments, hand tasks) of the demo sequence."""
-    from sqlalchemy import func, select
-
-    from backend.annotation.models import Assignment, Task
-    from backend.db import session_scope
-
-    with session_scope() as session:
-        done = session.scalar(select(func.count()).select_from(Assignment)
-                              .join(Task, Task.id == Assignment.task_id)
-                              .where(Task.sequence_id == sequence_id,
-                                     Assignment.status != "working"))
-        hands = session.scalar(select(func.count()).select_from(Task).where(
-            Task.sequence_id == sequence_id, Task.kind == "hand"))
-    return int(done or 0), int(hands or 0)
-
-
-def demo_print(seq, base: str, password: str, annotate: str,  # type: ignore[no-untyped-def]
-                preview: str) -> None:
-    base = base.rstrip("/")
-    typer.echo(f"\nsequence {seq.subject}/{seq.name} (id {seq.sequence_id}): "
-               f"{seq.num_cameras} cameras x {seq.num_frames} frames")
-    typer.echo(f"API docs:        {base}/docs")
-    typer.echo(f"health:          {base}/healthz")
-    typer.echo(f"sequences:       {base}/api/sequences  (admin bearer token)")
-    typer.echo(f"admin login:     POST {base}/api/auth/token  email={DEMO_ADMIN_EMAIL} "
-               f"password={password}")
-    typer.echo(f"costs:           {base}/api/crowd/costs  (or: dexlabel crowd costs)")
-    typer.echo(f"first view:      {base}{_demo_view_url(seq.sequence_id)}")
-    typer.echo(f"annotate (hand): {annotate}")
-    typer.echo(f"HIT preview:     {preview}")
-
-
-def demo_admin() -> str:
-    """(Re)set the demo admin's password and return it."""
-    from backend.accounts.service import create_admin as create
-    from backend.db import session_scope
-
-    password = secrets.token_urlsafe(12)
-    with session_scope() as session:
-        create(session, DEMO_ADMIN_EMAIL, password, reset=True)
-    return password
-
-
-def demo_annotation_links(sequence_id: int, base: str) -> tuple[str, str]:
-    """Tasks for the demo sequence, and page links for the first hand task: a demo worker's
-    assignment, and the read-only preview a worker sees before accepting a HIT."""
+def demo_annotation_link(sequence_id: int, base: str) -> str:
+    """Creates the sequence's tasks; the page link of a demo worker's own assignment on the
+    first hand task (a direct link: its submission goes to QC without a marketplace)."""
     from urllib.parse import urlencode
 
     from backend.annotation import service
-    from backend.annotation.router import PREVIEW_ASSIGNMENT_ID, assignment_token, task_token
-    from backend.db import session_scope
+    from backend.annotation.tokens import assignment_token
     from backend.storage import get_storage
 
     with session_scope() as session:
@@ -197,18 +167,225 @@ def demo_annotation_links(sequence_id: int, base: str) -> tuple[str, str]:
             assignment = service.create_assignment(session, task, "demo-worker")
         work = {"token": assignment_token(task, assignment),
                 "assignmentId": assignment.external_id, "workerId": assignment.worker_id}
-        look = {"token": task_token(task), "assignmentId": PREVIEW_ASSIGNMENT_ID}
-    return f"{base}/annotate/?{urlencode(work)}", f"{base}/annotate/?{urlencode(look)}"
+    return f"{base.rstrip('/')}/annotate/?{urlencode(work)}"
 
 
-def _demo_view_url(sequence_id: int) -> str:
-    from backend.accounts.deps import VIEW_SCOPE
-    from backend.captures.service import get_sequence_or_raise
-    from backend.db import session_scope
-    from backend.security import sign_token
+# --- the crowd ---------------------------------------------------------------------------
+
+
+def demo_publish(sequence_id: int, assignments: int) -> None:
+    """Publish the sequence's tasks on the built-in marketplace, hand tasks first (so they
+    are offered first), then the object tasks."""
+    from backend.crowd import flows
+    from backend.crowd.client import make_client
+    from backend.crowd.schemas import PublishOptions
+
+    client = make_client(get_settings())
+    options = PublishOptions(max_assignments=assignments)
+    for kind in ("hand", "object"):
+        result = flows.publish_each(client, options, sequence_id, kind)
+        typer.echo(f"{kind} tasks: {result.created} HITs created, {result.recovered} "
+                   f"recovered, {_hits(sequence_id, kind)} published in all")
+
+
+def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | None,
+               can_wait: bool) -> None:
+    """Rounds of simulated workers (mixed profiles), one per open assignment, until every
+    task has accepted work or MAX_ROUNDS passed. After each round the submissions are synced
+    and the quality checks waited for: they approve, or reject and re-open the HIT with one
+    more assignment; a task whose work was left for an admin's review gets one more too."""
+    from backend.crowd.simulate import simulate
+
+    for round_ in range(1, MAX_ROUNDS + 1):
+        missing, _ = _unaccepted(sequence_id)
+        slots = _open_slots(sequence_id, extend=round_ > 1)
+        if not missing or not slots:
+            return
+        count = min(workers or slots, slots)
+        typer.echo(f"round {round_}: {count} simulated workers for {missing} tasks without "
+                   "accepted work ...")
+        started = time.perf_counter()
+        outcomes = simulate(get_settings().public_url, capture, count, "mixed", admin.email,
+                            admin.password, seed=7 + round_,
+                            first_index=_simulated_accounts() + 1)
+        submitted = sum(o.status == "submitted" for o in outcomes)
+        _sync()
+        typer.echo(f"round {round_}: {submitted} submitted in "
+                   f"{time.perf_counter() - started:.0f} s; quality checks running ...")
+        if not can_wait or not wait_for_jobs():
+            return
+        if approve_reviewed(sequence_id):
+            wait_for_jobs()
+        if not submitted:
+            return
+
+
+def approve_reviewed(sequence_id: int) -> int:
+    """The demo's admin at work: for each task still without accepted work, approve the
+    assignment QC left for review with the smallest error (as the admin page's Approve does),
+    saying which; the number approved."""
+    from backend.annotation.models import Assignment
+    from backend.crowd.client import make_client
+    from backend.pipeline import approve
+    from backend.quality.models import QCReport
 
     with session_scope() as session:
-        serial = get_sequence_or_raise(session, sequence_id).cameras[0].serial
-    token = sign_token({"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial},
-                       get_settings().secret_key, 7 * 24 * 3600)
-    return f"/api/sequences/{sequence_id}/views/{serial}/frames?token={token}"
+        accepted = set(session.scalars(select(Assignment.task_id).where(
+            Assignment.status == "approved")))
+        rows = session.execute(
+            select(QCReport.task_id, QCReport.assignment_id, QCReport.target_key,
+                   QCReport.metrics, QCReport.feedback)
+            .join(Assignment, Assignment.id == QCReport.assignment_id)
+            .where(QCReport.sequence_id == sequence_id, QCReport.outcome == "review",
+                   QCReport.provisional.is_(False), Assignment.status == "submitted")).all()
+    best: dict[int, tuple[float, int, str, str]] = {}
+    for task_id, assignment_id, target, metrics, feedback in rows:
+        error = (metrics or {}).get("median_error_px")
+        key = (float("inf") if error is None else float(error), assignment_id, target,
+               (feedback or "").split(". ")[0])
+        if task_id not in accepted and (task_id not in best or key < best[task_id]):
+            best[task_id] = key
+    client = make_client(get_settings())
+    for task_id, (error, assignment_id, target, why) in sorted(best.items()):
+        with session_scope() as session:
+            approve(session, client, assignment_id, None)
+        typer.echo(f"  demo admin approved assignment {assignment_id} (task {task_id}, "
+                   f"{target}), left for review: {why}")
+    return len(best)
+
+
+def _sync() -> int:
+    from backend.crowd.client import make_client
+    from backend.pipeline import sync
+
+    with session_scope() as session:
+        return sync(session, make_client(get_settings())).accepted
+
+
+def wait_for_jobs(timeout_s: float = JOBS_TIMEOUT_S) -> bool:
+    """Wait until no job is queued, running or retrying; False when the time ran out."""
+    from backend.jobs.models import Job
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with session_scope() as session:
+            active = session.scalar(select(func.count()).select_from(Job)
+                                    .where(Job.status.in_(ACTIVE_JOBS))) or 0
+        if not active:
+            return True
+        if time.monotonic() > deadline:
+            typer.echo(f"{active} jobs still queued or running after {timeout_s:.0f} s")
+            return False
+        time.sleep(POLL_S)
+
+
+def _hits(sequence_id: int, kind: str) -> int:
+    from backend.annotation.models import Task
+    from backend.crowd.models import CrowdHit
+
+    with session_scope() as session:
+        return int(session.scalar(
+            select(func.count()).select_from(CrowdHit).join(Task, Task.id == CrowdHit.task_id)
+            .where(Task.sequence_id == sequence_id, Task.kind == kind,
+                   CrowdHit.hit_id.is_not(None))) or 0)
+
+
+def _unaccepted(sequence_id: int) -> tuple[int, int]:
+    """(tasks without approved work, tasks) of the sequence."""
+    from backend.annotation.models import Assignment, Task
+
+    with session_scope() as session:
+        tasks = set(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
+        accepted = set(session.scalars(select(Assignment.task_id).where(
+            Assignment.task_id.in_(tasks), Assignment.status == "approved")))
+    return len(tasks - accepted), len(tasks)
+
+
+def _open_slots(sequence_id: int, extend: bool) -> int:
+    """Assignments the marketplace still offers on the sequence's HITs; with ``extend``,
+    first one more on each HIT whose task has no accepted work and nothing left on offer."""
+    from backend.annotation.models import Assignment, Task
+    from backend.crowd.actions import add_assignments
+    from backend.crowd.client import make_client, paginate
+    from backend.crowd.models import CrowdHit
+    from backend.crowd.pricing import LARGE_HIT_ASSIGNMENTS
+
+    client = make_client(get_settings())
+    with session_scope() as session:
+        hits = dict(session.execute(
+            select(CrowdHit.hit_id, CrowdHit.task_id).join(Task, Task.id == CrowdHit.task_id)
+            .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))).all())
+        accepted = set(session.scalars(select(Assignment.task_id).where(
+            Assignment.task_id.in_(hits.values()), Assignment.status == "approved")))
+    offered = {h["HITId"]: int(h.get("NumberOfAssignmentsAvailable", 0))
+               for h in paginate(client, "list_hits", "HITs") if h["HITId"] in hits}
+    for hit_id, available in offered.items():
+        if extend and not available and hits[hit_id] not in accepted:
+            with session_scope() as session, session.no_autoflush:
+                row = session.scalar(select(CrowdHit).where(CrowdHit.hit_id == hit_id))
+                if row is not None and row.max_assignments + 1 < LARGE_HIT_ASSIGNMENTS:
+                    add_assignments(session, client, hit_id, 1)
+                    offered[hit_id] = 1
+    return sum(offered.values())
+
+
+def _simulated_accounts() -> int:
+    from backend.crowd.simulate import WORKER_EMAIL
+    from backend.portal.models import PortalAccount
+
+    pattern = WORKER_EMAIL.split("{", 1)[0] + "%"
+    with session_scope() as session:
+        return int(session.scalar(select(func.count()).select_from(PortalAccount)
+                                  .where(PortalAccount.email.like(pattern))) or 0)
+
+
+# --- what the demo prints ----------------------------------------------------------------
+
+
+def demo_summary(sequence_id: int) -> str:
+    """"16 submitted, 16 scored: 9 approved, 7 rejected; solve 1 done in 41 s"."""
+    from backend.annotation.models import Assignment, Task
+    from backend.quality.models import QCReport
+    from backend.solve.models import SolveRun
+
+    with session_scope() as session:
+        statuses = dict(session.execute(
+            select(Assignment.status, func.count()).join(Task, Task.id == Assignment.task_id)
+            .where(Task.sequence_id == sequence_id).group_by(Assignment.status)).all())
+        scored = session.scalar(select(func.count(func.distinct(QCReport.assignment_id)))
+                                .where(QCReport.sequence_id == sequence_id)) or 0
+        run = session.scalar(select(SolveRun).where(SolveRun.sequence_id == sequence_id)
+                             .order_by(SolveRun.id.desc()))
+        solve = _solve_words(run)
+    approved, rejected = statuses.get("approved", 0), statuses.get("rejected", 0)
+    pending = statuses.get("submitted", 0)
+    line = (f"{approved + rejected + pending} submitted, {scored} scored: {approved} approved, "
+            f"{rejected} rejected")
+    if pending:
+        line += f", {pending} awaiting a decision"
+    if run is None:
+        missing, total = _unaccepted(sequence_id)
+        solve = f"no solve yet: {missing} of {total} tasks without accepted work"
+    return f"{line}; {solve}"
+
+
+def _solve_words(run) -> str:  # type: ignore[no-untyped-def]
+    if run is None:
+        return ""
+    if run.status == "done":
+        return f"solve {run.id} done in {float((run.timings or {}).get('total_s', 0.0)):.0f} s"
+    if run.status == "failed":
+        last = (run.error or "").strip().splitlines()
+        return f"solve {run.id} failed: {last[-1] if last else 'see dexlabel jobs list'}"
+    return f"solve {run.id} {run.status}"
+
+
+def demo_print(seq, base: str, logins: dict[str, Login],  # type: ignore[no-untyped-def]
+               annotate: str) -> None:
+    base = base.rstrip("/")
+    admin, worker = logins["admin"], logins["worker"]
+    typer.echo(f"\nsequence {seq.subject}/{seq.name} (id {seq.sequence_id}): "
+               f"{seq.num_cameras} cameras x {seq.num_frames} frames")
+    typer.echo(f"annotate:      {annotate}")
+    typer.echo(f"worker portal: {base}/market/  email {worker.email}  password {worker.password}")
+    typer.echo(f"admin page:    {base}/admin/  email {admin.email}  password {admin.password}")

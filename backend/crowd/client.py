@@ -1,8 +1,10 @@
 """The requester's boto3 ``mturk`` client: the only module of the crowd domain touching boto3.
 
 It points at the built-in marketplace by default (``{PUBLIC_URL}/mturk`` with the dev requester
-pair) and at AWS or any MTurk-compatible endpoint by setting. Marketplace errors come back as
-our own errors so routers and the CLI render them like every other failure.
+pair; with PUBLIC_URL unset, at the address this instance's running ``serve`` or ``demo``
+recorded) and at AWS or any MTurk-compatible endpoint by setting. Marketplace errors, and a
+marketplace that cannot be reached, come back as our own errors so routers and the CLI render
+them like every other failure (one line naming the URL and the setting, no botocore traceback).
 """
 
 from __future__ import annotations
@@ -13,10 +15,14 @@ from urllib.parse import urlparse
 
 import boto3
 from botocore.config import Config
-from botocore.exceptions import BotoCoreError, ClientError
+from botocore.exceptions import (
+    BotoCoreError, ClientError, ConnectTimeoutError, HTTPClientError, ReadTimeoutError, SSLError,
+)
+from botocore.exceptions import ConnectionError as BotoConnectionError
 
 from backend.config import DEV_MARKET_REQUESTERS, Settings
 from backend.errors import DexlabelError
+from backend.instance import public_url, recorded_server, server_file
 
 REGION = "us-east-1"
 AWS_PRODUCTION_ENDPOINT = "https://mturk-requester.us-east-1.amazonaws.com"
@@ -42,13 +48,34 @@ class MarketplaceError(DexlabelError):
         self.turk_code = turk_code
 
 
+class MarketplaceUnreachable(MarketplaceError):
+    """No answer from the marketplace at ``url`` (refused, timed out, closed, TLS)."""
+
+    code = "marketplace_unreachable"
+
+
 class CrowdConfigError(DexlabelError):
     status_code = 500
     code = "crowd_config_error"
 
 
 def builtin_endpoint(settings: Settings) -> str:
-    return settings.public_url.rstrip("/") + BUILTIN_PATH
+    return public_url(settings).rstrip("/") + BUILTIN_PATH
+
+
+def endpoint_hint(settings: Settings) -> str:
+    """What to check when the requester endpoint does not answer: the setting that chose it."""
+    if settings.mturk_endpoint_url:
+        return "check DEXLABEL_MTURK_ENDPOINT_URL"
+    if settings.mturk_use_aws:
+        return "check DEXLABEL_MTURK_USE_AWS, DEXLABEL_MTURK_SANDBOX and the network"
+    if "public_url" in settings.model_fields_set:
+        return "check DEXLABEL_PUBLIC_URL (the built-in marketplace is served at its /mturk)"
+    if recorded_server(settings):
+        return (f"the server recorded in {server_file(settings)} does not answer; "
+                "or set DEXLABEL_PUBLIC_URL to the app's address")
+    return ("no `dexlabel serve` or `dexlabel demo` of this instance is running: start one, "
+            "or set DEXLABEL_PUBLIC_URL to the app's address")
 
 
 def endpoint_url(settings: Settings) -> str:
@@ -81,9 +108,28 @@ def credentials(settings: Settings) -> tuple[str, str]:
 def make_client(settings: Settings, attempts: int = DEFAULT_ATTEMPTS) -> MTurkClient:
     key, secret = credentials(settings)
     config = Config(retries={"total_max_attempts": attempts, "mode": "standard"})
-    return boto3.session.Session().client(
+    client = boto3.session.Session().client(
         "mturk", endpoint_url=endpoint_url(settings), region_name=REGION,
         aws_access_key_id=key, aws_secret_access_key=secret, config=config)
+    # Read back by unreachable() to name the setting in the message.
+    client.meta.dexlabel_hint = endpoint_hint(settings)
+    return client
+
+
+def unreachable(client: MTurkClient, operation: str, exc: BotoCoreError) -> MarketplaceError:
+    """The error for a marketplace that did not answer: its URL and the setting behind it."""
+    if isinstance(exc, (ConnectTimeoutError, ReadTimeoutError)):
+        reason = "timed out"
+    elif isinstance(exc, SSLError):
+        reason = "TLS failed"
+    elif isinstance(exc, HTTPClientError):
+        reason = "connection closed"
+    else:
+        reason = "no connection"
+    hint = getattr(client.meta, "dexlabel_hint", "check DEXLABEL_MTURK_ENDPOINT_URL")
+    return MarketplaceUnreachable(
+        f"the marketplace at {client.meta.endpoint_url} cannot be reached ({reason}); {hint}",
+        operation)
 
 
 def call(client: MTurkClient, operation: str, **params: Any) -> dict[str, Any]:
@@ -95,6 +141,8 @@ def call(client: MTurkClient, operation: str, **params: Any) -> dict[str, Any]:
         turk_code = exc.response.get("TurkErrorCode", "") or error.get("Code", "")
         raise MarketplaceError(
             f"{operation}: {error.get('Message', str(exc))}", operation, turk_code) from exc
+    except (BotoConnectionError, HTTPClientError) as exc:
+        raise unreachable(client, operation, exc) from exc
     except BotoCoreError as exc:
         raise MarketplaceError(f"{operation}: {exc}", operation) from exc
 
@@ -108,3 +156,7 @@ def paginate(client: MTurkClient, operation: str, key: str, **params: Any) -> It
         error = exc.response.get("Error", {})
         raise MarketplaceError(f"{operation}: {error.get('Message', str(exc))}", operation,
                                exc.response.get("TurkErrorCode", "")) from exc
+    except (BotoConnectionError, HTTPClientError) as exc:
+        raise unreachable(client, operation, exc) from exc
+    except BotoCoreError as exc:
+        raise MarketplaceError(f"{operation}: {exc}", operation) from exc

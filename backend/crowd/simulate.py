@@ -18,8 +18,8 @@ from urllib.parse import parse_qs, urlsplit
 import httpx
 import numpy as np
 
-from backend.errors import DexlabelError
 from backend.captures.layout import read_sequence
+from backend.errors import DexlabelError
 from worker.geometry.cameras import CameraModel, intrinsics_matrix
 from worker.geometry.mesh_io import read_mesh
 from worker.synth.annotators import annotate, draw_profiles, hand_visibility, mesh_landmarks
@@ -27,6 +27,8 @@ from worker.synth.annotators import annotate, draw_profiles, hand_visibility, me
 WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
 WORKER_PASSWORD = "simulated worker {index:03d}"
 HTTP_TIMEOUT_S = 30.0
+# Centroid splits of an object's mesh before landmarks are picked (see surface_points).
+SURFACE_LEVELS = 2
 
 
 class SimulationError(DexlabelError):
@@ -53,6 +55,25 @@ def _checked(resp: httpx.Response, step: str) -> Any:
     if resp.status_code != 200:
         raise SimulationError(f"{step}: HTTP {resp.status_code}: {resp.text[:300]}")
     return resp.json() if "json" in resp.headers.get("content-type", "") else resp.text
+
+
+def surface_points(vertices: np.ndarray, faces: np.ndarray,
+                   levels: int = SURFACE_LEVELS) -> tuple[np.ndarray, np.ndarray]:
+    """The same surface with a point added at each triangle's centroid (split in three),
+    ``levels`` times: (N', 3) vertices and (M', 3) faces.
+
+    A person picks landmarks anywhere on the object, not only at mesh vertices; on a coarse
+    mesh (the synthetic box has 8 corners, each on the silhouette in most views) the corners
+    alone rarely give two clearly visible landmarks. Centroids inherit their face's normal.
+    """
+    for _ in range(levels):
+        centroids = vertices[faces].mean(axis=1)
+        ids = np.arange(len(vertices), len(vertices) + len(faces))
+        a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+        faces = np.concatenate([np.stack([a, b, ids], 1), np.stack([b, c, ids], 1),
+                                np.stack([c, a, ids], 1)])
+        vertices = np.concatenate([vertices, centroids])
+    return vertices, faces
 
 
 class CaptureTruth:
@@ -95,7 +116,7 @@ class CaptureTruth:
 
     def object_points(self, serial: str, index: int, frames: int,
                       rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Two landmarks on object ``index`` in one view: mesh vertices visible where it first
+        """Two landmarks on object ``index`` in one view: surface points visible where it first
         shows, followed through its true poses; (F, 2, 2) px and (F, 2) visibility."""
         plan = self._plan(self._folder(serial).parent)
         cam = next(c for c in plan.cameras if c.serial == serial)
@@ -104,9 +125,10 @@ class CaptureTruth:
                              np.asarray(cam.distortion), np.eye(3, 4), cam.width, cam.height)
         mesh = read_mesh(plan.objects[index].mesh_path)
         _, seg, poses = self._labels(serial, frames)
-        xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id),
-                                        np.asarray(mesh.vertices, float),
-                                        np.asarray(mesh.faces, int), poses[:, index], rng)
+        vertices, faces = surface_points(np.asarray(mesh.vertices, float),
+                                         np.asarray(mesh.faces, int))
+        xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id), vertices,
+                                        faces, poses[:, index], rng)
         return xy, visible
 
     def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -212,11 +234,15 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
 
 
 def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: str,
-             admin_password: str, seed: int = 0) -> list[WorkerOutcome]:
+             admin_password: str, seed: int = 0, first_index: int = 1) -> list[WorkerOutcome]:
     """Run ``workers`` simulated workers one after another against the app at ``base``.
 
-    Worker i (from 1) is ``sim-worker-<i>`` with a deterministic password, so a re-run reuses
-    the same accounts; a worker already done with every HIT on offer reports "no HIT available".
+    Worker i (from ``first_index``) is ``sim-worker-<i>`` with a deterministic password, so a
+    re-run reuses the same accounts; a worker already done with every HIT on offer reports "no
+    HIT available". Hand and object tasks alike are worked (object landmarks are mesh
+    vertices followed through the object's true poses). A later round of a crowd starts
+    where the last one ended (``first_index``), so HITs re-opened after a rejection go to
+    workers who have not done them yet.
     """
     rng = np.random.default_rng(seed)
     profiles = draw_profiles(workers, profile, rng)
@@ -225,7 +251,7 @@ def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: 
         with httpx.Client(timeout=HTTP_TIMEOUT_S) as http:
             admin = admin_token(http, base, admin_email, admin_password)
             client = WorkerClient(http, base)
-            return [_work_one(client, admin, i + 1, name, truth, rng)
+            return [_work_one(client, admin, first_index + i, name, truth, rng)
                     for i, name in enumerate(profiles)]
     except httpx.HTTPError as exc:
         raise SimulationError(f"could not reach the app at {base}: {exc}") from exc

@@ -2,36 +2,46 @@
 
 from __future__ import annotations
 
+from enum import Enum
 from typing import Annotated
 
 import typer
 
+from backend.console import refusing_bad_input
 from backend.db import session_scope
-from backend.errors import DexlabelError
 
 jobs_app = typer.Typer(help="Queue jobs: status, attempts, results and errors.",
                        no_args_is_help=True)
 
 
-def _fail(exc: DexlabelError) -> None:
-    typer.secho(f"error: {exc.detail}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
+class JobStatus(str, Enum):
+    """The job table's statuses as choices (a test keeps them equal to JOB_STATUSES)."""
+
+    queued = "queued"
+    running = "running"
+    retrying = "retrying"
+    waiting = "waiting"
+    done = "done"
+    failed = "failed"
 
 
 @jobs_app.command("list")
 def jobs_list(
-    status: Annotated[str | None, typer.Option(help="queued, running, retrying, waiting, "
-                                                    "done or failed")] = None,
-    kind: Annotated[str | None, typer.Option()] = None,
+    status: Annotated[JobStatus | None, typer.Option(help="only jobs in this status")] = None,
+    kind: Annotated[str | None, typer.Option(help="only jobs of this kind (qc, solve, ...)")]
+    = None,
 ) -> None:
-    """The newest jobs with their status, attempts and last error."""
-    from backend.jobs.service import list_jobs
+    """The newest jobs: status, attempts, and the result or error in one line."""
+    from backend.jobs.service import describe, list_jobs
 
     with session_scope() as session:
-        for job in list_jobs(session, status, kind):
-            error = f"  {job.error.splitlines()[-1][:120]}" if job.error else ""
-            typer.echo(f"{job.id:5d} {job.key:32s} {job.status:8s} "
-                       f"attempts {job.attempts}/{job.max_attempts}{error}")
+        jobs = list_jobs(session, status.value if status else None, kind)
+        if not jobs:
+            typer.echo("no jobs" + (f" {status.value}" if status else "")
+                       + (f" of kind {kind}" if kind else ""))
+        for job in jobs:
+            typer.echo(f"{job.id:5d} {job.key:28s} {job.status:8s} "
+                       f"{job.attempts}/{job.max_attempts}  {describe(job)[:160]}")
 
 
 @jobs_app.command("retry")
@@ -39,9 +49,6 @@ def jobs_retry(job_id: Annotated[int, typer.Argument()]) -> None:
     """Queue a failed or waiting job again."""
     from backend.jobs.service import retry_job
 
-    try:
-        with session_scope() as session:
-            job = retry_job(session, job_id)
-            typer.echo(f"{job.key}: queued")
-    except DexlabelError as exc:
-        _fail(exc)
+    with refusing_bad_input(), session_scope() as session:
+        job = retry_job(session, job_id)
+        typer.echo(f"{job.key}: queued")

@@ -6,52 +6,61 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from sqlalchemy import select
 
+from backend.console import EXIT_FAILED, SequenceArg, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
-from backend.errors import DexlabelError
 
 qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True)
 training_app = typer.Typer(help="Training clips (gold) for the qualification.",
                            no_args_is_help=True)
 
 
-def _fail(exc: DexlabelError) -> None:
-    typer.secho(f"error: {exc.detail}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
-
-
 @qc_app.command("run")
 def qc_run(
-    sequence_id: Annotated[int, typer.Argument()],
+    sequence: SequenceArg,
     target: Annotated[str | None, typer.Option(help="hand:0, object:1, ... (default: all)")] = None,
     now: Annotated[bool, typer.Option("--now/--queue",
                                       help="run here and wait, or queue for a worker")] = True,
 ) -> None:
     """Score the submitted work of a sequence's targets and act on the decisions."""
-    from backend.jobs.service import execute
+    import worker.tasks  # noqa: F401  (registers the job handlers, so --now runs here)
+    from backend.jobs.models import Job
+    from backend.jobs.service import describe, execute
     from backend.quality.service import request_qc_for
 
-    try:
-        with session_scope() as session:
-            keys = [job.key for job in request_qc_for(session, sequence_id, target)]
-    except DexlabelError as exc:
-        _fail(exc)
-        return
+    with refusing_bad_input(), session_scope() as session:
+        sequence_id = resolve_sequence(session, sequence)
+        keys = [job.key for job in request_qc_for(session, sequence_id, target)]
+    failed = False
     for key in keys:
         if now:
-            execute(key)
-        typer.echo(f"{key}: {'done' if now else 'queued'}")
+            execute(key)  # a no-op when a queue consumer holds the job (it runs again after)
+        with session_scope() as session:
+            job = session.scalars(select(Job).where(Job.key == key)).one()
+            failed |= job.status in ("failed", "retrying")
+            typer.echo(f"{key}: {describe(job)}")
     if now:
-        qc_reports(sequence_id)
+        _print_reports(sequence_id)
+    if failed:
+        raise typer.Exit(EXIT_FAILED)
 
 
 @qc_app.command("reports")
-def qc_reports(sequence_id: Annotated[int, typer.Argument()]) -> None:
+def qc_reports(sequence: SequenceArg) -> None:
     """One line per scored assignment: outcome, errors, action, and the worker's feedback."""
+    with refusing_bad_input(), session_scope() as session:
+        sequence_id = resolve_sequence(session, sequence)
+    _print_reports(sequence_id)
+
+
+def _print_reports(sequence_id: int) -> None:
     from backend.quality.service import list_reports
 
     with session_scope() as session:
         rows = list_reports(session, sequence_id)
+        if not rows:
+            typer.echo(f"sequence {sequence_id} has no QC reports yet")
         for r in rows:
             m = r.metrics or {}
             med = m.get("median_error_px")
@@ -85,11 +94,8 @@ def training_create(
     from backend.quality.gold import create_clip, truth_tracks
     from backend.quality.schemas import TrainingClipCreate
 
-    try:
-        with session_scope() as session:
-            tracks = truth_tracks(session, task_id, from_truth) if from_truth else None
-            clip = create_clip(session, TrainingClipCreate(
-                task_id=task_id, from_assignment_id=from_assignment, tracks=tracks))
-            typer.echo(f"task {clip.task_id} is a training clip ({clip.source})")
-    except DexlabelError as exc:
-        _fail(exc)
+    with refusing_bad_input(), session_scope() as session:
+        tracks = truth_tracks(session, task_id, from_truth) if from_truth else None
+        clip = create_clip(session, TrainingClipCreate(
+            task_id=task_id, from_assignment_id=from_assignment, tracks=tracks))
+        typer.echo(f"task {clip.task_id} is a training clip ({clip.source})")

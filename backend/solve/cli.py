@@ -13,30 +13,14 @@ import time
 from typing import Annotated, Literal
 
 import typer
-from sqlalchemy.orm import Session
 
-from backend.captures.service import find_sequence
+from backend.console import (
+    EXIT_FAILED, SequenceArg, progress, refusing_bad_input, resolve_sequence,
+)
 from backend.db import session_scope
-from backend.errors import DexlabelError, NotFound
 
 # How often --wait looks at a run another process is solving, seconds.
 POLL_S = 2.0
-SequenceArg = Annotated[str, typer.Argument(help="sequence id, or SUBJECT/NAME")]
-
-
-def _sequence_id(session: Session, sequence: str) -> int:
-    if sequence.isdigit():
-        return int(sequence)
-    subject, _, name = sequence.partition("/")
-    found = find_sequence(session, subject, name) if name else None
-    if found is None:
-        raise NotFound(f"no sequence {sequence!r}: give an id or SUBJECT/NAME")
-    return found.id
-
-
-def _fail(exc: DexlabelError) -> typer.Exit:
-    typer.echo(f"error: {exc.detail}", err=True)
-    return typer.Exit(code=1)
 
 
 def solve_command(
@@ -53,27 +37,26 @@ def solve_command(
     from backend.solve.models import SolveRun
     from backend.solve.service import job_key, request_solve
 
-    try:
-        with session_scope() as session:
-            run = request_solve(session, _sequence_id(session, sequence), optimiser)
-            run_id = run.id
-    except DexlabelError as exc:
-        raise _fail(exc) from None
-    typer.echo(f"solve run {run_id} queued ({run.optimiser} optimiser)")
+    with refusing_bad_input(), session_scope() as session:
+        run = request_solve(session, resolve_sequence(session, sequence), optimiser)
+        run_id, chosen = run.id, run.optimiser
+    typer.echo(f"solve run {run_id} queued ({chosen} optimiser)")
     if not wait:
         return
-    execute(job_key(run_id))  # a no-op when a queue consumer claimed the job first
-    while True:
-        with session_scope() as session:
-            run = session.get_one(SolveRun, run_id)
-            status, summary, error, timings = run.status, run.summary, run.error, run.timings
-        if status in ("done", "failed"):
-            break
-        time.sleep(POLL_S)
+    with progress(f"solve run {run_id}") as step:
+        execute(job_key(run_id))  # a no-op when a queue consumer claimed the job first
+        while True:
+            with session_scope() as session:
+                run = session.get_one(SolveRun, run_id)
+                status, summary, error, timings = run.status, run.summary, run.error, run.timings
+            if status in ("done", "failed"):
+                break
+            time.sleep(POLL_S)
+        step(status)
     if status != "done":
-        typer.echo(f"solve run {run_id} is {status}: {error or 'see dexlabel worker logs'}",
+        typer.echo(f"solve run {run_id} is {status}: {error or 'see dexlabel jobs list'}",
                    err=True)
-        raise typer.Exit(code=1)
+        raise typer.Exit(EXIT_FAILED)
     typer.echo(f"solve run {run_id} done in {timings.get('total_s', 0.0):.1f} s")
     typer.echo(json.dumps(summary, indent=2, sort_keys=True))
 
@@ -86,11 +69,8 @@ def calibrate_hand_command(
     """Fit the subject's MANO betas to the accepted hand tracks and store them on the hand."""
     from backend.solve.calibration import calibrate_hand
 
-    try:
-        with session_scope() as session:
-            result = calibrate_hand(session, _sequence_id(session, sequence), force=force)
-    except DexlabelError as exc:
-        raise _fail(exc) from None
+    with refusing_bad_input(), session_scope() as session:
+        result = calibrate_hand(session, resolve_sequence(session, sequence), force=force)
     typer.echo(f"hand {result.hand_index} ({result.side}): betas from {result.frames_used} "
                f"frames, bone lengths within {result.max_residual_mm:.2f} mm")
     typer.echo(" ".join(f"{b:.4f}" for b in result.betas))
