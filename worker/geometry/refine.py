@@ -61,15 +61,18 @@ def project_stack(stack: CameraStack, points: np.ndarray,
         jacobian: also return d pixel / d point.
 
     Returns:
-        pixels (N, V, 2), camera depth z (N, V) metres, and the Jacobian (N, V, 2, 3) or None.
+        pixels (N, V, 2), camera depth z (N, V) metres, and the Jacobian (N, V, 2, 3) or None;
+        pixels and Jacobian are NaN where a point lies on a camera's principal plane (z = 0,
+        e.g. at the centre of the master camera, the world origin): it has no image there.
+        Points behind a camera (z < 0) project as OpenCV does; callers test z.
     """
     if points.ndim == 3:
         cam = np.einsum("vij,nvj->nvi", stack.rot, points) + stack.trans
     else:
         cam = camera_frames(stack, points)
     z = cam[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x, y = cam[..., 0] / z, cam[..., 1] / z
+    inv_z = np.divide(1.0, z, out=np.full_like(z, np.nan), where=z != 0)
+    x, y = cam[..., 0] * inv_z, cam[..., 1] * inv_z
     distorted = bool(stack.dist.any())
     if distorted:
         k1, k2, p1, p2, k3 = (stack.dist[:, i] for i in range(5))
@@ -86,9 +89,9 @@ def project_stack(stack: CameraStack, points: np.ndarray,
     if not jacobian:
         return pix, z, None
     jn = np.zeros(x.shape + (2, 3))
-    jn[..., 0, 0] = jn[..., 1, 1] = 1.0 / z
-    jn[..., 0, 2] = -x / z
-    jn[..., 1, 2] = -y / z
+    jn[..., 0, 0] = jn[..., 1, 1] = inv_z
+    jn[..., 0, 2] = -x * inv_z
+    jn[..., 1, 2] = -y * inv_z
     if not distorted:
         return pix, z, K[:, :2, :2] @ (jn @ stack.rot)
     d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)

@@ -271,7 +271,14 @@ def leave_one_out_residuals(cameras: list[CameraModel], pixels: np.ndarray, poin
     stack = CameraStack.of(cameras)
     w = np.broadcast_to(np.ones(len(cameras)) if weights is None else weights, inliers.shape)
     w = np.where(inliers, w, 0.0)
-    pix, _, jac = project_stack(stack, np.nan_to_num(points), jacobian=True)
+    # Only points that exist are projected, and only their inliers' Jacobians enter the sums:
+    # an outlier view may see the point on or behind its principal plane, where the
+    # Jacobian is NaN.
+    fitted = np.isfinite(points).all(axis=1)
+    pix = np.full(pixels.shape, np.nan)
+    jac = np.zeros(inliers.shape + (2, 3))
+    pix[fitted], _, jac[fitted] = project_stack(stack, points[fitted], jacobian=True)
+    jac = np.where(inliers[..., None, None], jac, 0.0)
     res = pixels - pix
     hess = np.einsum("nv,nvai,nvaj->nij", w, jac, jac)
     scale = np.einsum("nii->n", hess) ** 3

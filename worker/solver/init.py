@@ -21,6 +21,9 @@ from worker.solver.triangulate import linear_poses, reprojection_px, triangulate
 PALM_JOINTS = (0, 5, 9, 13, 17)
 # Weight (per rad^2) of the pose prior while fitting 3D joints, against residuals in mm.
 INIT_PRIOR = 1.0
+# Landmark observations a frame needs for worker.solver.triangulate.linear_poses to accept its
+# pose (12 unknowns of [R | t], 2 equations per observation).
+LINEAR_POSE_OBSERVATIONS = 6
 
 
 def kabsch(source: np.ndarray, target: np.ndarray, weight: np.ndarray
@@ -80,8 +83,17 @@ def initial_object_poses(problem: Problem, index: int, marks: MappedLandmarks) -
     if not len(marks.views):
         return poses
     model = problem.object_vertices[index][marks.vertices]
-    linear, ok = linear_poses(problem.cameras, marks.views, model, marks.xy, marks.gamma)
-    linear_error = _median_errors(problem, marks, model, linear)
+    # The linear pose only of frames with enough observations to be taken (linear_poses'
+    # rule); elsewhere it has no solution (no landmark seen: 0 / 0) and is never used.
+    enough = np.flatnonzero(marks.gamma.sum(axis=1) >= LINEAR_POSE_OBSERVATIONS)
+    linear = np.full((frames, 3, 4), np.nan)
+    ok = np.zeros(frames, bool)
+    linear_error = np.full(frames, np.inf)
+    if enough.size:
+        linear[enough], ok[enough] = linear_poses(problem.cameras, marks.views, model,
+                                                  marks.xy[enough], marks.gamma[enough])
+        linear_error[enough] = _median_errors(problem, marks, model, linear[enough],
+                                              enough.tolist())
     for f in range(1, frames):
         if ok[f] and linear_error[f] < _median_errors(problem, marks, model, poses[f - 1][None],
                                                       [f])[0]:
@@ -94,7 +106,8 @@ def initial_object_poses(problem: Problem, index: int, marks: MappedLandmarks) -
 def _median_errors(problem: Problem, marks: MappedLandmarks, model: np.ndarray,
                    poses: np.ndarray, frames: list[int] | None = None) -> np.ndarray:
     """(B,) median reprojection error px of the seen landmarks under poses (B, 3, 4) at frames
-    (default: all frames, B = F); inf where a frame sees none."""
+    (default: all frames, B = F); inf where a frame sees none, or where none of its seen
+    landmarks projects (a NaN pose, a point on a camera's principal plane)."""
     frames = list(range(len(poses))) if frames is None else frames
     world = np.einsum("bij,lj->bli", poses[:, :, :3], model) + poses[:, None, :, 3]
     errors = np.stack([reprojection_px([problem.cameras[v]], world[:, k],
@@ -102,6 +115,6 @@ def _median_errors(problem: Problem, marks: MappedLandmarks, model: np.ndarray,
                        for k, v in enumerate(marks.views)], axis=1)
     errors = np.where(marks.gamma[frames], errors, np.nan)
     out = np.full(len(poses), np.inf)
-    seen = marks.gamma[frames].any(axis=1)
-    out[seen] = np.nanmedian(errors[seen], axis=1)
+    measured = np.isfinite(errors).any(axis=1)
+    out[measured] = np.nanmedian(errors[measured], axis=1)
     return out
