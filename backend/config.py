@@ -7,14 +7,18 @@ PostgreSQL, Redis and S3 (see docker-compose.yml).
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import Field, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict, SettingsError
+
+from backend.errors import DexlabelError
 
 PLACEHOLDER_SECRETS = frozenset({"", "changeme", "change-me", "secret", "dev-secret-change-me"})
 DEV_SECRET = "dev-secret-change-me"
@@ -58,6 +62,34 @@ def parse_market_requesters(spec: str, default_balance: str) -> dict[str, Market
         balance = _cents(fields[2] if len(fields) == 3 else default_balance)
         requesters[key] = MarketRequester(key, fields[1], balance)
     return requesters
+
+
+def check_qc_thresholds(values: dict[str, Any]) -> dict[str, float | int]:
+    """DEXLABEL_QC_THRESHOLDS checked against worker.quality.decide.QCThresholds: every key one
+    of its number fields, every value a number of that field's type (whole for an int field),
+    finite and positive; the values as that type. ValueError naming the key otherwise."""
+    if not values:
+        return {}
+    # Imported only when the setting is used: the decision module pulls in NumPy, which most
+    # CLI commands never load.
+    from worker.quality.decide import QCThresholds
+
+    defaults = {f.name: f.default for f in dataclasses.fields(QCThresholds)
+                if isinstance(f.default, int | float) and not isinstance(f.default, bool)}
+    checked: dict[str, float | int] = {}
+    for name, value in values.items():
+        if name not in defaults:
+            raise ValueError(f"{name!r} is not a QC threshold setting; one of "
+                             f"{', '.join(sorted(defaults))}")
+        kind = type(defaults[name])
+        what = "a whole number" if kind is int else "a number"
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not number or not math.isfinite(value) or (kind is int and value != int(value)):
+            raise ValueError(f"{name} must be {what}, got {value!r}")
+        if value <= 0:
+            raise ValueError(f"{name} must be above 0, got {value!r}")
+        checked[name] = kind(value)
+    return checked
 
 
 class Settings(BaseSettings):
@@ -117,12 +149,19 @@ class Settings(BaseSettings):
     # DEXLABEL_SOLVE_PARAMS='{"w_depth": 5.0}'; a solve request's own params come on top.
     solve_params: dict[str, float | int | bool] = Field(default_factory=dict)
     # Quality control: act on clear decisions (approve / reject + re-open) without an admin;
-    # block a worker after this many rejected assignments (0: never); bounds of the learned
-    # thresholds as JSON of worker.quality.decide.QCThresholds fields, e.g.
-    # DEXLABEL_QC_THRESHOLDS='{"approve_px_max": 8.0}'.
+    # block a worker after this many rejected assignments (0: never); the settings of the
+    # learned thresholds as JSON of worker.quality.decide.QCThresholds' number fields
+    # (k_review, k_reject, min_population, motion_ratio_high), e.g.
+    # DEXLABEL_QC_THRESHOLDS='{"k_review": 2.5}'; an unknown key or a wrong type is refused
+    # when the settings load (check_qc_thresholds).
     qc_auto_actions: bool = True
     qc_block_after_failures: int = Field(default=3, ge=0)
-    qc_thresholds: dict[str, float] = Field(default_factory=dict)
+    qc_thresholds: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("qc_thresholds")
+    @classmethod
+    def _check_qc_thresholds(cls, value: dict[str, Any]) -> dict[str, float | int]:
+        return check_qc_thresholds(value)
 
     @model_validator(mode="after")
     def _fill_defaults_and_check(self) -> Settings:
@@ -159,7 +198,36 @@ class Settings(BaseSettings):
         return self.database_url.startswith("sqlite")
 
 
+class InvalidSettings(DexlabelError):
+    """The environment's settings are refused; the detail names each variable and why, one
+    per line (``DEXLABEL_QC_THRESHOLDS: 'x' is not a QC threshold setting; ...``). A
+    deployment's fault, not a request's: status 500. The CLI prints it without a traceback."""
+
+    status_code = 500
+    code = "invalid_settings"
+
+
+def _describe(exc: ValidationError) -> str:
+    lines = []
+    for error in exc.errors():
+        message = error["msg"].removeprefix("Value error, ")
+        field = str(error["loc"][0]) if error["loc"] else ""
+        lines.append(f"DEXLABEL_{field.upper()}: {message}" if field else message)
+    return "\n".join(lines)
+
+
 @lru_cache
 def get_settings() -> Settings:
-    """The process-wide settings, read once from the environment."""
-    return Settings()
+    """The process-wide settings, read once from the environment.
+
+    Raises InvalidSettings naming every refused variable (a wrong value, an unknown key of a
+    JSON setting, JSON that does not parse), so a process refuses to start with them.
+    """
+    try:
+        return Settings()
+    except ValidationError as exc:
+        raise InvalidSettings(_describe(exc)) from None
+    except SettingsError as exc:  # a JSON setting that does not parse
+        field = re.search(r'field "(\w+)"', str(exc))
+        name = f"DEXLABEL_{field.group(1).upper()}" if field else "a setting"
+        raise InvalidSettings(f"{name} is not valid JSON: {exc.__cause__ or exc}") from None
