@@ -10,6 +10,7 @@ worker's profile (worker.synth.annotators).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,9 @@ from worker.synth.annotators import annotate, draw_profiles, hand_visibility, me
 WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
 WORKER_PASSWORD = "simulated worker {index:03d}"
 HTTP_TIMEOUT_S = 30.0
+# Attempts of a request that a server error left without effect, and the pause between them.
+RETRIES = 3
+RETRY_PAUSE_S = 0.2
 # Centroid splits of an object's mesh before landmarks are picked (see surface_points).
 SURFACE_LEVELS = 2
 
@@ -147,6 +151,17 @@ class WorkerClient:
         self.http = http
         self.base = base.rstrip("/")
 
+    def _again(self, method: str, url: str, **kwargs: Any) -> httpx.Response:
+        """A request that changes nothing when it fails, tried again after a server error as
+        a browser's user would (the portal's HIT list can lose a race with a requester call
+        on the same HIT and answer 500; nothing was written)."""
+        for attempt in range(RETRIES):
+            resp = self.http.request(method, url, **kwargs)
+            if resp.status_code < 500:
+                break
+            time.sleep(RETRY_PAUSE_S * (attempt + 1))
+        return resp
+
     def sign_in(self, admin_token: str, email: str, password: str) -> tuple[str, str]:
         """Create the account (or reuse it) and log in; (portal token, worker id)."""
         resp = self.http.post(f"{self.base}/api/portal/workers",
@@ -162,15 +177,17 @@ class WorkerClient:
     def accept_first(self, token: str) -> dict | None:
         """Accept the first HIT on offer; the portal's assignment reply, or None."""
         auth = {"Authorization": f"Bearer {token}"}
-        hits = _checked(self.http.get(f"{self.base}/api/portal/hits", headers=auth), "list HITs")
+        hits = _checked(self._again("GET", f"{self.base}/api/portal/hits", headers=auth),
+                        "list HITs")
         for hit in hits:
             # Only HITs that open our annotation page with a task token can be worked here.
-            preview = self.http.get(f"{self.base}/api/portal/hits/{hit['hit_id']}", headers=auth)
+            preview = self._again("GET", f"{self.base}/api/portal/hits/{hit['hit_id']}",
+                                  headers=auth)
             url = preview.json().get("preview_url") if preview.status_code == 200 else None
             if "task=" not in (url or ""):
                 continue
-            resp = self.http.post(f"{self.base}/api/portal/hits/{hit['hit_id']}/accept",
-                                  headers=auth)
+            resp = self._again("POST", f"{self.base}/api/portal/hits/{hit['hit_id']}/accept",
+                               headers=auth)
             if resp.status_code == 200:
                 return resp.json()
         return None
