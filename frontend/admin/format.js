@@ -119,6 +119,37 @@ export function canRetry(job) {
   return job.status === "failed" || job.status === "waiting";
 }
 
+/** The tone of a job's outcome line by its status: trouble, a wait, or plain. */
+const JOB_TONES = /** @type {Record<string, string>} */ ({
+  failed: "error", retrying: "error", waiting: "warn",
+});
+
+/**
+ * @typedef {{kind: string, status: string, error?: string|null,
+ *            result?: Record<string, unknown>|null, message?: string}} JobLike
+ */
+
+/**
+ * A job's result or error in one line for people, its tone, and the full text behind it.
+ * The line is the API's ``message`` ("qc: hand:0 scored 6: 4 approve, 2 review, 0 reject",
+ * "solve: waiting: 27 of 32 tasks not accepted yet"); where a reply has none, it is made the
+ * same way from the error's last line or the result's own message.
+ * @param {JobLike} job   GET /api/jobs
+ * @returns {{line: string, tone: string, full: string}}
+ */
+export function jobOutcome(job) {
+  const error = (job.error || "").trim();
+  const lastLine = error.split("\n").pop() || "";
+  const said = typeof job.result?.message === "string" ? job.result.message : "";
+  let line = (job.message || "").trim();
+  if (!line) {
+    if (lastLine && JOB_TONES[job.status]) line = `${job.kind}: ${job.status}: ${lastLine.trim()}`;
+    else if (said && job.status === "done") line = `${job.kind}: ${said}`;
+    else line = `${job.kind}: ${job.status}`;
+  }
+  return { line, tone: JOB_TONES[job.status] || "", full: error || line };
+}
+
 /**
  * @typedef {{label: string, value: number|null, x: number, y: number, width: number,
  *            height: number}} Bar

@@ -1,7 +1,8 @@
 /** Thin renderers of the review page: they build DOM from API replies, nothing more. */
 
 import {
-  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, metric, percent, px, when,
+  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, jobOutcome, metric, percent,
+  px, when,
 } from "./format.js";
 
 const SVG = "http://www.w3.org/2000/svg";
@@ -184,24 +185,28 @@ export function renderWorkers(body, workers) {
 }
 
 /**
- * One row per job; failed and waiting ones get a Retry button (data-retry = job id).
+ * One row per job with its result or error in one line (the whole error in the line's
+ * tooltip); failed and waiting ones get a Retry button (data-retry = job id).
  * @param {HTMLTableSectionElement} body
  * @param {any[]} jobs   GET /api/jobs
  */
 export function renderJobs(body, jobs) {
-  body.replaceChildren(...jobs.map((j) => el("tr", {
-    "data-job": String(j.id), "data-kind": j.kind, "data-status": j.status,
-  }, [
-    el("td", { class: "num" }, [String(j.id)]),
-    el("td", {}, [j.kind]),
-    el("td", {}, [el("code", {}, [j.key])]),
-    el("td", {}, [badge(j.status)]),
-    el("td", { class: "num" }, [`${j.attempts} / ${j.max_attempts}`]),
-    el("td", {}, [when(j.updated_at)]),
-    el("td", { class: "error-text" }, [j.error || ""]),
-    el("td", {}, [canRetry(j)
-      ? el("button", { type: "button", "data-retry": String(j.id) }, ["Retry"]) : ""]),
-  ])));
+  body.replaceChildren(...jobs.map((j) => {
+    const outcome = jobOutcome(j);
+    return el("tr", { "data-job": String(j.id), "data-kind": j.kind, "data-status": j.status }, [
+      el("td", { class: "num" }, [String(j.id)]),
+      el("td", { class: "clip", title: j.key }, [el("code", {}, [j.key])]),
+      el("td", {}, [badge(j.status)]),
+      el("td", { class: "num" }, [`${j.attempts} / ${j.max_attempts}`]),
+      el("td", { class: "nowrap" }, [when(j.updated_at)]),
+      el("td", { class: "job-outcome" }, [el("div", {
+        class: `outcome-line ${outcome.tone}`.trim(), title: outcome.full,
+        "data-outcome": outcome.line,
+      }, [outcome.line])]),
+      el("td", { class: "job-action" }, [canRetry(j)
+        ? el("button", { type: "button", "data-retry": String(j.id) }, ["Retry"]) : ""]),
+    ]);
+  }));
 }
 
 /**

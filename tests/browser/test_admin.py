@@ -228,7 +228,22 @@ def test_jobs_workers_and_costs_panels_show_the_api_state(
     expect(row).to_have_attribute("data-status", "done")
     expect(row).to_contain_text(job["key"])
     expect(row.locator("button[data-retry]")).to_have_count(0)
+    # The job's result in the API's one line ("qc: hand:0 scored 3: 2 approve, ..."), drawn.
+    assert job["message"].startswith("qc: hand:0 scored "), job
+    line = row.locator(".outcome-line")
+    expect(line).to_have_text(job["message"])
+    assert line.evaluate("e => e.getBoundingClientRect().height") > 0
     page.screenshot(path=str(output_dir / "admin-jobs.png"))
+    # On a narrow screen the Action column stays in view; each outcome stays one sentence.
+    page.set_viewport_size({"width": 1024, "height": 700})
+    action = page.locator("#jobs th").last
+    expect(action).to_have_text("Action")
+    box = action.bounding_box()
+    assert box is not None and box["x"] + box["width"] <= 1024, box
+    lines = page.locator("#job-rows .outcome-line").all_inner_texts()
+    assert lines and all(text.strip() and "\n" not in text for text in lines), lines
+    page.screenshot(path=str(output_dir / "admin-jobs-1024.png"))
+    page.set_viewport_size({"width": 1440, "height": 900})
 
     quality = {w["worker_id"]: w for w in server.admin("GET", "/api/qc/workers")}
     page.locator("#nav-workers").click()
