@@ -75,7 +75,7 @@ def _request(url: str, body: dict | None = None, token: str | None = None) -> di
     data = json.dumps(body).encode() if body is not None else None
     req = urllib.request.Request(url, data=data, headers=headers,
                                  method="POST" if data is not None else "GET")
-    with urllib.request.urlopen(req) as resp:  # noqa: S310 - local server
+    with urllib.request.urlopen(req) as resp:
         return json.loads(resp.read())
 
 
@@ -123,7 +123,7 @@ def _open(browser, url: str) -> tuple:
 
 def _p99(values: list[float]) -> float:
     ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(0.99 * (len(ordered) - 1))))]
+    return ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))]
 
 
 def _measure(urls: list[str], steps: int) -> dict:

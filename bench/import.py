@@ -22,7 +22,7 @@ from _server import isolated_workdir, start_server
 
 def _get(url: str, token: str) -> bytes:
     req = urllib.request.Request(url, headers={"Authorization": f"Bearer {token}"})
-    with urllib.request.urlopen(req) as resp:  # noqa: S310 - local server
+    with urllib.request.urlopen(req) as resp:
         return resp.read()
 
 
@@ -57,7 +57,7 @@ def main() -> None:
         body = json.dumps({"email": "bench@example.org", "password": "bench-password-123"}).encode()
         req = urllib.request.Request(f"{base}/api/auth/token", data=body,
                                      headers={"Content-Type": "application/json"})
-        token = json.loads(urllib.request.urlopen(req).read())["access_token"]  # noqa: S310
+        token = json.loads(urllib.request.urlopen(req).read())["access_token"]
         views = [f"{base}/api/sequences/{result.sequence_id}/views/{s}" for s in summary.serials]
 
         t0 = time.perf_counter()

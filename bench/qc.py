@@ -215,7 +215,7 @@ def _mixed_crowds(capture: Path, truth, seeds: int, base_seed: int) -> dict:
         sequence_id, tasks = _setup(capture)
         rng = np.random.default_rng(base_seed + 1000 + seed)
         profile_of = {}
-        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng)):
+        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng), strict=True):
             profile_of[_submit(task, profile, f"{profile}-m{seed}-{task['id']}", truth, rng)] = \
                 profile
         _run_qc(sequence_id)

@@ -141,7 +141,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     z_axis = forward / norm
     x_axis = np.cross(z_axis, up)
     x_norm = np.linalg.norm(x_axis)
-    if x_norm < 1e-9 * max(np.linalg.norm(up), 1e-300):
+    if x_norm < 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
         raise ValueError("up is parallel to the viewing direction")
     x_axis /= x_norm
     y_axis = np.cross(z_axis, x_axis)

@@ -7,8 +7,10 @@ an image of height ``h`` is ``(1 - v) * (h - 1)``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -213,6 +215,12 @@ class _PlyElement:
     props: list[tuple[str, str, str | None]]
 
 
+# One column per property: a float array for a scalar property; for a list property, an (N, n)
+# float array when every row's list has the same length, else one sequence per row.
+_Column = np.ndarray | list[Any]
+_Columns = Mapping[str, _Column]
+
+
 def _ply_type(path: Path, lineno: int, name: str) -> str:
     if name not in _PLY_TYPES:
         raise ValueError(f"{path}:{lineno}: unknown PLY type {name!r}")
@@ -247,9 +255,11 @@ def _parse_ply_header(path: Path, data: bytes) -> tuple[str, list[_PlyElement], 
     return fmt, elements, body, len(lines)
 
 
-def _ascii_rows(path: Path, element: _PlyElement, lines: list[str], start: int, first_line: int):
+def _ascii_rows(
+    path: Path, element: _PlyElement, lines: list[str], start: int, first_line: int
+) -> tuple[_Columns, int]:
     """Parse ``element.count`` ascii rows from ``lines[start:]``; returns (columns, next start)."""
-    cols: dict[str, list] = {p[0]: [] for p in element.props}
+    cols: dict[str, list[Any]] = {p[0]: [] for p in element.props}
     for i in range(element.count):
         lineno = first_line + start + i
         if start + i >= len(lines):
@@ -271,13 +281,16 @@ def _ascii_rows(path: Path, element: _PlyElement, lines: list[str], start: int, 
     return cols, start + element.count
 
 
-def _binary_rows(path: Path, element: _PlyElement, data: bytes, offset: int, order: str):
+def _binary_rows(
+    path: Path, element: _PlyElement, data: bytes, offset: int, order: str
+) -> tuple[_Columns, int]:
     """Parse a binary element; returns (columns, offset after it).
 
     Fast path: every list is as long as in the first row (all triangles, say), so the element
     is one structured array. Otherwise the rows are walked one by one.
     """
-    fields, pos = [], offset
+    fields: list[tuple[str, str] | tuple[str, str, tuple[int]]] = []
+    pos = offset
     for name, typ, count_t in element.props:
         if count_t is None:
             fields.append((name, order + typ))
@@ -298,9 +311,11 @@ def _binary_rows(path: Path, element: _PlyElement, data: bytes, offset: int, ord
     return _binary_rows_walk(path, element, data, offset, order)
 
 
-def _binary_rows_walk(path: Path, element: _PlyElement, data: bytes, offset: int, order: str):
+def _binary_rows_walk(
+    path: Path, element: _PlyElement, data: bytes, offset: int, order: str
+) -> tuple[_Columns, int]:
     """Row-by-row parse of a binary element with lists of varying length."""
-    cols: dict[str, list] = {p[0]: [] for p in element.props}
+    cols: dict[str, list[Any]] = {p[0]: [] for p in element.props}
     pos = offset
     try:
         for _ in range(element.count):
@@ -320,7 +335,7 @@ def _binary_rows_walk(path: Path, element: _PlyElement, data: bytes, offset: int
     return {k: (np.asarray(v) if k in scalars else v) for k, v in cols.items()}, pos
 
 
-def _triangulate(path: Path, polys, n_verts: int) -> np.ndarray:
+def _triangulate(path: Path, polys: _Column, n_verts: int) -> np.ndarray:
     """Fan-triangulate polygons (a list of index lists, or an (F, n) array) -> (F', 3) int64."""
     if len(polys) == 0:
         raise ValueError(f"{path}: PLY has no faces")
@@ -343,7 +358,7 @@ def _triangulate(path: Path, polys, n_verts: int) -> np.ndarray:
 def _read_ply(path: Path) -> Mesh:
     data = path.read_bytes()
     fmt, elements, offset, n_header = _parse_ply_header(path, data)
-    found: dict[str, dict] = {}
+    found: dict[str, _Columns] = {}
     lines = data[offset:].decode("ascii", errors="replace").splitlines() if fmt == "ascii" else []
     start = 0
     for element in elements:
@@ -359,7 +374,8 @@ def _read_ply(path: Path) -> Mesh:
     verts = np.stack([np.asarray(vertex[k], dtype=np.float64) for k in "xyz"], axis=1)
     if not face or not ({"vertex_indices", "vertex_index"} & face.keys()):
         raise ValueError(f"{path}: PLY has no face element with vertex_indices")
-    faces = _triangulate(path, face.get("vertex_indices", face.get("vertex_index")), len(verts))
+    indices = face["vertex_indices"] if "vertex_indices" in face else face["vertex_index"]
+    faces = _triangulate(path, indices, len(verts))
     for u_name, v_name in _UV_NAMES:
         if u_name in vertex and v_name in vertex:
             uvs = np.stack([np.asarray(vertex[u_name]), np.asarray(vertex[v_name])], axis=1)

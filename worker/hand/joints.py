@@ -15,15 +15,17 @@ FINGER_NAMES: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little")
 
 _JOINT_SUFFIXES: tuple[str, ...] = ("mcp", "pip", "dip", "tip")
 
-JOINT_NAMES: tuple[str, ...] = ("wrist",) + tuple(
-    f"{finger}_{suffix}" for finger in FINGER_NAMES for suffix in _JOINT_SUFFIXES
+JOINT_NAMES: tuple[str, ...] = (
+    "wrist",
+    *(f"{finger}_{suffix}" for finger in FINGER_NAMES for suffix in _JOINT_SUFFIXES),
 )
 
 TIP_NAMES: tuple[str, ...] = tuple(f"{finger}_tip" for finger in FINGER_NAMES)
 
 # Parent of each DexYCB joint: every finger chain hangs off the wrist (index 0).
-JOINT_PARENTS: tuple[int, ...] = (-1,) + tuple(
-    0 if k == 0 else 1 + 4 * f + k - 1 for f in range(len(FINGER_NAMES)) for k in range(4)
+JOINT_PARENTS: tuple[int, ...] = (
+    -1,
+    *(0 if k == 0 else 1 + 4 * f + k - 1 for f in range(len(FINGER_NAMES)) for k in range(4)),
 )
 
 NUM_JOINTS = len(JOINT_NAMES)  # 21
@@ -33,23 +35,30 @@ NUM_POSE_JOINTS = NUM_SKELETON_JOINTS - 1  # joints 1..15 carry the 45-d hand po
 # MANO skeleton order: first joint index of each finger's 3-joint chain, per FINGER_NAMES.
 MANO_FINGER_START: dict[str, int] = {"index": 1, "middle": 4, "little": 7, "ring": 10, "thumb": 13}
 
-MANO_JOINT_NAMES: tuple[str, ...] = ("wrist",) + tuple(
-    f"{finger}_{suffix}"
-    for finger in ("index", "middle", "little", "ring", "thumb")
-    for suffix in _JOINT_SUFFIXES[:3]
+MANO_JOINT_NAMES: tuple[str, ...] = (
+    "wrist",
+    *(
+        f"{finger}_{suffix}"
+        for finger in ("index", "middle", "little", "ring", "thumb")
+        for suffix in _JOINT_SUFFIXES[:3]
+    ),
 )
 
 # MANO kinematic parents (kintree_table row 0, with -1 for the root).
-MANO_PARENTS: tuple[int, ...] = (-1,) + tuple(
-    0 if k == 0 else start + k - 1 for start in (1, 4, 7, 10, 13) for k in range(3)
+MANO_PARENTS: tuple[int, ...] = (
+    -1,
+    *(0 if k == 0 else start + k - 1 for start in (1, 4, 7, 10, 13) for k in range(3)),
 )
 
 # Index into concat(skeleton (16 joints, MANO order), tips (5, FINGER_NAMES order)) for each of
 # the 21 DexYCB joints.
-SKELETON_TO_DEXYCB: tuple[int, ...] = (0,) + tuple(
-    index
-    for f, finger in enumerate(FINGER_NAMES)
-    for index in (*range(MANO_FINGER_START[finger], MANO_FINGER_START[finger] + 3), 16 + f)
+SKELETON_TO_DEXYCB: tuple[int, ...] = (
+    0,
+    *(
+        index
+        for f, finger in enumerate(FINGER_NAMES)
+        for index in (*range(MANO_FINGER_START[finger], MANO_FINGER_START[finger] + 3), 16 + f)
+    ),
 )
 
 # Tip vertices of the 778-vertex official MANO mesh (thumb, index, middle, ring, little), the

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import torch
 from torch import nn
 
@@ -44,7 +45,13 @@ class HandOutput:
     full_pose: torch.Tensor
 
 
-def _as_batch(value, name: str, width: int, batch: int | None, like: torch.Tensor) -> torch.Tensor:
+def _as_batch(
+    value: torch.Tensor | npt.ArrayLike,
+    name: str,
+    width: int,
+    batch: int | None,
+    like: torch.Tensor,
+) -> torch.Tensor:
     """`value` as a (B, width) tensor of `like`'s dtype/device; ValueError naming the shape."""
     tensor = torch.as_tensor(value, dtype=like.dtype, device=like.device)
     expected = f"(B, {width})" if batch is None else f"({batch}, {width})"
@@ -62,6 +69,18 @@ class HandLayer(nn.Module):
     hands_components (all components, as DexYCB uses) instead of 15 x 3 axis-angle.
     """
 
+    # Buffers registered in __init__, declared so that they read as tensors, not modules.
+    v_template: torch.Tensor
+    shapedirs: torch.Tensor
+    posedirs: torch.Tensor
+    J_regressor: torch.Tensor
+    lbs_weights: torch.Tensor
+    hands_components: torch.Tensor
+    pose_mean: torch.Tensor
+    faces: torch.Tensor
+    tip_vertex_ids: torch.Tensor
+    joint_order: torch.Tensor
+
     def __init__(
         self,
         model: HandModel,
@@ -78,7 +97,7 @@ class HandLayer(nn.Module):
         self.num_betas = model.num_betas
         self.parents = [int(p) for p in model.parents]
 
-        def buffer(name: str, array, kind: torch.dtype = dtype) -> None:
+        def buffer(name: str, array: npt.ArrayLike, kind: torch.dtype = dtype) -> None:
             tensor = torch.as_tensor(np.array(array), dtype=kind, device=device)
             self.register_buffer(name, tensor)
 

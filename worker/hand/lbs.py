@@ -68,7 +68,7 @@ def rigid_transforms(
     """
     rel = joints.clone()
     rel[:, 1:] = joints[:, 1:] - joints[:, parents[1:]]
-    bottom = rotations.new_zeros(rotations.shape[:2] + (1, 4))
+    bottom = rotations.new_zeros((*rotations.shape[:2], 1, 4))
     bottom[..., 0, 3] = 1.0
     local = torch.cat((torch.cat((rotations, rel[..., None]), dim=-1), bottom), dim=-2)
     chain = [local[:, 0]]

@@ -16,13 +16,14 @@ in the official files' convention, so our files and the official ones read back 
 
 from __future__ import annotations
 
-import copyreg
 import io
 import os
 import pickle
 import tempfile
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy.sparse
@@ -41,6 +42,8 @@ _ALLOWED = {
 _PY2_MODULES = {"__builtin__": "builtins", "copy_reg": "copyreg"}
 # What numpy arrays, scalars and dtypes pickle through (in numpy, numpy.core or numpy._core).
 _NUMPY_NAMES = {"_reconstruct", "scalar", "ndarray", "dtype", "_frombuffer"}
+# What a pickled object's state arrives as: its dict, or (dict, slots) from protocol 2.
+_PickledState = dict[str, Any] | tuple[dict[str, Any], Any]
 
 
 class _ChumpyNode:
@@ -48,7 +51,7 @@ class _ChumpyNode:
 
     chumpy_class = "chumpy.ch.Ch"
 
-    def __setstate__(self, state) -> None:
+    def __setstate__(self, state: _PickledState) -> None:
         self.state = state[0] if isinstance(state, tuple) else state
 
 
@@ -57,7 +60,7 @@ class _SparseNode:
 
     sparse_format = "csc"
 
-    def __setstate__(self, state) -> None:
+    def __setstate__(self, state: _PickledState) -> None:
         self.state = state[0] if isinstance(state, tuple) else state
 
 
@@ -71,7 +74,7 @@ def _stand_in(base: type, module: str, name: str) -> type:
 class _ManoUnpickler(pickle.Unpickler):
     """Unpickler that needs neither chumpy nor a matching scipy version, and runs no code."""
 
-    def find_class(self, module: str, name: str):
+    def find_class(self, module: str, name: str) -> Any:
         module = _PY2_MODULES.get(module, module)
         if module == "chumpy" or module.startswith("chumpy."):
             return _stand_in(_ChumpyNode, module, name)
@@ -103,21 +106,19 @@ def _evaluate_chumpy(node: _ChumpyNode) -> np.ndarray:
     raise ValueError(f"cannot evaluate {node.chumpy_class} without chumpy")
 
 
-def as_array(value) -> np.ndarray:
+def as_array(value: object) -> np.ndarray:
     """Any pickled MANO value (ndarray, chumpy stand-in, sparse stand-in) as a dense ndarray."""
     if isinstance(value, _ChumpyNode):
         return _evaluate_chumpy(value)
     if isinstance(value, _SparseNode):
         s = value.state
-        shape = tuple(s.get("_shape", s.get("shape")))
+        shape = tuple(s["_shape"] if "_shape" in s else s["shape"])
         build = scipy.sparse.csc_matrix if value.sparse_format == "csc" else scipy.sparse.csr_matrix
         return build((s["data"], s["indices"], s["indptr"]), shape=shape).toarray()
-    if scipy.sparse.issparse(value):
-        return value.toarray()
     return np.asarray(value)
 
 
-def _side_of(path: Path, data: dict, side: str | None) -> HandSide:
+def _side_of(path: Path, data: dict[str, Any], side: str | None) -> HandSide:
     if side is not None:
         return check_side(side)
     if data.get("side") in ("right", "left"):
@@ -130,7 +131,7 @@ def _side_of(path: Path, data: dict, side: str | None) -> HandSide:
     raise ValueError(f"cannot tell the hand side of {path}; pass side='right' or side='left'")
 
 
-def _tip_vertex_ids(data: dict, arrays: dict[str, np.ndarray]) -> np.ndarray:
+def _tip_vertex_ids(data: dict[str, Any], arrays: dict[str, np.ndarray]) -> np.ndarray:
     """Fingertips: the file's own ids, MANO's usual ones for the 778-vertex mesh, or else for each
     finger the vertex its last bone owns that lies farthest along that bone."""
     if "tip_vertex_ids" in data:
@@ -186,25 +187,29 @@ class _ChumpyArray:
     def __init__(self, x: np.ndarray) -> None:
         self.x = x
 
-    def __reduce_ex__(self, protocol):
-        # chumpy's own state layout, so that real chumpy can read the file too.
-        state = {"x": self.x, "_dirty_vars": set(), "_itr": None, "_depends_on_deps": {},
-                 "_make_dense": False, "_make_sparse": False}
-        return copyreg.__newobj__, (_ChumpyArray,), state
+    def __getstate__(self) -> dict[str, Any]:
+        # chumpy's own state layout, so that real chumpy can read the file too. Pickled with
+        # protocol 2, the object is written as NEWOBJ of its class, then BUILD with this state.
+        return {"x": self.x, "_dirty_vars": set(), "_itr": None, "_depends_on_deps": {},
+                "_make_dense": False, "_make_sparse": False}
 
 
 class _ChumpyStylePickler(pickle._Pickler):  # the pure-Python pickler lets us name the class
     """Writes references to _ChumpyArray as the global chumpy.ch.Ch (chumpy need not exist)."""
 
-    def save_global(self, obj, name=None):
+    # Members of the pure-Python pickler that the standard library's stubs leave out.
+    write: Callable[[bytes], object]
+    memoize: Callable[[object], None]
+
+    def save_global(self, obj: object, name: str | None = None) -> None:
         if obj is _ChumpyArray:
             self.write(pickle.GLOBAL + b"chumpy.ch\nCh\n")
             self.memoize(obj)
             return
-        super().save_global(obj, name)
+        super().save_global(obj, name)  # type: ignore[misc]  # undocumented, so not in the stubs
 
 
-def _official_layout(model: HandModel, fix_left_shapedirs: bool) -> dict:
+def _official_layout(model: HandModel, fix_left_shapedirs: bool) -> dict[str, Any]:
     shapedirs = np.array(model.shapedirs)
     if model.side == "left" and fix_left_shapedirs:
         shapedirs[:, 0, :] *= -1.0  # the official left file's convention

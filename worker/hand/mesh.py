@@ -109,7 +109,9 @@ def _chain_loft(chain: Chain) -> tuple[Loft, list[int]]:
     return tube, joint_rings
 
 
-def _chain_weights(chain: Chain, tube: Loft, joint_rings: list[int]) -> tuple[np.ndarray, ...]:
+def _chain_weights(
+    chain: Chain, tube: Loft, joint_rings: list[int]
+) -> tuple[np.ndarray, np.ndarray]:
     """(V_tube, 16) skinning weights and (V_tube, 16) bend factors along a finger tube."""
     weights = np.zeros((tube.arc.shape[0], NUM_SKELETON_JOINTS))
     bend = np.zeros_like(weights)
@@ -159,7 +161,8 @@ def build_mesh(rig: HandRig) -> HandMesh:
     """Mesh, skinning weights, joint regressor and fingertips of `rig`, metres, model frame."""
     palm = _palm_loft(rig.palm)
     n_palm = palm.vertices.shape[0]
-    parts = [(palm, _palm_weights(palm.vertices, rig.chains), np.zeros((n_palm, 16)))]
+    parts: list[tuple[Loft, np.ndarray, np.ndarray]] = [
+        (palm, _palm_weights(palm.vertices, rig.chains), np.zeros((n_palm, 16)))]
     tubes = [_chain_loft(chain) for chain in rig.chains]
     parts += [(tube, *_chain_weights(chain, tube, rings))
               for chain, (tube, rings) in zip(rig.chains, tubes, strict=True)]

@@ -12,8 +12,14 @@ from worker.hand.builtin import builtin_hand_model
 from worker.hand.mano_pickle import load_mano_pickle, save_mano_pickle
 from worker.hand.params import HandModel, HandSide, check_side
 
-__all__ = ["HandModel", "HandSide", "load_hand_model", "load_mano_pickle", "save_mano_pickle",
-           "mano_file_name"]
+__all__ = [
+    "HandModel",
+    "HandSide",
+    "load_hand_model",
+    "load_mano_pickle",
+    "mano_file_name",
+    "save_mano_pickle",
+]
 
 
 def mano_file_name(side: HandSide) -> str:

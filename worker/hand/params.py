@@ -16,7 +16,7 @@ import numpy as np
 from worker.hand.joints import MANO_PARENTS, NUM_POSE_JOINTS, NUM_SKELETON_JOINTS
 
 HandSide = Literal["right", "left"]
-SIDES: tuple[str, ...] = ("right", "left")
+SIDES: tuple[HandSide, ...] = ("right", "left")
 
 NUM_POSE_FEATURES = 9 * NUM_POSE_JOINTS  # 135: (R_j - I) flattened for joints 1..15
 NUM_HAND_POSE = 3 * NUM_POSE_JOINTS  # 45: axis-angle of joints 1..15
@@ -24,13 +24,13 @@ NUM_HAND_POSE = 3 * NUM_POSE_JOINTS  # 45: axis-angle of joints 1..15
 
 def check_side(side: str) -> HandSide:
     """Return `side` if it is "right" or "left"; raise ValueError naming the bad value otherwise."""
-    if side not in SIDES:
-        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
-    return side  # type: ignore[return-value]
+    if side in SIDES:
+        return side
+    raise ValueError(f"side must be 'right' or 'left', got {side!r}")
 
 
 def _frozen(array: np.ndarray, dtype: type) -> np.ndarray:
-    out = np.array(array, dtype=dtype, copy=True)
+    out: np.ndarray = np.array(array, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
 

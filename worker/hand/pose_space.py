@@ -57,7 +57,8 @@ class _PoseBuilder:
         self.opposition = opposition_axis(rig)
         self.pose = np.zeros((NUM_POSE_JOINTS, 3))
 
-    def rotate(self, finger: str, level: int, flex=0.0, abduct=0.0, twist=0.0, in_palm=0.0):
+    def rotate(self, finger: str, level: int, flex: float = 0.0, abduct: float = 0.0,
+               twist: float = 0.0, in_palm: float = 0.0) -> _PoseBuilder:
         """Add rotations (rad) about joint axes; in_palm turns about the palm normal (for the
         thumb's base, positive brings the thumb towards the index finger in the palm plane)."""
         joint = MANO_FINGER_START[finger] + level
@@ -65,12 +66,14 @@ class _PoseBuilder:
         self.pose[joint - 1] += flex * r + abduct * a + twist * d + in_palm * _PALMAR
         return self
 
-    def oppose(self, angle: float, pronation: float):
+    def oppose(self, angle: float, pronation: float) -> _PoseBuilder:
         """Swing the thumb's base towards the finger pads (rad), turning its pad to face them."""
         self.pose[MANO_FINGER_START["thumb"] - 1] += angle * self.opposition
         return self.rotate("thumb", 0, twist=-pronation)
 
-    def fingers(self, levels: tuple[float, float, float], factors=(1.0, 1.0, 1.0, 1.0)):
+    def fingers(self, levels: tuple[float, float, float],
+                factors: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+                ) -> _PoseBuilder:
         """Flex the four fingers' joints by levels (rad) times a per-finger factor."""
         for finger, factor in zip(_FOUR, factors, strict=True):
             for level, amount in enumerate(levels):

@@ -17,6 +17,7 @@ Both quantities are linear in MANO's pose feature (R - I): its symmetric part is
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from worker.hand.mesh import HandMesh, build_mesh
 
 # Anatomy change per unit beta, in mode order. Sizes are about one population standard deviation
 # of adult hand measures (hand length ~5%, breadth ~5%, finger girth ~7%).
-SHAPE_MODES: tuple[tuple[str, dict[str, object]], ...] = (
+SHAPE_MODES: tuple[tuple[str, dict[str, float | tuple[float, ...]]], ...] = (
     ("scale", {"scale": 0.045}),
     ("palm_width", {"palm_width": 0.05}),
     ("finger_length", {"finger_length": (0.05, 0.05, 0.05, 0.05, 0.05)}),
@@ -46,14 +47,16 @@ _DIFF_STEP = 1e-3  # beta units for the central differences
 _CORRECTIVE_GAIN = 0.27
 
 
-def _perturbed(anatomy: HandAnatomy, change: dict[str, object], t: float) -> HandAnatomy:
-    values = {}
+def _perturbed(
+    anatomy: HandAnatomy, change: dict[str, float | tuple[float, ...]], t: float
+) -> HandAnatomy:
+    values: dict[str, Any] = {}  # each field's own type: a float or a tuple of floats
     for name, delta in change.items():
         base = getattr(anatomy, name)
-        if isinstance(base, tuple):
-            values[name] = tuple(b + t * d for b, d in zip(base, delta, strict=True))  # type: ignore[arg-type]
+        if isinstance(delta, tuple):
+            values[name] = tuple(b + t * d for b, d in zip(base, delta, strict=True))
         else:
-            values[name] = base + t * delta  # type: ignore[operator]
+            values[name] = base + t * delta
     return dataclasses.replace(anatomy, **values)
 
 

@@ -22,6 +22,7 @@ Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; w
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -98,7 +99,7 @@ class HandOptions:
     hidden_margin_m: float = HIDDEN_MARGIN_M
 
     @classmethod
-    def of(cls, options: dict) -> HandOptions:
+    def of(cls, options: dict[str, Any]) -> HandOptions:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(options) - known)
         if unknown:
@@ -214,7 +215,8 @@ class _Fit:
 
 
 def _solve(cams: list[CameraModel], pixels: np.ndarray, views: np.ndarray,
-           reliability: np.ndarray, opts: HandOptions, weights: np.ndarray | None = None):
+           reliability: np.ndarray, opts: HandOptions, weights: np.ndarray | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Robust points, inliers, leave-one-out residuals and label weights of ``pixels``."""
     pairs = _hypothesis_pairs(cams, views, reliability, opts)
     # A label's vote counts by its reliability, so that a spammer's point that happens to lie
@@ -292,7 +294,7 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors:
 
 
 def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
-               depth: dict[int, np.ndarray] | None = None, **options) -> HandReport:
+               depth: dict[int, np.ndarray] | None = None, **options: Any) -> HandReport:
     """Consensus of a hand target from all its labels, and every assignment's quality.
 
     Args:
@@ -307,7 +309,7 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
         assignments {key: AssignmentQC}, provisional (fewer than 3 distinct views support it).
     """
     opts = HandOptions.of(options)
-    frames, points = check_labels(cameras, labels)
+    frames, _ = check_labels(cameras, labels)
     for view, dm in (depth or {}).items():
         if np.ndim(dm) != 3 or np.shape(dm)[0] != frames:
             raise ValueError(f"depth[{view}] must have shape (F={frames}, H, W), "

@@ -12,6 +12,7 @@ by itself which way each one cuts.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Literal
 
@@ -76,9 +77,12 @@ class QCThresholds:
     bounds: dict[str, MetricBound] = field(default_factory=_bounds)
 
 
+Outcome = Literal["approve", "review", "reject"]
+
+
 @dataclass
 class Decision:
-    outcome: Literal["approve", "review", "reject"]
+    outcome: Outcome
     reasons: list[str]
     feedback: str
     provisional: bool
@@ -94,17 +98,18 @@ def _learned(values: np.ndarray, k: float, worse: str) -> float:
 
 
 def learn_thresholds(metric_rows: list[dict[str, float | None]],
-                     bounds: QCThresholds = QCThresholds()) -> dict[str, float]:
+                     bounds: QCThresholds | None = None) -> dict[str, float]:
     """Review and reject thresholds from a population of assignments' metrics.
 
     Args:
         metric_rows: AssignmentQC.metrics of the project's assignments (None entries skipped).
-        bounds: k factors and per-metric bounds.
+        bounds: k factors and per-metric bounds; QCThresholds() when None.
 
     Returns:
         {"<metric>.review_above": x, "<metric>.reject_above": y, ...} (or ..._below), each the
         learned value clamped into its bounds, plus "motion_ratio.review_above".
     """
+    bounds = bounds if bounds is not None else QCThresholds()
     out: dict[str, float] = {}
     for name, rule in bounds.bounds.items():
         values = np.array([r[name] for r in metric_rows if r.get(name) is not None], float)
@@ -140,7 +145,7 @@ def _pct(value: float) -> str:
 
 
 # One sentence per failing metric, for the worker; {v} the value, {t} the threshold.
-_ADVICE = {
+_ADVICE: dict[str, Callable[[float, float], str]] = {
     "median_error_px": lambda v, t: (f"Half of your points are more than {v:.1f} px off "
                                      f"(aim for under {t:.0f} px)."),
     "p90_error_px": lambda v, t: (f"A tenth of your points are more than {v:.0f} px off; "
@@ -199,8 +204,8 @@ def _issue_text(issue: dict, name: str) -> str:
     if issue.get("about") == "silhouette":
         return f"the {name} was {error:.0f} px off the object in {frames}"
     if issue.get("about") == "jump":
-        return f"the {name} jumped {error:.0f} px between frames {issue['frames'][0]} and " \
-            f"{issue['frames'][1]}"
+        first, last = issue["frames"][:2]
+        return f"the {name} jumped {error:.0f} px between frames {first} and {last}"
     views = issue.get("views")
     where = f"the other {views} camera views" if views else "the other camera views"
     return f"the {name} was {error:.0f} px from where {where} place it in {frames}"
@@ -237,6 +242,7 @@ def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str
         sign = ">" if worse == "above" else "<"
         reasons.append(f"{name} {value:.3g} {sign} {limit:.3g} ({level})")
     clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values())
+    outcome: Outcome
     if clear_fail and not qc.provisional:
         outcome = "reject"
     elif clear_fail or worst:

@@ -10,7 +10,12 @@ import numpy as np
 
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import (
-    AssignmentQC, error_issues, error_summary, num, per_point_and_frame, track_metrics,
+    AssignmentQC,
+    error_issues,
+    error_summary,
+    num,
+    per_point_and_frame,
+    track_metrics,
 )
 from worker.quality.swaps import find_swaps
 

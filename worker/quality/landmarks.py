@@ -214,7 +214,7 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     per_joint, per_frame = per_point_and_frame(dist)
     issues = [dict(i, about="silhouette")
               for i in error_issues(dist, SILHOUETTE_TOLERANCE_PX, min_frames=1)]
-    for f, p in zip(*np.nonzero(jump)):
+    for f, p in zip(*np.nonzero(jump), strict=True):
         issues.append({"point": int(p), "frames": [int(f), int(f) + 1],
                        "error_px": num(step[f, p], 1), "about": "jump"})
     return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,

@@ -95,17 +95,17 @@ def _frame_costs(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
 def _runs(votes: np.ndarray, against: np.ndarray) -> list[tuple[int, int]]:
     """Inclusive frame runs of ``votes`` (F,) bool, bridging up to GAP_FRAMES frames that do not
     vote ``against`` (F,) bool."""
+    frames: list[int] = np.flatnonzero(votes).tolist()
+    if not frames:
+        return []
     runs: list[tuple[int, int]] = []
-    start = last = None
-    for f in np.flatnonzero(votes):
-        if start is None:
-            start = f
-        elif f - last - 1 > GAP_FRAMES or against[last + 1:f].any():
-            runs.append((int(start), int(last)))
+    start = last = frames[0]
+    for f in frames[1:]:
+        if f - last - 1 > GAP_FRAMES or against[last + 1:f].any():
+            runs.append((start, last))
             start = f
         last = f
-    if start is not None:
-        runs.append((int(start), int(last)))
+    runs.append((start, last))
     return runs
 
 

@@ -14,7 +14,13 @@ import time
 import numpy as np
 import torch
 
-from worker.solver.energies import hand_residuals, object_residuals
+from worker.solver.energies import (
+    DepthData,
+    HandData,
+    ObjectData,
+    hand_residuals,
+    object_residuals,
+)
 from worker.solver.init import initial_hand, initial_object_poses
 from worker.solver.jacobians import hand_jacobian
 from worker.solver.lm import levenberg_marquardt
@@ -31,9 +37,10 @@ def cauchy_weights(errors: np.ndarray, scale: float) -> np.ndarray:
     return 1.0 / (1.0 + (np.nan_to_num(errors) / scale) ** 2)
 
 
-def fit_hand(problem: Problem, state: SolveState, depth, iterations: int, rounds: int,
-             smooth: bool = False) -> None:
+def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, iterations: int,
+             rounds: int, smooth: bool = False) -> None:
     """Refine state.hand_pose on the labelled frames in place."""
+    subject = problem.require_subject()
     frames = state.hand_frames
     settings = problem.settings
     for _ in range(rounds):
@@ -46,11 +53,11 @@ def fit_hand(problem: Problem, state: SolveState, depth, iterations: int, rounds
             data.smooth_target = problem.tensor(_neighbour_mean(state.joints(problem), frames))
             data.sqrt_smooth = float(np.sqrt(settings.w_smooth))
 
-        def residuals(p: torch.Tensor, data=data) -> torch.Tensor:
-            return hand_residuals(problem.subject, problem.rig, p, data)
+        def residuals(p: torch.Tensor, data: HandData = data) -> torch.Tensor:
+            return hand_residuals(subject, problem.rig, p, data)
 
-        def jacobian(p: torch.Tensor, data=data) -> torch.Tensor:
-            return hand_jacobian(problem.subject, problem.rig, p, data)
+        def jacobian(p: torch.Tensor, data: HandData = data) -> torch.Tensor:
+            return hand_jacobian(subject, problem.rig, p, data)
 
         pose, _ = levenberg_marquardt(residuals, problem.tensor(state.hand_pose[frames]),
                                       iterations, jacobian_fn=jacobian)
@@ -69,7 +76,7 @@ def _neighbour_mean(joints: np.ndarray, frames: np.ndarray) -> np.ndarray:
 
 
 def fit_object(problem: Problem, state: SolveState, index: int, marks: MappedLandmarks,
-               depth, iterations: int, rounds: int) -> None:
+               depth: DepthData | None, iterations: int, rounds: int) -> None:
     """Refine state.object_poses[index] over all frames in place."""
     settings = problem.settings
     frames = np.arange(problem.num_frames)
@@ -83,7 +90,7 @@ def fit_object(problem: Problem, state: SolveState, index: int, marks: MappedLan
         if data.vertex_ids.numel() == 0 and data.depth is None:
             return
 
-        def residuals(d: torch.Tensor, data=data) -> torch.Tensor:
+        def residuals(d: torch.Tensor, data: ObjectData = data) -> torch.Tensor:
             return object_residuals(d, data)
 
         zero = torch.zeros(len(frames), 6, dtype=torch.float64, device=problem.device)
@@ -134,9 +141,9 @@ def _solve_objects(problem: Problem, state: SolveState) -> None:
                                     lambda f: initial if f == 0 else None, hand_at)
     for second_pass in (False, True):
         if second_pass:
-            solved = state.object_poses.transpose(1, 0, 2, 3)
             before = [list(v) for v in state.landmarks]
-            state.landmarks = map_landmarks(problem, state.landmarks, lambda f: solved[f], hand_at)
+            state.landmarks = map_landmarks(problem, state.landmarks,
+                                            lambda f: state.object_poses[:, f], hand_at)
             if before == state.landmarks:
                 break
         for o in range(len(problem.objects)):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch.func import jvp
 
-from worker.solver.energies import MM_PER_M, HandData
+from worker.solver.energies import MM_PER_M, DepthData, HandData
 from worker.solver.hand_fk import SubjectHand
 from worker.solver.lm import jacobian
 from worker.solver.projection import Rig
@@ -58,17 +58,16 @@ def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandD
     if depth is not None:
         vertices = value[:, 63:].reshape(batch, -1, 3)
         d_vertices = fk[:, 63:].reshape(batch, vertices.shape[1], 3, -1)
-        parts.append(_depth_jacobian(vertices, d_vertices, data))
+        parts.append(_depth_jacobian(vertices, d_vertices, depth))
     if data.smooth_target is not None:
         parts.append((d_joints * MM_PER_M * data.sqrt_smooth).flatten(1, 2))
     return torch.cat(parts, dim=1)
 
 
-def _depth_jacobian(vertices: torch.Tensor, d_vertices: torch.Tensor, data: HandData
+def _depth_jacobian(vertices: torch.Tensor, d_vertices: torch.Tensor, depth: DepthData
                     ) -> torch.Tensor:
     """(B, 3N, P) rows of the depth residuals from posed vertices (B, K, 3) and their
     derivatives (B, K, 3, P)."""
-    depth = data.depth
     rows = torch.arange(vertices.shape[0], device=vertices.device)[:, None, None]
     corners = vertices[rows, depth.corners]  # (B, N, 3, 3)
     d_corners = d_vertices[rows, depth.corners]  # (B, N, 3, 3, P)

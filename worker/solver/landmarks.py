@@ -26,6 +26,11 @@ SILHOUETTE_TOLERANCE_M = 0.008
 # How many visible frames are tried before a landmark is given up as unmappable.
 MAX_TRIES = 5
 
+# A mesh posed at a frame: vertices (N, 3) world metres, faces (M, 3) vertex indices.
+PosedMesh = tuple[np.ndarray, np.ndarray]
+# The landmark's own object and the meshes that may hide it, posed at one frame.
+Scene = tuple[PosedMesh, list[PosedMesh]]
+
 
 def camera_ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World ray (origin (3,), unit direction (3,)) through pixel xy (2,) of `camera`."""
@@ -86,7 +91,7 @@ def first_visible_frames(visible: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 def map_landmark(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
-                 scene_at: Callable[[int], tuple[tuple, list] | None],
+                 scene_at: Callable[[int], Scene | None],
                  ) -> tuple[np.ndarray | None, int]:
     """(world surface point (3,), frame used) for one landmark, or (None, -1).
 

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from worker.solver.landmarks import map_landmark
+from worker.solver.landmarks import Scene, map_landmark
 from worker.solver.problem import MappedLandmarks, Problem
 
 PosesAt = Callable[[int], np.ndarray | None]  # frame -> (O, 3, 4) trusted poses, or None
@@ -28,7 +28,7 @@ def map_landmarks(problem: Problem, state: list[list[int]], poses_at: PosesAt,
             if out[o][k] >= 0:
                 continue
 
-            def scene_at(frame: int, o=o):
+            def scene_at(frame: int, o: int = o) -> Scene | None:
                 poses = poses_at(frame)
                 if poses is None:
                     return None
@@ -42,8 +42,10 @@ def map_landmarks(problem: Problem, state: list[list[int]], poses_at: PosesAt,
 
             point, frame = map_landmark(problem.cameras[mark.view], np.asarray(mark.xy, float),
                                         np.asarray(mark.visible, bool), scene_at)
-            if point is not None:
-                pose = poses_at(frame)[o]
+            # A point was found at `frame` only if scene_at had poses there.
+            poses = poses_at(frame) if point is not None else None
+            if point is not None and poses is not None:
+                pose = poses[o]
                 out[o][k] = problem.add_landmark_point(o, (point - pose[:, 3]) @ pose[:, :3])
     return out
 

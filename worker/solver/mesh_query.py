@@ -49,9 +49,9 @@ def closest_on_triangles(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
         ((d3 >= 0) & (d4 <= d3), [0.0, 1.0, 0.0]),
         ((d1 <= 0) & (d2 <= 0), [1.0, 0.0, 0.0]),
     ]
-    for mask, value in cases:
+    for mask, columns in cases:
         value = np.stack([np.broadcast_to(np.asarray(x, dtype=np.float64), mask.shape)
-                          for x in value], axis=1)
+                          for x in columns], axis=1)
         bary[mask] = value[mask]
     bad = ~np.isfinite(bary).all(axis=1)
     bary[bad] = [1.0, 0.0, 0.0]
@@ -122,7 +122,8 @@ class AABBTree:
         bound = self._ring_bound(points) * (1.0 + 1e-9) + 1e-12
         pt = np.arange(len(points))
         node = np.zeros(len(points), dtype=np.int64)
-        cand_pt, cand_face = [], []
+        pt_parts: list[np.ndarray] = []
+        face_parts: list[np.ndarray] = []
         while pt.size:
             rel = points[pt]
             gap = np.maximum(self.lo[node] - rel, 0) + np.maximum(rel - self.hi[node], 0)
@@ -134,12 +135,12 @@ class AABBTree:
                 counts = self.count[ln]
                 rep = np.repeat(lp, counts)
                 offs = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-                cand_pt.append(rep)
-                cand_face.append(self.order[np.repeat(self.start[ln], counts) + offs])
+                pt_parts.append(rep)
+                face_parts.append(self.order[np.repeat(self.start[ln], counts) + offs])
             inner = ~leaf
             pt = np.concatenate([pt[inner], pt[inner]])
             node = np.concatenate([self.left[node[inner]], self.right[node[inner]]])
-        cand_pt, cand_face = np.concatenate(cand_pt), np.concatenate(cand_face)
+        cand_pt, cand_face = np.concatenate(pt_parts), np.concatenate(face_parts)
         # Cheap lower bounds (the face's plane, the face's own box) discard most candidates
         # before the exact point-triangle distance.
         rel = points[cand_pt]
@@ -160,8 +161,12 @@ class AABBTree:
         dist, _, _ = self._best(points, rows, ring[rows, cols])
         return dist
 
-    def _best(self, points, cand_pt, cand_face):
-        """The nearest of each point's candidate faces: (distance, face, barycentrics) (P,)."""
+    def _best(self, points: np.ndarray, cand_pt: np.ndarray, cand_face: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The nearest of each point's candidate faces: (distance, face, barycentrics) (P,).
+
+        cand_pt, cand_face: (C,) pairs of a point index and a face index to compare.
+        """
         tri = self.vertices[self.faces[cand_face]]
         bary = closest_on_triangles(points[cand_pt], tri)
         near = np.einsum("ni,nij->nj", bary, tri)

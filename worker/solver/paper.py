@@ -17,7 +17,7 @@ import time
 import numpy as np
 import torch
 
-from worker.solver.energies import energy, hand_residuals, object_residuals
+from worker.solver.energies import DepthData, energy, hand_residuals, object_residuals
 from worker.solver.init import initial_hand
 from worker.solver.mapping import map_landmarks, mapped_table
 from worker.solver.problem import Problem
@@ -30,7 +30,7 @@ def solve_paper(problem: Problem, timings: dict[str, float]) -> SolveState:
     state = SolveState.empty(problem)
     labelled = problem.labelled
     hand_pose = None
-    poses = problem.initial_poses.copy() if problem.objects else np.zeros((0, 3, 4))
+    poses = problem.initial_poses.copy()
     timings.setdefault("depth_matching", 0.0)
     for frame in range(problem.num_frames):
         solve_hand = problem.subject is not None and bool(labelled[frame])
@@ -59,8 +59,9 @@ def _map_new_landmarks(problem: Problem, state: SolveState, frame: int, poses: n
     state.tables = [mapped_table(problem, o, v) for o, v in enumerate(state.landmarks)]
 
 
-def _solve_frame(problem: Problem, state: SolveState, frame: int, hand_pose, poses,
-                 rematch_every: int, timings: dict[str, float]):
+def _solve_frame(problem: Problem, state: SolveState, frame: int, hand_pose: np.ndarray | None,
+                 poses: np.ndarray, rematch_every: int, timings: dict[str, float]
+                 ) -> tuple[np.ndarray | None, np.ndarray]:
     """Adam on one frame; returns the new hand pose (or the input) and object poses (O, 3, 4)."""
     settings = problem.settings
     frames = np.array([frame])
@@ -71,7 +72,7 @@ def _solve_frame(problem: Problem, state: SolveState, frame: int, hand_pose, pos
     if not params:
         return hand_pose, poses
     optimiser = torch.optim.Adam(params, lr=settings.lr)
-    depth: list = [None] * (len(poses) + 1)
+    depth: list[DepthData | None] = [None] * (len(poses) + 1)
     for step in range(settings.paper_iterations):
         if problem.clouds and step % rematch_every == 0:
             tick = time.perf_counter()
@@ -80,12 +81,13 @@ def _solve_frame(problem: Problem, state: SolveState, frame: int, hand_pose, pos
         optimiser.zero_grad()
         total = torch.zeros((), dtype=torch.float64, device=problem.device)
         if hand is not None:
-            data = problem.hand_data(frames, None, depth[-1])
-            total = total + energy(hand_residuals(problem.subject, problem.rig, hand, data)).sum()
+            hand_data = problem.hand_data(frames, None, depth[-1])
+            residuals = hand_residuals(problem.require_subject(), problem.rig, hand, hand_data)
+            total = total + energy(residuals).sum()
         for o in range(len(poses)):
-            data = problem.object_data(o, frames, poses[o][None], state.tables[o], None,
-                                       depth[o])
-            total = total + energy(object_residuals(deltas[o:o + 1], data)).sum()
+            object_data = problem.object_data(o, frames, poses[o][None], state.tables[o], None,
+                                              depth[o])
+            total = total + energy(object_residuals(deltas[o:o + 1], object_data)).sum()
         total.backward()
         optimiser.step()
     return _finish(hand, hand_pose, deltas, poses, problem)
@@ -97,7 +99,8 @@ def _current_poses(problem: Problem, deltas: torch.Tensor, poses: np.ndarray) ->
     return torch.cat((rot, trans[..., None]), -1).cpu().numpy()
 
 
-def _depth_now(problem: Problem, state: SolveState, frame: int, hand, deltas, poses) -> list:
+def _depth_now(problem: Problem, state: SolveState, frame: int, hand: torch.Tensor | None,
+               deltas: torch.Tensor, poses: np.ndarray) -> list[DepthData | None]:
     """DepthData per mesh (objects, then the hand) matched against the current estimate."""
     current = _current_poses(problem, deltas, poses) if len(poses) else poses
     verts = None if hand is None else hand_vertices_world(problem, hand.detach().cpu().numpy())[0]
@@ -111,7 +114,8 @@ def _depth_now(problem: Problem, state: SolveState, frame: int, hand, deltas, po
     return out
 
 
-def _finish(hand, hand_pose, deltas, poses, problem):
+def _finish(hand: torch.Tensor | None, hand_pose: np.ndarray | None, deltas: torch.Tensor,
+            poses: np.ndarray, problem: Problem) -> tuple[np.ndarray | None, np.ndarray]:
     new_hand = hand_pose if hand is None else hand.detach().cpu().numpy()[0]
     new_poses = _current_poses(problem, deltas, poses) if len(poses) else poses
     return new_hand, new_poses

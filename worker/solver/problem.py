@@ -9,9 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 import torch
 
 from worker.hand import HandLayer, builtin_hand_model
+from worker.hand.params import check_side
 from worker.solver.depth import DepthClouds, Matches, crop_to_boxes, match_points, subsample
 from worker.solver.energies import DepthData, HandData, ObjectData
 from worker.solver.hand_fk import SubjectHand
@@ -23,12 +25,13 @@ from worker.solver.types import SolveInputs, SolveSettings
 @dataclass
 class MappedLandmarks:
     """One object's landmarks that have a vertex: views (L,), vertex ids (L,), xy (F, L, 2) px,
-    gamma (F, L) bool (labelled visible with a finite position)."""
+    gamma (F, L) bool (labelled visible with a finite position). With no landmark (L = 0), xy
+    and gamma are empty and have no frames either."""
 
     views: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    xy: np.ndarray | None = None
-    gamma: np.ndarray | None = None
+    xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
+    gamma: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
 
 
 def labelled_frames(gamma: np.ndarray, min_views: int, min_joints: int
@@ -59,8 +62,11 @@ class Problem:
         self.object_trees = [AABBTree.build(v, f)
                              for v, f in zip(self.object_vertices, self.object_faces, strict=True)]
         self.object_tensors = [self.tensor(v) for v in self.object_vertices]
-        self.initial_poses = np.stack([np.asarray(o.initial_pose, np.float64)
-                                       for o in inputs.objects]) if inputs.objects else None
+        # (O, 3, 4) object-to-world at frame 0; (0, 3, 4) without objects.
+        self.initial_poses = np.zeros((0, 3, 4))
+        if inputs.objects:
+            self.initial_poses = np.stack([np.asarray(o.initial_pose, np.float64)
+                                           for o in inputs.objects])
         self.clouds = DepthClouds(inputs.cameras, inputs.depth, settings.depth_stride) \
             if settings.use_depth else None
         self.workspace = self._workspace()
@@ -73,16 +79,23 @@ class Problem:
         self.object_tensors[index] = self.tensor(self.object_vertices[index])
         return len(self.object_vertices[index]) - 1
 
-    def tensor(self, array) -> torch.Tensor:
+    def tensor(self, array: npt.ArrayLike) -> torch.Tensor:
         return torch.as_tensor(np.asarray(array, dtype=np.float64), device=self.device)
 
+    def require_subject(self) -> SubjectHand:
+        """The subject's hand; ValueError when the sequence has no hand."""
+        if self.subject is None:
+            raise ValueError("this sequence has no hand to solve for")
+        return self.subject
+
     def _setup_hand(self, inputs: SolveInputs) -> None:
-        self.subject = None
+        self.subject: SubjectHand | None = None
+        self.reasons: list[str | None]
         if self.hand is None:
             self.labelled = np.zeros(self.num_frames, dtype=bool)
             self.reasons = ["no hand in this sequence"] * self.num_frames
             return
-        model = inputs.hand_model or builtin_hand_model(self.hand.side)
+        model = inputs.hand_model or builtin_hand_model(check_side(self.hand.side))
         self.layer = HandLayer(model, device=self.device)
         self.betas = np.asarray(self.hand.betas, dtype=np.float64)
         self.subject = SubjectHand(self.layer, self.tensor(self.betas))
@@ -94,7 +107,7 @@ class Problem:
 
     def _workspace(self) -> tuple[np.ndarray, np.ndarray] | None:
         """World box (lo, hi) around the objects' initial placement, grown by workspace_margin."""
-        if self.initial_poses is None:
+        if not self.objects:
             return None
         points = np.concatenate([v @ p[:, :3].T + p[:, 3] for v, p in
                                  zip(self.object_vertices, self.initial_poses, strict=True)])
@@ -148,8 +161,8 @@ class Problem:
         if self.workspace is not None:
             points = crop_to_boxes(points, [self.workspace], 0.0)
         trees = list(self.object_trees)
+        boxes = [_world_box(t, p) for t, p in zip(trees, object_poses, strict=True)]
         poses: list[np.ndarray | None] = list(object_poses)
-        boxes = [_world_box(t, p) for t, p in zip(trees, poses, strict=True)]
         if hand_vertices is not None:
             trees.append(AABBTree.build(hand_vertices, self.hand_faces))
             poses.append(None)

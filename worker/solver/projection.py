@@ -7,6 +7,7 @@ OpenCV's (k1, k2, p1, p2, k3) distortion, matching `worker.geometry.cameras.proj
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import torch
 
 from worker.geometry.cameras import CameraModel
@@ -16,8 +17,9 @@ from worker.hand.lbs import axis_angle_to_matrix
 class Rig:
     """V cameras as tensors: rotation world-to-camera (V, 3, 3), camera centres (V, 3), K, dist."""
 
-    def __init__(self, cameras: list[CameraModel], dtype=torch.float64, device="cpu") -> None:
-        def tensor(array) -> torch.Tensor:
+    def __init__(self, cameras: list[CameraModel], dtype: torch.dtype = torch.float64,
+                 device: str | torch.device = "cpu") -> None:
+        def tensor(array: npt.ArrayLike) -> torch.Tensor:
             return torch.as_tensor(np.asarray(array, dtype=np.float64), dtype=dtype, device=device)
 
         T = np.stack([c.T_cam_to_world for c in cameras])

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from worker.solver.depth import Matches
+from worker.solver.mapping import HandAt
 from worker.solver.problem import MappedLandmarks, Problem
 from worker.solver.triangulate import reprojection_px
 
@@ -18,7 +19,7 @@ from worker.solver.triangulate import reprojection_px
 def hand_vertices_world(problem: Problem, pose_m: np.ndarray) -> np.ndarray:
     """(B, V, 3) world vertices of the subject's hand for pose_m (B, 51)."""
     with torch.no_grad():
-        _, vertices = problem.subject.pose(problem.tensor(pose_m))
+        _, vertices = problem.require_subject().pose(problem.tensor(pose_m))
     return vertices.cpu().numpy()
 
 
@@ -50,7 +51,7 @@ class SolveState:
         """(B, 21, 3) joints of the labelled frames, world metres."""
         with torch.no_grad():
             pose = problem.tensor(self.hand_pose[self.hand_frames])
-            joints, _ = problem.subject.pose(pose, pose.new_zeros(0).long())
+            joints, _ = problem.require_subject().pose(pose, pose.new_zeros(0).long())
         return joints.cpu().numpy()
 
     def hand_errors(self, problem: Problem) -> np.ndarray:
@@ -72,9 +73,9 @@ class SolveState:
                            for k, v in enumerate(marks.views)], axis=1)
         return np.where(marks.gamma, errors, np.nan)
 
-    def hand_at(self, problem: Problem):
+    def hand_at(self, problem: Problem) -> HandAt:
         """frame -> (V, 3) world hand vertices where the frame is labelled, else None."""
-        labelled = set(int(f) for f in self.hand_frames)
+        labelled = {int(f) for f in self.hand_frames}
         cache: dict[int, np.ndarray] = {}
 
         def at(frame: int) -> np.ndarray | None:

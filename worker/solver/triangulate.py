@@ -46,7 +46,7 @@ def triangulate(cameras: list[CameraModel], pixels: np.ndarray, mask: np.ndarray
         points = triangulate_points(cameras, flat, outlier_px=2.0 * robust_scale_px).points
     else:
         points = triangulate_dlt(cameras, flat)
-    points = points.reshape(shape + (3,))
+    points = points.reshape((*shape, 3))
     ok = np.isfinite(points).all(axis=-1)
     return points, ok
 

@@ -12,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
+from worker.hand.params import HandModel
 
 
 @dataclass
@@ -70,7 +71,7 @@ class SolveInputs:
     hand: HandTarget | None
     objects: list[ObjectTarget]
     depth: list[np.ndarray | None]
-    hand_model: object | None = None
+    hand_model: HandModel | None = None
 
 
 @dataclass

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from worker.hand.joints import NUM_JOINTS
-from worker.solver.types import SolveInputs, SolveSettings
+from worker.solver.types import ObjectTarget, SolveInputs, SolveSettings
 
 
-def _shape(name: str, array, expected: tuple) -> np.ndarray:
+def _shape(name: str, array: npt.ArrayLike, expected: tuple[int | None, ...]) -> np.ndarray:
     array = np.asarray(array)
     ok = array.ndim == len(expected) and all(e is None or a == e
                                              for a, e in zip(array.shape, expected, strict=True))
@@ -45,7 +46,7 @@ def check_inputs(inputs: SolveInputs, settings: SolveSettings) -> None:
         _check_object(i, obj, views, frames)
 
 
-def _check_object(i: int, obj, views: int, frames: int) -> None:
+def _check_object(i: int, obj: ObjectTarget, views: int, frames: int) -> None:
     name = f"objects[{i}] ({obj.name})"
     if obj.initial_pose is None:
         raise ValueError(f"{name} has no initial pose: the solver needs each object's pose at "

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
 __all__ = ["SynthSummary", "generate_capture"]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     if name in __all__:
         from worker.synth import capture
 

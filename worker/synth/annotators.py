@@ -132,7 +132,7 @@ def visible_vertices(camera: CameraModel, seg: np.ndarray, value: int, points: n
 
 def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
                    faces: np.ndarray, poses: np.ndarray, rng: np.random.Generator,
-                   count: int = 2) -> tuple[np.ndarray, np.ndarray]:
+                   count: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` landmarks a person would pick on an object in one view: mesh vertices visible
     where the object first shows, followed through the object's true motion.
 

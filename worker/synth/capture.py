@@ -72,7 +72,8 @@ class SynthSummary:
     ycb_ids: list[int]
 
 
-def _check_args(seed, frames, views, objects, width, height) -> None:
+def _check_args(seed: int, frames: int, views: int, objects: int, width: int, height: int
+                ) -> None:
     if seed < 0:
         raise ValueError(f"seed must be >= 0, got {seed}")
     if frames < 2:
@@ -156,8 +157,8 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
     return summary
 
 
-def _generate(tmp: Path, out: Path, seed, frames, views, objects, width, height, workers
-              ) -> SynthSummary:
+def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects: int,
+              width: int, height: int, workers: int | None) -> SynthSummary:
     rng = np.random.default_rng(seed)
     serials = make_serials(seed, views)
     cams = make_cameras(rng, serials, width, height)

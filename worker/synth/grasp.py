@@ -179,7 +179,8 @@ def _canonical_hand(rig: ShapedHand) -> _CanonicalHand:
     return _CanonicalHand(verts[0], verts[1:].reshape(5, _CLOSURE_STEPS, -1, 3), levels)
 
 
-def _place(points: np.ndarray, rig: ShapedHand, rotation: np.ndarray, root: np.ndarray):
+def _place(points: np.ndarray, rig: ShapedHand, rotation: np.ndarray, root: np.ndarray
+           ) -> np.ndarray:
     """Canonical hand points (..., 3) -> table frame for a hand at (rotation, root)."""
     return (points - rig.root) @ rotation.T + root
 
@@ -190,9 +191,10 @@ def _gaps(verts: np.ndarray, obj: PlacedObject) -> tuple[np.ndarray, np.ndarray]
     return object_sdf(obj.spec, (verts - trans) @ rot), verts[..., 2]
 
 
-def _settle(hand: _CanonicalHand, rig: ShapedHand, rotation, root, obj, p_w) -> np.ndarray:
-    """Slide the open hand along its palm normal until it is CLEARANCE_M from the object,
-    keeping it 8 mm above the table; returns the adjusted root position (3,)."""
+def _settle(hand: _CanonicalHand, rig: ShapedHand, rotation: np.ndarray, root: np.ndarray,
+            obj: PlacedObject, p_w: np.ndarray) -> np.ndarray:
+    """Slide the open hand along its palm normal p_w (3,) until it is CLEARANCE_M from the
+    object, keeping it 8 mm above the table; returns the adjusted root position (3,)."""
     verts = _place(hand.open, rig, rotation, root)
     shift = np.zeros(3)
     for _ in range(8):
@@ -221,8 +223,8 @@ def _finger_closure(gap_object: np.ndarray, gap_table: np.ndarray, levels: np.nd
     return float(levels[k - 1] + frac * (levels[k] - levels[k - 1])), on_object
 
 
-def _closure(hand: _CanonicalHand, rig: ShapedHand, rotation, root, obj
-             ) -> tuple[np.ndarray, float]:
+def _closure(hand: _CanonicalHand, rig: ShapedHand, rotation: np.ndarray, root: np.ndarray,
+             obj: PlacedObject) -> tuple[np.ndarray, float]:
     """(5,) closure per finger and a score: fingers stopped by the object (thumb weighted)."""
     dist, height = _gaps(_place(hand.closing, rig, rotation, root), obj)
     closure, score = np.ones(5), 0.0
@@ -243,7 +245,7 @@ def plan_grasp(rig: ShapedHand, obj: PlacedObject, finger_yaw: float) -> Grasp:
     axes_w, target, _ = grasp_frame(obj, finger_yaw)
     rotation = axes_w.T @ rig.axes
     hand = _canonical_hand(rig)
-    best = None
+    best: tuple[float, np.ndarray, np.ndarray] | None = None
     for df in _FINGER_OFFSETS:
         for dt in _THUMB_OFFSETS:
             anchor = target + df * axes_w[0] + dt * axes_w[2]
@@ -252,6 +254,8 @@ def plan_grasp(rig: ShapedHand, obj: PlacedObject, finger_yaw: float) -> Grasp:
             closure, score = _closure(hand, rig, rotation, root, obj)
             if best is None or score > best[0] + 1e-9:
                 best = (score, root, closure)
+    if best is None:
+        raise ValueError("no palm placement to try")
     _, root, closure = best
     closed = rig.open_pose() + ((closure - _OPEN_FLEX)[:, None] * rig.flex).sum(axis=0)
     return Grasp(rotation, rotation @ (rig.anchor - rig.root) + root, closed, axes_w[1])

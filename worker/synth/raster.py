@@ -53,7 +53,12 @@ def _plane_coefficients(uv: np.ndarray, inv_z: np.ndarray, faces: np.ndarray) ->
     return coef
 
 
-def _candidates(ids, box, grid_w, grid_h, coef, width):
+# Integer pixel boxes (x0, y0, x1, y1) of triangles, each (F,) int64.
+_Boxes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _candidates(ids: np.ndarray, box: _Boxes, grid_w: int, grid_h: int, coef: np.ndarray,
+                width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Candidate pixels inside triangles ``ids`` whose boxes fit a (grid_h, grid_w) grid.
 
     Returns flat pixel indices, 1/z (1/metres) and triangle ids of the covered pixels.
@@ -77,12 +82,12 @@ def _quantised(size: np.ndarray) -> np.ndarray:
     return (np.ceil(size / step) * step).astype(np.int64)
 
 
-def _batches(ids, box):
+def _batches(ids: np.ndarray, box: _Boxes) -> list[tuple[np.ndarray, int, int]]:
     """Split triangles into (ids, grid_w, grid_h) batches of similar bounding-box size."""
     x0, y0, x1, y1 = box
     qw, qh = _quantised(x1[ids] - x0[ids] + 1), _quantised(y1[ids] - y0[ids] + 1)
     shapes, inverse = np.unique(np.stack([qw, qh], axis=1), axis=0, return_inverse=True)
-    out = []
+    out: list[tuple[np.ndarray, int, int]] = []
     for k, (gw, gh) in enumerate(shapes):
         group = ids[inverse.reshape(-1) == k]
         per = max(1, _CHUNK // int(gw * gh))
@@ -90,7 +95,7 @@ def _batches(ids, box):
     return out
 
 
-def _boxes(uv, faces, width, height):
+def _boxes(uv: np.ndarray, faces: np.ndarray, width: int, height: int) -> _Boxes:
     """Integer pixel boxes (x0, y0, x1, y1) of projected triangles, clipped to the image."""
     tri_uv = uv[faces]
     lo = np.ceil(tri_uv.min(axis=1)).astype(np.int64)
@@ -144,7 +149,8 @@ def rasterize(
     return _resolve(key, coef, inv_z, faces, width, height)
 
 
-def _resolve(key, coef, inv_z, faces, width, height) -> Fragments:
+def _resolve(key: np.ndarray, coef: np.ndarray, inv_z: np.ndarray, faces: np.ndarray,
+             width: int, height: int) -> Fragments:
     """Turn the packed z-buffer into triangle ids, perspective-correct weights and depth.
 
     Depth comes straight from the key (quantised to _DEPTH_QUANTUM); the weights, used only for

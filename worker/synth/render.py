@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from worker.geometry.cameras import pixels_to_rays
-from worker.synth.raster import rasterize
+from worker.synth.raster import Fragments, rasterize
 from worker.synth.sensor import finish_color, simulate_depth
 
 AMBIENT = 0.38
@@ -133,13 +134,16 @@ def _scene_rays(render_K: np.ndarray, rot: np.ndarray, size: tuple[int, int]) ->
     return (pix @ np.linalg.inv(render_K).T @ rot.T).astype(np.float32)
 
 
-def _finish_view(K, dist, T, width, height, render_K, size, map_xy, sample) -> ViewCamera:
+def _finish_view(K: np.ndarray, dist: np.ndarray, T: np.ndarray, width: int, height: int,
+                 render_K: np.ndarray, size: tuple[int, int], map_xy: np.ndarray | None,
+                 sample: np.ndarray | None) -> ViewCamera:
     background = np.linspace(_BACKGROUND_TOP, _BACKGROUND_BOTTOM, size[1]).astype(np.float32)
     return ViewCamera(K, dist, T, width, height, render_K, size, map_xy, sample,
                       _scene_rays(render_K, T[:, :3], size), background)
 
 
-def prepare_view(K, dist, T_cam_to_scene, width: int, height: int) -> ViewCamera:
+def prepare_view(K: npt.ArrayLike, dist: npt.ArrayLike, T_cam_to_scene: npt.ArrayLike,
+                 width: int, height: int) -> ViewCamera:
     """Precompute the padded pinhole, resampling maps and viewing rays of one camera."""
     K, dist = np.asarray(K, np.float64), np.asarray(dist, np.float64)
     T = np.asarray(T_cam_to_scene, np.float64)
@@ -208,7 +212,8 @@ def _albedo(frame: SceneFrame, tri: np.ndarray, bary: np.ndarray, atlas: Texture
     return albedo
 
 
-def _shade(frame: SceneFrame, view: ViewCamera, frags, atlas: TextureAtlas) -> np.ndarray:
+def _shade(frame: SceneFrame, view: ViewCamera, frags: Fragments, atlas: TextureAtlas
+           ) -> np.ndarray:
     """Lambertian + ambient colour (H', W', 3) float32 of the padded render image."""
     rw, rh = view.render_size
     img = np.repeat(view.background, rw, axis=0)  # (rh * rw, 3), row-major pixels
@@ -244,7 +249,7 @@ def render_view(frame: SceneFrame, view: ViewCamera, atlas: TextureAtlas,
     shaded = _shade(frame, view, frags, atlas)
     seg_full = np.where(frags.tri >= 0, frame.label[np.maximum(frags.tri, 0)], 0).astype(np.uint8)
     depth_full = frags.depth
-    if view.sample is not None:
+    if view.map_xy is not None and view.sample is not None:
         shaded = cv2.remap(shaded, view.map_xy[..., 0], view.map_xy[..., 1],
                            cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         shape = (view.height, view.width)

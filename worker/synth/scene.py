@@ -130,7 +130,7 @@ def place_objects(rng: np.random.Generator, ycb_ids: list[int], grasp_ind: int,
 
 def table_mesh() -> Mesh:
     """Tiled table-top rectangle at z = 0 (metres), UVs spanning the table texture once."""
-    nx, ny = (int(round(s / TABLE_TILE)) for s in TABLE_SIZE)
+    nx, ny = (round(s / TABLE_TILE) for s in TABLE_SIZE)
     xs = np.linspace(-TABLE_SIZE[0] / 2, TABLE_SIZE[0] / 2, nx + 1)
     ys = np.linspace(-TABLE_SIZE[1] / 2, TABLE_SIZE[1] / 2, ny + 1) + TABLE_CENTRE_Y
     gx, gy = np.meshgrid(xs, ys)
@@ -215,21 +215,29 @@ def object_sdf(spec: ObjectSpec, points_obj: np.ndarray) -> np.ndarray:
     return outside + np.minimum(q.max(axis=-1), 0.0)
 
 
-def build_meshes(rng: np.random.Generator, specs: list[ObjectSpec]
-                 ) -> tuple[ModelMesh, list[ModelMesh], list[np.ndarray], tuple[float, ...]]:
+def _corner_uvs(mesh: Mesh) -> np.ndarray:
+    """(F, 3, 2) texture coordinates of every face corner of a textured mesh."""
+    if mesh.uvs is None or mesh.face_uvs is None:
+        raise ValueError("the mesh has no texture coordinates")
+    return mesh.uvs[mesh.face_uvs]
+
+
+def build_meshes(
+    rng: np.random.Generator, specs: list[ObjectSpec]
+) -> tuple[ModelMesh, list[ModelMesh], list[np.ndarray], tuple[float, float, float]]:
     """Renderable meshes: the table (table frame), the objects (model frames), their textures
     (texture 0 is the table's, k + 1 object k's) and a skin colour (BGR) for the hand."""
     table = table_mesh()
     up = np.broadcast_to([0.0, 0.0, 1.0], (len(table.faces), 3, 3)).copy()
     textures = [table_texture(rng)]
-    table_mm = ModelMesh(table.vertices, table.faces, up, table.uvs[table.face_uvs], 0,
+    table_mm = ModelMesh(table.vertices, table.faces, up, _corner_uvs(table), 0,
                          (0.0, 0.0, 0.0), 0)
     objects = []
     for spec in specs:
         mesh = object_mesh(spec)
         textures.append(object_texture(spec))
         objects.append(ModelMesh(mesh.vertices, mesh.faces, crease_normals(mesh.vertices,
-                                 mesh.faces), mesh.uvs[mesh.face_uvs], len(textures) - 1,
+                                 mesh.faces), _corner_uvs(mesh), len(textures) - 1,
                                  (0.0, 0.0, 0.0), spec.ycb_id))
     tone = rng.uniform(-1.0, 1.0)
     skin = (float(120 + 25 * tone), float(150 + 25 * tone), float(205 + 20 * tone))

@@ -81,6 +81,6 @@ def finish_color(linear_bgr: np.ndarray, rng: np.random.Generator) -> np.ndarray
 
     A slight blur stands in for lens softness and anti-aliasing; read noise is added after it.
     """
-    img = cv2.GaussianBlur(linear_bgr.astype(np.float32), (0, 0), 0.6)
+    img: np.ndarray = cv2.GaussianBlur(linear_bgr.astype(np.float32), (0, 0), 0.6)
     img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(COLOR_NOISE_SIGMA)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)

@@ -65,7 +65,7 @@ CATALOGUE: dict[int, ObjectSpec] = {
 }
 
 # Landmark palette (BGR): saturated, mutually distinct colours.
-_MARK_COLORS = [
+_MARK_COLORS: list[tuple[int, int, int]] = [
     (0, 0, 255), (0, 200, 0), (255, 80, 0), (0, 230, 255), (255, 0, 255), (255, 255, 0),
     (0, 128, 255), (128, 0, 128), (255, 255, 255), (20, 20, 20), (0, 90, 0), (180, 105, 255),
 ]  # fmt: skip
@@ -158,7 +158,8 @@ def object_mesh(spec: ObjectSpec) -> Mesh:
     return box_mesh(spec.size)
 
 
-def _draw_mark(img: np.ndarray, centre: tuple[int, int], kind: int, color, radius: int) -> None:
+def _draw_mark(img: np.ndarray, centre: tuple[int, int], kind: int,
+               color: tuple[int, int, int], radius: int) -> None:
     """Draw one landmark glyph (dot, cross, square or ring) with a dark outline for contrast."""
     x, y = centre
     r = radius

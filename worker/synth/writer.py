@@ -55,7 +55,7 @@ def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
 _CaptureDumper.add_representer(list, _represent_list)
 
 
-def _plain(value):
+def _plain(value: object) -> object:
     """Convert numpy scalars/arrays and tuples inside ``value`` to plain Python types."""
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items()}

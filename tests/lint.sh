@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Lint and type checks: ruff over the Python sources and mypy over the product packages, with
+# the rules and strictness in pyproject.toml. Exits non-zero on any finding.
+# Needs the test extras installed in the virtualenv (tests/run.sh installs them).
+# Usage: bash tests/lint.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+VENV=${DEXLABEL_VENV:-.venv}
+status=0
+echo "ruff check backend worker bench migrations tests"
+"$VENV/bin/ruff" check --no-cache backend worker bench migrations tests || status=1
+echo "mypy backend worker"
+"$VENV/bin/mypy" backend worker || status=1
+exit "$status"
