@@ -18,8 +18,8 @@ from backend.errors import install_error_handlers
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.portal.router import router as portal_router
-from backend.solve.router import router as solve_router
 from backend.quality.router import router as review_router
+from backend.solve.router import router as solve_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 # Swagger UI as the fastapi-offline package ships it, served by the app itself: FastAPI's own

@@ -52,7 +52,7 @@ class TestQcThresholds:
         message = str(caught.value)
         assert f"{key!r} is not a QC threshold setting; one of {QC_KEYS}" in message
 
-    @pytest.mark.parametrize("value,why", [
+    @pytest.mark.parametrize(("value", "why"), [
         ('"high"', "k_review must be a number, got 'high'"),
         ("true", "k_review must be a number, got True"),
         ("null", "k_review must be a number, got None"),
@@ -69,8 +69,8 @@ class TestQcThresholds:
 
     def test_min_population_must_be_whole(self, clean_env: pytest.MonkeyPatch) -> None:
         clean_env.setenv("DEXLABEL_QC_THRESHOLDS", '{"min_population": 2.5}')
-        with pytest.raises(ValidationError, match="min_population must be a whole number, "
-                                                  "got 2.5"):
+        with pytest.raises(ValidationError,
+                           match=re.escape("min_population must be a whole number, got 2.5")):
             Settings()
 
 
@@ -82,14 +82,14 @@ class TestGetSettings:
         with pytest.raises(InvalidSettings) as caught:
             get_settings()
         lines = caught.value.detail.splitlines()
-        assert lines == [
-            "DEXLABEL_WORKER_THREADS: Input should be greater than or equal to 1",
-            f"DEXLABEL_QC_THRESHOLDS: 'approve_px_max' is not a QC threshold setting; one of "
-            f"{QC_KEYS}"]
+        unknown = ("DEXLABEL_QC_THRESHOLDS: 'approve_px_max' is not a QC threshold setting; "
+                   f"one of {QC_KEYS}")
+        assert lines == ["DEXLABEL_WORKER_THREADS: Input should be greater than or equal to 1",
+                         unknown]
 
     def test_json_that_does_not_parse_is_named(self, clean_env: pytest.MonkeyPatch) -> None:
         clean_env.setenv("DEXLABEL_QC_THRESHOLDS", "{k_review: 2}")
-        with pytest.raises(InvalidSettings, match="^DEXLABEL_QC_THRESHOLDS is not valid JSON"):
+        with pytest.raises(InvalidSettings, match=r"^DEXLABEL_QC_THRESHOLDS is not valid JSON"):
             get_settings()
 
     def test_a_command_stops_with_the_refusal_and_no_traceback(

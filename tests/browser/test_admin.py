@@ -155,7 +155,9 @@ def test_reports_table_shows_each_outcome_waiting_work_first(
         expect(row).to_have_attribute("data-outcome", report["outcome"])
         expect(row).to_contain_text(report["worker_id"])
         median = report["metrics"]["median_error_px"]
-        expect(row.locator("td").nth(6)).to_have_text("–" if median is None else f"{median:.1f} px")
+        unknown = "\u2013"  # the page's en dash for a value it does not have
+        expect(row.locator("td").nth(6)).to_have_text(
+            unknown if median is None else f"{median:.1f} px")
     waiting = [r["assignment_id"] for r in reports if r["outcome"] == "review" and not r["action"]]
     shown = [int(a) for a in rows.evaluate_all("rs => rs.map(r => r.dataset.assignment)")]
     assert sorted(shown[:len(waiting)]) == sorted(waiting)

@@ -56,7 +56,8 @@ def test_swagger_ui_renders_every_operation_without_the_network(
     expect(page.locator(".swagger-ui .info .title")).to_contain_text("dexlabel")
     blocks = page.locator(".swagger-ui .opblock")
     expect(blocks).to_have_count(len(operations))
-    expect(page.locator(".swagger-ui .opblock-summary-path[data-path='/api/jobs']")).not_to_have_count(0)
+    jobs = page.locator(".swagger-ui .opblock-summary-path[data-path='/api/jobs']")
+    expect(jobs).not_to_have_count(0)
     # The page's styles came from the app: an operation's method badge is laid out by them.
     get_badge = page.locator(".swagger-ui .opblock-get .opblock-summary-method").first
     assert get_badge.evaluate("b => getComputedStyle(b).backgroundColor") != "rgba(0, 0, 0, 0)"

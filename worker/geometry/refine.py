@@ -123,7 +123,8 @@ def cauchy_weights(errors: np.ndarray, scales: np.ndarray | None) -> np.ndarray:
     return 1.0 / (1.0 + (errors / scales) ** 2)
 
 
-def _weighted_cost(stack, pixels, points, mask, weights, scales=None) -> np.ndarray:
+def _weighted_cost(stack: CameraStack, pixels: np.ndarray, points: np.ndarray, mask: np.ndarray,
+                   weights: np.ndarray, scales: np.ndarray | None = None) -> np.ndarray:
     """(n,) sum of w * rho(e) over the masked observations: rho = e^2, or the Cauchy loss
     c^2 log(1 + (e / c)^2) with scales c; infinite where a point falls behind a camera."""
     err = reprojection_errors(stack, pixels, points)
@@ -136,6 +137,7 @@ def _lm_step(stack: CameraStack, pixels: np.ndarray, x: np.ndarray, mask: np.nda
              w: np.ndarray, damping: np.ndarray, scales: np.ndarray | None) -> np.ndarray:
     """One damped (iteratively re-weighted) Gauss-Newton step (n, 3) metres for x (n, 3)."""
     pix, _, jac = project_stack(stack, x, jacobian=True)
+    assert jac is not None  # asked for
     res = np.where(mask[..., None], pix - pixels, 0.0)
     w = w * cauchy_weights(np.linalg.norm(res, axis=-1), scales)
     flat = jac.reshape(len(x), -1, 3)  # (n, 2V, 3)
@@ -174,7 +176,7 @@ def refine_points(stack: CameraStack, pixels: np.ndarray, points: np.ndarray, ma
     damping = np.full(len(x), 1e-3)
     cost = np.full(len(x), np.inf)
 
-    def part(rows):
+    def part(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         return pixels[rows], mask[rows], w[rows], None if c is None else c[rows]
 
     pix_a, mask_a, w_a, c_a = part(active)

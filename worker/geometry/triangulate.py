@@ -24,7 +24,11 @@ import numpy as np
 
 from worker.geometry.cameras import CameraModel, undistort_normalized
 from worker.geometry.refine import (
-    CameraStack, camera_frames, project_stack, refine_points, reprojection_errors,
+    CameraStack,
+    camera_frames,
+    project_stack,
+    refine_points,
+    reprojection_errors,
 )
 
 # Pairs of columns whose camera centres are closer than this (metres) share a centre: their rays

@@ -44,7 +44,7 @@ def kabsch(source: np.ndarray, target: np.ndarray, weight: np.ndarray
 
 def initial_hand(problem: Problem, frames: np.ndarray, iterations: int = 10) -> np.ndarray:
     """pose_m (B, 51) for frames (B,), from the triangulated keypoints."""
-    subject = problem.subject
+    subject = problem.require_subject()
     points, ok = triangulate(problem.cameras, problem.keypoints[:, frames],
                              problem.gamma[:, frames], problem.settings.robust_scale_px)
     zero = torch.zeros(1, 51, dtype=torch.float64, device=problem.device)
