@@ -8,6 +8,7 @@ stops with one line saying so, creating nothing. Bad input is refused the same w
 
 from __future__ import annotations
 
+import signal
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -84,13 +85,13 @@ def synth(
     """Write a synthetic capture (DexYCB layout) with its ground-truth labels."""
     from worker.synth import generate_capture
 
-    with progress(f"synthesising {views} views x {frames} frames") as step:
-        try:
+    try:
+        with progress(f"synthesising {views} views x {frames} frames") as step:
             summary = generate_capture(out, seed=seed, frames=frames, views=views,
                                        objects=objects)
-        except (FileExistsError, ValueError) as exc:
-            fail(str(exc))
-        step(f"{summary.subject}/{summary.sequence}")
+            step(f"{summary.subject}/{summary.sequence}")
+    except (FileExistsError, ValueError) as exc:
+        fail(str(exc))
     typer.echo(f"wrote {summary.subject}/{summary.sequence}: {len(summary.serials)} views x "
                f"{summary.num_frames} frames, objects {summary.ycb_ids} -> {out}")
 
@@ -148,12 +149,20 @@ def serve(
     if settings.inprocess_worker and not settings.redis_url:
         consumer = start_inprocess_consumer(settings.worker_threads)
     record_server(settings, client_url(host, port))
+    # uvicorn stops on SIGINT/SIGTERM, then raises the signal again for the handler it found:
+    # this one ends the process through the ``finally`` below, so the record is removed.
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _exit_cleanly)
     try:
         uvicorn.run("backend.app:create_app", factory=True, host=host, port=port)
     finally:
         forget_server(settings)
         if consumer is not None:
             consumer.stop(graceful=True)
+
+
+def _exit_cleanly(_signum: int, _frame: object) -> None:
+    raise SystemExit(0)
 
 
 @app.command()
@@ -299,7 +308,7 @@ def publish(
             return
         with progress(f"publishing {c.hits} HITs") as step:
             result = flows.publish_each(make_client(get_settings()), options, sequence_id)
-            step(f"{result.created + result.recovered + result.already_published} HITs")
+            step(f"{result.created} created")
         typer.echo(f"published: {result.created} created, {result.recovered} recovered, "
                    f"{result.already_published} already published")
 
@@ -365,10 +374,10 @@ def crowd_bonus(
 
     try:
         cents = pricing.dollars_to_cents(amount)
-    except ValueError as exc:
-        fail(str(exc))
+    except (ValueError, ArithmeticError):  # decimal's InvalidOperation for "abc"
+        cents = -1
     if cents <= 0:
-        fail(f"a bonus must be more than $0.00 (got {amount!r})")
+        fail(f"a bonus is a dollar amount in whole cents above 0, like 1.00 (got {amount!r})")
     with refusing_bad_input():
         paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
     state = "already paid" if paid.already_done else "paid"
