@@ -19,7 +19,12 @@ from typer.core import TyperGroup
 from backend.config import get_settings
 from backend.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
 from backend.instance import (
-    adopt_recorded_server, client_url, forget_server, record_server, require_database, serve_at,
+    adopt_recorded_server,
+    client_url,
+    forget_server,
+    record_server,
+    require_database,
+    serve_at,
 )
 
 # Commands that make their own instance (or none) instead of needing one.
@@ -33,7 +38,7 @@ class _Commands(TyperGroup):
     """The root group; it keeps the arguments after the command name, so the instance check
     can let ``--help`` through."""
 
-    def resolve_command(self, ctx: typer.Context, args: list[str]) -> Any:
+    def resolve_command(self, ctx: Any, args: list[str]) -> Any:
         ctx.meta[_ARGS] = tuple(args)
         return super().resolve_command(ctx, args)
 
@@ -111,7 +116,9 @@ def _import(path: Path) -> list[Any]:
 
 
 @app.command("import")
-def import_(path: Annotated[Path, typer.Argument(help="capture root or one sequence folder")]) -> None:
+def import_(
+    path: Annotated[Path, typer.Argument(help="capture root or one sequence folder")],
+) -> None:
     """Import a capture (DexYCB raw layout, or one video per camera)."""
     _import(path)
 

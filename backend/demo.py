@@ -8,9 +8,11 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from sqlalchemy import func, select
@@ -19,6 +21,10 @@ from backend.config import get_settings
 from backend.db import session_scope
 from backend.errors import DexlabelError
 from backend.instance import client_url, forget_server, record_server
+
+if TYPE_CHECKING:
+    import uvicorn
+    from huey.consumer import Consumer
 
 DEMO_ADMIN_EMAIL = "demo@dexlabel.local"
 DEMO_WORKER_EMAIL = "demo-worker@dexlabel.local"
@@ -45,17 +51,15 @@ class DemoServer:
 
     def __init__(self, host: str, port: int) -> None:
         self.host, self.port = host, port
-        self.server = None  # type: ignore[var-annotated]
-        self.thread = None  # type: ignore[var-annotated]
-        self.consumer = None  # type: ignore[var-annotated]
+        self.server: uvicorn.Server | None = None
+        self.thread: threading.Thread | None = None
+        self.consumer: Consumer | None = None
 
     @property
     def has_consumer(self) -> bool:
         return self.consumer is not None
 
     def start(self) -> None:
-        import threading
-
         import uvicorn
 
         from backend.app import create_app
@@ -66,12 +70,12 @@ class DemoServer:
             self.consumer = start_inprocess_consumer(settings.worker_threads)
         config = uvicorn.Config(create_app(), host=self.host, port=self.port,
                                 log_level="warning")
-        self.server = uvicorn.Server(config)
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-        self.thread.start()
+        self.server = server = uvicorn.Server(config)
+        self.thread = thread = threading.Thread(target=server.run, daemon=True)
+        thread.start()
         deadline = time.monotonic() + 30
-        while not self.server.started:
-            if not self.thread.is_alive() or time.monotonic() > deadline:
+        while not server.started:
+            if not thread.is_alive() or time.monotonic() > deadline:
                 raise DexlabelError(f"the server did not start on {self.host}:{self.port} "
                                     "(is the port taken? try --port)")
             time.sleep(0.05)
@@ -246,7 +250,7 @@ def approve_reviewed(sequence_id: int) -> int:
         if task_id not in accepted and (task_id not in best or key < best[task_id]):
             best[task_id] = key
     client = make_client(get_settings())
-    for task_id, (error, assignment_id, target, why) in sorted(best.items()):
+    for task_id, (_error, assignment_id, target, why) in sorted(best.items()):
         with session_scope() as session:
             approve(session, client, assignment_id, None)
         typer.echo(f"  demo admin approved assignment {assignment_id} (task {task_id}, "

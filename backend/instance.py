@@ -69,7 +69,7 @@ def _server_migrated(database_url: str) -> bool:
             if not inspect(conn).has_table(MIGRATIONS_TABLE):
                 return False
             return conn.execute(text(f"SELECT 1 FROM {MIGRATIONS_TABLE}")).first() is not None
-    except Exception as exc:  # noqa: BLE001 - any driver's failure to connect reads the same
+    except Exception as exc:  # any driver's failure to connect reads the same
         raise NoInstance(f"cannot reach the database at {_safe_url(database_url)} "
                          f"(DEXLABEL_DATABASE_URL): {str(exc).splitlines()[0]}") from exc
     finally:

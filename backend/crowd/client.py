@@ -16,7 +16,12 @@ from urllib.parse import urlparse
 import boto3
 from botocore.config import Config
 from botocore.exceptions import (
-    BotoCoreError, ClientError, ConnectTimeoutError, HTTPClientError, ReadTimeoutError, SSLError,
+    BotoCoreError,
+    ClientError,
+    ConnectTimeoutError,
+    HTTPClientError,
+    ReadTimeoutError,
+    SSLError,
 )
 from botocore.exceptions import ConnectionError as BotoConnectionError
 
@@ -31,6 +36,8 @@ BUILTIN_PATH = "/mturk"
 # Standard-mode retries: 5xx (ServiceFault) and throttling are retried by botocore itself,
 # which is why every call that pays or publishes carries a UniqueRequestToken.
 DEFAULT_ATTEMPTS = 5
+# The client's note of what to check when its endpoint does not answer (see unreachable()).
+HINT = "dexlabel_hint"
 
 # boto3 builds the client class at run time; there is no class to name in annotations.
 MTurkClient = Any
@@ -111,8 +118,9 @@ def make_client(settings: Settings, attempts: int = DEFAULT_ATTEMPTS) -> MTurkCl
     client = boto3.session.Session().client(
         "mturk", endpoint_url=endpoint_url(settings), region_name=REGION,
         aws_access_key_id=key, aws_secret_access_key=secret, config=config)
-    # Read back by unreachable() to name the setting in the message.
-    client.meta.dexlabel_hint = endpoint_hint(settings)
+    # Read back by unreachable() to name the setting in the message (ClientMeta declares no
+    # such attribute, hence setattr).
+    setattr(client.meta, HINT, endpoint_hint(settings))
     return client
 
 
@@ -126,7 +134,7 @@ def unreachable(client: MTurkClient, operation: str, exc: BotoCoreError) -> Mark
         reason = "connection closed"
     else:
         reason = "no connection"
-    hint = getattr(client.meta, "dexlabel_hint", "check DEXLABEL_MTURK_ENDPOINT_URL")
+    hint = getattr(client.meta, HINT, "check DEXLABEL_MTURK_ENDPOINT_URL")
     return MarketplaceUnreachable(
         f"the marketplace at {client.meta.endpoint_url} cannot be reached ({reason}); {hint}",
         operation)
@@ -135,10 +143,11 @@ def unreachable(client: MTurkClient, operation: str, exc: BotoCoreError) -> Mark
 def call(client: MTurkClient, operation: str, **params: Any) -> dict[str, Any]:
     """``client.<operation>(**params)`` with marketplace failures as MarketplaceError."""
     try:
-        return getattr(client, operation)(**params)  # type: ignore[no-any-return]
+        reply: dict[str, Any] = getattr(client, operation)(**params)
+        return reply
     except ClientError as exc:
         error = exc.response.get("Error", {})
-        turk_code = exc.response.get("TurkErrorCode", "") or error.get("Code", "")
+        turk_code = str(exc.response.get("TurkErrorCode", "") or error.get("Code", ""))
         raise MarketplaceError(
             f"{operation}: {error.get('Message', str(exc))}", operation, turk_code) from exc
     except (BotoConnectionError, HTTPClientError) as exc:
@@ -155,7 +164,7 @@ def paginate(client: MTurkClient, operation: str, key: str, **params: Any) -> It
     except ClientError as exc:
         error = exc.response.get("Error", {})
         raise MarketplaceError(f"{operation}: {error.get('Message', str(exc))}", operation,
-                               exc.response.get("TurkErrorCode", "")) from exc
+                               str(exc.response.get("TurkErrorCode", ""))) from exc
     except (BotoConnectionError, HTTPClientError) as exc:
         raise unreachable(client, operation, exc) from exc
     except BotoCoreError as exc:

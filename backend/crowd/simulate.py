@@ -19,7 +19,7 @@ from urllib.parse import parse_qs, urlsplit
 import httpx
 import numpy as np
 
-from backend.captures.layout import read_sequence
+from backend.captures.layout import SequencePlan, read_sequence
 from backend.errors import DexlabelError
 from worker.geometry.cameras import CameraModel, intrinsics_matrix
 from worker.geometry.mesh_io import read_mesh
@@ -86,7 +86,7 @@ class CaptureTruth:
     def __init__(self, root: Path) -> None:
         self.root = Path(root)
         self._views: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._plans: dict[Path, Any] = {}
+        self._plans: dict[Path, SequencePlan] = {}
 
     def _folder(self, serial: str) -> Path:
         found = sorted(p for p in self.root.glob(f"*/*/{serial}") if p.is_dir())
@@ -113,7 +113,7 @@ class CaptureTruth:
         joint_2d, seg, _ = self._labels(serial, frames)
         return joint_2d, seg
 
-    def _plan(self, folder: Path):  # -> backend.captures.layout.SequencePlan
+    def _plan(self, folder: Path) -> SequencePlan:
         if folder not in self._plans:
             self._plans[folder] = read_sequence(folder)
         return self._plans[folder]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from enum import Enum
+from enum import StrEnum
 from typing import Annotated
 
 import typer
@@ -14,7 +14,7 @@ jobs_app = typer.Typer(help="Queue jobs: status, attempts, results and errors.",
                        no_args_is_help=True)
 
 
-class JobStatus(str, Enum):
+class JobStatus(StrEnum):
     """The job table's statuses as choices (a test keeps them equal to JOB_STATUSES)."""
 
     queued = "queued"

@@ -15,7 +15,11 @@ from typing import Annotated, Literal
 import typer
 
 from backend.console import (
-    EXIT_FAILED, SequenceArg, progress, refusing_bad_input, resolve_sequence,
+    EXIT_FAILED,
+    SequenceArg,
+    progress,
+    refusing_bad_input,
+    resolve_sequence,
 )
 from backend.db import session_scope
 

@@ -40,13 +40,13 @@ def logins(out: str) -> dict[str, tuple[str, str, str]]:
 def test_the_demo_reaches_a_finished_solve_and_prints_links_and_logins(tmp_path: Path) -> None:
     var_dir = tmp_path / "var"
     out = run_demo(var_dir)
-    assert re.search(r"^annotate: +http://127\.0\.0\.1:\d+/annotate/\?token=", out, re.M)
+    assert re.search(r"^annotate: +http://127\.0\.0\.1:\d+/annotate/\?token=", out, re.MULTILINE)
     first = logins(out)
     assert first["worker portal"][0].endswith("/market/")
     assert first["admin page"][0].endswith("/admin/")
     assert "/frames?token=" not in out  # no raw JSON link
     summary = re.search(r"^(\d+) submitted, (\d+) scored: (\d+) approved, (\d+) rejected.*; "
-                        r"solve (\d+) done in \d+ s", out, re.M)
+                        r"solve (\d+) done in \d+ s", out, re.MULTILINE)
     assert summary, out
     assert int(summary[1]) == int(summary[2])  # every submission has its QC report
     assert "--no-serve: nothing is being served" in out
