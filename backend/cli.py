@@ -229,6 +229,7 @@ def demo(
                              server.has_consumer)
             if server.has_consumer:
                 d.wait_for_jobs()
+                d.wait_for_solve(seq.sequence_id)
             else:
                 typer.echo("no queue consumer here: quality checks wait for `dexlabel worker`")
             d.demo_print(seq, settings.public_url, logins, annotate)

@@ -283,6 +283,25 @@ def wait_for_jobs(timeout_s: float = JOBS_TIMEOUT_S) -> bool:
         time.sleep(POLL_S)
 
 
+def wait_for_solve(sequence_id: int, timeout_s: float = JOBS_TIMEOUT_S) -> None:
+    """Wait until the sequence's newest solve run is done or failed (none: nothing to wait
+    for); a run still queued while no job is active has nobody to run it and is not waited
+    for."""
+    from backend.jobs.models import Job
+    from backend.solve.models import SolveRun
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with session_scope() as session:
+            status = session.scalar(select(SolveRun.status).where(
+                SolveRun.sequence_id == sequence_id).order_by(SolveRun.id.desc()).limit(1))
+            active = session.scalar(select(func.count()).select_from(Job)
+                                    .where(Job.status.in_(ACTIVE_JOBS))) or 0
+        if status in (None, "done", "failed") or (status == "queued" and not active):
+            return
+        time.sleep(POLL_S)
+
+
 def _hits(sequence_id: int, kind: str) -> int:
     from backend.annotation.models import Task
     from backend.crowd.models import CrowdHit
