@@ -7,11 +7,14 @@ they take ids, never ORM objects, so a consumer on another machine can run them.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-from huey import Huey, RedisHuey, SqliteHuey
+from huey import Huey, RedisHuey
 from huey.consumer import Consumer
+from huey.storage import SqliteStorage
 from sqlalchemy import event
 from sqlalchemy.orm import Session
 
@@ -20,11 +23,31 @@ from backend.config import Settings, get_settings
 log = logging.getLogger(__name__)
 
 
+class LazySqliteStorage:
+    """Huey's SQLite storage, opened (and its file created) on first use rather than when
+    this module is imported: a command that finds no instance leaves no file behind."""
+
+    def __init__(self, name: str, filename: str, **kwargs: Any) -> None:
+        self._name, self._filename, self._kwargs = name, filename, kwargs
+        self._real: SqliteStorage | None = None
+        self._lock = threading.Lock()
+
+    def _storage(self) -> SqliteStorage:
+        with self._lock:
+            if self._real is None:
+                Path(self._filename).parent.mkdir(parents=True, exist_ok=True)
+                self._real = SqliteStorage(self._name, filename=self._filename, **self._kwargs)
+            return self._real
+
+    def __getattr__(self, attr: str) -> Any:
+        return getattr(self._storage(), attr)
+
+
 def make_huey(settings: Settings) -> Huey:
     if settings.redis_url:
         return RedisHuey("dexlabel", url=settings.redis_url, results=False)
-    settings.var_dir.mkdir(parents=True, exist_ok=True)
-    return SqliteHuey("dexlabel", filename=str(settings.queue_path), results=False)
+    return Huey("dexlabel", results=False, storage_class=LazySqliteStorage,
+                filename=str(settings.queue_path))
 
 
 huey: Huey = make_huey(get_settings())
@@ -58,8 +81,8 @@ def make_consumer(workers: int) -> Consumer:
     import worker.tasks  # noqa: F401  (registers the tasks and job handlers on ``huey``)
     from backend.jobs.service import requeue_stale
 
-    try:  # jobs whose worker died while no consumer ran are picked up at once
-        requeue_stale()
+    try:  # queued jobs, and jobs whose worker died while no consumer ran, are picked up at once
+        requeue_stale(starting=True)
     except Exception:
         log.exception("could not check the job table for stale jobs")
     # periodic: the reaper (worker.tasks.reap_jobs) runs every minute in every consumer.

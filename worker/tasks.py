@@ -1,32 +1,37 @@
 """Queue tasks: the only bridge between the pure worker packages and the database.
 
-Every task takes ids, is idempotent (it overwrites what an earlier attempt wrote) and is retried
-with a delay when it fails.
+Every job is a row of the job table (backend.jobs) whose handler is registered here; each takes
+ids, is idempotent (it overwrites what an earlier attempt wrote) and is retried with backoff
+when it fails. The stage jobs (confirm, QC) run through backend.pipeline.
 """
 
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import cv2
 import numpy as np
+from huey import crontab
 from sqlalchemy import select
 
-from huey import crontab
-
+from backend import pipeline
+from backend.captures.flows import FRAME_STATS
 from backend.captures.models import Camera, Frame
 from backend.db import session_scope
 from backend.jobs.service import job_handler, requeue_stale
 from backend.queue import huey
+from backend.solve.flows import run_solve
 from backend.storage import get_storage
 from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
 
 log = logging.getLogger(__name__)
 
 
-@huey.task(retries=3, retry_delay=10)
-def compute_frame_stats(sequence_id: int) -> int:
-    """Statistics and a thumbnail for every frame of a sequence; returns frames processed."""
+@job_handler(FRAME_STATS)
+def compute_frame_stats(args: dict[str, Any]) -> dict[str, Any]:
+    """Statistics and a thumbnail for every frame of a sequence."""
+    sequence_id = int(args["sequence_id"])
     storage = get_storage()
     with session_scope() as session:
         stmt = (select(Frame).join(Camera).where(Camera.sequence_id == sequence_id)
@@ -44,7 +49,9 @@ def compute_frame_stats(sequence_id: int) -> int:
             frame.stats = frame_statistics(color, depth)
             frame.thumb_key = thumb_key
     log.info("frame statistics for sequence %d: %d frames", sequence_id, len(frames))
-    return len(frames)
+    return {"frames": len(frames),
+            "message": f"{len(frames)} frames of sequence {sequence_id}: statistics and "
+                       "thumbnails"}
 
 
 @huey.periodic_task(crontab(minute="*"))
@@ -54,27 +61,20 @@ def reap_jobs() -> None:
 
 
 @job_handler("qc")
-def quality_check(args: dict) -> dict:
-    """Score one target of a sequence and act on the decisions (backend.quality.flows)."""
-    from backend.quality.flows import run_qc
-
-    return run_qc(int(args["sequence_id"]), str(args["target_key"]))
+def quality_check(args: dict[str, Any]) -> dict[str, Any]:
+    """Score one target of a sequence, act on the decisions, then ask for the solve."""
+    return pipeline.run_qc(int(args["sequence_id"]), str(args["target_key"]))
 
 
-@job_handler("confirm")
-def confirm_submission(args: dict) -> dict:
+@job_handler(pipeline.CONFIRM)
+def confirm_submission(args: dict[str, Any]) -> dict[str, Any]:
     """The page said an assignment was submitted: check it with the requester API, then QC."""
-    from backend.crowd.confirm import confirm
-
-    return confirm(int(args["assignment_id"]))
-
-
-# --- solve (issue 6): the "solve" job fits MANO hand and 6D object poses of one run --------
+    return pipeline.confirm(int(args["assignment_id"]))
 
 
 @job_handler("solve", lease_s=3600)
-def solve_run(args: dict) -> dict:
+def solve_run(args: dict[str, Any]) -> dict[str, Any]:
     """Solve run ``args["run_id"]`` of a sequence and store its outputs (idempotent)."""
-    from backend.solve.flows import run_solve
-
-    return run_solve(int(args["run_id"]))
+    result = run_solve(int(args["run_id"]))
+    outcome = f"failed: {result['error']}" if result.get("error") else "done"
+    return {**result, "message": f"solve run {result['run_id']} {outcome}"}

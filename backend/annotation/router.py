@@ -12,6 +12,7 @@ from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Request
 
+from backend import pipeline
 from backend.accounts.deps import CurrentAdmin, bearer_token
 from backend.annotation import service
 from backend.annotation.models import Assignment, Task
@@ -21,31 +22,16 @@ from backend.annotation.schemas import (
     FramesLinks, HighlightUpdate, PreviewLink, SaveResult, StartRequest, TaskRead, TokenRead,
     TracksPayload, TracksSave,
 )
+from backend.annotation.tokens import (
+    ASSIGNMENT_SCOPE, PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token, task_token,
+)
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.errors import PayloadTooLarge, Unauthorized
-from backend.security import sign_token, verify_token
+from backend.security import verify_token
 from backend.storage import get_storage
 
 router = APIRouter(prefix="/api", tags=["annotation"])
-
-TASK_SCOPE = "task"
-ASSIGNMENT_SCOPE = "assignment"
-TOKEN_TTL_S = 14 * 24 * 3600
-PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE"
-
-
-def task_token(task: Task) -> str:
-    payload = {"scope": TASK_SCOPE, "task_id": task.id, "sequence_id": task.sequence_id,
-               "serial": task.camera.serial}
-    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
-
-
-def assignment_token(task: Task, assignment: Assignment) -> str:
-    payload = {"scope": ASSIGNMENT_SCOPE, "assignment_id": assignment.id, "task_id": task.id,
-               "sequence_id": task.sequence_id, "serial": task.camera.serial}
-    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
-
 
 def _worker_claims(request: Request) -> dict[str, Any]:
     token = bearer_token(request)
@@ -191,5 +177,5 @@ def save_tracks(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> 
 
 @router.post("/annotate/submit", response_model=SaveResult, dependencies=[Depends(_limit_body)])
 def submit(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
-    assignment = service.submit(session, _assignment_of(session, claims), body)
+    assignment = pipeline.submit(session, _assignment_of(session, claims), body)
     return SaveResult(version=assignment.version, status=assignment.status)

@@ -206,18 +206,4 @@ def submit(session: Session, assignment: Assignment, body: TracksSave) -> Assign
     assignment.status = "submitted"
     assignment.submitted_at = utcnow()
     session.flush()
-    _after_submit(session, assignment, task)
     return assignment
-
-
-def _after_submit(session: Session, assignment: Assignment, task: Task) -> None:
-    """Work from a marketplace is confirmed with its requester API first (the confirm job
-    queues the quality check); work from a direct link goes to the quality check at once."""
-    from backend.jobs.service import enqueue_job
-    from backend.quality.service import request_qc
-
-    if assignment.hit_id:
-        enqueue_job(session, "confirm", f"confirm:{assignment.id}",
-                    {"assignment_id": assignment.id})
-    else:
-        request_qc(session, task)

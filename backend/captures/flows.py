@@ -10,8 +10,11 @@ from pathlib import Path
 
 from backend.captures import layout, service
 from backend.db import session_scope
-from backend.queue import enqueue_after_commit
+from backend.jobs.service import enqueue_job
 from backend.storage import Storage, get_storage
+
+# The job kind of a sequence's frame statistics and thumbnails (worker.tasks runs it).
+FRAME_STATS = "frame_stats"
 
 
 def import_path(path: str | Path, storage: Storage | None = None) -> list[service.ImportResult]:
@@ -19,8 +22,6 @@ def import_path(path: str | Path, storage: Storage | None = None) -> list[servic
 
     All sequences are parsed and checked before the first one is written.
     """
-    from worker.tasks import compute_frame_stats
-
     storage = storage or get_storage()
     plans = [layout.read_sequence(d) for d in layout.find_sequence_dirs(Path(path))]
     results = []
@@ -32,7 +33,8 @@ def import_path(path: str | Path, storage: Storage | None = None) -> list[servic
                 result = service.import_sequence(session, storage, plan)
                 created = result.created
                 if created:
-                    enqueue_after_commit(session, compute_frame_stats, result.sequence_id)
+                    enqueue_job(session, FRAME_STATS, f"{FRAME_STATS}:{result.sequence_id}",
+                                {"sequence_id": result.sequence_id})
         except BaseException:
             if created:
                 storage.delete_prefix(prefix)

@@ -1,4 +1,4 @@
-"""The page's own submit notification: confirm one assignment with the requester API.
+"""The page's own submit notification: look one assignment up with the requester API.
 
 When a worker submits in our page, the marketplace learns of it a moment later (the page's
 form post to ``/mturk/externalSubmit``). The confirm job asks the requester API for that
@@ -16,7 +16,7 @@ from backend.annotation.models import Assignment
 from backend.config import get_settings
 from backend.crowd.client import MarketplaceError, call, make_client
 from backend.crowd.models import CrowdSubmission
-from backend.crowd.sync import COLLECTED_STATUSES, accept_record
+from backend.crowd.sync import COLLECTED_STATUSES
 from backend.db import session_scope
 
 
@@ -24,16 +24,21 @@ class NotSubmittedYet(RuntimeError):
     """The marketplace has not recorded the submission yet (the job retries later)."""
 
 
-def confirm(assignment_id: int) -> dict[str, Any]:
+def submitted_record(assignment_id: int) -> dict[str, Any] | str:
+    """The requester API's record of our submitted assignment, or why there is none to
+    accept ("assignment deleted", "not from a marketplace", "already_accepted").
+
+    Raises NotSubmittedYet while the marketplace has not recorded the submission.
+    """
     with session_scope() as session:
         ours = session.get(Assignment, assignment_id)
         if ours is None:
-            return {"state": "assignment deleted"}
+            return "assignment deleted"
         if ours.hit_id is None:
-            return {"state": "not from a marketplace"}
+            return "not from a marketplace"
         if session.scalar(select(CrowdSubmission.id).where(
                 CrowdSubmission.assignment_id == assignment_id)) is not None:
-            return {"state": "already_accepted"}
+            return "already_accepted"
         external_id = ours.external_id
     try:
         reply = call(make_client(get_settings()), "get_assignment", AssignmentId=external_id)
@@ -43,9 +48,8 @@ def confirm(assignment_id: int) -> dict[str, Any]:
             raise
         raise NotSubmittedYet(f"assignment {external_id} is not submitted on the marketplace "
                               "yet") from exc
-    record = reply["Assignment"]
+    record: dict[str, Any] = reply["Assignment"]
     if record["AssignmentStatus"] not in COLLECTED_STATUSES:
         raise NotSubmittedYet(f"assignment {external_id} is {record['AssignmentStatus']} on "
                               "the marketplace, not submitted yet")
-    with session_scope() as session:
-        return {"state": accept_record(session, record)}
+    return record

@@ -89,12 +89,6 @@ def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str
     assignment.status = _DONE[kind]
     submission.market_status = _MARKET_STATUS[kind]
     session.flush()
-    # The decision shows on the assignment's QC report at once, and the target's QC runs again
-    # (once every task is accepted, it queues the solve).
-    from backend.quality.service import record_decision, request_qc
-
-    record_decision(session, assignment.id, _DONE[kind])
-    request_qc(session, assignment.task)
     return _payment_read(row)
 
 

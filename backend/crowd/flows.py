@@ -12,7 +12,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
-from backend.crowd import pricing, decisions
+from backend.crowd import decisions, pricing
 from backend.crowd.client import MTurkClient
 from backend.crowd.models import CrowdHit
 from backend.crowd.publish import check_assignments, publish_task, requirements

@@ -16,7 +16,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
-from backend.annotation.router import task_token
+from backend.annotation.tokens import task_token
 from backend.config import get_settings
 from backend.crowd import pricing
 from backend.crowd.client import MarketplaceError, MTurkClient, call

@@ -6,17 +6,28 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
 
+from backend import pipeline
 from backend.accounts.deps import CurrentAdmin
 from backend.config import get_settings
-from backend.crowd import actions, flows, pricing, decisions
+from backend.crowd import actions, flows, pricing
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
 from backend.crowd.schemas import (
-    AddAssignmentsRequest, ApproveRequest, BlockRequest, BonusRequest, CostsRead, ExtendRequest,
-    NotifyRequest, PaymentRead, PublishOptions, PublishRequest, PublishResult,
-    QualificationRequest, RejectRequest, SyncResult,
+    AddAssignmentsRequest,
+    ApproveRequest,
+    BlockRequest,
+    BonusRequest,
+    CostsRead,
+    ExtendRequest,
+    NotifyRequest,
+    PaymentRead,
+    PublishOptions,
+    PublishRequest,
+    PublishResult,
+    QualificationRequest,
+    RejectRequest,
+    SyncResult,
 )
-from backend.crowd.sync import sync
 from backend.db import SessionDep
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
@@ -47,19 +58,19 @@ def publish(body: PublishRequest, session: SessionDep, _: CurrentAdmin,
 
 @router.post("/sync", response_model=SyncResult)
 def sync_submissions(session: SessionDep, _: CurrentAdmin, client: MTurk) -> SyncResult:
-    return sync(session, client)
+    return pipeline.sync(session, client)
 
 
 @router.post("/assignments/{assignment_id}/approve", response_model=PaymentRead)
 def approve(assignment_id: int, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
             client: MTurk) -> PaymentRead:
-    return decisions.approve(session, client, assignment_id, body.feedback)
+    return pipeline.approve(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/reject", response_model=PaymentRead)
 def reject(assignment_id: int, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
            client: MTurk) -> PaymentRead:
-    return decisions.reject(session, client, assignment_id, body.feedback)
+    return pipeline.reject(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)

@@ -61,6 +61,8 @@ class SyncResult(BaseModel):
     already_accepted: int
     mismatched: list[str]
     unknown: list[str]
+    # Our assignment ids of the submissions accepted by this sync (each goes on to QC).
+    accepted_ids: list[int] = []
 
 
 class ApproveRequest(BaseModel):

@@ -30,9 +30,7 @@ def verified_submission(session: Session, assignment: Assignment) -> CrowdSubmis
 
 
 def _accept(session: Session, ours: Assignment, record: dict) -> bool:
-    """Record a matching submission and queue its quality check; False when already recorded."""
-    from backend.quality.service import request_qc
-
+    """Record a matching submission; False when already recorded."""
     row = session.scalar(select(CrowdSubmission).where(
         CrowdSubmission.assignment_id == ours.id))
     if row is not None:
@@ -41,23 +39,22 @@ def _accept(session: Session, ours: Assignment, record: dict) -> bool:
     session.add(CrowdSubmission(assignment_id=ours.id, hit_id=record["HITId"],
                                 worker_id=record["WorkerId"],
                                 market_status=record["AssignmentStatus"]))
-    if ours.status == "submitted":
-        request_qc(session, ours.task)
     return True
 
 
-def accept_record(session: Session, record: dict) -> str:
+def accept_record(session: Session, record: dict) -> tuple[str, Assignment | None]:
     """Check one requester-API assignment record against ours and record it.
 
-    Returns "accepted", "already_accepted", "mismatched" or "unknown".
+    Returns the outcome ("accepted", "already_accepted", "mismatched" or "unknown") and our
+    assignment when the record matched it.
     """
     ours = session.scalar(select(Assignment).where(
         Assignment.external_id == record["AssignmentId"]))
     if ours is None:
-        return "unknown"
+        return "unknown", None
     if ours.hit_id != record["HITId"] or ours.worker_id != record["WorkerId"]:
-        return "mismatched"
-    return "accepted" if _accept(session, ours, record) else "already_accepted"
+        return "mismatched", None
+    return ("accepted" if _accept(session, ours, record) else "already_accepted"), ours
 
 
 def _records(client: MTurkClient, hit_ids: list[str]) -> list[dict]:
@@ -78,10 +75,12 @@ def sync(session: Session, client: MTurkClient, hit_ids: list[str] | None = None
     result = SyncResult(hits=len(hit_ids), accepted=0, already_accepted=0, mismatched=[],
                         unknown=[])
     for record in _records(client, hit_ids):
-        outcome = accept_record(session, record)
+        outcome, ours = accept_record(session, record)
         if outcome in ("unknown", "mismatched"):
             getattr(result, outcome).append(record["AssignmentId"])
         else:
             setattr(result, outcome, getattr(result, outcome) + 1)
+        if outcome == "accepted" and ours is not None:
+            result.accepted_ids.append(ours.id)
     session.flush()
     return result

@@ -37,6 +37,10 @@ class Job(TimestampMixin, Base):
     max_attempts: Mapped[int] = mapped_column(Integer, default=5)
     error: Mapped[str | None] = mapped_column(Text)
     result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    # Asks for this job so far, and the count its running attempt started from: a job asked
+    # for again while it runs (new work arrived) is queued again when that attempt ends.
+    requests: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    requests_claimed: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     lease_until: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow,
                                                  onupdate=utcnow)

@@ -7,6 +7,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict
 
+from backend.jobs.models import Job
+from backend.jobs.service import describe
+
 
 class JobRead(BaseModel):
     model_config = ConfigDict(from_attributes=True)
@@ -24,3 +27,9 @@ class JobRead(BaseModel):
     updated_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
+    # The outcome in one line (backend.jobs.service.describe).
+    message: str = ""
+
+    @classmethod
+    def of(cls, job: Job) -> JobRead:
+        return cls.model_validate(job).model_copy(update={"message": describe(job)})

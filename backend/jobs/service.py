@@ -8,6 +8,7 @@ runs in its own units of work between the claim and the finish.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import time
 import traceback
@@ -17,6 +18,8 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from sqlalchemy import or_, select, update
+from sqlalchemy.dialects.postgresql import insert as pg_insert
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from backend.config import get_settings
@@ -38,6 +41,9 @@ class Handler:
 
 
 _HANDLERS: dict[str, Handler] = {}
+# The module whose import registers the product's job handlers; loaded by the first job run in
+# a process that has not imported it (a CLI command running a job here, a test).
+HANDLERS_MODULE = "worker.tasks"
 
 
 def job_handler(kind: str, lease_s: float | None = None):
@@ -52,8 +58,25 @@ def job_handler(kind: str, lease_s: float | None = None):
     return register
 
 
+def handler_for(kind: str) -> Handler | None:
+    if kind not in _HANDLERS:
+        importlib.import_module(HANDLERS_MODULE)
+    return _HANDLERS.get(kind)
+
+
 def _now() -> datetime:
     return datetime.now(UTC)
+
+
+def describe(job: Job) -> str:
+    """The job's outcome in one line for people: its error while it is failing or waiting,
+    else the ``message`` its handler put in the result ("qc: scored 6: 4 approve, ...")."""
+    if job.status in ("failed", "retrying", "waiting") and job.error:
+        return f"{job.kind}: {job.status}: {job.error.strip().splitlines()[-1]}"
+    message = (job.result or {}).get("message")
+    if job.status == "done" and message:
+        return f"{job.kind}: {message}"
+    return f"{job.kind}: {job.status}"
 
 
 def get_job_or_raise(session: Session, job_id: int) -> Job:
@@ -76,22 +99,40 @@ def list_jobs(session: Session, status: str | None = None, kind: str | None = No
 def enqueue_job(session: Session, kind: str, key: str, args: dict[str, Any] | None = None) -> Job:
     """Queue the job named ``key`` once this unit of work commits.
 
-    A job already queued or running is left as it is (its run will see the newest data); a
-    finished, failed or waiting one is queued again with fresh attempts.
+    Every ask is counted on the job's row. A job already queued (or waiting to retry) will see
+    the newest data when it starts; a running one started before this unit of work's data, so
+    it is queued again when its attempt ends (``_finish``). A finished, failed or waiting job
+    is queued again with fresh attempts.
     """
-    job = session.scalar(select(Job).where(Job.key == key))
-    if job is None:
-        job = Job(kind=kind, key=key, args=args or {}, status="queued", attempts=0,
-                  max_attempts=get_settings().job_max_attempts)
-        session.add(job)
-    elif job.status in _ACTIVE:
+    if _insert_new(session, kind, key, args):
+        enqueue_after_commit(session, run_job, key)
+        return session.scalars(select(Job).where(Job.key == key)).one()
+    job = session.scalars(select(Job).where(Job.key == key)).one()
+    # Counting the ask takes the row's write lock, so the status read next is the one a
+    # finishing attempt will see this ask against (see _finish).
+    session.execute(update(Job).where(Job.key == key).values(requests=Job.requests + 1)
+                    .execution_options(synchronize_session=False))
+    session.refresh(job)
+    if job.status in _ACTIVE:
         return job
-    else:
-        job.status, job.attempts, job.error, job.args = "queued", 0, None, args or job.args
-        job.finished_at = None
+    job.status, job.attempts, job.error, job.args = "queued", 0, None, args or job.args
+    job.finished_at = None
     session.flush()
     enqueue_after_commit(session, run_job, key)
     return job
+
+
+def _insert_new(session: Session, kind: str, key: str, args: dict[str, Any] | None) -> bool:
+    """Insert the job's row as queued unless the key exists (also when a concurrent unit of
+    work inserts it first); True when this call made it."""
+    insert = pg_insert if session.get_bind().dialect.name == "postgresql" else sqlite_insert
+    now = _now()
+    made = session.execute(
+        insert(Job).values(kind=kind, key=key, args=args or {}, status="queued", attempts=0,
+                           max_attempts=get_settings().job_max_attempts, requests=1,
+                           requests_claimed=0, created_at=now, updated_at=now)
+        .on_conflict_do_nothing(index_elements=["key"]).returning(Job.id))
+    return made.scalar_one_or_none() is not None
 
 
 def mark_waiting(session: Session, kind: str, key: str, args: dict[str, Any], reason: str) -> Job:
@@ -122,7 +163,7 @@ def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
         if job is None:
             log.warning("job %s is not in the job table; dropped", key)
             return None
-        handler = _HANDLERS.get(job.kind)
+        handler = handler_for(job.kind)
         lease = (handler.lease_s if handler and handler.lease_s else settings.job_lease_s)
         now = _now()
         claimed = session.execute(
@@ -130,7 +171,8 @@ def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
                 Job.status.in_(_CLAIMABLE),
                 (Job.status == "running") & (Job.lease_until < now)))
             .values(status="running", attempts=Job.attempts + 1, started_at=now,
-                    lease_until=now + timedelta(seconds=lease), error=None)
+                    lease_until=now + timedelta(seconds=lease), error=None,
+                    requests_claimed=Job.requests)
             .execution_options(synchronize_session=False))
         if claimed.rowcount != 1:
             return None
@@ -146,11 +188,29 @@ def checkpoint() -> None:
 
 
 def _finish(key: str, attempt: int, **values: Any) -> bool:
+    """End attempt ``attempt`` with ``values`` (compare-and-set); False when it was not ours.
+
+    A job that ends done or failed while asks arrived after its attempt started is queued
+    again at once, so work submitted during a run is never left unprocessed.
+    """
+    rerun = False
     with session_scope() as session:
         done = session.execute(
             update(Job).where(Job.key == key, Job.status == "running", Job.attempts == attempt)
             .values(lease_until=None, **values).execution_options(synchronize_session=False))
-        return done.rowcount == 1
+        if done.rowcount != 1:
+            return False
+        if values.get("status") in ("done", "failed"):
+            again = session.execute(
+                update(Job).where(Job.key == key, Job.status == values["status"],
+                                  Job.requests > Job.requests_claimed)
+                .values(status="queued", attempts=0, finished_at=None)
+                .execution_options(synchronize_session=False))
+            rerun = again.rowcount == 1
+    if rerun:
+        log.info("job %s was asked for while it ran: queued again", key)
+        run_job(key)
+    return True
 
 
 def _retry_delay(attempt: int) -> float:
@@ -164,7 +224,7 @@ def execute(key: str) -> None:
     if claim is None:
         return
     kind, args, attempt = claim
-    handler = _HANDLERS.get(kind)
+    handler = handler_for(kind)
     try:
         if handler is None:
             raise RuntimeError(f"no handler for jobs of kind {kind!r} in this worker")
@@ -189,15 +249,22 @@ def _after_failure(key: str, attempt: int, exc: Exception) -> None:
         run_job.schedule((key,), delay=_retry_delay(attempt))
 
 
-def requeue_stale(now: datetime | None = None) -> list[str]:
-    """Queue again the jobs whose worker died (lease ran out) or whose message was lost."""
+def requeue_stale(now: datetime | None = None, starting: bool = False) -> list[str]:
+    """Queue again the jobs whose worker died (lease ran out) or whose message was lost.
+
+    A consumer ``starting`` also re-sends every queued job at once: its message may have gone
+    to a queue no consumer reads (a command run with other queue settings) or been lost while
+    none ran. A duplicate message is harmless, the claim runs a job once.
+    """
     settings = get_settings()
     now = now or _now()
     lost_before = now - timedelta(seconds=settings.job_requeue_after_s)
     with session_scope() as session:
-        keys = list(session.scalars(select(Job.key).where(or_(
-            (Job.status == "running") & (Job.lease_until < now),
-            Job.status.in_(_CLAIMABLE) & (Job.updated_at < lost_before)))))
+        stale = [(Job.status == "running") & (Job.lease_until < now),
+                 Job.status.in_(_CLAIMABLE) & (Job.updated_at < lost_before)]
+        if starting:
+            stale.append(Job.status == "queued")
+        keys = list(session.scalars(select(Job.key).where(or_(*stale))))
         for key in keys:
             # Touch the row so a lost message is re-sent once per interval, not every minute.
             session.execute(update(Job).where(Job.key == key, Job.status != "running")

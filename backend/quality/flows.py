@@ -1,4 +1,5 @@
-"""The QC job: score a target, then act on each new decision in its own unit of work.
+"""The QC job's own work: score a target, then act on each new decision in its own unit of
+work (backend.pipeline runs it and moves on to the solve).
 
 Marketplace calls happen with no write transaction open (the embedded SQLite database is
 shared with the built-in marketplace); each action's ledger row and the report's ``action``
@@ -13,17 +14,16 @@ from typing import Any
 
 from sqlalchemy import func, select
 
-from backend.annotation.models import Assignment, Task
+from backend.annotation.models import Assignment
 from backend.config import get_settings
 from backend.crowd import actions, decisions
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
-from backend.jobs.service import checkpoint, mark_waiting
+from backend.jobs.service import checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
-from backend.solve.service import request_solve
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +48,7 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
         acted = act_on_reports(client, sequence_id, target_key)
         block_repeat_failures(client, sequence_id, target_key)
     timings["act_s"] = round(time.perf_counter() - started, 3)
-    solve = maybe_request_solve(sequence_id)
-    return {"scored": counts, "actions": acted, "solve": solve, "timings": timings}
+    return {"scored": counts, "actions": acted, "timings": timings}
 
 
 def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
@@ -159,20 +158,3 @@ def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str
             except Conflict:
                 pass
     return done
-
-
-def maybe_request_solve(sequence_id: int) -> str:
-    """Queue the solve once every task of the sequence has approved work."""
-    with session_scope() as session:
-        tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
-        approved = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.task_id.in_(tasks), Assignment.status == "approved")))
-        if not tasks or set(tasks) - approved:
-            return f"waiting: {len(set(tasks) - approved)} of {len(tasks)} tasks not accepted yet"
-        try:
-            run = request_solve(session, sequence_id)
-        except DexlabelError as exc:
-            mark_waiting(session, "solve", f"solve:{sequence_id}", {"sequence_id": sequence_id},
-                         exc.detail)
-            return f"solve not started: {exc.detail}"
-        return f"solve run {run.id} queued"

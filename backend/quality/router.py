@@ -11,7 +11,11 @@ from backend.db import SessionDep
 from backend.jobs.schemas import JobRead
 from backend.quality import gold, service
 from backend.quality.schemas import (
-    QCReportDetail, QCReportRead, QCRunRequest, TrainingClipCreate, TrainingClipRead,
+    QCReportDetail,
+    QCReportRead,
+    QCRunRequest,
+    TrainingClipCreate,
+    TrainingClipRead,
     WorkerQualityRead,
 )
 

@@ -32,7 +32,13 @@ from backend.errors import NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
 from backend.quality import gold
-from backend.quality.inputs import SCORED_STATUSES, TargetInputs, depth_maps, highlight_mask, target_inputs
+from backend.quality.inputs import (
+    SCORED_STATUSES,
+    TargetInputs,
+    depth_maps,
+    highlight_mask,
+    target_inputs,
+)
 from backend.quality.models import QCReport, TrainingClip
 
 log = logging.getLogger(__name__)
@@ -101,7 +107,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
             if mask is not None:
                 masks[view] = {0: mask}
         results.update(score_object(inputs.cameras, crowd, masks))
-    methods = {key: "consensus" for key in results}
+    methods = dict.fromkeys(results, "consensus")
     for lab in inputs.labels:
         if lab.key not in results:
             task_id = inputs.who[lab.key].task_id

@@ -41,6 +41,9 @@ class SolveRun(TimestampMixin, Base):
     error: Mapped[str | None] = mapped_column(Text)
     # Storage key of the per-frame outputs (npz), set when the run is done.
     result_key: Mapped[str | None] = mapped_column(String(500))
+    # Digest of the accepted assignments the pipeline requested this run for (None: asked
+    # for by hand); one automatic run per set of accepted labels.
+    labels_digest: Mapped[str | None] = mapped_column(String(64), index=True)
     num_frames: Mapped[int] = mapped_column(Integer)
     num_views: Mapped[int] = mapped_column(Integer)
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))

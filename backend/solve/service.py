@@ -90,7 +90,7 @@ def solver_params(optimiser: str, overrides: dict | None = None) -> dict:
 
 
 def request_solve(session: Session, sequence_id: int, optimiser: str | None = None,
-                  params: dict | None = None) -> SolveRun:
+                  params: dict | None = None, labels_digest: str | None = None) -> SolveRun:
     """Create a run of the sequence's solve and queue its job (runs after commit); a run
     with the same settings that is still queued is returned instead of a second one.
 
@@ -112,10 +112,11 @@ def request_solve(session: Session, sequence_id: int, optimiser: str | None = No
     for run in waiting:
         # Not started yet, so it will read the newest labels: asking again changes nothing.
         if run.params == settings:
+            run.labels_digest = labels_digest or run.labels_digest
             return run
     run = SolveRun(sequence_id=seq.id, optimiser=optimiser, params=settings,
                    status="queued", timings={}, num_frames=seq.num_frames,
-                   num_views=len(seq.cameras))
+                   num_views=len(seq.cameras), labels_digest=labels_digest)
     session.add(run)
     session.flush()
     enqueue_job(session, JOB_KIND, job_key(run.id), {"run_id": run.id})

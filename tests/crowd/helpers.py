@@ -76,7 +76,7 @@ def synced_submission(base: str, hit_id: str, worker_id: str) -> int:
     """A worker submits on the HIT and our sync accepts it; our assignment id."""
     from backend.config import get_settings
     from backend.crowd.client import make_client
-    from backend.crowd.sync import sync
+    from backend.pipeline import sync
 
     _, ours = worker_submits(base, hit_id, worker_id)
     with session_scope() as session:

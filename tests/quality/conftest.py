@@ -9,7 +9,7 @@ from tests.market.conftest import market_database_url, market_url, migrated_sqli
 __all__ = ["crowd_url", "market_database_url", "market_env", "market_url", "migrated_sqlite"]
 
 
-import pytest  # noqa: E402
+import pytest
 
 
 @pytest.fixture(scope="session")

@@ -39,8 +39,10 @@ def publish_hand_tasks(capture: Path, max_assignments: int) -> tuple[int, list[s
     return sequence_id, hit_ids
 
 
-def crowd_submits(base: str, capture: Path, profiles: list[str], seed: int = 0) -> list:
-    """Simulated workers 1..N with these profiles, in order, each taking the first HIT on offer."""
+def crowd_submits(base: str, capture: Path, profiles: list[str], seed: int = 0,
+                  first_worker: int = 1) -> list:
+    """Simulated workers first_worker.. with these profiles, in order, each taking the first
+    HIT on offer."""
     from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
 
     rng = np.random.default_rng(seed)
@@ -48,13 +50,13 @@ def crowd_submits(base: str, capture: Path, profiles: list[str], seed: int = 0) 
     with httpx.Client(timeout=30.0) as http:
         admin = admin_token(http, base, ADMIN_EMAIL, ADMIN_PASSWORD)
         client = WorkerClient(http, base)
-        return [_work_one(client, admin, i + 1, profile, truth, rng)
+        return [_work_one(client, admin, first_worker + i, profile, truth, rng)
                 for i, profile in enumerate(profiles)]
 
 
 def sync_submissions() -> None:
     from backend.crowd.client import make_client
-    from backend.crowd.sync import sync
+    from backend.pipeline import sync
 
     with session_scope() as session:
         sync(session, make_client(get_settings()))

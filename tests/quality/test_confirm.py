@@ -38,7 +38,8 @@ def test_submit_in_the_page_is_confirmed_without_a_sync(crowd_url: str,
     assert _job(key).status == "queued"
     assert _job(qc_key(sequence_id, "hand:0")) is None  # not before the marketplace agrees
     execute(key)
-    assert (_job(key).status, _job(key).result) == ("done", {"state": "accepted"})
+    assert (_job(key).status, _job(key).result["state"]) == ("done", "accepted")
+    assert _job(key).result["message"] == f"assignment {ours.id}: accepted"
     with session_scope() as session:
         [row] = session.scalars(select(CrowdSubmission))
         assert (row.hit_id, row.worker_id) == (outcome.hit_id, outcome.worker_id)
@@ -47,12 +48,14 @@ def test_submit_in_the_page_is_confirmed_without_a_sync(crowd_url: str,
 
 def test_confirm_retries_until_the_marketplace_has_the_submission(crowd_url: str,
                                                                   training_capture: Path) -> None:
-    from backend.annotation.schemas import TracksSave
-    from backend.annotation.service import start_assignment, submit
     from backend.annotation.models import Task
+    from backend.annotation.schemas import TracksSave
+    from backend.annotation.service import start_assignment
     from backend.crowd.models import CrowdHit
     from backend.jobs.service import execute
-    from tests.market.helpers import accept, submit as market_submit
+    from backend.pipeline import submit
+    from tests.market.helpers import accept
+    from tests.market.helpers import submit as market_submit
     from worker.synth.annotators import annotate
 
     _, hit_ids = publish_hand_tasks(training_capture, max_assignments=1)

@@ -13,7 +13,11 @@ from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
 from backend.db import session_scope
 from tests.market.helpers import make_client as boto3_client
 from tests.quality.helpers import (
-    ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, publish_hand_tasks, sync_submissions,
+    ADMIN_EMAIL,
+    ADMIN_PASSWORD,
+    crowd_submits,
+    publish_hand_tasks,
+    sync_submissions,
 )
 
 

@@ -1,0 +1,178 @@
+"""The one place that moves work between stages: submitted -> confirmed -> QC -> solve.
+
+Each domain does its own step and knows nothing of the next one (annotation saves and
+submits, crowd talks to the marketplace, quality scores and acts, solve fits poses); this
+module calls them in order and queues the next stage's job. Nothing else triggers a stage, so
+the domains import each other in one direction only, and every stage is reached through a job
+row of the job table (a job asked for while it runs runs again afterwards, see
+backend.jobs.service), so no submission is left without its quality check.
+
+Functions that take a session work inside the caller's unit of work (an API request, a CLI
+command); the job bodies (``confirm``, ``run_qc``) open their own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation import service as annotation
+from backend.annotation.models import Assignment, Task
+from backend.annotation.schemas import TracksSave
+from backend.crowd import confirm as crowd_confirm
+from backend.crowd import decisions
+from backend.crowd import sync as crowd_sync
+from backend.crowd.client import MTurkClient
+from backend.crowd.schemas import PaymentRead, SyncResult
+from backend.db import session_scope
+from backend.errors import DexlabelError
+from backend.jobs.service import enqueue_job, mark_waiting
+from backend.quality import flows as quality_flows
+from backend.quality.service import record_decision, request_qc
+from backend.solve.models import SolveRun
+from backend.solve.service import request_solve
+
+CONFIRM = "confirm"
+
+
+def confirm_key(assignment_id: int) -> str:
+    return f"{CONFIRM}:{assignment_id}"
+
+
+# --- submitted ---------------------------------------------------------------------------
+
+
+def submit(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
+    """The worker's submit: save and check the work, then send it on. Work from a
+    marketplace is confirmed with the requester API first (the confirm job); work from a
+    direct link goes to the quality check at once."""
+    assignment = annotation.submit(session, assignment, body)
+    if assignment.hit_id:
+        enqueue_job(session, CONFIRM, confirm_key(assignment.id),
+                    {"assignment_id": assignment.id})
+    else:
+        request_qc(session, assignment.task)
+    return assignment
+
+
+# --- confirmed ---------------------------------------------------------------------------
+
+
+def _confirmed(session: Session, assignment_ids: list[int]) -> None:
+    """Submissions the requester API vouched for: each submitted one goes to QC."""
+    for assignment_id in assignment_ids:
+        assignment = session.get_one(Assignment, assignment_id)
+        if assignment.status == "submitted":
+            request_qc(session, assignment.task)
+
+
+def sync(session: Session, client: MTurkClient) -> SyncResult:
+    """Collect the marketplace's submissions (``crowd sync``) and queue QC for the new ones."""
+    result = crowd_sync.sync(session, client)
+    _confirmed(session, result.accepted_ids)
+    return result
+
+
+def confirm(assignment_id: int) -> dict[str, Any]:
+    """The confirm job: ask the requester API for one submission, then queue its QC."""
+    record = crowd_confirm.submitted_record(assignment_id)
+    if isinstance(record, str):
+        state = record
+    else:
+        with session_scope() as session:
+            state, ours = crowd_sync.accept_record(session, record)
+            if state == "accepted" and ours is not None:
+                _confirmed(session, [ours.id])
+    return {"state": state, "message": f"assignment {assignment_id}: {state.replace('_', ' ')}"}
+
+
+# --- decided (by an admin) ---------------------------------------------------------------
+
+
+def _decided(session: Session, assignment_id: int, decision: str) -> None:
+    """An admin's approval or rejection shows on the QC report at once, and the target's QC
+    runs again (it acts on what is left and asks for the solve once all is accepted)."""
+    record_decision(session, assignment_id, decision)
+    request_qc(session, session.get_one(Assignment, assignment_id).task)
+
+
+def approve(session: Session, client: MTurkClient, assignment_id: int,
+            feedback: str | None = None) -> PaymentRead:
+    payment = decisions.approve(session, client, assignment_id, feedback)
+    _decided(session, assignment_id, "approved")
+    return payment
+
+
+def reject(session: Session, client: MTurkClient, assignment_id: int,
+           feedback: str) -> PaymentRead:
+    payment = decisions.reject(session, client, assignment_id, feedback)
+    _decided(session, assignment_id, "rejected")
+    return payment
+
+
+# --- QC -> solve -------------------------------------------------------------------------
+
+
+def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
+    """The QC job of one target: score and act (backend.quality.flows), then ask for the
+    sequence's solve once every task has accepted work."""
+    result = quality_flows.run_qc(sequence_id, target_key)
+    with session_scope() as session:
+        result["solve"] = solve_if_ready(session, sequence_id)
+    result["message"] = _qc_message(target_key, result)
+    return result
+
+
+def _qc_message(target_key: str, result: dict[str, Any]) -> str:
+    """"hand:0 scored 6: 4 approve, 0 review, 2 reject; acted: 4 approved, 2 rejected;
+    waiting: 3 of 12 tasks not accepted yet"."""
+    scored = result.get("scored", {})
+    total = sum(scored.get(k, 0) for k in ("approve", "review", "reject"))
+    line = (f"{target_key} scored {total}: " + ", ".join(
+        f"{scored.get(k, 0)} {k}" for k in ("approve", "review", "reject")))
+    if scored.get("provisional"):
+        line += f" ({scored['provisional']} provisional)"
+    acted = result.get("actions") or {}
+    if acted:
+        line += "; acted: " + ", ".join(f"{n} {what}" for what, n in sorted(acted.items()))
+    return f"{line}; {result['solve']}"
+
+
+def accepted_digest(session: Session, sequence_id: int) -> tuple[str | None, int]:
+    """(digest of the accepted assignments, tasks still without one); the digest is None
+    while any task of the sequence lacks accepted work."""
+    tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
+    accepted = session.execute(
+        select(Assignment.task_id, Assignment.id)
+        .where(Assignment.task_id.in_(tasks), Assignment.status == "approved")
+        .order_by(Assignment.id)).all()
+    missing = len(set(tasks) - {task_id for task_id, _ in accepted})
+    if not tasks or missing:
+        return None, missing
+    ids = ",".join(str(assignment_id) for _, assignment_id in accepted)
+    return hashlib.sha256(ids.encode()).hexdigest(), 0
+
+
+def solve_if_ready(session: Session, sequence_id: int) -> str:
+    """Queue one solve per set of accepted labels once every task has accepted work; say
+    why not otherwise (the QC job's result shows it)."""
+    digest, missing = accepted_digest(session, sequence_id)
+    if digest is None:
+        total = len(list(session.scalars(select(Task.id).where(
+            Task.sequence_id == sequence_id))))
+        return f"waiting: {missing} of {total} tasks not accepted yet"
+    existing = session.scalar(select(SolveRun).where(
+        SolveRun.sequence_id == sequence_id, SolveRun.labels_digest == digest,
+        SolveRun.status != "failed").order_by(SolveRun.id.desc()))
+    if existing is not None:
+        return f"solve run {existing.id} ({existing.status}) has these labels already"
+    try:
+        run = request_solve(session, sequence_id, labels_digest=digest)
+    except DexlabelError as exc:
+        mark_waiting(session, "solve", f"solve:{sequence_id}", {"sequence_id": sequence_id},
+                     exc.detail)
+        return f"solve not started: {exc.detail}"
+    return f"solve run {run.id} queued"
