@@ -1,4 +1,5 @@
-"""worker.solver.init.initial_object_poses in a capture's master frame (world = camera 0's
+"""worker.solver.init.initial_object_poses (and worker.solver.triangulate.linear_poses) in a
+capture's master frame (world = camera 0's
 frame, as in DexYCB): frames whose landmarks cannot give a linear pose (none seen, or seen
 only by the master camera, whose centre is the origin) keep the previous start, without a
 numpy warning, and every other frame gets what it gets alone."""
@@ -15,6 +16,7 @@ from worker.geometry.cameras import CameraModel
 from worker.solver import ObjectTarget, SolveInputs, SolveSettings
 from worker.solver.init import initial_object_poses
 from worker.solver.problem import MappedLandmarks, Problem
+from worker.solver.triangulate import linear_poses
 
 VIEWS = 4
 FRAMES = 5
@@ -89,3 +91,36 @@ class TestInitialObjectPoses:
         problem, truth, xy = _problem()
         poses = initial_object_poses(problem, 0, _marks(xy, np.zeros(xy.shape[:2], bool)))
         assert np.array_equal(poses, np.repeat(truth[:1], FRAMES, axis=0))
+
+
+class TestLinearPoses:
+    """Frames whose linear system has only the zero solution (no landmark seen; landmarks seen
+    only by the master camera, whose centre is the origin) have no scale to divide by."""
+
+    def test_a_frame_with_no_landmark_seen_is_not_ok_without_a_warning(self):
+        problem, truth, xy = _problem()
+        seen = np.ones(xy.shape[:2], bool)
+        seen[1] = False
+        model = problem.object_vertices[0][LANDMARK_VERTICES]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            poses, ok = linear_poses(problem.cameras, LANDMARK_VIEWS, model,
+                                     np.where(seen[..., None], xy, np.nan), seen)
+        assert ok.tolist() == [True, False, True, True, True]
+        assert np.isnan(poses[1, :, 3]).all()
+        for f in (0, 2, 3, 4):
+            assert np.abs(poses[f] - truth[f]).max() < 1e-6
+
+    def test_landmarks_seen_only_by_the_master_camera_are_not_ok_without_a_warning(self):
+        problem, truth, _ = _problem()
+        model = problem.object_vertices[0][LANDMARK_VERTICES]
+        master = problem.cameras[0]
+        xy = np.stack([master.project(model @ truth[f, :, :3].T + truth[f, :, 3])
+                       for f in range(FRAMES)])  # (F, L, 2), all in view 0
+        views = np.zeros(len(model), int)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            poses, ok = linear_poses(problem.cameras, views, model, xy,
+                                     np.ones(xy.shape[:2], bool))
+        assert not ok.any()
+        assert np.isnan(poses[:, :, 3]).all()

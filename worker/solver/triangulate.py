@@ -58,7 +58,8 @@ def linear_poses(cameras: list[CameraModel], views: np.ndarray, model_points: np
     views: (L,) view ids; model_points: (L, 3) object frame, metres; pixels: (F, L, 2) px;
     seen: (F, L) bool. Per frame, the 12 entries of [R | t] are solved linearly (u r3.X' - r1.X'
     = 0 per observation in its camera's normalised coordinates) and R is projected onto SO(3).
-    Returns poses (F, 3, 4) and (F,) bool: at least 6 observations and a well-posed system.
+    Returns poses (F, 3, 4) and (F,) bool: at least 6 observations, a well-posed system and a
+    non-zero solution (a frame without one has a NaN translation).
     """
     frames = pixels.shape[0]
     xy = np.stack([pixels_to_rays(np.nan_to_num(pixels[:, k]), cameras[v].K, cameras[v].dist)
@@ -82,6 +83,10 @@ def linear_poses(cameras: list[CameraModel], views: np.ndarray, model_points: np
     fix = np.ones((frames, 3))
     fix[:, 2] = np.sign(np.linalg.det(u @ vt))
     rot = (u * fix[:, None, :]) @ vt
-    # The linear solution's scale error lives in its singular values; rescale t with them.
-    trans = pose[:, :, 3] / s.mean(axis=1, keepdims=True)
+    # The linear solution's scale error lives in its singular values; rescale t with them. A
+    # zero solution (no landmark seen, or seen only from cameras whose centre is the world
+    # origin: a system with no constant term) has no scale: its translation is NaN, not ok.
+    scale = s.mean(axis=1, keepdims=True)
+    trans = np.divide(pose[:, :, 3], scale, out=np.full((frames, 3), np.nan), where=scale > 0)
+    ok &= scale[:, 0] > 0
     return np.concatenate([rot, trans[..., None]], axis=2), ok
