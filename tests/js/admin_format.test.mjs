@@ -1,10 +1,11 @@
-// The review page's pure helpers: numbers, point names, report order, bar geometry, routes.
+// The review page's pure helpers: numbers, point names, report order, job outcomes, bar geometry,
+// routes.
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import {
-  HAND_JOINTS, barLayout, canRetry, costCells, dollars, metric, orderReports, parseRoute, percent,
-  pointNames, px, tallyReports, when,
+  HAND_JOINTS, barLayout, canRetry, costCells, dollars, jobOutcome, metric, orderReports,
+  parseRoute, percent, pointNames, px, tallyReports, when,
 } from "../../frontend/admin/format.js";
 
 test("px writes pixels with one decimal and a dash where unknown", () => {
@@ -85,6 +86,46 @@ test("canRetry allows only failed and waiting jobs", () => {
   for (const status of ["queued", "running", "retrying", "done"]) {
     assert.equal(canRetry({ status }), false);
   }
+});
+
+const TRACEBACK = "Traceback (most recent call last):\n  File \"flows.py\", line 3\n"
+  + "ValueError: capture 4 has no frames\n";
+
+test("jobOutcome shows the API's one-line message, toned by status, the error behind it", () => {
+  const line = "qc: hand:0 scored 6: 4 approve, 2 review, 0 reject";
+  assert.deepEqual(jobOutcome({ kind: "qc", status: "done", message: `  ${line} `, error: null }),
+    { line, tone: "", full: line });
+  const waiting = "solve: waiting: 27 of 32 tasks not accepted yet";
+  assert.deepEqual(jobOutcome({ kind: "solve", status: "waiting", message: waiting }),
+    { line: waiting, tone: "warn", full: waiting });
+  assert.deepEqual(
+    jobOutcome({ kind: "qc", status: "failed", message: "qc: failed: boom", error: TRACEBACK }),
+    { line: "qc: failed: boom", tone: "error", full: TRACEBACK.trim() });
+});
+
+test("jobOutcome without a message says a failing job's last error line", () => {
+  for (const [status, tone] of [["failed", "error"], ["retrying", "error"], ["waiting", "warn"]]) {
+    assert.deepEqual(jobOutcome({ kind: "frame_stats", status, error: TRACEBACK }), {
+      line: `frame_stats: ${status}: ValueError: capture 4 has no frames`, tone,
+      full: TRACEBACK.trim(),
+    });
+  }
+});
+
+test("jobOutcome without a message says a done job's result message, else its status", () => {
+  assert.deepEqual(
+    jobOutcome({ kind: "sync", status: "done", result: { message: "3 assignments synced" } }),
+    { line: "sync: 3 assignments synced", tone: "", full: "sync: 3 assignments synced" });
+  // A result message counts only once the job is done, and only if it is text.
+  assert.equal(jobOutcome({ kind: "sync", status: "running", result: { message: "half" } }).line,
+    "sync: running");
+  assert.equal(jobOutcome({ kind: "sync", status: "done", result: { message: 3 } }).line,
+    "sync: done");
+  assert.deepEqual(jobOutcome({ kind: "qc", status: "queued", result: null, error: null }),
+    { line: "qc: queued", tone: "", full: "qc: queued" });
+  // An old error of a job queued again is not its line, but stays behind it.
+  assert.deepEqual(jobOutcome({ kind: "qc", status: "queued", error: TRACEBACK }),
+    { line: "qc: queued", tone: "", full: TRACEBACK.trim() });
 });
 
 test("barLayout scales the largest value to the plot height and flattens unknowns", () => {
