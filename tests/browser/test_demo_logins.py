@@ -1,6 +1,7 @@
 """The logins the demo prints work in a browser: after `dexlabel demo --no-serve`, `dexlabel
 serve` on the same port (as the demo says) serves the worker portal and the admin page, and
-each printed email and password signs in."""
+each printed email and password signs in. Screenshots of each sign-in form and the page behind
+it at 1440 x 900 and 1024 x 700 go to the browser tests' output folder."""
 
 from __future__ import annotations
 
@@ -8,13 +9,16 @@ import re
 import subprocess
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pytest
 from playwright.sync_api import Page, expect
 
+from tests.browser.conftest import VIEWPORT
 from tests.cli.conftest import DEXLABEL, clean_env, free_port
 
+NARROW = {"width": 1024, "height": 700}
 LOGIN = re.compile(r"^(worker portal|admin page): +(http://\S+) +email (\S+) +password (\S+)$",
                    re.MULTILINE)
 
@@ -49,20 +53,38 @@ def demo_logins(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, 
         server.wait(timeout=30)
 
 
-def _sign_in(page: Page, url: str, email: str, password: str) -> None:
+def _sign_in(page: Page, url: str, email: str, password: str, shots: Path) -> None:
+    """Sign in with the form, screenshot (shots-login[-1024].png) at both sizes first."""
     page.goto(url)
+    for suffix, size in (("-1024", NARROW), ("", VIEWPORT)):
+        page.set_viewport_size(size)
+        expect(page.locator("#login")).to_be_visible()
+        page.screenshot(path=f"{shots}-login{suffix}.png")
     page.locator("#login input[name=email]").fill(email)
     page.locator("#login input[name=password]").fill(password)
     page.locator("#login button[type=submit]").click()
 
 
-def test_the_printed_worker_login_opens_the_portal(page: Page, demo_logins: dict) -> None:
+def _screenshots(page: Page, shots: Path) -> None:
+    """The signed-in page at both sizes (shots[-1024].png); the narrow one scrolls no wider."""
+    page.screenshot(path=f"{shots}.png")
+    page.set_viewport_size(NARROW)
+    assert page.evaluate("document.documentElement.scrollWidth") <= NARROW["width"]
+    page.screenshot(path=f"{shots}-1024.png")
+    page.set_viewport_size(VIEWPORT)
+
+
+def test_the_printed_worker_login_opens_the_portal(page: Page, demo_logins: dict,
+                                                   output_dir: Path) -> None:
     url, email, password = demo_logins["worker portal"]
-    _sign_in(page, url, email, password)
+    _sign_in(page, url, email, password, output_dir / "demo-portal")
     expect(page.locator("#hits-view")).to_be_visible()
+    _screenshots(page, output_dir / "demo-portal")
 
 
-def test_the_printed_admin_login_opens_the_admin_page(page: Page, demo_logins: dict) -> None:
+def test_the_printed_admin_login_opens_the_admin_page(page: Page, demo_logins: dict,
+                                                      output_dir: Path) -> None:
     url, email, password = demo_logins["admin page"]
-    _sign_in(page, url, email, password)
+    _sign_in(page, url, email, password, output_dir / "demo-admin")
     expect(page.locator("#sequences-view")).to_be_visible()
+    _screenshots(page, output_dir / "demo-admin")
