@@ -18,6 +18,7 @@ from backend.errors import install_error_handlers
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.portal.router import router as portal_router
+from backend.progress.router import router as progress_router
 from backend.quality.router import router as review_router
 from backend.solve.router import router as solve_router
 
@@ -43,6 +44,7 @@ def create_app() -> FastAPI:
     app.include_router(market_router)
     app.include_router(portal_router)
     app.include_router(solve_router)
+    app.include_router(progress_router)
 
     @app.get("/healthz", tags=["ops"])
     def healthz() -> dict[str, str]:

@@ -426,9 +426,11 @@ def crowd_simulate(
 
 def _register_domain_commands() -> None:
     from backend.jobs.cli import jobs_app
+    from backend.progress.cli import status_command
     from backend.quality.cli import qc_app, training_app
     from backend.solve.cli import calibrate_hand_command, solve_command
 
+    app.command("status")(status_command)
     app.command("solve")(solve_command)
     app.command("calibrate-hand")(calibrate_hand_command)
     app.add_typer(qc_app, name="qc")

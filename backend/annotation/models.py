@@ -9,8 +9,16 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, CheckConstraint, DateTime, Float, ForeignKey, Integer, String
-from sqlalchemy import UniqueConstraint
+from sqlalchemy import (
+    JSON,
+    CheckConstraint,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    UniqueConstraint,
+)
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from backend.captures.models import Camera, Sequence
@@ -32,12 +40,11 @@ class Task(TimestampMixin, Base):
     # "hand:<index>" or "object:<index>": the target within the sequence.
     target_key: Mapped[str] = mapped_column(String(32))
     hand_id: Mapped[int | None] = mapped_column(ForeignKey("hands.id", ondelete="CASCADE"))
-    object_id: Mapped[int | None] = mapped_column(ForeignKey("scene_objects.id", ondelete="CASCADE"))
+    object_id: Mapped[int | None] = mapped_column(
+        ForeignKey("scene_objects.id", ondelete="CASCADE"))
     num_points: Mapped[int] = mapped_column(Integer)
     # Object tasks: {"polygon": [[x, y], ...]} from the projected initial pose, or {"box": [...]}.
     highlight: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
-    status: Mapped[str] = mapped_column(String(16), default="open")
-
     sequence: Mapped[Sequence] = relationship()
     camera: Mapped[Camera] = relationship()
     # Module-qualified targets: other domains (the marketplace) have classes of the same name.
@@ -70,7 +77,8 @@ class Assignment(TimestampMixin, Base):
     saved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     submitted_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
 
-    task: Mapped[Task] = relationship("backend.annotation.models.Task", back_populates="assignments")
+    task: Mapped[Task] = relationship("backend.annotation.models.Task",
+                                      back_populates="assignments")
     tracks: Mapped[list[Track]] = relationship(
         "backend.annotation.models.Track", back_populates="assignment",
         cascade="all, delete-orphan", order_by="backend.annotation.models.Track.point_index",

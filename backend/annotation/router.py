@@ -11,6 +11,7 @@ from typing import Annotated, Any
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Request
+from sqlalchemy.orm import Session
 
 from backend import pipeline
 from backend.accounts.deps import CurrentAdmin, bearer_token
@@ -18,16 +19,33 @@ from backend.annotation import service
 from backend.annotation.models import Assignment, Task
 from backend.annotation.points import point_colours, point_names, skeleton
 from backend.annotation.schemas import (
-    MAX_SAVE_BYTES, AnnotateTaskRead, AssignmentCreate, AssignmentLink, AssignmentRead,
-    FramesLinks, HighlightUpdate, PreviewLink, SaveResult, StartRequest, TaskRead, TokenRead,
-    TracksPayload, TracksSave,
+    MAX_SAVE_BYTES,
+    AnnotateTaskRead,
+    AssignmentCreate,
+    AssignmentLink,
+    AssignmentRead,
+    FramesLinks,
+    HighlightUpdate,
+    PreviewLink,
+    SaveResult,
+    StartRequest,
+    TaskRead,
+    TokenRead,
+    TracksPayload,
+    TracksSave,
 )
 from backend.annotation.tokens import (
-    ASSIGNMENT_SCOPE, PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token, task_token,
+    ASSIGNMENT_SCOPE,
+    PREVIEW_ASSIGNMENT_ID,
+    TASK_SCOPE,
+    assignment_token,
+    task_token,
 )
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.errors import PayloadTooLarge, Unauthorized
+from backend.progress.schemas import TaskState
+from backend.progress.service import task_states
 from backend.security import verify_token
 from backend.storage import get_storage
 
@@ -55,14 +73,20 @@ async def _limit_body(request: Request) -> None:
         raise PayloadTooLarge(f"a save may be at most {MAX_SAVE_BYTES} bytes, got {length}")
 
 
-def _task_read(task: Task) -> TaskRead:
+def _task_reads(session: Session, tasks: list[Task]) -> list[TaskRead]:
+    """The tasks as the API shows them, each with its state derived from its work."""
+    states = task_states(session, [t.id for t in tasks])
+    return [_task_read(t, states[t.id].state) for t in tasks]
+
+
+def _task_read(task: Task, status: TaskState) -> TaskRead:
     return TaskRead(
         id=task.id, kind=task.kind, sequence_id=task.sequence_id, serial=task.camera.serial,
         target_key=task.target_key, num_points=task.num_points,
         num_frames=task.sequence.num_frames, width=task.camera.width, height=task.camera.height,
         fps=task.sequence.fps, point_names=point_names(task.kind),
         point_colors=point_colours(task.kind), skeleton=skeleton(task.kind),
-        highlight=task.highlight, status=task.status,
+        highlight=task.highlight, status=status,
     )
 
 
@@ -76,13 +100,14 @@ def _page_url(params: dict[str, str]) -> str:
 def create_tasks(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> list[TaskRead]:
     """One task per view and target; running it again creates only what is missing."""
     tasks = service.create_tasks(session, get_storage(), sequence_id)
-    return [_task_read(service.get_task_or_raise(session, t.id)) for t in tasks]
+    return _task_reads(session, [service.get_task_or_raise(session, t.id) for t in tasks])
 
 
 @router.get("/tasks", response_model=list[TaskRead])
-def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: int | None = None) -> list[TaskRead]:
-    return [_task_read(service.get_task_or_raise(session, t.id))
-            for t in service.list_tasks(session, sequence_id)]
+def list_tasks(session: SessionDep, _: CurrentAdmin,
+               sequence_id: int | None = None) -> list[TaskRead]:
+    return _task_reads(session, [service.get_task_or_raise(session, t.id)
+                                 for t in service.list_tasks(session, sequence_id)])
 
 
 @router.put("/tasks/{task_id}/highlight", response_model=TaskRead)
@@ -90,7 +115,7 @@ def set_highlight(task_id: int, body: HighlightUpdate, session: SessionDep,
                   _: CurrentAdmin) -> TaskRead:
     """Draw the object's box by hand (when its projected initial pose is missing or wrong)."""
     task = service.set_highlight_box(session, service.get_task_or_raise(session, task_id), body.box)
-    return _task_read(task)
+    return _task_reads(session, [task])[0]
 
 
 @router.post("/tasks/{task_id}/assignments", response_model=AssignmentLink)
@@ -155,7 +180,7 @@ def read_task(request: Request, claims: WorkerClaims, session: SessionDep) -> An
     frames = FramesLinks(bundle_url=f"{base}/frames.bin?token={token}",
                          manifest_url=f"{base}/frames?token={token}")
     if claims["scope"] == TASK_SCOPE:
-        return AnnotateTaskRead(mode="preview", task=_task_read(task), frames=frames,
+        return AnnotateTaskRead(mode="preview", task=_task_reads(session, [task])[0], frames=frames,
                                 assignment=None)
     assignment = _assignment_of(session, claims)
     payload = service.tracks_payload(assignment)
@@ -166,7 +191,8 @@ def read_task(request: Request, claims: WorkerClaims, session: SessionDep) -> An
         tracks=TracksPayload.model_validate(payload) if payload else None,
     )
     mode = "edit" if assignment.status == "working" else "submitted"
-    return AnnotateTaskRead(mode=mode, task=_task_read(task), frames=frames, assignment=read)
+    return AnnotateTaskRead(mode=mode, task=_task_reads(session, [task])[0], frames=frames,
+                            assignment=read)
 
 
 @router.put("/annotate/tracks", response_model=SaveResult, dependencies=[Depends(_limit_body)])

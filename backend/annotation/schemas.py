@@ -6,6 +6,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from backend.progress.schemas import TaskState
+
 # A keyframe row: [frame, x, y, visible01]; x and y in image pixels or null when occluded.
 KeyframeRow = list[Any]
 # Generous bounds: a clip of up to 2000 frames, every frame keyed, 64 points.
@@ -50,7 +52,8 @@ class TaskRead(BaseModel):
     point_colors: list[str]
     skeleton: list[list[int]]
     highlight: dict[str, Any] | None
-    status: str
+    # Derived from the task's work: open, published, submitted, in review or accepted.
+    status: TaskState
 
 
 class TracksPayload(BaseModel):

@@ -6,9 +6,9 @@ Services flush and never commit; the request is the unit of work.
 from __future__ import annotations
 
 import secrets
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import select, update
+from sqlalchemy import CursorResult, select, update
 from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.highlight import object_highlight
@@ -45,10 +45,10 @@ def create_tasks(session: Session, storage: Storage, sequence_id: int) -> list[T
     for camera in seq.cameras:
         for hand in seq.hands:
             key = f"hand:{hand.index}"
-            task = existing.get((camera.id, key)) or Task(
+            hand_task = existing.get((camera.id, key)) or Task(
                 sequence_id=seq.id, camera_id=camera.id, kind="hand", target_key=key,
                 hand_id=hand.id, num_points=HAND_POINTS)
-            tasks.append(task)
+            tasks.append(hand_task)
         for obj in seq.objects:
             key = f"object:{obj.index}"
             task = existing.get((camera.id, key))
@@ -167,13 +167,14 @@ def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> A
     task = get_task_or_raise(session, assignment.task_id)
     rows = _check_tracks(task, body)
     # Compare-and-set on the version: of two tabs saving from one version, one wins.
-    result = session.execute(
+    # An UPDATE's result is a cursor result (it has a rowcount).
+    result = cast(CursorResult[Any], session.execute(
         update(Assignment)
         .where(Assignment.id == assignment.id, Assignment.version == body.version)
         .values(version=Assignment.version + 1, edit_count=body.edit_count,
                 working_time_s=body.working_time_s, saved_at=utcnow())
         .execution_options(synchronize_session=False)
-    )
+    ))
     if result.rowcount != 1:
         session.refresh(assignment)
         raise StaleVersion(

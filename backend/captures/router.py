@@ -10,8 +10,15 @@ from backend.captures import flows, service
 from backend.captures.frames import BUNDLE_MEDIA_TYPE, build_bundle, bundle_etag
 from backend.captures.models import Sequence
 from backend.captures.schemas import (
-    CameraRead, FrameRef, FramesManifest, HandRead, ImportRequest, ImportResultRead, ObjectRead,
-    SequenceRead, ViewTokenRead,
+    CameraRead,
+    FrameRef,
+    FramesManifest,
+    HandRead,
+    ImportRequest,
+    ImportResultRead,
+    ObjectRead,
+    SequenceRead,
+    ViewTokenRead,
 )
 from backend.config import get_settings
 from backend.db import SessionDep

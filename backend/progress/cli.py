@@ -1,0 +1,84 @@
+"""`dexlabel status [SEQUENCE]`: where the work stands, as the progress API shows it."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from backend.console import refusing_bad_input, resolve_sequence
+from backend.progress.schemas import SequenceProgress
+from backend.progress.service import TASK_STATES, sequence_progress
+
+
+def _solve_line(p: SequenceProgress) -> str:
+    if p.solve is None:
+        return "solve: none yet"
+    s = p.solve
+    line = f"solve: run {s.run_id} {s.status}"
+    if s.finished_at is not None:
+        line += f" at {s.finished_at:%Y-%m-%d %H:%M:%S}"
+    line += {"current": " (the current accepted labels)",
+             "outdated": " (the accepted labels have changed since)",
+             "by hand": " (asked for by hand)"}[s.labels]
+    if s.error:
+        line += f": {s.error.strip().splitlines()[-1]}"
+    return line
+
+
+def summary_line(p: SequenceProgress) -> str:
+    """One line: the sequence, its state, its tasks per state and its solve."""
+    total = sum(p.counts.values())
+    states = ", ".join(f"{p.counts[state]} {state}" for state in TASK_STATES if p.counts[state])
+    return (f"{p.sequence_id}  {p.subject}/{p.name}  {p.state}: {total} tasks"
+            f"{' (' + states + ')' if states else ''}; {_solve_line(p)}")
+
+
+def _grid(p: SequenceProgress) -> list[str]:
+    cells = {(t.serial, t.target_key): t for t in p.tasks}
+    width = max([len("view"), *map(len, p.views)])
+    cols = [max(len(target), *(len(t.state) for t in p.tasks)) for target in p.targets]
+    lines = ["  ".join([f"{'view':<{width}}", *(f"{t:<{w}}" for t, w in zip(p.targets, cols,
+                                                                             strict=True))])]
+    for serial in p.views:
+        row = [cells[(serial, t)].state if (serial, t) in cells else "-" for t in p.targets]
+        lines.append("  ".join([f"{serial:<{width}}", *(f"{s:<{w}}" for s, w in zip(
+            row, cols, strict=True))]).rstrip())
+    return lines
+
+
+def status_command(
+    sequence: Annotated[str | None, typer.Argument(
+        help="sequence id or SUBJECT/NAME (default: one line per sequence)",
+        show_default=False)] = None,
+    json: Annotated[bool, typer.Option("--json", help="print the progress API's JSON")] = False,
+) -> None:
+    """Where the work stands: each view x target task's state (open, published, submitted,
+    in review, accepted), HIT and assignment counts, and the current solve."""
+    from backend.captures.service import list_sequences
+    from backend.db import session_scope
+
+    with refusing_bad_input(), session_scope() as session:
+        ids = ([resolve_sequence(session, sequence)] if sequence is not None
+               else [s.id for s in list_sequences(session)])
+        found = [sequence_progress(session, i) for i in ids]
+    if json:
+        body = ",\n".join(p.model_dump_json(indent=2) for p in found)
+        typer.echo(body if sequence is not None else f"[{body}]")
+        return
+    if not found:
+        typer.echo("no sequences yet: `dexlabel import PATH` or `dexlabel synth` adds one")
+        return
+    if sequence is None:
+        for p in found:
+            typer.echo(summary_line(p))
+        return
+    p = found[0]
+    typer.echo(summary_line(p))
+    a = p.assignments
+    typer.echo(f"HITs: {p.hits} published, {p.hits_live} open; assignments: {a.approved} "
+               f"approved, {a.rejected} rejected, {a.submitted} submitted, {a.working} working")
+    if p.tasks:
+        typer.echo("")
+        for line in _grid(p):
+            typer.echo(line)

@@ -1,0 +1,141 @@
+"""Task and sequence states, derived on read from the rows the stages write.
+
+A task's state is the furthest any of its work has got:
+
+- ``accepted``: an assignment of it is approved;
+- ``in review``: a submitted assignment has its QC report and waits for a decision;
+- ``submitted``: a submitted assignment waits for its confirmation or quality check;
+- ``published``: a HIT of it is open on the marketplace, or someone is working on it;
+- ``open``: none of these (never published, or every HIT expired and all work rejected).
+
+Nothing stores these states, so they cannot disagree with the work they describe.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from collections.abc import Iterable
+from typing import get_args
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from backend.annotation.models import Assignment, Task
+from backend.captures.models import Camera, Sequence
+from backend.captures.service import get_sequence_or_raise
+from backend.crowd.models import CrowdHit
+from backend.pipeline import accepted_digest
+from backend.progress.schemas import (
+    AssignmentCounts,
+    SequenceProgress,
+    SequenceState,
+    SolveProgress,
+    TaskProgress,
+    TaskState,
+)
+from backend.quality.models import QCReport
+from backend.solve.models import SolveRun
+
+TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
+
+
+def _state(assignments: dict[str, int], reviewed: int, hits_live: int) -> TaskState:
+    if assignments.get("approved"):
+        return "accepted"
+    if reviewed:
+        return "in review"
+    if assignments.get("submitted"):
+        return "submitted"
+    if hits_live or assignments.get("working"):
+        return "published"
+    return "open"
+
+
+def task_states(session: Session, task_ids: Iterable[int]) -> dict[int, TaskProgress]:
+    """The progress of each task in ``task_ids`` (a few grouped queries, whatever their number)."""
+    ids = list(task_ids)
+    if not ids:
+        return {}
+    counts: dict[int, dict[str, int]] = defaultdict(dict)
+    for task_id, status, n in session.execute(
+            select(Assignment.task_id, Assignment.status, func.count())
+            .where(Assignment.task_id.in_(ids)).group_by(Assignment.task_id, Assignment.status)):
+        counts[task_id][status] = n
+    reviewed: Counter[int] = Counter()
+    for task_id, n in session.execute(
+            select(Assignment.task_id, func.count())
+            .join(QCReport, QCReport.assignment_id == Assignment.id)
+            .where(Assignment.task_id.in_(ids), Assignment.status == "submitted")
+            .group_by(Assignment.task_id)):
+        reviewed[task_id] = n
+    hits: Counter[int] = Counter()
+    live: Counter[int] = Counter()
+    for task_id, expired_at in session.execute(
+            select(CrowdHit.task_id, CrowdHit.expired_at)
+            .where(CrowdHit.task_id.in_(ids), CrowdHit.hit_id.is_not(None))):
+        hits[task_id] += 1
+        live[task_id] += expired_at is None
+    rows = session.execute(
+        select(Task.id, Task.kind, Task.target_key, Camera.serial)
+        .join(Camera, Camera.id == Task.camera_id).where(Task.id.in_(ids))).all()
+    return {
+        task_id: TaskProgress(
+            task_id=task_id, serial=serial, target_key=target_key, kind=kind,
+            state=_state(counts[task_id], reviewed[task_id], live[task_id]),
+            hits=hits[task_id], hits_live=live[task_id],
+            assignments=AssignmentCounts(**counts[task_id]))
+        for task_id, kind, target_key, serial in rows}
+
+
+def _target_order(key: str) -> tuple[int, int, str]:
+    kind, _, index = key.partition(":")
+    return (0 if kind == "hand" else 1, int(index) if index.isdigit() else 0, key)
+
+
+def _solve(session: Session, sequence_id: int) -> SolveProgress | None:
+    run = session.scalar(select(SolveRun).where(SolveRun.sequence_id == sequence_id)
+                         .order_by(SolveRun.id.desc()).limit(1))
+    if run is None:
+        return None
+    if run.labels_digest is None:
+        labels = "by hand"
+    else:
+        labels = "current" if accepted_digest(session, sequence_id)[0] == run.labels_digest \
+            else "outdated"
+    return SolveProgress(run_id=run.id, status=run.status, labels=labels,
+                         finished_at=run.finished_at, error=run.error)
+
+
+def sequence_progress(session: Session, sequence_id: int) -> SequenceProgress:
+    """The view x target grid of one sequence, its counts and its current solve.
+
+    Raises:
+        NotFound: no such sequence.
+    """
+    seq: Sequence = get_sequence_or_raise(session, sequence_id)
+    ids = session.scalars(select(Task.id).where(Task.sequence_id == sequence_id))
+    cells = sorted(task_states(session, ids).values(),
+                   key=lambda t: (t.serial, _target_order(t.target_key)))
+    counts = dict.fromkeys(TASK_STATES, 0)
+    totals: Counter[str] = Counter()
+    for cell in cells:
+        counts[cell.state] += 1
+        totals.update(cell.assignments.model_dump())
+    solve = _solve(session, sequence_id)
+    state: SequenceState
+    if not cells:
+        state = "no tasks"
+    elif counts["accepted"] == len(cells):
+        state = "solved" if solve and solve.status == "done" and solve.labels == "current" \
+            else "accepted"
+    elif counts["open"] == len(cells):
+        state = "open"
+    else:
+        state = "in progress"
+    return SequenceProgress(
+        sequence_id=seq.id, subject=seq.subject.name, name=seq.name, state=state,
+        views=sorted({c.serial for c in cells} or {c.serial for c in seq.cameras}),
+        targets=sorted({c.target_key for c in cells}, key=_target_order),
+        counts=counts, hits=sum(c.hits for c in cells),
+        hits_live=sum(c.hits_live for c in cells), assignments=AssignmentCounts(**totals),
+        tasks=cells, solve=solve)
