@@ -69,6 +69,16 @@ def test_the_demo_reaches_a_finished_solve_and_prints_links_and_logins(tmp_path:
     assert kinds == {"hand": 3, "object": 3}
     assert (unaccepted, unscored, busy) == (0, 0, 0)
 
+    # `dexlabel status 1` in the same instance: every view x target accepted, the solve done.
+    status = subprocess.run([*DEXLABEL, "status", "1"], env=clean_env(DEXLABEL_VAR_DIR=str(
+        var_dir)), cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert status.returncode == 0, status.stderr
+    head, *rest = status.stdout.splitlines()
+    assert "solved: 6 tasks (6 accepted)" in head and f"run {summary[5]} done" in head, head
+    grid = rest[rest.index("") + 1:]
+    assert grid[0].split() == ["view", "hand:0", "object:0"]
+    assert len(grid) == 4 and all(r.split()[1:] == ["accepted", "accepted"] for r in grid[1:])
+
     again = run_demo(var_dir)
     # The same emails and passwords (the port differs from run to run).
     assert {k: v[1:] for k, v in logins(again).items()} == {k: v[1:] for k, v in first.items()}
