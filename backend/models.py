@@ -2,8 +2,8 @@
 
 from backend.accounts.models import Admin
 from backend.annotation.models import Assignment, Task, Track
-from backend.crowd import models as crowd
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
+from backend.crowd import models as crowd
 from backend.db import Base
 from backend.jobs.models import Job
 from backend.market import models as market
@@ -11,6 +11,7 @@ from backend.portal import models as portal
 from backend.quality.models import QCReport, TrainingClip
 from backend.solve.models import SolveRun
 
-__all__ = ["Admin", "Assignment", "Task", "Track", "Base", "Camera", "Frame", "Hand", "SceneObject",
-           "Sequence", "Subject", "crowd", "market", "portal", "Job", "QCReport",
-           "TrainingClip", "SolveRun"]
+__all__ = [
+    "Admin", "Assignment", "Base", "Camera", "Frame", "Hand", "Job", "QCReport", "SceneObject",
+    "Sequence", "SolveRun", "Subject", "Task", "Track", "TrainingClip", "crowd", "market", "portal",
+]

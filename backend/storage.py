@@ -116,7 +116,9 @@ class S3Storage:
         except BotoCoreError as exc:
             raise StorageError(f"S3 {what} failed: {exc}") from exc
 
-    def put_bytes(self, key: str, data: bytes, content_type: str = "application/octet-stream") -> None:
+    def put_bytes(
+        self, key: str, data: bytes, content_type: str = "application/octet-stream"
+    ) -> None:
         self._call(
             "put", self.client.put_object,
             Bucket=self.bucket, Key=self._key(key), Body=data, ContentType=content_type,

@@ -48,7 +48,7 @@ def postgres_server_url() -> Iterator[str]:
         admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
         with admin.connect() as conn:
             conn.execute(text(f'CREATE DATABASE "{name}"'))
-    except Exception as exc:  # noqa: BLE001 - any connection failure means "not reachable"
+    except Exception as exc:  # any connection failure means "not reachable"
         _unavailable("PostgreSQL", exc)
     yield admin_url.set(database=name).render_as_string(hide_password=False)
     with admin.connect() as conn:
@@ -64,7 +64,7 @@ def redis_url() -> str:
         client = redis.Redis.from_url(REDIS_URL)
         client.ping()
         client.flushdb()
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         _unavailable("Redis", exc)
     return REDIS_URL
 

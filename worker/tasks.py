@@ -40,6 +40,8 @@ def compute_frame_stats(args: dict[str, Any]) -> dict[str, Any]:
         for frame in frames:
             color = cv2.imdecode(np.frombuffer(storage.get_bytes(frame.color_key), np.uint8),
                                  cv2.IMREAD_COLOR)
+            if color is None:
+                raise ValueError(f"{frame.color_key}: not a decodable colour image")
             depth = None
             if frame.depth_key:
                 depth = cv2.imdecode(np.frombuffer(storage.get_bytes(frame.depth_key), np.uint8),

@@ -36,7 +36,9 @@ def current_admin(request: Request, session: SessionDep) -> Admin:
 CurrentAdmin = Annotated[Admin, Depends(current_admin)]
 
 
-def require_view_access(request: Request, session: SessionDep, sequence_id: int, serial: str) -> None:
+def require_view_access(
+    request: Request, session: SessionDep, sequence_id: int, serial: str
+) -> None:
     """An admin, or the holder of a view token for exactly this sequence and camera."""
     if bearer_token(request) is not None:
         current_admin(request, session)

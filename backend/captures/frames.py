@@ -46,7 +46,8 @@ class _BundleCache:
     def put(self, key: tuple[int, str], data: bytes) -> None:
         with self._lock:
             self._items[key] = data
-            while sum(len(v) for v in self._items.values()) > self.max_bytes and len(self._items) > 1:
+            while (sum(len(v) for v in self._items.values()) > self.max_bytes
+                   and len(self._items) > 1):
                 self._items.popitem(last=False)
 
     def clear(self) -> None:

@@ -2,8 +2,10 @@
 
 Layout (paths relative to the capture root)::
 
-    calibration/intrinsics/<serial>_<W>x<H>.yml     color: {fx, fy, ppx, ppy[, width, height, coeffs]}
-    calibration/extrinsics_<name>/extrinsics.yml    extrinsics: {<serial>: 12 floats}, master: <serial>
+    calibration/intrinsics/<serial>_<W>x<H>.yml     color: {fx, fy, ppx, ppy[, width, height,
+                                                    coeffs]}
+    calibration/extrinsics_<name>/extrinsics.yml    extrinsics: {<serial>: 12 floats},
+                                                    master: <serial>
     calibration/mano_<calib>/mano.yml               betas: 10 floats
     models/<ycb name>/textured_simple.obj           (or any .obj / .ply in that folder)
     <subject>/<sequence>/meta.yml                   serials, num_frames, ycb_ids, ycb_grasp_ind,
@@ -127,7 +129,9 @@ class _Reader:
             raise self.fail(path, "expected a mapping at the top level")
         return doc
 
-    def field(self, doc: dict[str, Any], path: Path, name: str, kind: type | tuple[type, ...]) -> Any:
+    def field(
+        self, doc: dict[str, Any], path: Path, name: str, kind: type | tuple[type, ...]
+    ) -> Any:
         if name not in doc:
             raise self.fail(path, f"field '{name}' is missing")
         value = doc[name]
@@ -152,7 +156,8 @@ class _Reader:
 
 def _kind_name(kind: type | tuple[type, ...]) -> str:
     kinds = kind if isinstance(kind, tuple) else (kind,)
-    names = {list: "a list", dict: "a mapping", str: "a string", int: "an integer", float: "a number"}
+    names = {list: "a list", dict: "a mapping", str: "a string", int: "an integer",
+             float: "a number"}
     return " or ".join(names.get(k, k.__name__) for k in kinds)
 
 
@@ -184,7 +189,8 @@ def read_sequence(seq_dir: Path) -> SequencePlan:
         raise rd.fail(meta_path, "field 'serials' must list distinct camera serials")
     num_frames = meta.get("num_frames")
     if num_frames is not None and (not isinstance(num_frames, int) or num_frames <= 0):
-        raise rd.fail(meta_path, f"field 'num_frames' must be a positive integer, got {num_frames!r}")
+        raise rd.fail(meta_path,
+                      f"field 'num_frames' must be a positive integer, got {num_frames!r}")
     extr_name = str(rd.field(meta, meta_path, "extrinsics", (str, int)))
     extrinsics, master = _read_extrinsics(rd, root, extr_name, serials)
     cameras = [_read_camera(rd, root, seq_dir, s, extrinsics[s]) for s in serials]
@@ -223,7 +229,8 @@ def _read_camera(
 ) -> CameraPlan:
     candidates = sorted((root / "calibration" / "intrinsics").glob(f"{serial}_*.yml"))
     if not candidates:
-        raise rd.fail(root / "calibration" / "intrinsics" / f"{serial}_640x480.yml", "file is missing")
+        raise rd.fail(root / "calibration" / "intrinsics" / f"{serial}_640x480.yml",
+                      "file is missing")
     path = candidates[0]
     doc = rd.yaml(path)
     color = rd.field(doc, path, "color", dict)
@@ -244,8 +251,8 @@ def _read_camera(
         raise rd.fail(path, f"field 'color.coeffs' must hold 4, 5 or 8 numbers, got {len(dist)}")
     if vals["fx"] <= 0 or vals["fy"] <= 0:
         raise rd.fail(path, "fields 'color.fx' and 'color.fy' must be positive")
-    return CameraPlan(serial=serial, width=width, height=height, distortion=dist,
-                      extrinsics=extrinsics, **vals)
+    return CameraPlan(serial=serial, width=width, height=height, fx=vals["fx"], fy=vals["fy"],
+                      ppx=vals["ppx"], ppy=vals["ppy"], distortion=dist, extrinsics=extrinsics)
 
 
 def _attach_frames(
@@ -385,7 +392,8 @@ def _read_hands(rd: _Reader, root: Path, meta: dict[str, Any], meta_path: Path) 
     hands = []
     for i, side in enumerate(sides):
         if side not in ("right", "left"):
-            raise rd.fail(meta_path, f"field 'mano_sides[{i}]' must be 'right' or 'left', got {side!r}")
+            raise rd.fail(meta_path,
+                          f"field 'mano_sides[{i}]' must be 'right' or 'left', got {side!r}")
         calib = str(calibs[i]) if i < len(calibs) else None
         betas = None
         if calib is not None:

@@ -154,9 +154,8 @@ def _add_rows(session: Session, plan: SequencePlan, uid: str) -> Sequence:
 
 def _upload(storage: Storage, plan: SequencePlan, seq: Sequence, prefix: str) -> None:
     jobs: list[tuple[str, bytes | None, str]] = []  # (key, data or None to read path, path)
-    for obj in plan.objects:
-        for path in obj.model_files:
-            jobs.append((f"{prefix}/models/{obj.name}/{path.name}", None, str(path)))
+    jobs.extend((f"{prefix}/models/{obj.name}/{path.name}", None, str(path))
+                for obj in plan.objects for path in obj.model_files)
     for cam_plan, cam in zip(plan.cameras, seq.cameras, strict=True):
         for index, color_key, depth_key, color_bytes in _frame_sources(cam_plan, prefix, jobs):
             cam.frames.append(Frame(index=index, color_key=color_key, depth_key=depth_key,

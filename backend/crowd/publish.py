@@ -35,11 +35,11 @@ LOCALE = "00000000000000000071"
 _HIT_ID_IN_MESSAGE = re.compile(r"HIT\s?Id\W*([A-Za-z0-9]+)", re.IGNORECASE)
 _TITLES = {
     "hand": ("Track the 21 joints of a hand through a short video",
-             "Click each hand joint on a few frames of a short grasp video; the tool "
-             "interpolates between them. Mark joints you cannot see as occluded."),
+             ("Click each hand joint on a few frames of a short grasp video; the tool "
+              "interpolates between them. Mark joints you cannot see as occluded.")),
     "object": ("Track 2 points on an object through a short video",
-               "Pick two points on the highlighted object and follow them through a short "
-               "grasp video; mark them occluded when hidden."),
+               ("Pick two points on the highlighted object and follow them through a short "
+                "grasp video; mark them occluded when hidden.")),
 }
 
 

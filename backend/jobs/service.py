@@ -15,9 +15,9 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
-from typing import Any
+from typing import Any, TypeVar, cast
 
-from sqlalchemy import or_, select, update
+from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
@@ -46,13 +46,16 @@ _HANDLERS: dict[str, Handler] = {}
 HANDLERS_MODULE = "worker.tasks"
 
 
-def job_handler(kind: str, lease_s: float | None = None):
+JobFn = TypeVar("JobFn", bound=Callable[[dict[str, Any]], dict[str, Any] | None])
+
+
+def job_handler(kind: str, lease_s: float | None = None) -> Callable[[JobFn], JobFn]:
     """Register ``fn(args) -> result dict`` as the work of jobs of ``kind``.
 
     The handler opens its own units of work and must be idempotent: a retry (after an error
     or a killed worker) runs it again from the start.
     """
-    def register(fn: Callable[[dict[str, Any]], dict[str, Any] | None]):
+    def register(fn: JobFn) -> JobFn:
         _HANDLERS[kind] = Handler(fn, lease_s)
         return fn
     return register
@@ -155,6 +158,11 @@ def retry_job(session: Session, job_id: int) -> Job:
     return enqueue_job(session, job.kind, job.key, job.args)
 
 
+def _rowcount(result: Result[Any]) -> int:
+    """The rows an UPDATE changed (its result is a cursor result, which has a rowcount)."""
+    return cast(CursorResult[Any], result).rowcount
+
+
 def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
     """Take the job for this worker: (kind, args, attempt), or None when not ours to run."""
     settings = get_settings()
@@ -174,7 +182,7 @@ def _claim(key: str) -> tuple[str, dict[str, Any], int] | None:
                     lease_until=now + timedelta(seconds=lease), error=None,
                     requests_claimed=Job.requests)
             .execution_options(synchronize_session=False))
-        if claimed.rowcount != 1:
+        if _rowcount(claimed) != 1:
             return None
         session.refresh(job)
         return job.kind, dict(job.args or {}), job.attempts
@@ -198,7 +206,7 @@ def _finish(key: str, attempt: int, **values: Any) -> bool:
         done = session.execute(
             update(Job).where(Job.key == key, Job.status == "running", Job.attempts == attempt)
             .values(lease_until=None, **values).execution_options(synchronize_session=False))
-        if done.rowcount != 1:
+        if _rowcount(done) != 1:
             return False
         if values.get("status") in ("done", "failed"):
             again = session.execute(
@@ -206,7 +214,7 @@ def _finish(key: str, attempt: int, **values: Any) -> bool:
                                   Job.requests > Job.requests_claimed)
                 .values(status="queued", attempts=0, finished_at=None)
                 .execution_options(synchronize_session=False))
-            rerun = again.rowcount == 1
+            rerun = _rowcount(again) == 1
     if rerun:
         log.info("job %s was asked for while it ran: queued again", key)
         run_job(key)
@@ -260,19 +268,32 @@ def requeue_stale(now: datetime | None = None, starting: bool = False) -> list[s
     now = now or _now()
     lost_before = now - timedelta(seconds=settings.job_requeue_after_s)
     with session_scope() as session:
-        stale = [(Job.status == "running") & (Job.lease_until < now),
-                 Job.status.in_(_CLAIMABLE) & (Job.updated_at < lost_before)]
+        stale: list[ColumnElement[bool]] = [
+            (Job.status == "running") & (Job.lease_until < now),
+            Job.status.in_(_CLAIMABLE) & (Job.updated_at < lost_before)]
         if starting:
             stale.append(Job.status == "queued")
-        keys = list(session.scalars(select(Job.key).where(or_(*stale))))
-        for key in keys:
+        rows = session.execute(select(Job.key, Job.status, Job.updated_at)
+                               .where(or_(*stale))).all()
+        for key, _, _ in rows:
             # Touch the row so a lost message is re-sent once per interval, not every minute.
             session.execute(update(Job).where(Job.key == key, Job.status != "running")
                             .values(updated_at=now).execution_options(synchronize_session=False))
-    for key in keys:
-        log.warning("re-queueing job %s (lease ran out or message lost)", key)
+    for key, status, updated_at in rows:
+        if status == "running":
+            log.warning("job %s: its worker stopped before the lease ran out; queued again", key)
+        elif _aware(updated_at) < lost_before:
+            log.warning("job %s: queued for over %.0f s with no worker taking it; its message "
+                        "is sent again", key, settings.job_requeue_after_s)
+        else:  # queued recently, before this consumer started: routine, not a fault
+            log.info("job %s: queued before this worker started; sent to it", key)
         run_job(key)
-    return keys
+    return [key for key, _, _ in rows]
+
+
+def _aware(moment: datetime) -> datetime:
+    """SQLite returns naive datetimes for timezone-aware columns (they are UTC)."""
+    return moment if moment.tzinfo else moment.replace(tzinfo=UTC)
 
 
 @huey.task()

@@ -15,7 +15,11 @@ from sqlalchemy.orm import selectinload
 from backend.market import ledger, lifecycle
 from backend.market.context import Call
 from backend.market.errors import (
-    ASSIGNMENT_DOES_NOT_EXIST, INVALID_ASSIGNMENT_STATE, RequestError, invalid, not_found,
+    ASSIGNMENT_DOES_NOT_EXIST,
+    INVALID_ASSIGNMENT_STATE,
+    RequestError,
+    invalid,
+    not_found,
 )
 from backend.market.hits import get_hit_or_raise
 from backend.market.lifecycle import HitState

@@ -74,7 +74,9 @@ def _parse_authorization(header: str | None) -> _Authorization:
     scope = parts["Credential"].split("/")
     if len(scope) != 5:
         raise _incomplete("Credential must be ACCESS_KEY/DATE/REGION/SERVICE/aws4_request.")
-    return _Authorization(*scope, signed_headers=parts["SignedHeaders"].split(";"),
+    access_key, date, region, service, terminator = scope
+    return _Authorization(access_key, date, region, service, terminator,
+                          signed_headers=parts["SignedHeaders"].split(";"),
                           signature=parts["Signature"])
 
 

@@ -13,8 +13,14 @@ from sqlalchemy.orm import selectinload
 from backend.market import lifecycle, tokens
 from backend.market.context import Call, new_id
 from backend.market.errors import (
-    HIT_ALREADY_EXISTS, HIT_DOES_NOT_EXIST, HIT_TYPE_DOES_NOT_EXIST, INVALID_ASSIGNMENT_INCREASE,
-    INVALID_HIT_STATE, RequestError, invalid, not_found,
+    HIT_ALREADY_EXISTS,
+    HIT_DOES_NOT_EXIST,
+    HIT_TYPE_DOES_NOT_EXIST,
+    INVALID_ASSIGNMENT_INCREASE,
+    INVALID_HIT_STATE,
+    RequestError,
+    invalid,
+    not_found,
 )
 from backend.market.lifecycle import HitState
 from backend.market.models import Hit, HitType

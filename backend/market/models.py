@@ -8,11 +8,25 @@ states that depend on time are derived against the marketplace clock (see ``hits
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, BigInteger, Boolean, CheckConstraint, DateTime, Dialect, ForeignKey
-from sqlalchemy import Index, Integer, String, Text, TypeDecorator, UniqueConstraint
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    Boolean,
+    CheckConstraint,
+    DateTime,
+    Dialect,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    TypeDecorator,
+    UniqueConstraint,
+)
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from backend.db import Base
@@ -95,7 +109,7 @@ class Hit(Base):
     # Optimistic lock: two units of work that both move this HIT's held funds cannot both win.
     version: Mapped[int] = mapped_column(Integer)
 
-    __mapper_args__ = {"version_id_col": version}
+    __mapper_args__: Mapping[str, Any] = {"version_id_col": version}
 
     hit_type: Mapped[HitType] = relationship()
     assignments: Mapped[list[MarketAssignment]] = relationship(

@@ -13,7 +13,11 @@ from backend.market import assignments, blocks, hits, payments, qualifications
 from backend.market.context import Call
 from backend.market.pagination import page_result
 from backend.market.views import (
-    assignment_view, bonus_view, hit_view, qualification_type_view, qualification_view,
+    assignment_view,
+    bonus_view,
+    hit_view,
+    qualification_type_view,
+    qualification_view,
 )
 
 Handler = Callable[[Call, dict[str, Any]], dict[str, Any]]

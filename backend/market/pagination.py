@@ -40,7 +40,7 @@ def page_size(params: dict[str, Any]) -> int:
 
 
 def page(
-    session: Session, stmt: Select[tuple[T]], pk: InstrumentedAttribute[int],
+    session: Session, stmt: Select[T], pk: InstrumentedAttribute[int],
     operation: str, params: dict[str, Any],
 ) -> tuple[list[T], str | None]:
     """One page of ``stmt`` and the NextToken of the rest (None on the last page)."""

@@ -28,8 +28,13 @@ from backend.market import clock, ledger, lifecycle, validation
 from backend.market.auth import SignedRequest, authenticate
 from backend.market.context import Call
 from backend.market.errors import (
-    PARAMETER_VALIDATION, SERVICE_UNAVAILABLE, UNSUPPORTED_OPERATION, MarketError, ProtocolError,
-    RequestError, ServiceFault,
+    PARAMETER_VALIDATION,
+    SERVICE_UNAVAILABLE,
+    UNSUPPORTED_OPERATION,
+    MarketError,
+    ProtocolError,
+    RequestError,
+    ServiceFault,
 )
 from backend.market.operations import HANDLERS, SPENDING, Handler
 
@@ -53,7 +58,7 @@ def handle(request: SignedRequest) -> WireResponse:
         return _reply(200, _process(request, request_id), request_id)
     except MarketError as exc:
         return _reply(exc.status_code, exc.body(), request_id)
-    except Exception:  # noqa: BLE001 - any other failure is ours; the caller may retry
+    except Exception:  # any other failure is ours; the caller may retry
         log.exception("marketplace request %s failed", request_id)
         fault = ServiceFault("The marketplace could not process the request; try again.",
                              SERVICE_UNAVAILABLE)

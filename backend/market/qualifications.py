@@ -9,8 +9,13 @@ from sqlalchemy.orm import selectinload
 
 from backend.market.context import Call, new_id
 from backend.market.errors import (
-    PERMISSION_DENIED, QUALIFICATION_DOES_NOT_EXIST, QUALIFICATION_TYPE_DOES_NOT_EXIST,
-    QUALIFICATION_TYPE_EXISTS, RequestError, invalid, not_found,
+    PERMISSION_DENIED,
+    QUALIFICATION_DOES_NOT_EXIST,
+    QUALIFICATION_TYPE_DOES_NOT_EXIST,
+    QUALIFICATION_TYPE_EXISTS,
+    RequestError,
+    invalid,
+    not_found,
 )
 from backend.market.models import Notification, Qualification, QualificationType
 from backend.market.pagination import page

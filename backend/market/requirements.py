@@ -7,6 +7,7 @@ the guarded actions; a worker without the qualification meets only ``DoesNotExis
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -91,7 +92,7 @@ def worker_profile(session: Session, worker_id: str) -> WorkerProfile:
                     .join(Qualification.qualification_type)
                     .where(Qualification.worker_id == worker_id,
                            Qualification.status == "Granted"))
-    granted = {type_id: value for type_id, value in session.execute(granted_stmt)}
+    granted = dict(session.execute(granted_stmt).all())
     profile = WorkerProfile(worker_id, granted)
     worker = session.scalars(select(Worker).where(Worker.worker_id == worker_id)).one_or_none()
     if worker is not None and worker.locale_country:
@@ -100,7 +101,7 @@ def worker_profile(session: Session, worker_id: str) -> WorkerProfile:
                 .where(MarketAssignment.worker_id == worker_id,
                        MarketAssignment.status.in_(("Approved", "Rejected")))
                 .group_by(MarketAssignment.status))
-    counts = {status: count for status, count in session.execute(reviewed)}
+    counts = dict(session.execute(reviewed).all())
     approved, rejected = counts.get("Approved", 0), counts.get("Rejected", 0)
     profile.number_approved = approved
     # A worker with no reviewed work yet has a 100% approval rate, as on MTurk.
@@ -139,7 +140,7 @@ def meets(profile: WorkerProfile, req: dict[str, Any]) -> bool:
         hits = [_locale_matches(value, want) for want in req.get("LocaleValues", [])]
         return any(hits) if comparator in ("EqualTo", "In") else not any(hits)
     targets = req.get("IntegerValues", [])
-    return {
+    checks: dict[str, Callable[[], bool]] = {
         "LessThan": lambda: value < targets[0],
         "LessThanOrEqualTo": lambda: value <= targets[0],
         "GreaterThan": lambda: value > targets[0],
@@ -148,7 +149,8 @@ def meets(profile: WorkerProfile, req: dict[str, Any]) -> bool:
         "NotEqualTo": lambda: value != targets[0],
         "In": lambda: value in targets,
         "NotIn": lambda: value not in targets,
-    }[comparator]()
+    }
+    return checks[comparator]()
 
 
 def guarded_actions(req: dict[str, Any]) -> tuple[str, ...]:

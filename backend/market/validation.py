@@ -9,11 +9,20 @@ what a real MTurk could not.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
 
 import botocore.session
-from botocore.model import OperationModel, ServiceModel, Shape
+from botocore.model import (
+    ListShape,
+    MapShape,
+    OperationModel,
+    ServiceModel,
+    Shape,
+    StringShape,
+    StructureShape,
+)
 
 INT32 = (-(2**31), 2**31 - 1)
 INT64 = (-(2**63), 2**63 - 1)
@@ -62,14 +71,13 @@ def _check(shape: Shape, value: Any, path: str, found: list[str]) -> None:
     checker(shape, value, path, found)
 
 
-def _check_structure(shape: Shape, value: Any, path: str, found: list[str]) -> None:
+def _check_structure(shape: StructureShape, value: Any, path: str, found: list[str]) -> None:
     if not isinstance(value, dict):
         found.append(f"{_where(path)} must be an object, got {type(value).__name__}")
         return
     members = shape.members
-    for name in shape.required_members:
-        if value.get(name) is None:
-            found.append(f"{_join(path, name)} is required")
+    found.extend(f"{_join(path, name)} is required"
+                 for name in shape.required_members if value.get(name) is None)
     for name, item in value.items():
         member_path = _join(path, name)
         if name not in members:
@@ -82,7 +90,7 @@ def _join(path: str, name: str) -> str:
     return f"{path}.{name}" if path else name
 
 
-def _check_list(shape: Shape, value: Any, path: str, found: list[str]) -> None:
+def _check_list(shape: ListShape, value: Any, path: str, found: list[str]) -> None:
     if not isinstance(value, list):
         found.append(f"{path} must be a list, got {type(value).__name__}")
         return
@@ -91,7 +99,7 @@ def _check_list(shape: Shape, value: Any, path: str, found: list[str]) -> None:
         _check(shape.member, item, f"{path}[{index}]", found)
 
 
-def _check_map(shape: Shape, value: Any, path: str, found: list[str]) -> None:
+def _check_map(shape: MapShape, value: Any, path: str, found: list[str]) -> None:
     if not isinstance(value, dict):
         found.append(f"{path} must be an object, got {type(value).__name__}")
         return
@@ -109,7 +117,7 @@ def _check_size(shape: Shape, size: int, path: str, unit: str, found: list[str])
         found.append(f"{path} must have at most {high} {unit}, got {size}")
 
 
-def _check_string(shape: Shape, value: Any, path: str, found: list[str]) -> None:
+def _check_string(shape: StringShape, value: Any, path: str, found: list[str]) -> None:
     if not isinstance(value, str):
         found.append(f"{path} must be a string, got {type(value).__name__}")
         return
@@ -155,7 +163,9 @@ def _check_number(shape: Shape, value: Any, path: str, found: list[str]) -> None
         found.append(f"{path} must be a number, got {type(value).__name__}")
 
 
-_CHECKERS = {
+# botocore builds a StructureShape for a "structure", a ListShape for a "list", a MapShape for a
+# "map" and a StringShape for a "string", so each checker takes the class its type name gets.
+_CHECKERS: dict[str, Callable[[Any, Any, str, list[str]], None]] = {
     "structure": _check_structure,
     "list": _check_list,
     "map": _check_map,

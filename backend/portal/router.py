@@ -17,8 +17,18 @@ from backend.portal import accounts, service
 from backend.portal.deps import PORTAL_TOKEN_TTL_S, CurrentWorker, portal_token
 from backend.portal.models import PortalAccount
 from backend.portal.schemas import (
-    AccountCreate, AccountRead, AssignmentRead, AssignmentsRead, EarningsRead, HitPreview, HitRead,
-    InviteCreate, InviteRead, Login, Register, TokenRead,
+    AccountCreate,
+    AccountRead,
+    AssignmentRead,
+    AssignmentsRead,
+    EarningsRead,
+    HitPreview,
+    HitRead,
+    InviteCreate,
+    InviteRead,
+    Login,
+    Register,
+    TokenRead,
 )
 
 router = APIRouter(prefix="/api/portal", tags=["worker portal"])

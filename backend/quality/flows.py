@@ -8,6 +8,7 @@ are committed together, so a job killed at any point and run again repeats no ac
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from typing import Any
@@ -112,10 +113,9 @@ def _grant(client: MTurkClient, report_id: int, assignment_id: int) -> None:
     """The worker passed a training clip: grant our "passed training" qualification."""
     with session_scope() as session, session.no_autoflush:
         worker_id = session.get_one(Assignment, assignment_id).worker_id
-        try:
+        # Conflict: granted by an earlier run whose commit was lost, or by an admin.
+        with contextlib.suppress(Conflict):
             actions.grant_qualification(session, client, worker_id, None, notify=True)
-        except Conflict:
-            pass  # granted by an earlier run whose commit was lost, or by an admin
         session.get_one(QCReport, report_id).action_detail = GRANTED
 
 
@@ -123,7 +123,8 @@ def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
     """One more assignment on the rejected work's HIT (its token makes a repeat add nothing)."""
     with session_scope() as session, session.no_autoflush:
         hit = hit_of(session, session.get_one(Assignment, assignment_id))
-        if hit is not None and hit.expired_at is None:
+        # (A HIT found for a submission has its marketplace id.)
+        if hit is not None and hit.hit_id is not None and hit.expired_at is None:
             try:
                 actions.add_assignments(session, client, hit.hit_id, 1, allow_large_hits=True)
             except DexlabelError as exc:

@@ -8,17 +8,23 @@ with the same metrics and decision rules as consensus scoring.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
 from backend.annotation.service import get_assignment_or_raise, get_task_or_raise
-from backend.errors import Conflict, DexlabelError
+from backend.errors import Conflict, DexlabelError, NotFound
 from backend.quality.models import TrainingClip
 from backend.quality.schemas import TrainingClipCreate
 from worker.tracks import completeness, validate_keyframes
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from worker.quality.consensus import ViewLabels
+    from worker.quality.metrics import AssignmentQC
 
 
 class InvalidClip(DexlabelError):
@@ -47,10 +53,7 @@ def create_clip(session: Session, body: TrainingClipCreate) -> TrainingClip:
     task = get_task_or_raise(session, body.task_id)
     if session.scalar(select(TrainingClip).where(TrainingClip.task_id == task.id)):
         raise Conflict(f"task {task.id} is already a training clip", state="training")
-    if (body.from_assignment_id is None) == (body.tracks is None):
-        raise InvalidClip("give exactly one of from_assignment_id or tracks",
-                          field="from_assignment_id")
-    if body.from_assignment_id is not None:
+    if body.from_assignment_id is not None and body.tracks is None:
         source_assignment = get_assignment_or_raise(session, body.from_assignment_id)
         if source_assignment.task_id != task.id:
             raise InvalidClip(f"assignment {source_assignment.id} is of task "
@@ -61,8 +64,11 @@ def create_clip(session: Session, body: TrainingClipCreate) -> TrainingClip:
                               " only approved labels can be gold", field="from_assignment_id")
         tracks = [t.keyframes for t in source_assignment.tracks]
         source = f"assignment:{source_assignment.id}"
-    else:
+    elif body.tracks is not None and body.from_assignment_id is None:
         tracks, source = body.tracks, "given"
+    else:
+        raise InvalidClip("give exactly one of from_assignment_id or tracks",
+                          field="from_assignment_id")
     _check_tracks(task, tracks)
     clip = TrainingClip(task_id=task.id, source=source, tracks=tracks, note=body.note)
     session.add(clip)
@@ -93,17 +99,20 @@ def truth_tracks(session: Session, task_id: int, capture: Path) -> list[list[lis
               int(visible[f, p])] for f in range(xy.shape[0])] for p in range(xy.shape[1])]
 
 
-def gold_dense(clip: TrainingClip, num_frames: int):
+def gold_dense(clip: TrainingClip, num_frames: int) -> tuple[np.ndarray, np.ndarray]:
     """The clip's gold as (F, P, 2) px and (F, P) visibility."""
     from worker.tracks import dense_points
 
     return dense_points(enumerate(clip.tracks), num_frames, len(clip.tracks))
 
 
-def score_training(session: Session, task_id: int, label, num_frames: int):
+def score_training(session: Session, task_id: int, label: ViewLabels, num_frames: int
+                   ) -> AssignmentQC:
     """A training assignment's quality against its clip's gold (worker.quality.gold)."""
     from worker.quality.gold import score_against_gold
 
     clip = clip_of(session, task_id)
+    if clip is None:
+        raise NotFound(f"task {task_id} is not a training clip")
     gold_xy, gold_visible = gold_dense(clip, num_frames)
     return score_against_gold(label, gold_xy, gold_visible)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -19,6 +20,9 @@ from backend.captures.service import camera_model, sequence_cameras
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracks import dense_points
+
+if TYPE_CHECKING:
+    from worker.quality.consensus import ViewLabels
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
@@ -44,13 +48,14 @@ class TargetInputs:
     # One per view, in view order: as the worker packages take them, and the rows.
     cameras: list[CameraModel]
     camera_rows: list[Camera]
-    labels: list = field(default_factory=list)  # worker.quality.consensus.ViewLabels
+    labels: list[ViewLabels] = field(default_factory=list)
     who: dict[str, ScoredAssignment] = field(default_factory=dict)
     tasks: dict[int, Task] = field(default_factory=dict)
     view_of_task: dict[int, int] = field(default_factory=dict)
 
 
-def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int):
+def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int
+                ) -> ViewLabels:
     """An assignment's tracks as dense (F, P, 2) px (NaN = no position) and (F, P) visibility,
     as a worker.quality.consensus.ViewLabels."""
     from worker.quality.consensus import ViewLabels
@@ -115,7 +120,7 @@ class DepthStack:
         out = np.zeros(frames.shape, dtype=np.uint16)
         needed = [int(f) for f in np.unique(frames)]
         with ThreadPoolExecutor(max_workers=DECODE_THREADS) as pool:
-            for frame, depth in zip(needed, pool.map(self._load, needed)):
+            for frame, depth in zip(needed, pool.map(self._load, needed), strict=True):
                 at = frames == frame
                 out[at] = depth[rows[at], cols[at]]
         return out
@@ -131,8 +136,9 @@ def depth_maps(session: Session, cameras: list[Camera], views: set[int]
             continue
         keys = list(session.scalars(select(Frame.depth_key).where(Frame.camera_id == camera.id)
                                     .order_by(Frame.index)))
-        if keys and all(keys):
-            out[view] = DepthStack(keys, camera.height, camera.width)
+        present = [key for key in keys if key]
+        if keys and len(present) == len(keys):
+            out[view] = DepthStack(present, camera.height, camera.width)
     return out
 
 

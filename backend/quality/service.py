@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -40,6 +40,9 @@ from backend.quality.inputs import (
     target_inputs,
 )
 from backend.quality.models import QCReport, TrainingClip
+
+if TYPE_CHECKING:
+    from worker.quality.decide import QCThresholds
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +73,7 @@ def request_qc_for(session: Session, sequence_id: int, target_key: str | None) -
     return [request_qc(session, task) for task in firsts.values()]
 
 
-def thresholds_bounds():  # -> worker.quality.decide.QCThresholds
+def thresholds_bounds() -> QCThresholds:
     from worker.quality.decide import QCThresholds
 
     return QCThresholds(**get_settings().qc_thresholds)

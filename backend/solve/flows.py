@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 
 
 def _settings(params: dict[str, Any]) -> SolveSettings:
-    known = {f for f in SolveSettings.__dataclass_fields__}
+    known = set(SolveSettings.__dataclass_fields__)
     return SolveSettings(**{k: v for k, v in params.items() if k in known})
 
 

@@ -25,6 +25,7 @@ from backend.storage import Storage, get_storage
 from worker.geometry.mesh_io import Mesh, read_mesh
 from worker.hand import HandModel, load_hand_model
 from worker.hand.joints import NUM_JOINTS
+from worker.hand.params import check_side
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
 from worker.tracks import dense_points
 
@@ -85,15 +86,16 @@ def load_depth(storage: Storage, camera: Camera, frames: list[Frame]) -> np.ndar
 
     Raises ValueError naming the file when a stored depth map is not an H x W uint16 PNG.
     """
-    if not camera.has_depth or not frames or any(f.depth_key is None for f in frames):
+    keys = [f.depth_key for f in frames if f.depth_key is not None]
+    if not camera.has_depth or not frames or len(keys) < len(frames):
         return None
     maps = []
-    for frame in frames:
-        data = np.frombuffer(storage.get_bytes(frame.depth_key), np.uint8)
+    for key in keys:
+        data = np.frombuffer(storage.get_bytes(key), np.uint8)
         depth = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         if depth is None or depth.dtype != np.uint16 or depth.shape != (camera.height,
                                                                         camera.width):
-            raise ValueError(f"depth map {frame.depth_key} is not a {camera.width}x"
+            raise ValueError(f"depth map {key} is not a {camera.width}x"
                              f"{camera.height} uint16 PNG")
         maps.append(depth)
     return np.stack(maps)
@@ -101,7 +103,7 @@ def load_depth(storage: Storage, camera: Camera, frames: list[Frame]) -> np.ndar
 
 def hand_model_for(side: str) -> HandModel:
     """The MANO model of ``side``: official pickles from DEXLABEL_MANO_DIR, else built in."""
-    return load_hand_model(side, get_settings().mano_dir)
+    return load_hand_model(check_side(side), get_settings().mano_dir)
 
 
 @dataclass

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter, Query, Response
 
 from backend.accounts.deps import CurrentAdmin
@@ -12,7 +14,7 @@ from backend.solve.schemas import InitialPoseUpdate, SolveFrameRead, SolveReques
 
 router = APIRouter(prefix="/api", tags=["solve"])
 
-_PNG = {200: {"content": {"image/png": {}}}}
+_PNG: dict[int | str, dict[str, Any]] = {200: {"content": {"image/png": {}}}}
 
 
 def _read(run: SolveRun, current: SolveRun | None) -> SolveRunRead:

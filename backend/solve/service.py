@@ -9,6 +9,7 @@ job finishes, so a re-run (or a failed one) never hides the previous result.
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import numpy as np
 from sqlalchemy import select
@@ -24,7 +25,8 @@ from backend.solve.models import SolveRun
 from worker.solver import SolveSettings
 
 JOB_KIND = "solve"
-OPTIMISERS = ("paper", "default")
+Optimiser = Literal["paper", "default"]
+OPTIMISERS: tuple[Optimiser, ...] = ("paper", "default")
 # A given rotation block must be orthonormal to this tolerance (unitless).
 ROTATION_TOLERANCE = 1e-4
 
@@ -70,7 +72,7 @@ def check_ready(session: Session, seq: Sequence) -> None:
 _FIXED_PARAMS = ("optimiser", "device")
 
 
-def solver_params(optimiser: str, overrides: dict | None = None) -> dict:
+def solver_params(optimiser: Optimiser, overrides: dict | None = None) -> dict:
     """The solver settings a run records and uses (JSON): defaults, then the deployment's
     DEXLABEL_SOLVE_PARAMS, then ``overrides``."""
     settings = dataclasses.asdict(SolveSettings(optimiser=optimiser,
@@ -89,6 +91,15 @@ def solver_params(optimiser: str, overrides: dict | None = None) -> dict:
     return settings
 
 
+def _optimiser(name: str) -> Optimiser:
+    """``name`` as one of OPTIMISERS; InvalidSolveRequest (422) when it is none of them."""
+    for known in OPTIMISERS:
+        if name == known:
+            return known
+    raise InvalidSolveRequest(f"optimiser must be one of {', '.join(OPTIMISERS)}, got "
+                              f"{name!r}", field="optimiser")
+
+
 def request_solve(session: Session, sequence_id: int, optimiser: str | None = None,
                   params: dict | None = None, labels_digest: str | None = None) -> SolveRun:
     """Create a run of the sequence's solve and queue its job (runs after commit); a run
@@ -99,22 +110,19 @@ def request_solve(session: Session, sequence_id: int, optimiser: str | None = No
     Raises NotFound (no sequence), SolveNotReady (409) or InvalidSolveRequest (422: an
     unknown optimiser or parameter).
     """
-    optimiser = optimiser or get_settings().solve_optimiser
-    if optimiser not in OPTIMISERS:
-        raise InvalidSolveRequest(f"optimiser must be one of {', '.join(OPTIMISERS)}, got "
-                            f"{optimiser!r}", field="optimiser")
-    settings = solver_params(optimiser, params)
+    chosen = _optimiser(optimiser or get_settings().solve_optimiser)
+    settings = solver_params(chosen, params)
     seq = get_sequence_or_raise(session, sequence_id)
     check_ready(session, seq)
     waiting = session.scalars(select(SolveRun).where(
         SolveRun.sequence_id == seq.id, SolveRun.status == "queued",
-        SolveRun.optimiser == optimiser).order_by(SolveRun.id)).all()
+        SolveRun.optimiser == chosen).order_by(SolveRun.id)).all()
     for run in waiting:
         # Not started yet, so it will read the newest labels: asking again changes nothing.
         if run.params == settings:
             run.labels_digest = labels_digest or run.labels_digest
             return run
-    run = SolveRun(sequence_id=seq.id, optimiser=optimiser, params=settings,
+    run = SolveRun(sequence_id=seq.id, optimiser=chosen, params=settings,
                    status="queued", timings={}, num_frames=seq.num_frames,
                    num_views=len(seq.cameras), labels_digest=labels_digest)
     session.add(run)

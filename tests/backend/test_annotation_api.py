@@ -7,6 +7,7 @@ from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
 
+
 @pytest.fixture
 def tasks(client: TestClient, admin_headers: dict, small_capture: Path) -> list[dict]:
     seq_id = import_path(small_capture)[0].sequence_id
@@ -43,11 +44,14 @@ def test_tasks_are_one_per_view_and_target_and_creating_again_adds_none(
     objects = [t for t in tasks if t["kind"] == "object"]
     assert all(t["num_points"] == 2 for t in objects)
     assert any(t["highlight"] and len(t["highlight"]["polygon"]) >= 3 for t in objects)
-    again = client.post(f"/api/sequences/{tasks[0]['sequence_id']}/tasks", headers=admin_headers).json()
+    again = client.post(f"/api/sequences/{tasks[0]['sequence_id']}/tasks",
+                        headers=admin_headers).json()
     assert sorted(t["id"] for t in again) == sorted(t["id"] for t in tasks)
 
 
-def test_save_then_read_back_with_versions(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+def test_save_then_read_back_with_versions(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
     task = tasks[0]
     link = _assign(client, admin_headers, task["id"])
     page = client.get("/api/annotate/task", headers=_bearer(link["token"])).json()
@@ -66,7 +70,8 @@ def test_a_stale_save_gets_409_and_changes_nothing(
 ) -> None:
     link = _assign(client, admin_headers, tasks[0]["id"])
     first = {"version": 0, "tracks": _full_tracks(21, 6)}
-    assert client.put("/api/annotate/tracks", json=first, headers=_bearer(link["token"])).status_code == 200
+    saved = client.put("/api/annotate/tracks", json=first, headers=_bearer(link["token"]))
+    assert saved.status_code == 200
     stale = {"version": 0, "tracks": [{"point": 0, "keyframes": [[0, 1.0, 1.0, 1]]}]}
     resp = client.put("/api/annotate/tracks", json=stale, headers=_bearer(link["token"]))
     assert resp.status_code == 409 and resp.json()["current_version"] == 1
@@ -93,7 +98,9 @@ def test_invalid_keyframes_are_refused_with_the_point_named_and_nothing_stored(
     assert page["assignment"]["version"] == 0
 
 
-def test_non_finite_coordinates_are_refused(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+def test_non_finite_coordinates_are_refused(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
     link = _assign(client, admin_headers, tasks[0]["id"])
     raw = '{"version": 0, "tracks": [{"point": 0, "keyframes": [[0, NaN, 3.0, 1]]}]}'
     resp = client.put("/api/annotate/tracks", content=raw,
@@ -111,7 +118,9 @@ def test_a_point_the_task_does_not_have_is_refused(
     assert resp.status_code == 422 and "point 2 does not exist" in resp.json()["detail"]
 
 
-def test_oversized_payload_is_413(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+def test_oversized_payload_is_413(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
     link = _assign(client, admin_headers, tasks[0]["id"])
     raw = '{"version": 0, "tracks": [], "pad": "' + "x" * 1_100_000 + '"}'
     resp = client.put("/api/annotate/tracks", content=raw,
@@ -162,7 +171,9 @@ def test_an_assignment_token_opens_nothing_else(
     assert client.get("/api/sequences", headers=_bearer(mine["token"])).status_code == 401
 
 
-def test_a_forged_token_is_refused(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
+def test_a_forged_token_is_refused(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
     link = _assign(client, admin_headers, tasks[0]["id"])
     raw, sig = link["token"].split(".")
     forged = raw[:-4] + ("AAAA" if raw[-4:] != "AAAA" else "BBBB") + "." + sig
@@ -170,8 +181,11 @@ def test_a_forged_token_is_refused(client: TestClient, admin_headers: dict, task
     assert resp.status_code == 401
 
 
-def test_preview_token_reads_but_cannot_save(client: TestClient, admin_headers: dict, tasks: list[dict]) -> None:
-    preview = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin_headers).json()
+def test_preview_token_reads_but_cannot_save(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
+    preview = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token",
+                          headers=admin_headers).json()
     assert "ASSIGNMENT_ID_NOT_AVAILABLE" in preview["page_url"]
     page = client.get("/api/annotate/task", headers=_bearer(preview["token"])).json()
     assert page["mode"] == "preview" and page["assignment"] is None
@@ -183,7 +197,8 @@ def test_preview_token_reads_but_cannot_save(client: TestClient, admin_headers: 
 def test_start_exchanges_a_task_token_once_per_assignment(
     client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
-    task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token", headers=admin_headers).json()["token"]
+    task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token",
+                             headers=admin_headers).json()["token"]
     body = {"task_token": task_token, "assignment_id": "A1", "hit_id": "H1", "worker_id": "W9"}
     first = client.post("/api/annotate/start", json=body)
     assert first.status_code == 200
@@ -202,9 +217,11 @@ def test_admin_box_highlight_is_checked_against_the_image(
     client: TestClient, admin_headers: dict, tasks: list[dict]
 ) -> None:
     obj = next(t for t in tasks if t["kind"] == "object")
-    ok = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 100, 120]}, headers=admin_headers)
+    ok = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 100, 120]},
+                    headers=admin_headers)
     assert ok.status_code == 200 and ok.json()["highlight"] == {"box": [10.0, 20.0, 100.0, 120.0]}
-    bad = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 5000, 120]}, headers=admin_headers)
+    bad = client.put(f"/api/tasks/{obj['id']}/highlight", json={"box": [10, 20, 5000, 120]},
+                     headers=admin_headers)
     assert bad.status_code == 400 and "box must satisfy" in bad.json()["detail"]
 
 
@@ -216,7 +233,8 @@ def test_server_produces_the_dense_per_frame_track(
     tracks[0]["keyframes"] = [[1, 10.0, 20.0, 1], [3, 20.0, 40.0, 0]]
     client.put("/api/annotate/tracks", json={"version": 0, "tracks": tracks},
                headers=_bearer(link["token"]))
-    dense = client.get(f"/api/assignments/{link['assignment_id']}/dense", headers=admin_headers).json()
+    dense = client.get(f"/api/assignments/{link['assignment_id']}/dense",
+                       headers=admin_headers).json()
     wrist = dense["points"][0]
     assert wrist["state"] == ["unplaced", "keyframe", "interpolated", "keyframe",
                               "interpolated", "interpolated"]

@@ -9,10 +9,12 @@ from backend.captures.flows import import_path
 from backend.captures.frames import parse_bundle
 from tests.backend import capture_edits as edit
 
+
 @pytest.fixture
 def imported(client: TestClient, small_capture: Path) -> dict:
     result = import_path(small_capture)[0]
-    return {"id": result.sequence_id, "serials": [str(s) for s in edit.meta(small_capture)["serials"]]}
+    serials = [str(s) for s in edit.meta(small_capture)["serials"]]
+    return {"id": result.sequence_id, "serials": serials}
 
 
 def test_login_with_a_wrong_password_is_refused(client: TestClient) -> None:
@@ -34,8 +36,10 @@ def test_sequence_lists_cameras_objects_and_hands(
     assert [s["id"] for s in listing] == [imported["id"]]
     seq = client.get(f"/api/sequences/{imported['id']}", headers=admin_headers).json()
     assert [c["serial"] for c in seq["cameras"]] == imported["serials"]
-    assert len(seq["cameras"][0]["extrinsics"]) == 3 and len(seq["cameras"][0]["extrinsics"][0]) == 4
-    assert seq["num_frames"] == 6 and len(seq["objects"]) == 2 and seq["hands"][0]["side"] == "right"
+    extrinsics = seq["cameras"][0]["extrinsics"]
+    assert len(extrinsics) == 3 and len(extrinsics[0]) == 4
+    assert seq["num_frames"] == 6 and len(seq["objects"]) == 2
+    assert seq["hands"][0]["side"] == "right"
 
 
 def test_unknown_sequence_is_404_with_the_id_named(client: TestClient, admin_headers: dict) -> None:

@@ -20,8 +20,11 @@ def test_defaults_are_the_embedded_deployment(monkeypatch: pytest.MonkeyPatch, t
     assert s.redis_url is None and s.queue_path == tmp_path / "queue.db"
 
 
-@pytest.mark.parametrize("secret", ["dev-secret-change-me", "changeme", "short-but-not-placeholder"])
-def test_prod_refuses_a_placeholder_or_short_secret(monkeypatch: pytest.MonkeyPatch, secret: str) -> None:
+@pytest.mark.parametrize("secret",
+                         ["dev-secret-change-me", "changeme", "short-but-not-placeholder"])
+def test_prod_refuses_a_placeholder_or_short_secret(
+    monkeypatch: pytest.MonkeyPatch, secret: str
+) -> None:
     monkeypatch.setenv("DEXLABEL_ENV", "prod")
     monkeypatch.setenv("DEXLABEL_SECRET_KEY", secret)
     with pytest.raises(ValidationError, match="SECRET_KEY"):

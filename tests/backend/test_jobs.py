@@ -11,7 +11,11 @@ from sqlalchemy import select, update
 from backend.db import session_scope
 from backend.jobs.models import Job
 from backend.jobs.service import (
-    _retry_delay, enqueue_job, execute, job_handler, requeue_stale,
+    _retry_delay,
+    enqueue_job,
+    execute,
+    job_handler,
+    requeue_stale,
 )
 from backend.queue import huey
 
@@ -58,11 +62,15 @@ def test_job_runs_once_and_records_its_result(app_env: dict) -> None:
     assert CALLS == [{"value": 7}]
 
 
+def _enqueue_in_a_failing_unit() -> None:
+    with session_scope() as session:
+        enqueue_job(session, "test-echo", "echo:lost", {"value": 1})
+        raise RuntimeError("the unit of work failed")
+
+
 def test_enqueue_of_a_rolled_back_unit_sends_nothing(app_env: dict) -> None:
-    with pytest.raises(RuntimeError):
-        with session_scope() as session:
-            enqueue_job(session, "test-echo", "echo:lost", {"value": 1})
-            raise RuntimeError("the unit of work failed")
+    with pytest.raises(RuntimeError, match="the unit of work failed"):
+        _enqueue_in_a_failing_unit()
     assert huey.pending_count() == 0
     with session_scope() as session:
         assert session.scalar(select(Job).where(Job.key == "echo:lost")) is None
@@ -106,6 +114,21 @@ def test_reaper_requeues_the_job_of_a_dead_worker(app_env: dict) -> None:
     job = _job("echo:dead")
     assert (job.status, job.attempts) == ("done", 2)
     assert requeue_stale() == []
+
+
+def test_a_starting_worker_takes_jobs_queued_where_it_cannot_see_their_message(
+        app_env: dict) -> None:
+    """A job queued by a process whose queue no consumer reads (another queue setting, a
+    message lost while no worker ran) is sent again when a worker starts, and runs once."""
+    _queue("test-echo", "echo:elsewhere", 5)
+    huey.flush()  # the message is gone; the row still says queued
+    assert requeue_stale() == []  # recent: the reaper leaves it alone
+    assert requeue_stale(starting=True) == ["echo:elsewhere"]
+    assert huey.pending_count() == 1
+    execute("echo:elsewhere")
+    execute("echo:elsewhere")  # a duplicate message finds the job done: it does not run again
+    job = _job("echo:elsewhere")
+    assert (job.status, job.attempts) == ("done", 1) and len(CALLS) == 1
 
 
 def test_reaper_leaves_a_running_job_with_a_live_lease(app_env: dict) -> None:

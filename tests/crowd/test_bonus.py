@@ -11,7 +11,7 @@ from sqlalchemy import select
 
 from backend.annotation.service import get_assignment_or_raise
 from backend.config import get_settings
-from backend.crowd import flows, decisions
+from backend.crowd import decisions, flows
 from backend.crowd.client import MarketplaceError, make_client
 from backend.crowd.models import CrowdPayment
 from backend.db import session_scope

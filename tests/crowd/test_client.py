@@ -8,8 +8,14 @@ from botocore.stub import Stubber
 
 from backend.config import Settings
 from backend.crowd.client import (
-    AWS_PRODUCTION_ENDPOINT, AWS_SANDBOX_ENDPOINT, CrowdConfigError, MarketplaceError, call,
-    credentials, endpoint_url, make_client,
+    AWS_PRODUCTION_ENDPOINT,
+    AWS_SANDBOX_ENDPOINT,
+    CrowdConfigError,
+    MarketplaceError,
+    call,
+    credentials,
+    endpoint_url,
+    make_client,
 )
 
 AWS_KEYS = {"mturk_access_key_id": "AKIAEXAMPLEEXAMPLE00",

@@ -9,7 +9,7 @@ import pytest
 from sqlalchemy import select
 from typer.testing import CliRunner
 
-from backend.crowd import actions, costs, flows, decisions
+from backend.crowd import actions, costs, decisions, flows
 from backend.crowd.schemas import CostLine, PublishOptions
 from backend.db import session_scope
 from tests.crowd.helpers import make_tasks, synced_submission

@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from backend.config import get_settings
-from backend.crowd import actions, costs, flows, decisions
+from backend.crowd import actions, costs, decisions, flows
 from backend.crowd.client import make_client
 from backend.crowd.publish import TooManyAssignments
 from backend.crowd.sync import sync

@@ -75,11 +75,9 @@ def test_a_publish_killed_midway_and_rerun_yields_exactly_one_hit_per_task(
     crowd_url: str, tasks: list[int], per_task_commit: bool,
 ) -> None:
     client = make_client(get_settings())
+    killed = KilledAfter(client, 3)
     with pytest.raises(KeyboardInterrupt):
-        if per_task_commit:
-            flows.publish_each(KilledAfter(client, 3), OPEN, None)
-        else:
-            _publish(KilledAfter(client, 3))
+        flows.publish_each(killed, OPEN, None) if per_task_commit else _publish(killed)
     assert len(_hits(client)) == 3
     result = flows.publish_each(client, OPEN, None) if per_task_commit else _publish(client)
     # The third HIT was created but its row lost with the crash: recovered, not duplicated.

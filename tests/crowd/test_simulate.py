@@ -63,7 +63,7 @@ def test_simulated_workers_submit_through_the_portal(crowd_url: str, small_captu
             assert ours is not None and ours.status == "submitted"
             assert ours.worker_id == outcome.worker_id
             assert sorted(t.point_index for t in ours.tracks) == list(range(21))
-            first = sorted(ours.tracks, key=lambda t: t.point_index)[0].keyframes
+            first = min(ours.tracks, key=lambda t: t.point_index).keyframes
             assert (first[0][0], first[-1][0]) == (0, 5)  # the clip's 6 frames
 
     again = simulate(crowd_url, small_capture, 1, "careful", ADMIN_EMAIL, ADMIN_PASSWORD)

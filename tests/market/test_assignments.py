@@ -8,8 +8,16 @@ from datetime import timedelta
 import pytest
 
 from tests.market.helpers import (
+    ANSWERS_NS,
+    WORKER,
+    WORKER_2,
+    WORKER_3,
     MTurk,
-    ANSWERS_NS, WORKER, WORKER_2, WORKER_3, accept, create_hit, error_of, submit, work,
+    accept,
+    create_hit,
+    error_of,
+    submit,
+    work,
 )
 
 

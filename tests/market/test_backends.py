@@ -13,8 +13,16 @@ from datetime import timedelta
 import pytest
 
 from tests.market.helpers import (
+    WORKER,
+    WORKER_2,
+    WORKER_3,
     MTurk,
-    WORKER, WORKER_2, WORKER_3, accept, create_hit, error_of, make_client, submit, work,
+    accept,
+    create_hit,
+    error_of,
+    make_client,
+    submit,
+    work,
 )
 
 
@@ -61,7 +69,7 @@ def test_racing_workers_get_the_last_slot_once(mturk: MTurk) -> None:
     def take(worker_id: str) -> None:
         try:
             outcomes.append(accept(hit_id, worker_id))
-        except Exception as exc:  # noqa: BLE001 - a lost race may surface as a lock error
+        except Exception as exc:  # a lost race may surface as a lock error
             outcomes.append(type(exc).__name__)
 
     threads = [threading.Thread(target=take, args=(f"A{i}RACER",)) for i in range(6)]

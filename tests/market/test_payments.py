@@ -8,8 +8,15 @@ import pytest
 
 from backend.market.money import assignment_cost, assignment_fee, bonus_cost, parse_amount
 from tests.market.helpers import (
+    POOR_REQUESTER,
+    WORKER,
+    WORKER_2,
     MTurk,
-    POOR_REQUESTER, WORKER, WORKER_2, accept, create_hit, error_of, make_client, work,
+    accept,
+    create_hit,
+    error_of,
+    make_client,
+    work,
 )
 
 
@@ -98,7 +105,7 @@ def test_a_bonus_goes_only_to_the_assignments_worker(market_url: str, mturk: MTu
     with pytest.raises(mturk.exceptions.RequestError, match="does not exist"):
         mturk.send_bonus(WorkerId=WORKER_2, AssignmentId=in_progress, BonusAmount="1",
                          Reason="thanks")
-    with pytest.raises(mturk.exceptions.RequestError, match="more than 0.00"):
+    with pytest.raises(mturk.exceptions.RequestError, match=r"more than 0\.00"):
         mturk.send_bonus(WorkerId=WORKER, AssignmentId=assignment_id, BonusAmount="0",
                          Reason="thanks")
 

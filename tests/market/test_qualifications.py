@@ -5,8 +5,16 @@ from __future__ import annotations
 import pytest
 
 from tests.market.helpers import (
+    OTHER_REQUESTER,
+    WORKER,
+    WORKER_2,
+    WORKER_3,
     MTurk,
-    OTHER_REQUESTER, WORKER, WORKER_2, WORKER_3, accept, create_hit, error_of, make_client, work,
+    accept,
+    create_hit,
+    error_of,
+    make_client,
+    work,
 )
 
 

@@ -6,7 +6,10 @@ import pytest
 
 from backend.market.errors import RequestError
 from backend.market.questions import (
-    answers_xml, external_url, parse_answers, validate_question,
+    answers_xml,
+    external_url,
+    parse_answers,
+    validate_question,
 )
 from tests.market.helpers import external_question
 

@@ -10,7 +10,11 @@ import httpx
 import pytest
 
 from tests.market.conftest import (
-    market_database_url, market_env, market_url, migrated_sqlite, mturk,
+    market_database_url,
+    market_env,
+    market_url,
+    migrated_sqlite,
+    mturk,
 )
 
 # The marketplace tests' fixtures, used here by name.

@@ -92,4 +92,4 @@ def test_killed_worker_mid_qc_job_is_retried_and_acts_once(crowd_url: str, qc_ca
     assert len(reports) == 6
     assert sorted(r.action for r in reports) == ["approved"] * 5 + ["rejected"]
     decided = [(p.kind, p.assignment_id) for p in payments if p.kind != "bonus"]
-    assert len(decided) == len(set(p[1] for p in decided)) == 6
+    assert len(decided) == len({p[1] for p in decided}) == 6

@@ -67,7 +67,7 @@ def test_passing_the_training_clip_grants_the_qualification(crowd_url: str,
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key
 
-    sequence_id, clip_task, hit_ids = _publish_with_training(training_capture)
+    sequence_id, _clip_task, hit_ids = _publish_with_training(training_capture)
     # New workers see only the training HIT; one labels it well, one spams it.
     outcomes = crowd_submits(crowd_url, training_capture, ["careful", "spammer"])
     assert [o.hit_id for o in outcomes] == [hit_ids[0], hit_ids[0]]

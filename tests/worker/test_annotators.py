@@ -7,8 +7,14 @@ import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix
 from worker.synth.annotators import (
-    LITTLE, PROFILES, RING, swap_window, annotate, draw_profiles, hand_visibility,
+    LITTLE,
+    PROFILES,
+    RING,
+    annotate,
+    draw_profiles,
+    hand_visibility,
     mesh_landmarks,
+    swap_window,
 )
 
 FRAMES, WIDTH, HEIGHT = 72, 640, 480

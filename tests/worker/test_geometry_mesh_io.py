@@ -81,7 +81,7 @@ class TestObj:
             read_mesh(_write(tmp_path / "bad.obj", text))
 
     def test_unknown_suffix(self, tmp_path):
-        with pytest.raises(ValueError, match="unsupported mesh format '.stl'"):
+        with pytest.raises(ValueError, match=r"unsupported mesh format '\.stl'"):
             read_mesh(_write(tmp_path / "m.stl", "solid"))
 
 

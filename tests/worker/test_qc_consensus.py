@@ -117,7 +117,7 @@ class TestConsensus:
         assert careful["outlier_fraction"] < 0.01 and careful["median_error_px"] < 3.5
 
     def test_label_is_scored_against_a_consensus_without_it(self, scene):
-        cams, joints, truth_xy = scene
+        cams, _joints, truth_xy = scene
         # With three views an in-sample residual would shrink by about a half; the
         # leave-one-out error keeps the annotator's 2 px noise (Rayleigh median 2.35 px).
         labels = careful_pool(cams[:3], truth_xy)
@@ -126,13 +126,13 @@ class TestConsensus:
         assert all(1.8 < m < 3.5 for m in medians)
 
     def test_two_views_make_a_provisional_report(self, scene):
-        cams, joints, truth_xy = scene
+        cams, _joints, truth_xy = scene
         report = score_hand(cams, careful_pool(cams, truth_xy)[:2])
         assert report.provisional
         assert all(qc.provisional for qc in report.assignments.values())
 
     def test_per_joint_and_per_frame_errors_locate_a_bad_joint(self, scene):
-        cams, joints, truth_xy = scene
+        cams, _joints, truth_xy = scene
         labels = careful_pool(cams, truth_xy)
         bad = labels[4]
         bad.xy = bad.xy.copy()
@@ -183,14 +183,14 @@ class TestDepthVisibility:
 
 class TestInputChecks:
     def test_label_shape_mismatch_names_the_label_and_shapes(self, scene):
-        cams, joints, truth_xy = scene
+        cams, _joints, truth_xy = scene
         labels = careful_pool(cams, truth_xy)[:3]
         labels[2] = ViewLabels("short", 2, labels[2].xy[:10], labels[2].visible[:10])
         with pytest.raises(ValueError, match=r"'short'.*\(10, 21, 2\)"):
             score_hand(cams, labels)
 
     def test_view_out_of_range_and_unknown_option_raise(self, scene):
-        cams, joints, truth_xy = scene
+        cams, _joints, truth_xy = scene
         labels = careful_pool(cams, truth_xy)[:3]
         with pytest.raises(ValueError, match="view 9"):
             score_hand(cams, labels[:2] + [ViewLabels("x", 9, labels[2].xy, labels[2].visible)])

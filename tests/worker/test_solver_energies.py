@@ -142,7 +142,7 @@ class TestObjectEnergy:
         rng = np.random.default_rng(RNG_SEED)
         points = rng.normal(0, 0.03, (50, 3)) + np.array([0.0, 0.0, 0.05])
         tree = AABBTree.build(vertices, faces)
-        dist, face, bary = tree.closest(points)
+        _dist, face, bary = tree.closest(points)
         depth = _depth_data(points, faces[face], bary)
         none = torch.zeros(0, dtype=torch.long)
         data = ObjectData(t64(vertices), t64(np.eye(3, 4)[None]), none, none,

@@ -46,7 +46,7 @@ def box(size=(0.06, 0.04, 0.08), steps: int = 3) -> tuple[np.ndarray, np.ndarray
                     k = base + i * (steps + 1) + j
                     quad = [k, k + steps + 1, k + steps + 2, k + 1]
                     if sign < 0:
-                        quad = quad[::-1]
+                        quad.reverse()
                     faces += [[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]
     vertices = np.array(vertices)
     unique, inverse = np.unique(np.round(vertices, 9), axis=0, return_inverse=True)

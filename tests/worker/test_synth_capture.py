@@ -140,9 +140,12 @@ class TestLayout:
         with pytest.raises(FileExistsError):
             generate_capture(capture.root, frames=2, views=1)
 
-    @pytest.mark.parametrize("bad", [{"frames": 1}, {"views": 0}, {"objects": 0}, {"seed": -1}])
-    def test_rejects_bad_arguments(self, tmp_path, bad):
-        with pytest.raises(ValueError):
+    @pytest.mark.parametrize(("bad", "message"), [
+        ({"frames": 1}, "frames must be"), ({"views": 0}, "views must be"),
+        ({"objects": 0}, "objects must be"), ({"seed": -1}, "seed must be"),
+    ])
+    def test_rejects_bad_arguments(self, tmp_path, bad, message):
+        with pytest.raises(ValueError, match=message):
             generate_capture(tmp_path / "x", **bad)
         assert not (tmp_path / "x").exists()
 

@@ -132,7 +132,7 @@ class TestParseKeyframe:
         assert isinstance(a.x, float)
 
     @pytest.mark.parametrize(
-        "raw, match",
+        ("raw", "match"),
         [
             ([1, 2, 3], "expected"),
             ({"x": 1, "y": 1, "visible": True}, "missing frame"),

@@ -137,7 +137,7 @@ class TestProjectionJacobian:
         h = 1e-6
         plus = [project_stack(stack, X + h * e)[0] for e in np.eye(3)]
         minus = [project_stack(stack, X - h * e)[0] for e in np.eye(3)]
-        numeric = np.stack([(p - m) / (2 * h) for p, m in zip(plus, minus)], axis=-1)
+        numeric = np.stack([(p - m) / (2 * h) for p, m in zip(plus, minus, strict=True)], axis=-1)
         assert np.abs(jac - numeric).max() < 1e-4 * np.abs(jac).max()
 
     def test_matches_camera_model_projection(self):

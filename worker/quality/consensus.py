@@ -21,6 +21,7 @@ Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; w
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -42,6 +43,7 @@ from worker.quality.metrics import (
     HIDDEN_MARGIN_M,
     SURFACE_MARGIN_M,
     AssignmentQC,
+    DepthMaps,
     SurfaceCheck,
     depth_visibility,
     error_issues,
@@ -294,7 +296,7 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors:
 
 
 def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
-               depth: dict[int, np.ndarray] | None = None, **options: Any) -> HandReport:
+               depth: Mapping[int, DepthMaps] | None = None, **options: Any) -> HandReport:
     """Consensus of a hand target from all its labels, and every assignment's quality.
 
     Args:
@@ -311,7 +313,7 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
     opts = HandOptions.of(options)
     frames, _ = check_labels(cameras, labels)
     for view, dm in (depth or {}).items():
-        if np.ndim(dm) != 3 or np.shape(dm)[0] != frames:
+        if len(np.shape(dm)) != 3 or np.shape(dm)[0] != frames:
             raise ValueError(f"depth[{view}] must have shape (F={frames}, H, W), "
                              f"got {np.shape(dm)}")
     report, fit = _score(cameras, labels, labels, depth, opts)
@@ -350,7 +352,7 @@ def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus
 
 
 def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: list[ViewLabels],
-           depth: dict[int, np.ndarray] | None, opts: HandOptions,
+           depth: Mapping[int, DepthMaps] | None, opts: HandOptions,
            previous: _Fit | None = None) -> tuple[HandReport, _Fit]:
     """Consensus from ``fit_labels`` (updating ``previous`` where given), every label of
     ``labels`` judged against it; the report and the fit."""

@@ -9,6 +9,7 @@ for "not measurable"), so they go to JSON as they are.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -144,6 +145,17 @@ def track_metrics(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
             "working_time_s": num(working_time_s, 1)}
 
 
+class DepthMaps(Protocol):
+    """One view's (F, H, W) uint16 depth maps as the visibility check reads them: an ndarray,
+    or anything with its ``shape`` and (frames, rows, cols) integer-array indexing (a stack
+    read lazily, for one)."""
+
+    @property
+    def shape(self) -> tuple[int, ...]: ...
+
+    def __getitem__(self, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray: ...
+
+
 @dataclass(frozen=True)
 class SurfaceCheck:
     """What one view's depth map says of the reference points, (F, P) bool each: on_surface
@@ -154,7 +166,7 @@ class SurfaceCheck:
     hidden: np.ndarray
 
 
-def surface_check(camera: CameraModel, points_world: np.ndarray, depth_mm: np.ndarray,
+def surface_check(camera: CameraModel, points_world: np.ndarray, depth_mm: DepthMaps,
                   surface_margin_m: float = SURFACE_MARGIN_M,
                   hidden_margin_m: float = HIDDEN_MARGIN_M) -> SurfaceCheck:
     """Look the reference points up in the view's depth map (once per view: every label of the
