@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the tests need (a virtualenv with the project and its test extras; PostgreSQL
-# and Redis started if they are installed but down) and runs the whole suite.
+# and Redis started if they are installed but down), checks lint and types (tests/lint.sh: ruff
+# and strict mypy; any finding stops here) and runs the whole suite.
 # Usage: bash tests/run.sh [pytest args...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,6 +13,7 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
 "$VENV/bin/python" -m pip install --quiet -e '.[test]'
+DEXLABEL_VENV="$VENV" bash tests/lint.sh
 
 start_services() {
   if command -v pg_isready >/dev/null && ! pg_isready -q -h 127.0.0.1 -p 5432; then
