@@ -7,6 +7,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.orm.exc import StaleDataError
 
 
 class DexlabelError(Exception):
@@ -58,6 +59,13 @@ class InvalidCapture(DexlabelError):
         self.problem = problem
 
 
+class Busy(DexlabelError):
+    """A concurrent request changed the same records first; the same request again works."""
+
+    status_code = 503
+    code = "busy"
+
+
 class StorageError(DexlabelError):
     status_code = 502
     code = "storage_error"
@@ -71,6 +79,14 @@ def install_error_handlers(app: FastAPI) -> None:
         body: dict[str, Any] = {"error": exc.code, "detail": exc.detail}
         body.update(exc.extra)
         return JSONResponse(body, status_code=exc.status_code)
+
+    @app.exception_handler(StaleDataError)
+    async def _lost_race(_: Request, exc: StaleDataError) -> JSONResponse:
+        # A row's version changed under this request (optimistic locking): nothing of it was
+        # written; asking again sees the winner's state.
+        return JSONResponse({"error": Busy.code, "detail": "a concurrent request changed the "
+                             "same records; please try again"}, status_code=Busy.status_code,
+                            headers={"Retry-After": "1"})
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:

@@ -16,8 +16,9 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
+from sqlalchemy.orm.exc import StaleDataError
 
-from backend.errors import Forbidden, NotFound
+from backend.errors import Busy, Forbidden, NotFound
 from backend.market import lifecycle, workers
 from backend.market.models import Bonus, Hit, MarketAssignment
 from backend.market.questions import EXTERNAL_QUESTION_NS, external_url
@@ -25,6 +26,7 @@ from backend.market.workers import WorkerHit
 
 PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE"
 DEFAULT_FRAME_HEIGHT = 800
+LISTING_ATTEMPTS = 3
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,19 @@ def work_url(assignment: MarketAssignment, submit_to: str) -> str | None:
 
 
 def list_hits(session: Session, worker_id: str, now: datetime) -> list[WorkerHit]:
-    return workers.list_available_hits(session, worker_id, now)
+    """The HITs the worker can take. Listing settles what the clock made due on each HIT it
+    shows, a write that can lose to a concurrent one on the same HIT (another worker's accept,
+    the requester's review); the listing then starts again from the winner's state.
+
+    Raises:
+        Busy: the HITs kept changing under the listing (503; asking again works).
+    """
+    for _ in range(LISTING_ATTEMPTS):
+        try:
+            return workers.list_available_hits(session, worker_id, now)
+        except StaleDataError:
+            session.rollback()
+    raise Busy("the HITs changed while they were listed; please try again")
 
 
 def preview(session: Session, worker_id: str, hit_id: str, now: datetime) -> WorkerHit:

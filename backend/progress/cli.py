@@ -7,8 +7,7 @@ from typing import Annotated
 import typer
 
 from backend.console import refusing_bad_input, resolve_sequence
-from backend.progress.schemas import SequenceProgress
-from backend.progress.service import TASK_STATES, sequence_progress
+from backend.progress.schemas import TASK_STATES, SequenceProgress
 
 
 def _solve_line(p: SequenceProgress) -> str:
@@ -57,6 +56,7 @@ def status_command(
     in review, accepted), HIT and assignment counts, and the current solve."""
     from backend.captures.service import list_sequences
     from backend.db import session_scope
+    from backend.progress.service import sequence_progress
 
     with refusing_bad_input(), session_scope() as session:
         ids = ([resolve_sequence(session, sequence)] if sequence is not None

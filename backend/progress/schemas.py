@@ -1,11 +1,12 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Literal
+from typing import Literal, get_args
 
 from pydantic import BaseModel
 
 TaskState = Literal["open", "published", "submitted", "in review", "accepted"]
+TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
 SequenceState = Literal["no tasks", "open", "in progress", "accepted", "solved"]
 
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from collections import Counter, defaultdict
 from collections.abc import Iterable
-from typing import get_args
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -26,6 +25,7 @@ from backend.captures.service import get_sequence_or_raise
 from backend.crowd.models import CrowdHit
 from backend.pipeline import accepted_digest
 from backend.progress.schemas import (
+    TASK_STATES,
     AssignmentCounts,
     SequenceProgress,
     SequenceState,
@@ -35,8 +35,6 @@ from backend.progress.schemas import (
 )
 from backend.quality.models import QCReport
 from backend.solve.models import SolveRun
-
-TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
 
 
 def _state(assignments: dict[str, int], reviewed: int, hits_live: int) -> TaskState:

@@ -313,7 +313,7 @@ def test_calibrate_hand_recovers_the_subjects_bone_lengths_from_accepted_tracks(
         hand = s.scalars(select(Hand).where(Hand.sequence_id == approved)).one()
         true_betas = np.asarray(hand.betas)
     refused = runner.invoke(_cli(), ["calibrate-hand", str(approved)])
-    assert refused.exit_code == 1 and "--force" in refused.output
+    assert refused.exit_code == 2 and "--force" in refused.output  # bad input: exit 2
     result = runner.invoke(_cli(), ["calibrate-hand", str(approved), "--force"])
     assert result.exit_code == 0, result.output
     with session_scope() as s:
@@ -332,7 +332,7 @@ def test_the_solve_command_waits_for_the_run_and_prints_its_summary(approved: in
     assert result.exit_code == 0, result.output
     assert "solve run 1 done" in result.output and '"labelled_frames"' in result.output
     refused = CliRunner().invoke(_cli(), ["solve", "no-such/sequence"])
-    assert refused.exit_code == 1 and "no sequence" in refused.output
+    assert refused.exit_code == 2 and "no sequence" in refused.output
 
 
 def test_several_approved_labels_of_one_view_merge_to_the_median_and_the_majority() -> None:
@@ -353,7 +353,7 @@ def test_several_approved_labels_of_one_view_merge_to_the_median_and_the_majorit
 @pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)
 def test_calibrate_hand_without_accepted_hand_tracks_says_so(sequence: int) -> None:
     result = CliRunner().invoke(_cli(), ["calibrate-hand", str(sequence), "--force"])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert f"cannot calibrate hand 0 of sequence {sequence}" in result.output
     assert "fewer than 3 frames" in result.output
     with session_scope() as s:

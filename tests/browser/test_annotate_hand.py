@@ -10,8 +10,19 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
-    assert_rows_close, click_image, drag_image, frames_shown, goto_frame, open_task, place_joints,
-    point_states, select_point, server_keyframes, value_at, wait_saved, zoom_on_points,
+    assert_rows_close,
+    click_image,
+    drag_image,
+    frames_shown,
+    goto_frame,
+    open_task,
+    place_joints,
+    point_states,
+    select_point,
+    server_keyframes,
+    value_at,
+    wait_saved,
+    zoom_on_points,
 )
 
 LAST = CLIP_FRAMES - 1
@@ -31,7 +42,7 @@ def _first_keyframe_with_a_reload(page: Page, server: LiveServer, link: dict, fi
     serial = server.worker_get_task(link["token"])["task"]["serial"]
     page.route("**/api/annotate/tracks", lambda route: route.abort())
     _zoom_on_hand(page, server, serial)
-    place_joints(page, first, range(0, 10))
+    place_joints(page, first, range(10))
     expect(page.locator("#save-status")).to_contain_text("not saved yet")
     page.reload()
     page.wait_for_function("window.__dexlabel.ready")

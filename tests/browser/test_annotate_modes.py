@@ -10,9 +10,17 @@ from playwright.sync_api import BrowserContext, Page, expect
 
 from tests.browser.conftest import LiveServer
 from tests.browser.helpers import (
-    click_image, drag_image, frames_shown, goto_frame, open_task, point_states, server_keyframes,
-    value_at, wait_saved,
+    click_image,
+    drag_image,
+    frames_shown,
+    goto_frame,
+    open_task,
+    point_states,
+    server_keyframes,
+    value_at,
+    wait_saved,
 )
+
 
 def _where(page: Page) -> list[int]:
     """[current frame, active point]."""
@@ -27,6 +35,8 @@ def _click_timeline(page: Page, point: int, frame: int) -> None:
     page.mouse.click(box["x"] + centre["x"] + 3, box["y"] + centre["y"])
 
 
+# The page writes frame ranges with an en dash.
+EN_DASH = "\u2013"
 CONFLICT = "This assignment was changed in another tab — reload to continue"
 
 
@@ -116,8 +126,8 @@ def test_incomplete_work_is_listed_frame_by_frame_and_cannot_be_submitted(
     dialog = page.locator("#submit-dialog")
     problems = dialog.locator(".submit-problems li")
     expect(problems).to_have_count(2)
-    expect(problems.nth(0)).to_contain_text("Frames 0–5: Thumb PIP, Thumb DIP, Thumb tip")
-    expect(problems.nth(1)).to_contain_text("Frames 6–11: Thumb DIP, Thumb tip")
+    expect(problems.nth(0)).to_contain_text(f"Frames 0{EN_DASH}5: Thumb PIP, Thumb DIP, Thumb tip")
+    expect(problems.nth(1)).to_contain_text(f"Frames 6{EN_DASH}11: Thumb DIP, Thumb tip")
     expect(dialog.locator(".submit-confirm")).to_be_disabled()
     problems.nth(1).locator("button").click()
     expect(dialog).not_to_be_visible()

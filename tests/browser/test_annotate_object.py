@@ -10,7 +10,13 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
-    click_image, drag_image, goto_frame, open_task, point_states, server_keyframes, wait_saved,
+    click_image,
+    drag_image,
+    goto_frame,
+    open_task,
+    point_states,
+    server_keyframes,
+    wait_saved,
 )
 
 LAST = CLIP_FRAMES - 1

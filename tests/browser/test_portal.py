@@ -15,7 +15,13 @@ from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
 from backend.market.questions import parse_answers
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
-    READY, drag_image, goto_frame, place_joints, point_states, wait_saved, zoom_on_points,
+    READY,
+    drag_image,
+    goto_frame,
+    place_joints,
+    point_states,
+    wait_saved,
+    zoom_on_points,
 )
 from tests.market.helpers import external_question, make_client
 

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from urllib.parse import parse_qs, urlsplit
 
+import pytest
+from sqlalchemy import select
+
 from backend.config import get_settings
 from tests.market.helpers import MTurk, create_hit, external_question, submit
 from tests.portal.conftest import Portal
@@ -98,3 +101,75 @@ def test_earnings_count_approved_rewards_and_bonuses_and_show_feedback(
     assert one["reward"] == "0.30" and one["submit_time"] is not None
     other = portal.new_worker("fin@example.org")
     assert portal.call("GET", f"/assignments/{done[1]}", other["access_token"]).status_code == 404
+
+
+def test_a_crowd_listing_and_accepting_at_once_never_gets_a_server_error(
+    portal: Portal, mturk: MTurk
+) -> None:
+    """Listing HITs settles what the clock made due on each HIT it shows, a write that can
+    race with another worker's accept of the same HIT; the loser lists again, it never
+    answers 500."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    hits = [_hit(mturk, MaxAssignments=4)["HITId"] for _ in range(3)]
+    workers = [portal.new_worker(f"crowd{i}@example.org")["access_token"] for i in range(12)]
+
+    def work(token: str) -> list[int]:
+        codes = []
+        for _ in range(4):
+            listed = portal.call("GET", "/hits", token)
+            codes.append(listed.status_code)
+            if listed.status_code == 200 and listed.json():
+                accept = portal.call("POST", f"/hits/{listed.json()[0]['hit_id']}/accept", token)
+                codes.append(accept.status_code)
+        return codes
+
+    with ThreadPoolExecutor(len(workers)) as pool:
+        codes = [c for done in pool.map(work, workers) for c in done]
+    assert 500 not in codes, codes
+    assert set(codes) <= {200, 409, 503}, codes
+    # Every worker holds one of the 12 slots (one assignment per worker and HIT; a worker
+    # whose listing came back empty had seen the other HITs taken).
+    held = [[a["hit_id"] for a in portal.ok("GET", "/assignments", token)["assignments"]
+             if a["status"] == "Accepted"] for token in workers]
+    assert sum(map(len, held)) == 12 and {h for one in held for h in one} == set(hits)
+
+
+def test_a_listing_that_loses_a_race_on_a_hit_lists_again_instead_of_failing(
+    portal: Portal, mturk: MTurk, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Listing settles what the clock made due on each HIT it shows (here: approving a
+    submission whose auto-approval time passed, paying it from the HIT's hold). Another
+    request settles the same HIT first and commits; the listing's write then matches no row
+    (the HIT's version moved on), so it lists again from the winner's state: no error, the
+    HIT shown, the work paid once."""
+    from datetime import timedelta
+
+    from backend.db import session_scope
+    from backend.market import clock, lifecycle, workers
+    from backend.market.models import Hit
+
+    hit = _hit(mturk, Reward="0.40", MaxAssignments=2, AutoApprovalDelayInSeconds=60)["HITId"]
+    ben, cat = portal.new_worker("ben@example.org"), portal.new_worker("cat@example.org")
+    done = portal.ok("POST", f"/hits/{hit}/accept", ben["access_token"])["assignment_id"]
+    assert submit(portal.base, done, result="submitted:3").status_code == 200
+    clock.advance(timedelta(minutes=5))  # ben's submission is due for auto-approval
+    real, raced = lifecycle.refresh_hit, []
+
+    def refresh_after_a_rival(session, listed: Hit, now, payer=None):  # type: ignore[no-untyped-def]
+        if not raced:  # another request settles the same HIT first, and commits
+            raced.append(listed.hit_id)
+            with session_scope() as rival:
+                real(rival, rival.scalars(select(Hit).where(Hit.hit_id == listed.hit_id)).one(),
+                     now)
+        return real(session, listed, now, payer)
+
+    monkeypatch.setattr(workers.lifecycle, "refresh_hit", refresh_after_a_rival)
+    try:
+        listed = portal.call("GET", "/hits", cat["access_token"])
+    finally:
+        clock.reset()
+    assert raced == [hit]
+    assert listed.status_code == 200, listed.text
+    assert [(h["hit_id"], h["available"]) for h in listed.json()] == [(hit, 1)]
+    assert portal.ok("GET", "/assignments", ben["access_token"])["earnings"]["paid"] == "0.40"
