@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sqlalchemy import Boolean, String
+from sqlalchemy import Boolean, Integer, String
 from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.db import Base, TimestampMixin
@@ -15,3 +15,6 @@ class Admin(TimestampMixin, Base):
     email: Mapped[str] = mapped_column(String(320), unique=True)
     password_hash: Mapped[str] = mapped_column(String(300))
     active: Mapped[bool] = mapped_column(Boolean, default=True)
+    # Copied into every admin token; logout and a password change or reset move it on, which
+    # ends every token issued before.
+    token_epoch: Mapped[int] = mapped_column(Integer, default=0, server_default="0")

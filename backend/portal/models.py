@@ -23,6 +23,9 @@ class PortalAccount(Base):
         String(64), ForeignKey("market_workers.worker_id"), unique=True)
     active: Mapped[bool] = mapped_column(Boolean, default=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime)
+    # Copied into every portal token; logout and a password change move it on, which ends
+    # every token issued before.
+    token_epoch: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
 
 
 class PortalInvite(Base):
