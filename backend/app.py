@@ -17,6 +17,7 @@ from backend.crowd.router import router as crowd_router
 from backend.errors import install_error_handlers
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
+from backend.middleware import install_request_guards
 from backend.portal.router import router as portal_router
 from backend.progress.router import router as progress_router
 from backend.quality.router import router as review_router
@@ -35,6 +36,7 @@ def create_app() -> FastAPI:
                   description="Crowd-labelled multi-view video to 3D hand and object poses.",
                   docs_url=None, redoc_url=None)
     install_error_handlers(app)
+    install_request_guards(app)
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)

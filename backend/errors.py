@@ -1,13 +1,23 @@
-"""Error classes that carry their HTTP status, and the one handler that renders them."""
+"""Error classes that carry their HTTP status, the handlers that render them, and their shape
+in the OpenAPI document.
+
+Every error answer is ``{"error", "detail"}`` (plus ``fields`` on validation errors, and
+whatever an error adds about itself); the OpenAPI document declares exactly that shape for the
+4xx answers of every operation.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from http import HTTPStatus
 from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict
 from sqlalchemy.orm.exc import StaleDataError
+from starlette.exceptions import HTTPException
 
 
 class DexlabelError(Exception):
@@ -71,14 +81,69 @@ class StorageError(DexlabelError):
     code = "storage_error"
 
 
+class FieldProblem(BaseModel):
+    """One invalid input: `field` is where it is (`email`, `path.task_id`, `query.limit`,
+    `tracks.0.point`), `message` what is wrong with it."""
+
+    field: str
+    message: str
+
+
+class ErrorRead(BaseModel):
+    """The body of every error answer."""
+
+    # Errors add what they know about themselves (the operation, the current version, ...).
+    model_config = ConfigDict(extra="allow", title="Error")
+
+    error: str
+    detail: str
+    fields: list[FieldProblem] | None = None
+
+
+def validation_error(problems: list[dict[str, str]]) -> JSONResponse:
+    """422 naming each invalid field: ``problems`` are ``{"field", "message"}``."""
+    detail = "; ".join(f"{p['field']}: {p['message']}" for p in problems)
+    return JSONResponse({"error": "validation_error", "detail": detail, "fields": problems},
+                        status_code=422)
+
+
+def _field_problem(err: Any) -> dict[str, str]:
+    loc = [str(p) for p in err.get("loc", ()) if p != "body"]
+    if err.get("type") == "json_invalid":
+        reason = (err.get("ctx") or {}).get("error", "")
+        return {"field": "body", "message": f"invalid JSON at character {'.'.join(loc)}: {reason}"}
+    message = str(err.get("msg", ""))
+    if err.get("type") == "value_error" and (err.get("ctx") or {}).get("error") is not None:
+        message = str(err["ctx"]["error"])  # our validators' own words, without a prefix
+    return {"field": ".".join(loc) or "body", "message": message}
+
+
+# The error word of framework answers (an unknown route, a wrong method, a body too large).
+_HTTP_CODES = {404: NotFound.code, 401: Unauthorized.code, 403: Forbidden.code,
+               409: Conflict.code, 413: PayloadTooLarge.code}
+
+
+def _http_code(status: int) -> str:
+    if status in _HTTP_CODES:
+        return _HTTP_CODES[status]
+    try:
+        return HTTPStatus(status).phrase.lower().replace(" ", "_").replace("-", "_")
+    except ValueError:
+        return "error"
+
+
 def install_error_handlers(app: FastAPI) -> None:
-    """Render our errors and request-validation errors in one shape."""
+    """Render our errors, the framework's and request-validation errors in one shape, and
+    declare that shape in the OpenAPI document."""
+    install_error_schema(app)
 
     @app.exception_handler(DexlabelError)
     async def _dexlabel_error(_: Request, exc: DexlabelError) -> JSONResponse:
         body: dict[str, Any] = {"error": exc.code, "detail": exc.detail}
         body.update(exc.extra)
-        return JSONResponse(body, status_code=exc.status_code)
+        # An error may carry response headers (a 429's Retry-After).
+        headers: dict[str, str] | None = getattr(exc, "headers", None)
+        return JSONResponse(body, status_code=exc.status_code, headers=headers)
 
     @app.exception_handler(StaleDataError)
     async def _lost_race(_: Request, exc: StaleDataError) -> JSONResponse:
@@ -90,11 +155,53 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:
-        problems = [
-            {"field": ".".join(str(p) for p in err["loc"] if p != "body"), "message": err["msg"]}
-            for err in exc.errors()
-        ]
-        detail = "; ".join(f"{p['field']}: {p['message']}" for p in problems)
-        return JSONResponse(
-            {"error": "validation_error", "detail": detail, "fields": problems}, status_code=422
-        )
+        return validation_error([_field_problem(err) for err in exc.errors()])
+
+    @app.exception_handler(HTTPException)
+    async def _http_error(_: Request, exc: HTTPException) -> JSONResponse:
+        return JSONResponse({"error": _http_code(exc.status_code), "detail": str(exc.detail)},
+                            status_code=exc.status_code, headers=exc.headers)
+
+
+# ----- the error shape in the OpenAPI document -------------------------------------------
+
+_METHODS = ("get", "put", "post", "delete", "patch", "head", "options", "trace")
+_REF = "#/components/schemas/{model}"
+
+
+def _error_response(description: str) -> dict[str, Any]:
+    return {"description": description,
+            "content": {"application/json": {"schema": {"$ref": _REF.format(model="Error")}}}}
+
+
+def document_errors(schema: dict[str, Any]) -> dict[str, Any]:
+    """Declare ``ErrorRead`` as every operation's 422 and 4XX answer, in place of FastAPI's
+    default validation-error schema (which is not what the API sends)."""
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    for name in ("HTTPValidationError", "ValidationError"):
+        components.pop(name, None)
+    error_schema = ErrorRead.model_json_schema(ref_template=_REF)
+    components.update(error_schema.pop("$defs", {}))
+    components["Error"] = error_schema
+    for operations in schema.get("paths", {}).values():
+        for method, operation in operations.items():
+            if method not in _METHODS:
+                continue
+            responses = operation.setdefault("responses", {})
+            responses["422"] = _error_response(
+                "Invalid input: `fields` names each invalid field and what is wrong with it")
+            responses.setdefault("4XX", _error_response(
+                "Refused: `error` says why in a word, `detail` in a sentence"))
+    return schema
+
+
+def install_error_schema(app: FastAPI) -> None:
+    """Make ``app.openapi()`` document the error shape (see ``document_errors``)."""
+    generate: Callable[[], dict[str, Any]] = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            app.openapi_schema = document_errors(generate())
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]

@@ -12,7 +12,6 @@ from typing import Any
 from sqlalchemy import (
     JSON,
     CheckConstraint,
-    DateTime,
     Float,
     ForeignKey,
     Integer,
@@ -22,7 +21,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from backend.captures.models import Camera, Sequence
-from backend.db import Base, TimestampMixin
+from backend.db import Base, TimestampMixin, UTCDateTime
 
 
 class Task(TimestampMixin, Base):
@@ -74,8 +73,8 @@ class Assignment(TimestampMixin, Base):
     version: Mapped[int] = mapped_column(Integer, default=0)
     edit_count: Mapped[int] = mapped_column(Integer, default=0)
     working_time_s: Mapped[float] = mapped_column(Float, default=0.0)
-    saved_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
-    submitted_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    saved_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    submitted_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
     task: Mapped[Task] = relationship("backend.annotation.models.Task",
                                       back_populates="assignments")

@@ -9,7 +9,7 @@ from datetime import UTC, datetime, timedelta
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.crowd.client import MTurkClient, call
+from backend.crowd.client import MTurkClient, call, call_naming
 from backend.crowd.models import CrowdHit, CrowdWorkerAction
 from backend.crowd.publish import check_assignments, training_qualification
 from backend.errors import Conflict, NotFound
@@ -28,8 +28,8 @@ def get_hit_or_raise(session: Session, hit_id: str) -> CrowdHit:
 def extend_hit(session: Session, client: MTurkClient, hit_id: str, seconds: int) -> CrowdHit:
     """Keep the HIT open ``seconds`` from now (it reopens an expired HIT)."""
     row = get_hit_or_raise(session, hit_id)
-    call(client, "update_expiration_for_hit", HITId=hit_id,
-         ExpireAt=datetime.now(UTC) + timedelta(seconds=seconds))
+    call_naming(client, "update_expiration_for_hit", {"ExpireAt": "seconds"}, HITId=hit_id,
+                ExpireAt=datetime.now(UTC) + timedelta(seconds=seconds))
     row.expired_at = None
     session.flush()
     return row
@@ -51,8 +51,9 @@ def add_assignments(session: Session, client: MTurkClient, hit_id: str, count: i
     row = get_hit_or_raise(session, hit_id)
     check_assignments(row.max_assignments + count, allow_large_hits)
     token = f"dxadd-{hit_id[:40]}-{row.max_assignments}"
-    call(client, "create_additional_assignments_for_hit", HITId=hit_id,
-         NumberOfAdditionalAssignments=count, UniqueRequestToken=token)
+    call_naming(client, "create_additional_assignments_for_hit",
+                {"NumberOfAdditionalAssignments": "count"}, HITId=hit_id,
+                NumberOfAdditionalAssignments=count, UniqueRequestToken=token)
     row.max_assignments += count
     session.flush()
     return row
@@ -73,8 +74,10 @@ def grant_qualification(session: Session, client: MTurkClient, worker_id: str,
         if _worker_action(session, worker_id, "qualification", type_id) is not None:
             raise Conflict(f"worker {worker_id} already holds qualification {type_id}",
                            state="granted")
-        call(client, "associate_qualification_with_worker", QualificationTypeId=type_id,
-             WorkerId=worker_id, IntegerValue=value, SendNotification=notify)
+        call_naming(client, "associate_qualification_with_worker",
+                    {"IntegerValue": "value", "SendNotification": "notify"},
+                    QualificationTypeId=type_id, WorkerId=worker_id, IntegerValue=value,
+                    SendNotification=notify)
     session.add(CrowdWorkerAction(worker_id=worker_id, kind="qualification", target=type_id,
                                   value=value))
     session.flush()
@@ -123,6 +126,6 @@ def unblock_worker(session: Session, client: MTurkClient, worker_id: str,
 def notify_workers(client: MTurkClient, worker_ids: list[str], subject: str,
                    message: str) -> list[dict]:
     """Send a message; the marketplace's per-worker failures (empty when all went out)."""
-    reply = call(client, "notify_workers", WorkerIds=worker_ids, Subject=subject,
-                 MessageText=message)
+    reply = call_naming(client, "notify_workers", {"MessageText": "message"},
+                        WorkerIds=worker_ids, Subject=subject, MessageText=message)
     return list(reply.get("NotifyWorkersFailureStatuses", []))

@@ -5,11 +5,14 @@ pair; with PUBLIC_URL unset, at the address this instance's running ``serve`` or
 recorded) and at AWS or any MTurk-compatible endpoint by setting. Marketplace errors, and a
 marketplace that cannot be reached, come back as our own errors so routers and the CLI render
 them like every other failure (one line naming the URL and the setting, no botocore traceback).
+A refusal of the request's values (a worker id of the wrong form, an unknown qualification
+type) is the caller's input at fault: 422 naming the fields; any other failure is 502.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import re
+from collections.abc import Iterator, Mapping
 from typing import Any
 from urllib.parse import urlparse
 
@@ -20,6 +23,7 @@ from botocore.exceptions import (
     ClientError,
     ConnectTimeoutError,
     HTTPClientError,
+    ParamValidationError,
     ReadTimeoutError,
     SSLError,
 )
@@ -53,6 +57,32 @@ class MarketplaceError(DexlabelError):
         super().__init__(detail, operation=operation, turk_code=turk_code)
         self.operation = operation
         self.turk_code = turk_code
+
+
+class MarketplaceRefused(MarketplaceError):
+    """The marketplace refused the request's values: the caller's input, so 422; ``fields``
+    names our fields behind the marketplace parameters it objected to."""
+
+    status_code = 422
+    code = "marketplace_refused"
+
+    def __init__(self, detail: str, operation: str, turk_code: str,
+                 fields: list[dict[str, str]]) -> None:
+        super().__init__(detail, operation, turk_code)
+        if fields:
+            self.extra["fields"] = fields
+
+
+# TurkErrorCodes of refusals caused by the values sent (botocore's own checks of the request
+# shape count too): the marketplace's validation codes, and an unknown qualification type
+# (its id is only ever the caller's).
+PARAMETER_VALIDATION = "ParameterValidationError"
+INPUT_REFUSALS = frozenset({
+    PARAMETER_VALIDATION,
+    "ValidationException",
+    "AWS.MechanicalTurk.InvalidParameterValue",
+    "AWS.MechanicalTurk.QualificationTypeDoesNotExist",
+})
 
 
 class MarketplaceUnreachable(MarketplaceError):
@@ -140,20 +170,59 @@ def unreachable(client: MTurkClient, operation: str, exc: BotoCoreError) -> Mark
         operation)
 
 
-def call(client: MTurkClient, operation: str, **params: Any) -> dict[str, Any]:
+def snake_case(name: str) -> str:
+    """A marketplace parameter's name as our fields spell it: HITId -> hit_id."""
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", "_", name).lower()
+
+
+def refused_fields(message: str, turk_code: str, params: Mapping[str, Any],
+                   fields: Mapping[str, str] | None = None) -> list[dict[str, str]]:
+    """Our fields behind the parameters a refusal names (``fields`` maps a marketplace
+    parameter to our field where the names differ; others are the snake_case name)."""
+    named = set()
+    for param in params:
+        if re.search(rf"\b{re.escape(param)}\b", message):
+            named.add(param)
+    missing = re.fullmatch(r"AWS\.MechanicalTurk\.(\w+)DoesNotExist", turk_code)
+    if missing and f"{missing[1]}Id" in params:
+        named.add(f"{missing[1]}Id")
+    names = fields or {}
+    return [{"field": names.get(param, snake_case(param)), "message": message}
+            for param in params if param in named]
+
+
+def _failure(exc: Exception, operation: str, params: Mapping[str, Any],
+             fields: Mapping[str, str] | None) -> MarketplaceError:
+    """The MarketplaceError for a botocore failure other than an unreachable marketplace."""
+    if isinstance(exc, ClientError):
+        error = exc.response.get("Error", {})
+        turk_code = str(exc.response.get("TurkErrorCode", "") or error.get("Code", ""))
+        message = str(error.get("Message", str(exc)))
+    else:
+        turk_code = PARAMETER_VALIDATION if isinstance(exc, ParamValidationError) else ""
+        message = str(exc)
+    if turk_code in INPUT_REFUSALS:
+        return MarketplaceRefused(f"{operation}: {message}", operation, turk_code,
+                                  refused_fields(message, turk_code, params, fields))
+    return MarketplaceError(f"{operation}: {message}", operation, turk_code)
+
+
+def call(client: MTurkClient, operation: str, /, **params: Any) -> dict[str, Any]:
     """``client.<operation>(**params)`` with marketplace failures as MarketplaceError."""
+    return call_naming(client, operation, None, **params)
+
+
+def call_naming(client: MTurkClient, operation: str, fields: Mapping[str, str] | None, /,
+                **params: Any) -> dict[str, Any]:
+    """``call``, where ``fields`` maps a parameter to the request field it came from where the
+    names differ (``{"MessageText": "message"}``), for a refusal of its value to name it."""
     try:
         reply: dict[str, Any] = getattr(client, operation)(**params)
         return reply
-    except ClientError as exc:
-        error = exc.response.get("Error", {})
-        turk_code = str(exc.response.get("TurkErrorCode", "") or error.get("Code", ""))
-        raise MarketplaceError(
-            f"{operation}: {error.get('Message', str(exc))}", operation, turk_code) from exc
     except (BotoConnectionError, HTTPClientError) as exc:
         raise unreachable(client, operation, exc) from exc
-    except BotoCoreError as exc:
-        raise MarketplaceError(f"{operation}: {exc}", operation) from exc
+    except (ClientError, BotoCoreError) as exc:
+        raise _failure(exc, operation, params, fields) from exc
 
 
 def paginate(client: MTurkClient, operation: str, key: str, **params: Any) -> Iterator[Any]:
@@ -161,11 +230,7 @@ def paginate(client: MTurkClient, operation: str, key: str, **params: Any) -> It
     try:
         for page in client.get_paginator(operation).paginate(**params):
             yield from page.get(key, [])
-    except ClientError as exc:
-        error = exc.response.get("Error", {})
-        raise MarketplaceError(f"{operation}: {error.get('Message', str(exc))}", operation,
-                               str(exc.response.get("TurkErrorCode", ""))) from exc
     except (BotoConnectionError, HTTPClientError) as exc:
         raise unreachable(client, operation, exc) from exc
-    except BotoCoreError as exc:
-        raise MarketplaceError(f"{operation}: {exc}", operation) from exc
+    except (ClientError, BotoCoreError) as exc:
+        raise _failure(exc, operation, params, None) from exc

@@ -10,7 +10,6 @@ from datetime import datetime
 
 from sqlalchemy import (
     CheckConstraint,
-    DateTime,
     ForeignKey,
     Integer,
     String,
@@ -19,7 +18,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin
+from backend.db import Base, TimestampMixin, UTCDateTime
 
 
 class CrowdHit(TimestampMixin, Base):
@@ -39,7 +38,7 @@ class CrowdHit(TimestampMixin, Base):
     hit_id: Mapped[str | None] = mapped_column(String(64), unique=True)
     max_assignments: Mapped[int] = mapped_column(Integer)
     reward_cents: Mapped[int] = mapped_column(Integer)
-    expired_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    expired_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
 
 class CrowdSubmission(TimestampMixin, Base):

@@ -10,10 +10,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, CheckConstraint, DateTime, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, Boolean, CheckConstraint, ForeignKey, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin, utcnow
+from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
 
 
 class QCReport(TimestampMixin, Base):
@@ -46,8 +46,7 @@ class QCReport(TimestampMixin, Base):
     # "waiting" (provisional), "recorded" (no marketplace submission to act on).
     action: Mapped[str | None] = mapped_column(String(16))
     action_detail: Mapped[str | None] = mapped_column(Text)
-    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow,
-                                                 onupdate=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
 
 
 class TrainingClip(TimestampMixin, Base):

@@ -11,10 +11,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, CheckConstraint, DateTime, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, CheckConstraint, ForeignKey, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin
+from backend.db import Base, TimestampMixin, UTCDateTime
 
 SOLVE_STATUSES = ("queued", "running", "done", "failed")
 
@@ -46,5 +46,5 @@ class SolveRun(TimestampMixin, Base):
     labels_digest: Mapped[str | None] = mapped_column(String(64), index=True)
     num_frames: Mapped[int] = mapped_column(Integer)
     num_views: Mapped[int] = mapped_column(Integer)
-    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
-    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)

@@ -1,0 +1,97 @@
+"""Bounds of request input, checked at the edge before a handler or the database sees it.
+
+Every id, index, version and counter fits a 32-bit signed integer (PostgreSQL's INTEGER; SQLite
+holds it too), every float is finite and bounded, and no string holds a NUL character (PostgreSQL
+text cannot store one). A value outside these bounds is a 422 naming its field, like any other
+validation error; path and query strings are checked for NUL by
+``backend.middleware.RequestGuardMiddleware`` before routing.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+from fastapi import Path, Query
+from pydantic import AfterValidator, BaseModel, Field, StrictBool, field_validator
+
+MAX_INT32 = 2**31 - 1
+MIN_INT32 = -(2**31)
+# Coordinates, weights and every other float the API takes: far beyond any image, scene or
+# setting, and small enough that arithmetic on them stays finite.
+MAX_ABS_FLOAT = 1e12
+# Serials, marketplace ids (MTurk allows 64 characters) and other names in a path.
+MAX_KEY_LENGTH = 128
+
+NUL = "\x00"
+NUL_MESSAGE = "must not contain a NUL character (\\u0000)"
+NUMBER_MESSAGE = (f"numbers must be finite, integers within {MIN_INT32}..{MAX_INT32} and "
+                  f"other numbers at most {MAX_ABS_FLOAT:g} in magnitude")
+
+
+def contains_nul(value: Any) -> bool:
+    """Whether a string anywhere in ``value`` (lists, dicts and their keys) holds a NUL."""
+    if isinstance(value, str):
+        return NUL in value
+    if isinstance(value, dict):
+        return any(contains_nul(k) or contains_nul(v) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return any(contains_nul(v) for v in value)
+    return False
+
+
+def number_in_bounds(value: Any) -> bool:
+    """Whether every number anywhere in ``value`` is within the API's bounds (True otherwise)."""
+    if isinstance(value, bool) or value is None:
+        return True
+    if isinstance(value, int):
+        return MIN_INT32 <= value <= MAX_INT32
+    if isinstance(value, float):
+        return math.isfinite(value) and abs(value) <= MAX_ABS_FLOAT
+    if isinstance(value, dict):
+        return all(number_in_bounds(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return all(number_in_bounds(v) for v in value)
+    return True
+
+
+def _bounded_numbers(value: Any) -> Any:
+    if not number_in_bounds(value):
+        raise ValueError(NUMBER_MESSAGE)
+    return value
+
+
+# ----- path and query parameters ---------------------------------------------------------
+
+# A row id in a path: 1 up to the largest 32-bit integer.
+Id = Annotated[int, Path(ge=1, le=MAX_INT32)]
+# A frame or object index in a path.
+Index = Annotated[int, Path(ge=0, le=MAX_INT32)]
+# A serial, marketplace id or other name in a path (NUL is refused before routing).
+Key = Annotated[str, Path(min_length=1, max_length=MAX_KEY_LENGTH)]
+# An optional id filter in a query string.
+QueryId = Annotated[int | None, Query(ge=1, le=MAX_INT32)]
+# An optional name filter in a query string.
+QueryKey = Annotated[str | None, Query(min_length=1, max_length=MAX_KEY_LENGTH)]
+
+# ----- body fields -----------------------------------------------------------------------
+
+BodyId = Annotated[int, Field(ge=1, le=MAX_INT32)]
+Int32 = Annotated[int, Field(ge=MIN_INT32, le=MAX_INT32)]
+Count = Annotated[int, Field(ge=0, le=MAX_INT32)]
+Finite = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_ABS_FLOAT, le=MAX_ABS_FLOAT)]
+# A JSON scalar of a track or setting: a boolean, a bounded integer or a bounded finite float.
+Scalar = StrictBool | Int32 | Finite
+# Free-form JSON (keyframe rows): every number in it within bounds.
+BoundedJson = Annotated[Any, AfterValidator(_bounded_numbers)]
+
+
+class RequestModel(BaseModel):
+    """Base of every request body: no string anywhere in it (keys included) holds a NUL."""
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _refuse_nul(cls, value: Any) -> Any:
+        if contains_nul(value):
+            raise ValueError(NUL_MESSAGE)
+        return value
