@@ -14,6 +14,7 @@ from sqlalchemy import (
     CheckConstraint,
     Float,
     ForeignKey,
+    Index,
     Integer,
     String,
     UniqueConstraint,
@@ -33,7 +34,9 @@ class Task(TimestampMixin, Base):
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"))
+    # Indexed: a sequence's tasks are read by every progress, QC and solve query.
+    sequence_id: Mapped[int] = mapped_column(
+        ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
     camera_id: Mapped[int] = mapped_column(ForeignKey("cameras.id", ondelete="CASCADE"))
     kind: Mapped[str] = mapped_column(String(8))
     # "hand:<index>" or "object:<index>": the target within the sequence.
@@ -57,6 +60,8 @@ class Assignment(TimestampMixin, Base):
 
     __tablename__ = "assignments"
     __table_args__ = (
+        # A task's work, and its work in one state (the approved labels, the submitted work).
+        Index("ix_assignments_task_id_status", "task_id", "status"),
         CheckConstraint("version >= 0", name="version_nonnegative"),
         CheckConstraint(
             "status IN ('working', 'submitted', 'approved', 'rejected')", name="status_valid"

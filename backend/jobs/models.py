@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, CheckConstraint, Integer, String, Text
+from sqlalchemy import JSON, CheckConstraint, Index, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
@@ -21,6 +21,9 @@ JOB_STATUSES = ("queued", "running", "retrying", "waiting", "done", "failed")
 class Job(TimestampMixin, Base):
     __tablename__ = "jobs"
     __table_args__ = (
+        # The job listing, newest first, of one status or one kind.
+        Index("ix_jobs_status_id", "status", "id"),
+        Index("ix_jobs_kind_id", "kind", "id"),
         CheckConstraint(
             "status IN ('queued', 'running', 'retrying', 'waiting', 'done', 'failed')",
             name="status_valid"),
@@ -29,10 +32,10 @@ class Job(TimestampMixin, Base):
 
     id: Mapped[int] = mapped_column(primary_key=True)
     # What runs: "qc", "solve", ...; the key names the work ("qc:12:hand:0") and is unique.
-    kind: Mapped[str] = mapped_column(String(32), index=True)
+    kind: Mapped[str] = mapped_column(String(32))
     key: Mapped[str] = mapped_column(String(128), unique=True)
     args: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    status: Mapped[str] = mapped_column(String(16), default="queued")
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     max_attempts: Mapped[int] = mapped_column(Integer, default=5)
     error: Mapped[str | None] = mapped_column(Text)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, CheckConstraint, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, Boolean, CheckConstraint, ForeignKey, Index, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
@@ -19,6 +19,8 @@ from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
 class QCReport(TimestampMixin, Base):
     __tablename__ = "qc_reports"
     __table_args__ = (
+        # Each worker's tally by outcome (worker quality) is read from this index alone.
+        Index("ix_qc_reports_worker_id_outcome", "worker_id", "outcome", "provisional"),
         CheckConstraint("outcome IN ('approve', 'review', 'reject')", name="outcome_valid"),
     )
 
@@ -29,7 +31,7 @@ class QCReport(TimestampMixin, Base):
     sequence_id: Mapped[int] = mapped_column(
         ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
     target_key: Mapped[str] = mapped_column(String(32))
-    worker_id: Mapped[str] = mapped_column(String(64), index=True)
+    worker_id: Mapped[str] = mapped_column(String(64))
     # "consensus" (scored against the other views) or "gold" (a training clip's known labels).
     method: Mapped[str] = mapped_column(String(16), default="consensus")
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON)
