@@ -159,3 +159,62 @@ def test_admin_lists_jobs_and_reruns_a_failed_one(client: TestClient,
     assert twice.status_code == 409 and "already queued" in twice.json()["detail"]
     assert client.get("/api/jobs/99999", headers=admin_headers).status_code == 404
     assert client.get("/api/jobs").status_code == 401
+
+
+def test_first_submissions_of_two_views_at_once_queue_one_qc_job(
+        client: TestClient, admin_headers: dict[str, str], small_capture,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two views of one target submitted at the same moment, before its QC job exists: both
+    submits succeed and the target has one QC job row that counts both asks."""
+    import threading
+
+    from backend.captures.flows import import_path
+    from backend.config import get_settings
+    from backend.quality import service as quality_service
+    from backend.quality.service import qc_key
+
+    sequence_id = import_path(small_capture)[0].sequence_id
+    made = client.post(f"/api/sequences/{sequence_id}/tasks", headers=admin_headers)
+    hands = [t for t in made.json() if t["kind"] == "hand"][:2]
+    tokens = []
+    for n, task in enumerate(hands):
+        link = client.post(f"/api/tasks/{task['id']}/assignments",
+                           json={"worker_id": f"W{n}"}, headers=admin_headers)
+        tokens.append(link.json()["token"])
+    tracks = [{"point": p, "keyframes": [[0, 10.0 + p, 20.0, 1], [5, 30.0 + p, 40.0, 1]]}
+              for p in range(21)]
+
+    # On PostgreSQL both units of work reach the QC job's enqueue before either commits. (On
+    # SQLite the second waits for the first one's write lock before it gets there.)
+    together = get_settings().database_url.startswith("postgresql")
+    barrier = threading.Barrier(2, timeout=30)
+    real_enqueue = quality_service.enqueue_job
+
+    def enqueue_together(*args, **kwargs):  # type: ignore[no-untyped-def]
+        if together:
+            barrier.wait()
+        return real_enqueue(*args, **kwargs)
+
+    monkeypatch.setattr(quality_service, "enqueue_job", enqueue_together)
+    answers: list = [None, None]
+
+    def submit(n: int) -> None:
+        try:
+            answers[n] = client.post("/api/annotate/submit",
+                                     json={"version": 0, "tracks": tracks},
+                                     headers={"Authorization": f"Bearer {tokens[n]}"})
+        except Exception as exc:  # the test client raises what the app did not handle
+            answers[n] = exc
+
+    threads = [threading.Thread(target=submit, args=(n,)) for n in (0, 1)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert all(not isinstance(a, Exception) for a in answers), answers
+    assert [a.status_code for a in answers] == [200, 200], [a.text for a in answers]
+    assert [a.json()["status"] for a in answers] == ["submitted", "submitted"]
+    with session_scope() as session:
+        jobs = list(session.scalars(select(Job).where(Job.kind == "qc")))
+    assert [(j.key, j.status, j.requests) for j in jobs] == [
+        (qc_key(sequence_id, "hand:0"), "queued", 2)]
