@@ -1,39 +1,91 @@
 """Passwords and signed tokens (HMAC-SHA256 over a JSON payload, with an expiry).
 
-Tokens travel in URLs and headers, never in cookies: the annotation page runs inside a
-sandboxed MTurk iframe where third-party cookies are blocked.
+Tokens travel in headers, never in cookies: the annotation page runs inside a sandboxed MTurk
+iframe where third-party cookies are blocked. Only short-lived read-only view tokens go into
+URLs (frame links).
+
+Passwords are hashed with scrypt. Each hash takes tens of milliseconds of CPU, so at most
+``SCRYPT_SLOTS`` run at once in a process: concurrent password guesses queue among themselves
+instead of taking every core from the other requests. A login for an account that does not
+exist is checked against a dummy hash, so it takes as long as one for an account that does.
 """
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import hashlib
 import hmac
 import json
 import os
+import secrets
+import threading
 import time
+import weakref
 from typing import Any
+
+import anyio.to_thread
+from anyio import CapacityLimiter
 
 from backend.errors import Unauthorized
 
 _SCRYPT = {"n": 2**14, "r": 8, "p": 1, "dklen": 32}
+# scrypt computations running at once in this process (half the cores, at most 2): a burst of
+# logins waits for a slot rather than starving every other request of CPU.
+SCRYPT_SLOTS = max(1, min(2, (os.cpu_count() or 1) // 2))
+_scrypt_slots = threading.BoundedSemaphore(SCRYPT_SLOTS)
+_dummy_lock = threading.Lock()
+_dummy_hash: str | None = None
+# Per event loop: the thread slots of password checks awaited by async endpoints (logins), so
+# the requests waiting for a slot hold no thread of the server's pool while they wait.
+_loop_slots: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, CapacityLimiter] = (
+    weakref.WeakKeyDictionary())
+
+
+def _scrypt(password: str, salt: bytes) -> bytes:
+    with _scrypt_slots:
+        return hashlib.scrypt(password.encode(), salt=salt, **_SCRYPT)
 
 
 def hash_password(password: str) -> str:
     salt = os.urandom(16)
-    digest = hashlib.scrypt(password.encode(), salt=salt, **_SCRYPT)
-    return f"scrypt${salt.hex()}${digest.hex()}"
+    return f"scrypt${salt.hex()}${_scrypt(password, salt).hex()}"
 
 
-def verify_password(password: str, stored: str) -> bool:
+def dummy_hash() -> str:
+    """A scrypt hash of a random password nobody knows (made once per process)."""
+    global _dummy_hash
+    with _dummy_lock:
+        if _dummy_hash is None:
+            _dummy_hash = hash_password(secrets.token_hex(16))
+        return _dummy_hash
+
+
+def verify_password(password: str, stored: str | None) -> bool:
+    """Whether ``password`` matches ``stored``. ``None`` (no such account) is checked against a
+    dummy hash and is always False, in the same time as a real check."""
+    candidate = dummy_hash() if stored is None else stored
     try:
-        scheme, salt_hex, digest_hex = stored.split("$")
+        scheme, salt_hex, digest_hex = candidate.split("$")
+        salt = bytes.fromhex(salt_hex)
     except ValueError:
-        return False
+        scheme, salt, digest_hex = "", b"", ""
     if scheme != "scrypt":
+        # A malformed stored hash still costs one scrypt, so it cannot be told apart either.
+        _scrypt(password, b"\0" * 16)
         return False
-    digest = hashlib.scrypt(password.encode(), salt=bytes.fromhex(salt_hex), **_SCRYPT)
-    return hmac.compare_digest(digest.hex(), digest_hex)
+    match = hmac.compare_digest(_scrypt(password, salt).hex(), digest_hex)
+    return match and stored is not None
+
+
+async def check_password(password: str, stored: str | None) -> bool:
+    """``verify_password`` for async endpoints: it waits for one of ``SCRYPT_SLOTS`` threads
+    of its own, so a queue of password checks never occupies the server's request threads."""
+    loop = asyncio.get_running_loop()
+    slots = _loop_slots.get(loop)
+    if slots is None:
+        slots = _loop_slots[loop] = CapacityLimiter(SCRYPT_SLOTS)
+    return await anyio.to_thread.run_sync(verify_password, password, stored, limiter=slots)
 
 
 def _b64(data: bytes) -> str:

@@ -11,12 +11,15 @@ from backend.accounts.service import get_active_admin
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.errors import Forbidden, Unauthorized
-from backend.security import verify_token
+from backend.security import sign_token, verify_token
+from backend.validation import Id, Key
 
 ADMIN_SCOPE = "admin"
 VIEW_SCOPE = "view"
-# Tokens of these scopes carry a sequence_id and serial and may read that view's frames.
-FRAME_SCOPES = ("view", "task", "assignment")
+# The only tokens a frame URL (?token=) may carry: read-only view tokens of one sequence and
+# camera. The write-capable assignment token is sent as a header only, never in a URL, where
+# access logs and browser histories would keep it.
+FRAME_SCOPES = (VIEW_SCOPE,)
 
 
 def bearer_token(request: Request) -> str | None:
@@ -25,19 +28,32 @@ def bearer_token(request: Request) -> str | None:
     return token.strip() if scheme.lower() == "bearer" and token.strip() else None
 
 
+def admin_token(admin_id: int, token_epoch: int, ttl_s: int) -> str:
+    """An admin's bearer token, valid until ``ttl_s`` or until the admin's token epoch moves
+    on (logout, password change or reset)."""
+    payload = {"scope": ADMIN_SCOPE, "sub": admin_id, "epoch": token_epoch}
+    return sign_token(payload, get_settings().secret_key, ttl_s)
+
+
+def view_token(sequence_id: int, serial: str, ttl_s: int) -> str:
+    """A read-only token for one view's frames, the only token fit for a URL."""
+    payload = {"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial}
+    return sign_token(payload, get_settings().secret_key, ttl_s)
+
+
 def current_admin(request: Request, session: SessionDep) -> Admin:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("admin login required: send 'Authorization: Bearer <token>'")
     payload = verify_token(token, get_settings().secret_key, ADMIN_SCOPE)
-    return get_active_admin(session, int(payload["sub"]))
+    return get_active_admin(session, int(payload["sub"]), payload.get("epoch"))
 
 
 CurrentAdmin = Annotated[Admin, Depends(current_admin)]
 
 
 def require_view_access(
-    request: Request, session: SessionDep, sequence_id: int, serial: str
+    request: Request, session: SessionDep, sequence_id: Id, serial: Key
 ) -> None:
     """An admin, or the holder of a view token for exactly this sequence and camera."""
     if bearer_token(request) is not None:
@@ -52,5 +68,5 @@ def require_view_access(
 
 
 def _frame_token(token: str) -> dict:
-    """The payload of a token that may read one view's frames: view, task or assignment."""
+    """The payload of a token that may read one view's frames: a view token only."""
     return verify_token(token, get_settings().secret_key, FRAME_SCOPES)

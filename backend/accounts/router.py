@@ -1,22 +1,28 @@
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel, Field
+from starlette.concurrency import run_in_threadpool
 
-from backend.accounts.deps import ADMIN_SCOPE, CurrentAdmin
-from backend.accounts.service import authenticate
-from backend.config import get_settings
+from backend.accounts import service
+from backend.accounts.deps import CurrentAdmin, admin_token
+from backend.accounts.login import password_check, password_login
 from backend.db import SessionDep
-from backend.security import sign_token
 
 router = APIRouter(prefix="/api/auth", tags=["auth"])
 
 ADMIN_TOKEN_TTL_S = 12 * 3600
+ADMIN_REALM = "admin"
 
 
 class LoginRequest(BaseModel):
     email: str = Field(min_length=3, max_length=320)
     password: str = Field(min_length=1, max_length=1000)
+
+
+class PasswordChange(BaseModel):
+    current_password: str = Field(min_length=1, max_length=1000)
+    new_password: str = Field(min_length=1, max_length=1000)
 
 
 class TokenRead(BaseModel):
@@ -30,12 +36,35 @@ class AdminRead(BaseModel):
     email: str
 
 
+def _token_read(admin_id: int, token_epoch: int) -> TokenRead:
+    return TokenRead(access_token=admin_token(admin_id, token_epoch, ADMIN_TOKEN_TTL_S),
+                     expires_in=ADMIN_TOKEN_TTL_S)
+
+
 @router.post("/token", response_model=TokenRead)
-def login(body: LoginRequest, session: SessionDep) -> TokenRead:
-    admin = authenticate(session, body.email, body.password)
-    token = sign_token({"scope": ADMIN_SCOPE, "sub": admin.id}, get_settings().secret_key,
-                       ADMIN_TOKEN_TTL_S)
-    return TokenRead(access_token=token, expires_in=ADMIN_TOKEN_TTL_S)
+async def login(body: LoginRequest, request: Request) -> TokenRead:
+    """A bearer token for 12 hours. Failed logins are limited per account and per client
+    address: past the limit every login answers 429 with Retry-After."""
+    record = await password_login(request, ADMIN_REALM, body.email, body.password,
+                                  service.login_record)
+    return _token_read(record.account_id, record.token_epoch)
+
+
+@router.post("/logout", status_code=204, response_class=Response)
+def logout(admin: CurrentAdmin, session: SessionDep) -> Response:
+    """Ends every token of this admin (on every device)."""
+    service.sign_out(session, admin)
+    return Response(status_code=204)
+
+
+@router.post("/password", response_model=TokenRead)
+async def change_password(body: PasswordChange, request: Request, admin: CurrentAdmin,
+                          session: SessionDep) -> TokenRead:
+    """A new password: every token issued before ends; the reply is a new token."""
+    await password_check(request, ADMIN_REALM, admin.email, body.current_password,
+                         admin.password_hash)
+    await run_in_threadpool(service.change_password, session, admin, body.new_password)
+    return _token_read(admin.id, admin.token_epoch)
 
 
 @router.get("/me", response_model=AdminRead)

@@ -39,15 +39,18 @@ from backend.annotation.tokens import (
     PREVIEW_ASSIGNMENT_ID,
     TASK_SCOPE,
     assignment_token,
+    frame_token,
     task_token,
 )
 from backend.config import get_settings
 from backend.db import SessionDep
-from backend.errors import PayloadTooLarge, Unauthorized
+from backend.errors import Unauthorized
+from backend.middleware import body_limit
 from backend.progress.schemas import TaskState
 from backend.progress.service import task_states
 from backend.security import verify_token
 from backend.storage import get_storage
+from backend.validation import Id, QueryId
 
 router = APIRouter(prefix="/api", tags=["annotation"])
 
@@ -65,12 +68,6 @@ def _assignment_of(session: SessionDep, claims: dict[str, Any]) -> Assignment:
     if claims["scope"] != ASSIGNMENT_SCOPE:
         raise Unauthorized("a preview link cannot change labels; accept the HIT first")
     return service.get_assignment_or_raise(session, int(claims["assignment_id"]))
-
-
-async def _limit_body(request: Request) -> None:
-    length = request.headers.get("content-length")
-    if length is not None and int(length) > MAX_SAVE_BYTES:
-        raise PayloadTooLarge(f"a save may be at most {MAX_SAVE_BYTES} bytes, got {length}")
 
 
 def _task_reads(session: Session, tasks: list[Task]) -> list[TaskRead]:
@@ -97,7 +94,7 @@ def _page_url(params: dict[str, str]) -> str:
 # ----- admin -----------------------------------------------------------------------------
 
 @router.post("/sequences/{sequence_id}/tasks", response_model=list[TaskRead])
-def create_tasks(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> list[TaskRead]:
+def create_tasks(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> list[TaskRead]:
     """One task per view and target; running it again creates only what is missing."""
     tasks = service.create_tasks(session, get_storage(), sequence_id)
     return _task_reads(session, [service.get_task_or_raise(session, t.id) for t in tasks])
@@ -105,13 +102,13 @@ def create_tasks(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> list
 
 @router.get("/tasks", response_model=list[TaskRead])
 def list_tasks(session: SessionDep, _: CurrentAdmin,
-               sequence_id: int | None = None) -> list[TaskRead]:
+               sequence_id: QueryId = None) -> list[TaskRead]:
     return _task_reads(session, [service.get_task_or_raise(session, t.id)
                                  for t in service.list_tasks(session, sequence_id)])
 
 
 @router.put("/tasks/{task_id}/highlight", response_model=TaskRead)
-def set_highlight(task_id: int, body: HighlightUpdate, session: SessionDep,
+def set_highlight(task_id: Id, body: HighlightUpdate, session: SessionDep,
                   _: CurrentAdmin) -> TaskRead:
     """Draw the object's box by hand (when its projected initial pose is missing or wrong)."""
     task = service.set_highlight_box(session, service.get_task_or_raise(session, task_id), body.box)
@@ -119,7 +116,7 @@ def set_highlight(task_id: int, body: HighlightUpdate, session: SessionDep,
 
 
 @router.post("/tasks/{task_id}/assignments", response_model=AssignmentLink)
-def create_assignment(task_id: int, body: AssignmentCreate, session: SessionDep,
+def create_assignment(task_id: Id, body: AssignmentCreate, session: SessionDep,
                       _: CurrentAdmin) -> AssignmentLink:
     """A direct assignment link for a named worker (outside any marketplace)."""
     task = service.get_task_or_raise(session, task_id)
@@ -132,7 +129,7 @@ def create_assignment(task_id: int, body: AssignmentCreate, session: SessionDep,
 
 
 @router.post("/tasks/{task_id}/preview-token", response_model=PreviewLink)
-def create_preview_token(task_id: int, session: SessionDep, _: CurrentAdmin) -> PreviewLink:
+def create_preview_token(task_id: Id, session: SessionDep, _: CurrentAdmin) -> PreviewLink:
     task = service.get_task_or_raise(session, task_id)
     token = task_token(task)
     return PreviewLink(token=token,
@@ -140,7 +137,7 @@ def create_preview_token(task_id: int, session: SessionDep, _: CurrentAdmin) -> 
 
 
 @router.get("/assignments/{assignment_id}/dense")
-def dense_tracks(assignment_id: int, session: SessionDep, _: CurrentAdmin) -> dict[str, Any]:
+def dense_tracks(assignment_id: Id, session: SessionDep, _: CurrentAdmin) -> dict[str, Any]:
     """Every point of an assignment at every frame: x, y (image px, null where unplaced or
     occluded without a position), visible, and state (keyframe / interpolated / unplaced)."""
     from worker.tracks import dense_track
@@ -173,10 +170,11 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
 
 
 @router.get("/annotate/task", response_model=AnnotateTaskRead)
-def read_task(request: Request, claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
+def read_task(claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
     task = service.get_task_or_raise(session, int(claims["task_id"]))
+    # The frame links carry a read-only view token of their own, never the page's token.
     base = f"/api/sequences/{task.sequence_id}/views/{task.camera.serial}"
-    token = bearer_token(request)
+    token = frame_token(task)
     frames = FramesLinks(bundle_url=f"{base}/frames.bin?token={token}",
                          manifest_url=f"{base}/frames?token={token}")
     if claims["scope"] == TASK_SCOPE:
@@ -195,13 +193,15 @@ def read_task(request: Request, claims: WorkerClaims, session: SessionDep) -> An
                             assignment=read)
 
 
-@router.put("/annotate/tracks", response_model=SaveResult, dependencies=[Depends(_limit_body)])
+@router.put("/annotate/tracks", response_model=SaveResult,
+            openapi_extra=body_limit(MAX_SAVE_BYTES))
 def save_tracks(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
     assignment = service.save_tracks(session, _assignment_of(session, claims), body)
     return SaveResult(version=assignment.version, status=assignment.status)
 
 
-@router.post("/annotate/submit", response_model=SaveResult, dependencies=[Depends(_limit_body)])
+@router.post("/annotate/submit", response_model=SaveResult,
+             openapi_extra=body_limit(MAX_SAVE_BYTES))
 def submit(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
     assignment = pipeline.submit(session, _assignment_of(session, claims), body)
     return SaveResult(version=assignment.version, status=assignment.status)

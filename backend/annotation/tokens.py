@@ -1,9 +1,12 @@
 """The page's tokens: a task token opens a read-only preview of one task, an assignment token
-opens one assignment for editing. Both are signed with the deployment's secret and name the
-sequence and view whose frames they open."""
+opens one assignment for editing. Both are signed with the deployment's secret and are sent as
+a bearer header. The frames are read with a view token made for each page load
+(``frame_token``): read-only, one view, valid for an hour, the only token that goes into a
+frame URL."""
 
 from __future__ import annotations
 
+from backend.accounts.deps import view_token
 from backend.annotation.models import Assignment, Task
 from backend.config import get_settings
 from backend.security import sign_token
@@ -12,6 +15,9 @@ TASK_SCOPE = "task"
 ASSIGNMENT_SCOPE = "assignment"
 TOKEN_TTL_S = 14 * 24 * 3600
 PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE"
+# The page loads every frame of its view at once, right after it reads its task; a reload
+# reads the task again and gets a new frame token.
+FRAME_TOKEN_TTL_S = 3600
 
 
 def task_token(task: Task) -> str:
@@ -24,3 +30,8 @@ def assignment_token(task: Task, assignment: Assignment) -> str:
     payload = {"scope": ASSIGNMENT_SCOPE, "assignment_id": assignment.id, "task_id": task.id,
                "sequence_id": task.sequence_id, "serial": task.camera.serial}
     return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
+
+
+def frame_token(task: Task) -> str:
+    """A read-only view token for the task's frames (sequence and camera), for frame URLs."""
+    return view_token(task.sequence_id, task.camera.serial, FRAME_TOKEN_TTL_S)

@@ -13,7 +13,9 @@ from datetime import datetime, timedelta
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from backend.accounts.login import LoginRecord
 from backend.accounts.models import Admin
+from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError, NotFound, Unauthorized
 from backend.market.workers import get_or_create_worker
 from backend.portal.models import PortalAccount, PortalInvite
@@ -47,7 +49,8 @@ def create_account(session: Session, email: str, password: str, now: datetime) -
         raise Conflict(f"a worker account for {email} already exists")
     worker = get_or_create_worker(session, _new_worker_id(session), now)
     account = PortalAccount(email=email, password_hash=hash_password(password),
-                            worker_id=worker.worker_id, active=True, created_at=now)
+                            worker_id=worker.worker_id, active=True, created_at=now,
+                            token_epoch=0)
     session.add(account)
     session.flush()
     return account
@@ -89,12 +92,41 @@ def register(
 
 
 def authenticate(session: Session, email: str, password: str) -> PortalAccount:
+    """The active account of ``email`` if ``password`` is its password (an unknown email takes
+    as long to refuse as a wrong password)."""
     account = session.scalars(select(PortalAccount).where(
         PortalAccount.email == email.strip().lower())).one_or_none()
-    if (account is None or not account.active
-            or not verify_password(password, account.password_hash)):
+    ok = verify_password(password, account.password_hash if account is not None else None)
+    if account is None or not account.active or not ok:
         raise Unauthorized("email or password is wrong")
     return account
+
+
+def login_record(email: str) -> LoginRecord | None:
+    """What a login needs of the account of ``email`` (None: no such account)."""
+    with session_scope() as session:
+        account = session.scalars(select(PortalAccount).where(
+            PortalAccount.email == email.strip().lower())).one_or_none()
+        if account is None:
+            return None
+        return LoginRecord(account.id, account.password_hash, account.active,
+                           account.token_epoch, account.worker_id)
+
+
+def change_password(session: Session, account: PortalAccount, password: str) -> PortalAccount:
+    """A new password; every token issued before ends."""
+    if len(password) < MIN_PASSWORD_LENGTH:
+        raise DexlabelError(f"password must be at least {MIN_PASSWORD_LENGTH} characters")
+    account.password_hash = hash_password(password)
+    account.token_epoch += 1
+    session.flush()
+    return account
+
+
+def sign_out(session: Session, account: PortalAccount) -> None:
+    """Ends every token the worker holds (on every device)."""
+    account.token_epoch += 1
+    session.flush()
 
 
 def get_active_account(session: Session, account_id: int) -> PortalAccount:

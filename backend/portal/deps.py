@@ -19,8 +19,11 @@ PORTAL_SCOPE = "portal"
 PORTAL_TOKEN_TTL_S = 12 * 3600
 
 
-def portal_token(account: PortalAccount) -> str:
-    payload = {"scope": PORTAL_SCOPE, "sub": account.id, "worker_id": account.worker_id}
+def portal_token(account_id: int, worker_id: str, token_epoch: int) -> str:
+    """A worker's bearer token, valid until its TTL or until the account's token epoch moves
+    on (logout or password change)."""
+    payload = {"scope": PORTAL_SCOPE, "sub": account_id, "worker_id": worker_id,
+               "epoch": token_epoch}
     return sign_token(payload, get_settings().secret_key, PORTAL_TOKEN_TTL_S)
 
 
@@ -32,6 +35,9 @@ def current_worker(request: Request, session: SessionDep) -> PortalAccount:
     account = get_active_account(session, int(payload["sub"]))
     if account.worker_id != payload.get("worker_id"):
         raise Unauthorized("token does not belong to this worker account")
+    if account.token_epoch != payload.get("epoch"):
+        raise Unauthorized("this sign-in has ended (signed out, or the password was changed); "
+                           "sign in again")
     return account
 
 

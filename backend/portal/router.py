@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request, Response
+from starlette.concurrency import run_in_threadpool
 
 from backend.accounts.deps import CurrentAdmin
+from backend.accounts.login import password_check, password_login
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.market import clock
@@ -27,11 +29,19 @@ from backend.portal.schemas import (
     InviteCreate,
     InviteRead,
     Login,
+    PasswordChange,
     Register,
     TokenRead,
 )
+from backend.validation import Key
 
 router = APIRouter(prefix="/api/portal", tags=["worker portal"])
+PORTAL_REALM = "portal"
+
+
+def _token_read(account_id: int, worker_id: str, token_epoch: int) -> TokenRead:
+    return TokenRead(access_token=portal_token(account_id, worker_id, token_epoch),
+                     expires_in=PORTAL_TOKEN_TTL_S, worker_id=worker_id)
 
 
 def _account_read(account: PortalAccount) -> AccountRead:
@@ -83,10 +93,30 @@ def register(body: Register, session: SessionDep) -> AccountRead:
 
 
 @router.post("/login", response_model=TokenRead)
-def login(body: Login, session: SessionDep) -> TokenRead:
-    account = accounts.authenticate(session, body.email, body.password)
-    return TokenRead(access_token=portal_token(account), expires_in=PORTAL_TOKEN_TTL_S,
-                     worker_id=account.worker_id)
+async def login(body: Login, request: Request) -> TokenRead:
+    """A bearer token for 12 hours. Failed logins are limited per account and per client
+    address: past the limit every login answers 429 with Retry-After."""
+    record = await password_login(request, PORTAL_REALM, body.email, body.password,
+                                  accounts.login_record)
+    assert record.worker_id is not None
+    return _token_read(record.account_id, record.worker_id, record.token_epoch)
+
+
+@router.post("/logout", status_code=204, response_class=Response)
+def logout(worker: CurrentWorker, session: SessionDep) -> Response:
+    """Ends every token of this worker account (on every device)."""
+    accounts.sign_out(session, worker)
+    return Response(status_code=204)
+
+
+@router.post("/password", response_model=TokenRead)
+async def change_password(body: PasswordChange, request: Request, worker: CurrentWorker,
+                          session: SessionDep) -> TokenRead:
+    """A new password: every token issued before ends; the reply is a new token."""
+    await password_check(request, PORTAL_REALM, worker.email, body.current_password,
+                         worker.password_hash)
+    await run_in_threadpool(accounts.change_password, session, worker, body.new_password)
+    return _token_read(worker.id, worker.worker_id, worker.token_epoch)
 
 
 @router.get("/me", response_model=AccountRead)
@@ -102,20 +132,20 @@ def list_hits(session: SessionDep, worker: CurrentWorker) -> list[HitRead]:
 
 
 @router.get("/hits/{hit_id}", response_model=HitPreview)
-def preview_hit(hit_id: str, session: SessionDep, worker: CurrentWorker) -> HitPreview:
+def preview_hit(hit_id: Key, session: SessionDep, worker: CurrentWorker) -> HitPreview:
     view = service.preview(session, worker.worker_id, hit_id, clock.now())
     return HitPreview(**_hit_read(view).model_dump(), preview_url=service.preview_url(view),
                       frame_height=service.frame_height(view.hit))
 
 
 @router.post("/hits/{hit_id}/accept", response_model=AssignmentRead)
-def accept_hit(hit_id: str, session: SessionDep, worker: CurrentWorker) -> AssignmentRead:
+def accept_hit(hit_id: Key, session: SessionDep, worker: CurrentWorker) -> AssignmentRead:
     """Takes one assignment; its ``work_url`` is the page to frame."""
     return _assignment_read(service.accept(session, worker.worker_id, hit_id, clock.now()), 0)
 
 
 @router.post("/assignments/{assignment_id}/return", response_model=AssignmentRead)
-def return_assignment(assignment_id: str, session: SessionDep,
+def return_assignment(assignment_id: Key, session: SessionDep,
                       worker: CurrentWorker) -> AssignmentRead:
     assignment = service.return_assignment(session, worker.worker_id, assignment_id, clock.now())
     return _assignment_read(assignment, 0)
@@ -135,7 +165,7 @@ def my_assignments(session: SessionDep, worker: CurrentWorker) -> AssignmentsRea
 
 
 @router.get("/assignments/{assignment_id}", response_model=AssignmentRead)
-def get_assignment(assignment_id: str, session: SessionDep,
+def get_assignment(assignment_id: Key, session: SessionDep,
                    worker: CurrentWorker) -> AssignmentRead:
     assignment = service.get_assignment(session, worker.worker_id, assignment_id, clock.now())
     bonus = service.bonuses_by_assignment(session, worker.worker_id).get(assignment.id, 0)

@@ -22,6 +22,11 @@ class Login(BaseModel):
     password: str = Field(min_length=1, max_length=1000)
 
 
+class PasswordChange(BaseModel):
+    current_password: str = Field(min_length=1, max_length=1000)
+    new_password: str = Field(min_length=1, max_length=1000)
+
+
 class AccountRead(BaseModel):
     id: int
     email: str

@@ -165,9 +165,12 @@ def test_an_assignment_token_opens_nothing_else(
     mine = _assign(client, admin_headers, tasks[0]["id"], "W1")
     other_task = next(t for t in tasks if t["serial"] != tasks[0]["serial"])
     bundle = f"/api/sequences/{other_task['sequence_id']}/views/{other_task['serial']}/frames.bin"
-    assert client.get(f"{bundle}?token={mine['token']}").status_code == 403
+    assert client.get(f"{bundle}?token={mine['token']}").status_code == 401  # not in URLs
     own = client.get("/api/annotate/task", headers=_bearer(mine["token"])).json()
     assert client.get(own["frames"]["bundle_url"]).status_code == 200
+    other = own["frames"]["bundle_url"].replace(f"/views/{tasks[0]['serial']}/",
+                                               f"/views/{other_task['serial']}/")
+    assert client.get(other).status_code == 403  # its view token opens its own view only
     assert client.get("/api/sequences", headers=_bearer(mine["token"])).status_code == 401
 
 
