@@ -425,6 +425,7 @@ def crowd_simulate(
 
 
 def _register_domain_commands() -> None:
+    from backend.captures.cli import sequences_app
     from backend.jobs.cli import jobs_app
     from backend.progress.cli import status_command
     from backend.quality.cli import qc_app, training_app
@@ -436,6 +437,7 @@ def _register_domain_commands() -> None:
     app.add_typer(qc_app, name="qc")
     app.add_typer(jobs_app, name="jobs")
     app.add_typer(training_app, name="training")
+    app.add_typer(sequences_app, name="sequences")
 
 
 _register_domain_commands()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, Request, Response
+from fastapi import APIRouter, Depends, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
 from backend.accounts.deps import VIEW_SCOPE, CurrentAdmin, require_view_access
@@ -17,6 +17,7 @@ from backend.captures.schemas import (
     ImportRequest,
     ImportResultRead,
     ObjectRead,
+    SequenceDeletedRead,
     SequenceRead,
     ViewTokenRead,
 )
@@ -25,6 +26,7 @@ from backend.db import SessionDep
 from backend.errors import NotFound, PayloadTooLarge
 from backend.security import sign_token
 from backend.storage import get_storage
+from backend.validation import Id, Index, Key
 
 router = APIRouter(prefix="/api", tags=["captures"])
 
@@ -48,7 +50,9 @@ def _sequence_read(seq: Sequence) -> SequenceRead:
 async def import_capture(body: ImportRequest, _: CurrentAdmin) -> list[ImportResultRead]:
     """Import a capture that is on the server's disk (DexYCB layout or per-camera videos)."""
     results = await run_in_threadpool(flows.import_path, body.path)
-    return [ImportResultRead(**r.__dict__) for r in results]
+    return [ImportResultRead(sequence_id=r.sequence_id, subject=r.subject, name=r.name,
+                             created=r.created, num_cameras=r.num_cameras,
+                             num_frames=r.num_frames, repaired=r.repaired) for r in results]
 
 
 @router.get("/sequences", response_model=list[SequenceRead])
@@ -57,13 +61,27 @@ def list_sequences(session: SessionDep, _: CurrentAdmin) -> list[SequenceRead]:
 
 
 @router.get("/sequences/{sequence_id}", response_model=SequenceRead)
-def get_sequence(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> SequenceRead:
+def get_sequence(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> SequenceRead:
     return _sequence_read(service.get_sequence_or_raise(session, sequence_id))
+
+
+@router.delete("/sequences/{sequence_id}", response_model=SequenceDeletedRead)
+async def delete_sequence(
+    sequence_id: int, _: CurrentAdmin,
+    force: bool = Query(False, description="delete it even with submitted or approved work"),
+) -> SequenceDeletedRead:
+    """Delete a sequence: its rows, the tasks and work on it, and its stored files. 409 when it
+    has submitted or approved assignments, unless ``force=true``."""
+    done = await run_in_threadpool(flows.delete_sequence, sequence_id, force)
+    d = done.sequence
+    return SequenceDeletedRead(sequence_id=d.sequence_id, subject=d.subject, name=d.name,
+                               tasks=d.tasks, assignments=d.assignments,
+                               finished_assignments=d.finished_assignments, files=done.files)
 
 
 @router.post("/sequences/{sequence_id}/views/{serial}/token", response_model=ViewTokenRead)
 def create_view_token(
-    sequence_id: int, serial: str, session: SessionDep, _: CurrentAdmin
+    sequence_id: Id, serial: Key, session: SessionDep, _: CurrentAdmin
 ) -> ViewTokenRead:
     """A token that lets its holder read this one view's frames (for sharing a clip)."""
     service.get_camera_or_raise(session, sequence_id, serial)
@@ -81,7 +99,7 @@ def _frame_url(request: Request, sequence_id: int, serial: str, tail: str) -> st
 @router.get("/sequences/{sequence_id}/views/{serial}/frames", response_model=FramesManifest,
             dependencies=[Depends(require_view_access)])
 def frames_manifest(
-    sequence_id: int, serial: str, request: Request, session: SessionDep
+    sequence_id: Id, serial: Key, request: Request, session: SessionDep
 ) -> FramesManifest:
     """Every frame of one view: direct (signed) URLs on S3, API URLs on local storage."""
     camera = service.get_camera_or_raise(session, sequence_id, serial)
@@ -106,7 +124,7 @@ def frames_manifest(
 @router.get("/sequences/{sequence_id}/views/{serial}/frames.bin",
             dependencies=[Depends(require_view_access)],
             responses={200: {"content": {BUNDLE_MEDIA_TYPE: {}}}})
-def frames_bundle(sequence_id: int, serial: str, request: Request, session: SessionDep) -> Response:
+def frames_bundle(sequence_id: Id, serial: Key, request: Request, session: SessionDep) -> Response:
     """All colour frames of one view in one response (format in backend/captures/frames.py)."""
     camera = service.get_camera_or_raise(session, sequence_id, serial)
     seq = session.get(Sequence, sequence_id)
@@ -126,16 +144,18 @@ def frames_bundle(sequence_id: int, serial: str, request: Request, session: Sess
 
 
 @router.get("/sequences/{sequence_id}/views/{serial}/frames/{index}.jpg",
-            dependencies=[Depends(require_view_access)])
-def frame_color(sequence_id: int, serial: str, index: int, session: SessionDep) -> Response:
+            dependencies=[Depends(require_view_access)], response_class=Response,
+            responses={200: {"content": {"image/jpeg": {}}}})
+def frame_color(sequence_id: Id, serial: Key, index: Index, session: SessionDep) -> Response:
     frame = service.get_frame_or_raise(session, sequence_id, serial, index)
     return Response(get_storage().get_bytes(frame.color_key), media_type="image/jpeg",
                     headers={"Cache-Control": FRAME_CACHE_CONTROL})
 
 
 @router.get("/sequences/{sequence_id}/views/{serial}/frames/{index}/depth.png",
-            dependencies=[Depends(require_view_access)])
-def frame_depth(sequence_id: int, serial: str, index: int, session: SessionDep) -> Response:
+            dependencies=[Depends(require_view_access)], response_class=Response,
+            responses={200: {"content": {"image/png": {}}}})
+def frame_depth(sequence_id: Id, serial: Key, index: Index, session: SessionDep) -> Response:
     frame = service.get_frame_or_raise(session, sequence_id, serial, index)
     if frame.depth_key is None:
         raise NotFound(f"camera {serial!r} has no depth (imported from video)")

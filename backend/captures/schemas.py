@@ -61,7 +61,8 @@ class SequenceRead(BaseModel):
 
 
 class ImportRequest(BaseModel):
-    path: str = Field(min_length=1, description="capture root or sequence folder on the server")
+    path: str = Field(min_length=1, max_length=4096,
+                      description="capture root or sequence folder on the server")
 
 
 class ImportResultRead(BaseModel):
@@ -71,6 +72,18 @@ class ImportResultRead(BaseModel):
     created: bool
     num_cameras: int
     num_frames: int
+    repaired: int = Field(0, description="stored files of an already-imported sequence that "
+                                         "were missing and are written again from the capture")
+
+
+class SequenceDeletedRead(BaseModel):
+    sequence_id: int
+    subject: str
+    name: str
+    tasks: int = Field(description="its annotation tasks, deleted with it")
+    assignments: int = Field(description="assignments of those tasks (any state), deleted")
+    finished_assignments: int = Field(description="of which submitted or approved")
+    files: int = Field(description="stored files removed (frames, models, thumbnails, solves)")
 
 
 class FrameRef(BaseModel):

@@ -3,22 +3,30 @@
 from __future__ import annotations
 
 import hashlib
+import logging
 import mimetypes
-from collections.abc import Iterator
+import secrets
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session, selectinload
 
-from backend.captures.layout import CameraPlan, SequencePlan
+from backend.captures.layout import SequencePlan
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.errors import Conflict, NotFound
 from backend.storage import Storage
 from worker.geometry.cameras import CameraModel
 
 UPLOAD_THREADS = 8
+# Assignment states that hold a worker's finished work: deleting their sequence needs force.
+FINISHED_WORK = ("submitted", "approved")
+# Most missing file keys an error message lists.
+LISTED_KEYS = 5
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -29,10 +37,38 @@ class ImportResult:
     created: bool
     num_cameras: int
     num_frames: int
+    # Stored files of an already-imported sequence that were missing and are written again.
+    repaired: int = 0
+    storage_uid: str = ""
 
 
-def storage_uid(subject: str, name: str) -> str:
-    return hashlib.sha256(f"{subject}/{name}".encode()).hexdigest()[:24]
+@dataclass(frozen=True)
+class StoredFile:
+    """One file an import writes: its storage key, and the capture file or bytes it holds."""
+
+    key: str
+    path: Path | None
+    data: bytes | None = None
+
+
+def new_storage_uid(subject: str, name: str) -> str:
+    """A storage prefix of its own for one import attempt: the name's hash, then a random part.
+
+    Two imports of the same sequence at once write under different prefixes, so the one that
+    loses the race (its rows are refused by the unique name) removes only its own files.
+    """
+    digest = hashlib.sha256(f"{subject}/{name}".encode()).hexdigest()[:24]
+    return f"{digest}-{secrets.token_hex(6)}"
+
+
+def capture_prefix(uid: str) -> str:
+    """Storage prefix of a sequence's frames, models and thumbnails."""
+    return f"captures/{uid}"
+
+
+def solve_prefix(uid: str) -> str:
+    """Storage prefix of a sequence's solve results (backend.solve.results.result_key)."""
+    return f"solves/{uid}"
 
 
 def find_sequence(session: Session, subject: str, name: str) -> Sequence | None:
@@ -90,7 +126,8 @@ def existing_import(session: Session, plan: SequencePlan) -> Sequence | None:
     if seq.fingerprint != plan.fingerprint:
         raise Conflict(
             f"sequence {plan.subject}/{plan.name} is already imported with different content; "
-            "delete it first to re-import"
+            f"delete it first to re-import (`dexlabel sequences delete {seq.id}` or "
+            f"DELETE /api/sequences/{seq.id})"
         )
     return seq
 
@@ -98,23 +135,64 @@ def existing_import(session: Session, plan: SequencePlan) -> Sequence | None:
 def import_sequence(session: Session, storage: Storage, plan: SequencePlan) -> ImportResult:
     """Copy a planned sequence's files to storage and add its rows (flushed, not committed).
 
-    On any failure the files written under the sequence's storage prefix are removed again;
-    the caller's rollback removes the rows.
+    A new sequence is written under a storage prefix of this attempt's own, and on any failure
+    before the rows are flushed that prefix is removed again (the caller's rollback removes the
+    rows). A sequence already imported from the same capture is checked instead: stored files
+    that went missing are written again from the capture (``repaired``).
     """
     seq = existing_import(session, plan)
     if seq is not None:
-        frames = seq.num_frames
-        return ImportResult(seq.id, plan.subject, plan.name, False, len(seq.cameras), frames)
-    uid = storage_uid(plan.subject, plan.name)
-    prefix = f"captures/{uid}"
+        repaired = restore_missing_files(session, storage, plan, seq)
+        return ImportResult(seq.id, plan.subject, plan.name, False, len(seq.cameras),
+                            seq.num_frames, repaired=repaired, storage_uid=seq.storage_uid)
+    uid = new_storage_uid(plan.subject, plan.name)
     try:
         seq = _add_rows(session, plan, uid)
-        _upload(storage, plan, seq, prefix)
+        _write(storage, plan_files(plan, capture_prefix(uid)))
         session.flush()
     except BaseException:
-        storage.delete_prefix(prefix)
+        storage.delete_prefix(capture_prefix(uid))
         raise
-    return ImportResult(seq.id, plan.subject, plan.name, True, len(plan.cameras), plan.num_frames)
+    return ImportResult(seq.id, plan.subject, plan.name, True, len(plan.cameras), plan.num_frames,
+                        storage_uid=uid)
+
+
+def restore_missing_files(
+    session: Session, storage: Storage, plan: SequencePlan, seq: Sequence
+) -> int:
+    """Write again every stored file of ``seq`` that is missing, from the capture it was imported
+    from (same fingerprint); how many were written.
+
+    Raises:
+        Conflict: a stored file the rows refer to is missing and the capture has nothing for
+            that key; the detail lists the keys and how to delete the sequence.
+    """
+    files = {f.key: f for f in plan_files(plan, capture_prefix(seq.storage_uid))}
+    keys = set(files)
+    keys.update(k for row in _frame_rows(session, seq.id) for k in row if k)
+    keys.update(obj.mesh_key for obj in seq.objects)
+    with ThreadPoolExecutor(UPLOAD_THREADS) as pool:
+        present = dict(zip(sorted(keys), pool.map(storage.exists, sorted(keys)), strict=True))
+    missing = [k for k, there in present.items() if not there]
+    lost = [k for k in missing if k not in files]
+    if lost:
+        listed = ", ".join(lost[:LISTED_KEYS]) + (" ..." if len(lost) > LISTED_KEYS else "")
+        raise Conflict(
+            f"sequence {seq.id} ({plan.subject}/{plan.name}): {len(lost)} stored file(s) are "
+            f"missing and this capture has nothing to restore them from: {listed}; delete the "
+            f"sequence (`dexlabel sequences delete {seq.id}` or DELETE /api/sequences/{seq.id}) "
+            "and import it again")
+    if missing:
+        _write(storage, [files[k] for k in missing])
+        log.warning("sequence %d (%s/%s): %d stored file(s) were missing and are written again "
+                    "from the capture", seq.id, plan.subject, plan.name, len(missing))
+    return len(missing)
+
+
+def _frame_rows(session: Session, sequence_id: int) -> list[tuple[str, str | None]]:
+    stmt = (select(Frame.color_key, Frame.depth_key).join(Camera)
+            .where(Camera.sequence_id == sequence_id))
+    return [(row[0], row[1]) for row in session.execute(stmt)]
 
 
 def _get_or_create_subject(session: Session, name: str) -> Subject:
@@ -125,23 +203,65 @@ def _get_or_create_subject(session: Session, name: str) -> Subject:
     return subject
 
 
+def color_key(prefix: str, serial: str, index: int) -> str:
+    return f"{prefix}/{serial}/color_{index:06d}.jpg"
+
+
+def depth_key(prefix: str, serial: str, index: int) -> str:
+    return f"{prefix}/{serial}/aligned_depth_to_color_{index:06d}.png"
+
+
+def model_key(prefix: str, object_name: str, file_name: str) -> str:
+    return f"{prefix}/models/{object_name}/{file_name}"
+
+
+def plan_files(plan: SequencePlan, prefix: str) -> list[StoredFile]:
+    """Every file an import of ``plan`` under ``prefix`` writes: models, colour and depth."""
+    files = [StoredFile(model_key(prefix, obj.name, path.name), path)
+             for obj in plan.objects for path in obj.model_files]
+    for cam in plan.cameras:
+        if cam.video_path is None:
+            for fr in cam.frames:
+                files.append(StoredFile(color_key(prefix, cam.serial, fr.index), fr.color_path))
+                if fr.depth_path is not None:
+                    files.append(StoredFile(depth_key(prefix, cam.serial, fr.index),
+                                            fr.depth_path))
+        else:
+            files.extend(StoredFile(color_key(prefix, cam.serial, index), None, data)
+                         for index, data in enumerate(cam.video_frames))
+    return files
+
+
 def _add_rows(session: Session, plan: SequencePlan, uid: str) -> Sequence:
     seq = Sequence(
         subject=_get_or_create_subject(session, plan.subject), name=plan.name, storage_uid=uid,
         num_frames=plan.num_frames, master_serial=plan.master_serial,
         source_kind=plan.source_kind, fingerprint=plan.fingerprint,
     )
-    prefix = f"captures/{uid}"
-    for view, cam in enumerate(plan.cameras):
-        seq.cameras.append(Camera(
-            serial=cam.serial, view_index=view, width=cam.width, height=cam.height,
-            fx=cam.fx, fy=cam.fy, ppx=cam.ppx, ppy=cam.ppy, distortion=cam.distortion,
-            extrinsics=cam.extrinsics, has_depth=cam.video_path is None,
-        ))
+    prefix = capture_prefix(uid)
+    for view, cam_plan in enumerate(plan.cameras):
+        cam = Camera(
+            serial=cam_plan.serial, view_index=view, width=cam_plan.width,
+            height=cam_plan.height, fx=cam_plan.fx, fy=cam_plan.fy, ppx=cam_plan.ppx,
+            ppy=cam_plan.ppy, distortion=cam_plan.distortion, extrinsics=cam_plan.extrinsics,
+            has_depth=cam_plan.video_path is None,
+        )
+        if cam_plan.video_path is None:
+            for fr in cam_plan.frames:
+                cam.frames.append(Frame(
+                    index=fr.index, color_key=color_key(prefix, cam.serial, fr.index),
+                    depth_key=(depth_key(prefix, cam.serial, fr.index)
+                               if fr.depth_path is not None else None),
+                    color_bytes=fr.color_path.stat().st_size))
+        else:
+            for index, data in enumerate(cam_plan.video_frames):
+                cam.frames.append(Frame(index=index, color_key=color_key(prefix, cam.serial, index),
+                                        depth_key=None, color_bytes=len(data)))
+        seq.cameras.append(cam)
     for obj in plan.objects:
         seq.objects.append(SceneObject(
             index=obj.index, ycb_id=obj.ycb_id, name=obj.name,
-            mesh_key=f"{prefix}/models/{obj.name}/{obj.mesh_path.name}",
+            mesh_key=model_key(prefix, obj.name, obj.mesh_path.name),
             num_vertices=obj.num_vertices, num_faces=obj.num_faces, grasped=obj.grasped,
             initial_pose=obj.initial_pose,
         ))
@@ -152,42 +272,63 @@ def _add_rows(session: Session, plan: SequencePlan, uid: str) -> Sequence:
     return seq
 
 
-def _upload(storage: Storage, plan: SequencePlan, seq: Sequence, prefix: str) -> None:
-    jobs: list[tuple[str, bytes | None, str]] = []  # (key, data or None to read path, path)
-    jobs.extend((f"{prefix}/models/{obj.name}/{path.name}", None, str(path))
-                for obj in plan.objects for path in obj.model_files)
-    for cam_plan, cam in zip(plan.cameras, seq.cameras, strict=True):
-        for index, color_key, depth_key, color_bytes in _frame_sources(cam_plan, prefix, jobs):
-            cam.frames.append(Frame(index=index, color_key=color_key, depth_key=depth_key,
-                                    color_bytes=color_bytes))
+def _write(storage: Storage, files: list[StoredFile]) -> None:
     with ThreadPoolExecutor(UPLOAD_THREADS) as pool:
-        for _ in pool.map(lambda job: _put(storage, *job), jobs):
+        for _ in pool.map(lambda f: _put(storage, f), files):
             pass
 
 
-def _put(storage: Storage, key: str, data: bytes | None, path: str) -> None:
-    payload = data if data is not None else open(path, "rb").read()  # noqa: SIM115
-    storage.put_bytes(key, payload, mimetypes.guess_type(key)[0] or "application/octet-stream")
+def _put(storage: Storage, file: StoredFile) -> None:
+    if file.data is not None:
+        payload = file.data
+    else:
+        assert file.path is not None
+        payload = file.path.read_bytes()
+    storage.put_bytes(file.key, payload,
+                      mimetypes.guess_type(file.key)[0] or "application/octet-stream")
 
 
-def _frame_sources(
-    cam: CameraPlan, prefix: str, jobs: list[tuple[str, bytes | None, str]]
-) -> Iterator[tuple[int, str, str | None, int]]:
-    base = f"{prefix}/{cam.serial}"
-    if cam.video_path is None:
-        for fr in cam.frames:
-            color_key = f"{base}/color_{fr.index:06d}.jpg"
-            jobs.append((color_key, None, str(fr.color_path)))
-            depth_key = None
-            if fr.depth_path is not None:
-                depth_key = f"{base}/aligned_depth_to_color_{fr.index:06d}.png"
-                jobs.append((depth_key, None, str(fr.depth_path)))
-            yield fr.index, color_key, depth_key, fr.color_path.stat().st_size
-        return
-    for index, data in enumerate(cam.video_frames):
-        color_key = f"{base}/color_{index:06d}.jpg"
-        jobs.append((color_key, data, ""))
-        yield index, color_key, None, len(data)
+@dataclass
+class DeletedSequence:
+    sequence_id: int
+    subject: str
+    name: str
+    storage_uid: str
+    tasks: int
+    assignments: int
+    finished_assignments: int
+
+
+def delete_sequence(session: Session, sequence_id: int, force: bool = False) -> DeletedSequence:
+    """Delete a sequence's rows and everything that hangs off them (cameras, frames, objects,
+    hands, tasks, assignments, HIT and QC records, solve runs: the foreign keys cascade).
+    Its stored files are the caller's to remove, once this is committed.
+
+    Raises:
+        NotFound: no such sequence.
+        Conflict: it has submitted or approved work and ``force`` is not given.
+    """
+    from backend.annotation.models import Assignment, Task
+
+    seq = get_sequence_or_raise(session, sequence_id)
+    tasks = session.scalar(select(func.count()).select_from(Task)
+                           .where(Task.sequence_id == sequence_id)) or 0
+    rows = session.execute(select(Assignment.status, func.count()).join(Task)
+                           .where(Task.sequence_id == sequence_id)
+                           .group_by(Assignment.status)).all()
+    by_status: dict[str, int] = dict(rows)
+    finished = sum(by_status.get(status, 0) for status in FINISHED_WORK)
+    if finished and not force:
+        raise Conflict(
+            f"sequence {sequence_id} ({seq.subject.name}/{seq.name}) has {finished} submitted "
+            f"or approved assignment(s); deleting it deletes that work too: ask again with "
+            f"force (`--force`, `?force=true`) to delete it anyway")
+    deleted = DeletedSequence(sequence_id, seq.subject.name, seq.name, seq.storage_uid,
+                              tasks, sum(by_status.values()), finished)
+    session.execute(delete(Sequence).where(Sequence.id == sequence_id)
+                    .execution_options(synchronize_session=False))
+    session.expunge_all()
+    return deleted
 
 
 def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
