@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -43,9 +44,21 @@ class LazySqliteStorage:
         return getattr(self._storage(), attr)
 
 
+# Redis socket limits: a Redis that does not answer (down, or a host that drops packets) makes
+# an enqueue fail within seconds instead of hanging the request or job that sends it. Reads
+# block for at most a second (Huey's read timeout), well within the socket timeout.
+REDIS_CONNECT_TIMEOUT_S = 5.0
+REDIS_SOCKET_TIMEOUT_S = 10.0
+
+
 def make_huey(settings: Settings) -> Huey:
     if settings.redis_url:
-        return RedisHuey("dexlabel", url=settings.redis_url, results=False)
+        from redis import ConnectionPool
+
+        pool = ConnectionPool.from_url(settings.redis_url,
+                                       socket_connect_timeout=REDIS_CONNECT_TIMEOUT_S,
+                                       socket_timeout=REDIS_SOCKET_TIMEOUT_S)
+        return RedisHuey("dexlabel", connection_pool=pool, results=False)
     return Huey("dexlabel", results=False, storage_class=LazySqliteStorage,
                 filename=str(settings.queue_path))
 
@@ -64,7 +77,8 @@ def enqueue_after_commit(session: Session, task: Callable[..., Any], *args: Any)
 @event.listens_for(Session, "after_commit")
 def _flush_jobs(session: Session) -> None:
     # The data is committed by now; a queue that is down must not make the caller believe the
-    # unit of work failed, so the error is logged and the job can be re-run by hand.
+    # unit of work failed. A job's message goes through backend.jobs.service.send, which
+    # records one the queue refused so the reaper sends it again; anything else is logged.
     for task, args in session.info.pop("after_commit_jobs", []):
         try:
             task(*args)
@@ -77,12 +91,49 @@ def _drop_jobs(session: Session) -> None:
     session.info.pop("after_commit_jobs", None)
 
 
+# A mark the reaper leaves in the queue's own store: when it is gone, the store lost what it
+# held (a Redis restarted without persistence, or flushed), messages included.
+_MARK = "dexlabel.queue-mark"
+
+
+def queue_lost_messages(queue: Huey | None = None) -> bool:
+    """True when the queue's store no longer holds the mark left by the previous call (or was
+    never marked): messages sent before may be gone. Leaves the mark in either case."""
+    return bool((queue or huey).put_if_empty(_MARK, time.time()))
+
+
+def check_queue(timeout_s: float = 2.0) -> str | None:
+    """Why the queue cannot take messages now (None when it can): a Redis ping within
+    ``timeout_s`` when Redis is the queue, else a read of the SQLite queue file."""
+    settings = get_settings()
+    try:
+        if settings.redis_url:
+            import redis
+
+            client = redis.Redis.from_url(settings.redis_url, socket_timeout=timeout_s,
+                                          socket_connect_timeout=timeout_s)
+            try:
+                client.ping()
+            finally:
+                client.close()
+        else:
+            huey.pending_count()
+    except Exception as exc:  # any failure to reach it is the answer
+        return f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''}"
+    return None
+
+
 def make_consumer(workers: int) -> Consumer:
     import worker.tasks  # noqa: F401  (registers the tasks and job handlers on ``huey``)
     from backend.jobs.service import requeue_stale
 
+    try:
+        reset = queue_lost_messages()
+    except Exception:
+        log.exception("the queue does not answer; jobs are sent once it does")
+        reset = True
     try:  # queued jobs, and jobs whose worker died while no consumer ran, are picked up at once
-        requeue_stale(starting=True)
+        requeue_stale(starting=True, queue_reset=reset)
     except Exception:
         log.exception("could not check the job table for stale jobs")
     # periodic: the reaper (worker.tasks.reap_jobs) runs every minute in every consumer.

@@ -20,7 +20,7 @@ from backend.captures.flows import FRAME_STATS
 from backend.captures.models import Camera, Frame
 from backend.db import session_scope
 from backend.jobs.service import job_handler, requeue_stale
-from backend.queue import huey
+from backend.queue import huey, queue_lost_messages
 from backend.solve.flows import run_solve
 from backend.storage import get_storage
 from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
@@ -58,8 +58,9 @@ def compute_frame_stats(args: dict[str, Any]) -> dict[str, Any]:
 
 @huey.periodic_task(crontab(minute="*"))
 def reap_jobs() -> None:
-    """Every minute: re-queue jobs whose worker died or whose queue message was lost."""
-    requeue_stale()
+    """Every minute: re-queue jobs whose worker died or whose queue message was lost (all of
+    them at once when the queue's store lost its messages, e.g. a Redis restarted empty)."""
+    requeue_stale(queue_reset=queue_lost_messages())
 
 
 @job_handler("qc")

@@ -22,7 +22,7 @@ from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
-from backend.jobs.service import checkpoint
+from backend.jobs.service import check_lease, checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
 
@@ -65,6 +65,7 @@ def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
 def act_on_reports(client: MTurkClient, sequence_id: int, target_key: str) -> dict[str, int]:
     done: dict[str, int] = {}
     for report_id, assignment_id in _pending(sequence_id, target_key):
+        check_lease()  # an attempt that lost its job to a newer one stops before acting
         outcome = _act(client, report_id, assignment_id)
         if outcome:
             done[outcome] = done.get(outcome, 0) + 1
@@ -151,6 +152,7 @@ def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str
     for worker_id in due:
         if worker_id in blocked:
             continue
+        check_lease()
         with session_scope() as session, session.no_autoflush:
             try:
                 actions.block_worker(session, client, worker_id,

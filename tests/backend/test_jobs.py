@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from datetime import UTC, datetime, timedelta
 
 import pytest
@@ -12,6 +14,7 @@ from backend.db import session_scope
 from backend.jobs.models import Job
 from backend.jobs.service import (
     _retry_delay,
+    checkpoint,
     enqueue_job,
     execute,
     job_handler,
@@ -166,8 +169,6 @@ def test_first_submissions_of_two_views_at_once_queue_one_qc_job(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Two views of one target submitted at the same moment, before its QC job exists: both
     submits succeed and the target has one QC job row that counts both asks."""
-    import threading
-
     from backend.captures.flows import import_path
     from backend.config import get_settings
     from backend.quality import service as quality_service
@@ -218,3 +219,145 @@ def test_first_submissions_of_two_views_at_once_queue_one_qc_job(
         jobs = list(session.scalars(select(Job).where(Job.kind == "qc")))
     assert [(j.key, j.status, j.requests) for j in jobs] == [
         (qc_key(sequence_id, "hand:0"), "queued", 2)]
+
+
+SLOW_RUNS: list[int] = []
+
+
+@job_handler("test-slow")
+def _slow(args: dict) -> dict:
+    """Works for args["seconds"] in steps, with a checkpoint between steps."""
+    SLOW_RUNS.append(1)
+    steps = int(args["seconds"] / 0.25)
+    for _ in range(steps):
+        time.sleep(0.25)
+        checkpoint()
+    return {"steps": steps}
+
+
+def test_a_job_that_works_longer_than_its_lease_keeps_it(
+        app_env: dict, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 1 s lease and 4 s of work: the heartbeat renews the lease, so the reaper and other
+    workers asking for the job all along leave it to its one attempt."""
+    from backend.config import get_settings
+
+    monkeypatch.setenv("DEXLABEL_JOB_LEASE_S", "1")
+    get_settings.cache_clear()
+    SLOW_RUNS.clear()
+    with session_scope() as session:
+        enqueue_job(session, "test-slow", "slow:1", {"seconds": 4})
+    runner = threading.Thread(target=execute, args=("slow:1",))
+    runner.start()
+    requeued: list[str] = []
+    while runner.is_alive():  # another worker and the reaper, as often as they can
+        requeued += requeue_stale()
+        execute("slow:1")
+        time.sleep(0.2)
+    runner.join()
+    job = _job("slow:1")
+    assert (job.status, job.attempts, job.result) == ("done", 1, {"steps": 16})
+    assert SLOW_RUNS == [1] and requeued == []
+
+
+ACTED: list[int] = []
+STARTED, RELEASE = threading.Event(), threading.Event()
+
+
+@job_handler("test-act")
+def _act_once(args: dict) -> dict:
+    """Acts after a checkpoint; the first run waits for the test before it gets there."""
+    run = 2 if STARTED.is_set() else 1
+    if run == 1:
+        STARTED.set()
+        assert RELEASE.wait(30)
+    checkpoint()
+    ACTED.append(run)
+    return {"acted_in_run": run}
+
+
+def test_an_attempt_that_lost_its_job_stops_at_its_next_checkpoint_without_acting(
+        app_env: dict) -> None:
+    ACTED.clear()
+    STARTED.clear()
+    RELEASE.clear()
+    with session_scope() as session:
+        enqueue_job(session, "test-act", "act:1", {})
+    first = threading.Thread(target=execute, args=("act:1",))
+    first.start()
+    try:
+        assert STARTED.wait(30)
+        # The first attempt's lease runs out (its heartbeat could not reach the database) and
+        # another worker claims the job and acts.
+        with session_scope() as session:
+            session.execute(update(Job).where(Job.key == "act:1").values(
+                lease_until=datetime.now(UTC) - timedelta(seconds=1)))
+        execute("act:1")
+        assert ACTED == [2]
+    finally:
+        RELEASE.set()
+        first.join(30)
+    assert ACTED == [2], "the attempt that lost its job acted anyway"
+    job = _job("act:1")
+    assert (job.status, job.attempts, job.result, job.error) == (
+        "done", 2, {"acted_in_run": 2}, None)
+
+
+class _QueueDown:
+    """The queue task while the queue is down: sending raises, as Redis's client does."""
+
+    def __call__(self, *args: object) -> None:
+        raise ConnectionError("Error 111 connecting to 127.0.0.1:6379. Connection refused.")
+
+    def schedule(self, *args: object, **kwargs: object) -> None:
+        self()
+
+
+def test_a_job_the_queue_did_not_take_is_sent_by_the_next_reaper_pass(
+        app_env: dict, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The queue was down when the unit of work committed: the job's row says so, and the
+    reaper's next pass (every minute) sends it, not only job_requeue_after_s later."""
+    from backend.jobs import service
+
+    monkeypatch.setattr(service, "run_job", _QueueDown())
+    _queue("test-echo", "echo:unsent", 4)  # committed all the same
+    job = _job("echo:unsent")
+    assert job.status == "queued" and job.lease_until is not None
+    assert huey.pending_count() == 0
+    monkeypatch.undo()  # the queue is back
+    assert requeue_stale() == ["echo:unsent"]
+    assert huey.pending_count() == 1
+    assert requeue_stale() == []  # sent: nothing more to send
+    execute("echo:unsent")
+    assert (_job("echo:unsent").status, CALLS) == ("done", [{"value": 4}])
+
+
+def test_a_retry_the_queue_did_not_take_is_sent_when_it_is_due(
+        app_env: dict, monkeypatch: pytest.MonkeyPatch) -> None:
+    from backend.jobs import service
+
+    _queue("test-broken", "broken:unsent", 1)
+    huey.flush()
+    monkeypatch.setattr(service, "run_job", _QueueDown())
+    execute("broken:unsent")  # fails; its retry (due in 5 s) cannot be scheduled
+    monkeypatch.undo()
+    job = _job("broken:unsent")
+    assert (job.status, job.attempts) == ("retrying", 1)
+    assert requeue_stale() == []  # not due yet
+    later = datetime.now(UTC) + timedelta(seconds=6)
+    assert requeue_stale(now=later) == ["broken:unsent"]
+    assert huey.pending_count() == 1
+
+
+def test_after_the_queue_lost_its_messages_the_reaper_sends_every_waiting_job(
+        app_env: dict) -> None:
+    """A Redis restarted without persistence forgets the messages it held: the reaper's next
+    pass sends every queued job at once and every retrying one at its retry time."""
+    _queue("test-echo", "echo:forgotten", 1)
+    _queue("test-broken", "broken:forgotten", 2)
+    execute("broken:forgotten")  # now retrying, its retry scheduled in 5 s
+    huey.flush()  # the queue's store is emptied
+    assert requeue_stale() == []
+    assert sorted(requeue_stale(queue_reset=True)) == ["broken:forgotten", "echo:forgotten"]
+    sent = {task.args[0]: task.eta for task in huey.pending()}
+    assert sent.keys() == {"echo:forgotten", "broken:forgotten"}
+    assert sent["echo:forgotten"] is None and sent["broken:forgotten"] is not None
