@@ -20,5 +20,10 @@ RUN pip install -e .
 
 RUN useradd --create-home --uid 1000 dexlabel && mkdir -p /app/var && chown dexlabel /app/var
 USER dexlabel
+# Safe by default: the image serves in prod mode, which refuses to start without a real
+# DEXLABEL_SECRET_KEY (32+ random characters) and real DEXLABEL_MARKET_REQUESTERS key pairs,
+# so a container never answers on all interfaces with development settings. For a local look,
+# run it with -e DEXLABEL_ENV=dev (the instance then makes its own random secret in /app/var).
+ENV DEXLABEL_ENV=prod
 EXPOSE 8000
 CMD ["dexlabel", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
+import secrets
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -20,8 +23,14 @@ from pydantic_settings import BaseSettings, SettingsConfigDict, SettingsError
 
 from backend.errors import DexlabelError
 
-PLACEHOLDER_SECRETS = frozenset({"", "changeme", "change-me", "secret", "dev-secret-change-me"})
-DEV_SECRET = "dev-secret-change-me"
+# Well-known values refused as DEXLABEL_SECRET_KEY in every mode (the former dev default too).
+PLACEHOLDER_SECRETS = frozenset({"changeme", "change-me", "secret", "dev-secret-change-me"})
+MIN_SECRET_LENGTH = 32
+# With DEXLABEL_SECRET_KEY unset, tokens are signed in dev with a random key made once and kept
+# in {VAR_DIR}/secret_key (mode 0600), and in test with the test suite's own key; prod refuses
+# to start without one. There is no default key anyone could know.
+SECRET_FILE = "secret_key"
+TEST_SECRET = "dexlabel-test-suite-signing-key-only-for-env-test"
 # The built-in marketplace's requester key pair for local use only; `prod` refuses it.
 DEV_MARKET_ACCESS_KEY = "AKDEXLABELDEVREQUESTER"
 DEV_MARKET_REQUESTERS = f"{DEV_MARKET_ACCESS_KEY}:dexlabel-dev-requester-secret"
@@ -95,7 +104,10 @@ def check_qc_thresholds(values: dict[str, Any]) -> dict[str, float | int]:
 class Settings(BaseSettings):
     """All runtime configuration of dexlabel."""
 
-    model_config = SettingsConfigDict(env_prefix="DEXLABEL_", env_file=".env", extra="ignore")
+    # hide_input_in_errors: a refused setting's error never repeats the values it was given
+    # (the secret key among them).
+    model_config = SettingsConfigDict(env_prefix="DEXLABEL_", env_file=".env", extra="ignore",
+                                      hide_input_in_errors=True)
 
     env: Literal["dev", "test", "prod"] = "dev"
     var_dir: Path = Path("var")
@@ -105,7 +117,8 @@ class Settings(BaseSettings):
     s3_endpoint_url: str | None = None
     s3_region: str = "us-east-1"
     public_url: str = "http://127.0.0.1:8000"
-    secret_key: str = DEV_SECRET
+    # Signs every token; read it through ``signing_key`` (unset: see SECRET_FILE above).
+    secret_key: str = Field(default="", repr=False)
     mano_dir: Path | None = None
     # The embedded deployment runs a queue consumer inside `dexlabel serve`; a scale-out
     # deployment turns it off and runs `dexlabel worker` processes instead.
@@ -115,7 +128,7 @@ class Settings(BaseSettings):
     max_bundle_frames: int = Field(default=2000, ge=1)
     # Requester accounts of the built-in MTurk-compatible marketplace: comma-separated
     # ACCESS_KEY:SECRET[:STARTING_BALANCE]; each key pair is one requester account.
-    market_requesters: str = DEV_MARKET_REQUESTERS
+    market_requesters: str = Field(default=DEV_MARKET_REQUESTERS, repr=False)
     market_start_balance: str = "10000.00"
     # Check every marketplace response against botocore's output shape before sending it.
     market_check_responses: bool = True
@@ -124,7 +137,7 @@ class Settings(BaseSettings):
     mturk_endpoint_url: str | None = None
     # Unset = the built-in marketplace's dev requester pair.
     mturk_access_key_id: str | None = None
-    mturk_secret_access_key: str | None = None
+    mturk_secret_access_key: str | None = Field(default=None, repr=False)
     # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
     mturk_sandbox: bool = True
     mturk_use_aws: bool = False
@@ -169,12 +182,17 @@ class Settings(BaseSettings):
             self.database_url = f"sqlite:///{(self.var_dir / 'dexlabel.db').as_posix()}"
         if not self.storage_url:
             self.storage_url = (self.var_dir / "storage").as_posix()
-        if self.env == "prod" and self.secret_key.strip().lower() in PLACEHOLDER_SECRETS:
-            raise ValueError(
-                "DEXLABEL_SECRET_KEY is a placeholder; set a long random value outside dev"
-            )
-        if self.env == "prod" and len(self.secret_key) < 32:
-            raise ValueError("DEXLABEL_SECRET_KEY must be at least 32 characters outside dev")
+        # The messages name the setting, never its value.
+        secret = self.secret_key.strip()
+        if secret.lower() in PLACEHOLDER_SECRETS:
+            raise ValueError("DEXLABEL_SECRET_KEY is a well-known placeholder; set a long random "
+                             "value (or leave it unset in dev)")
+        if self.env == "prod" and not secret:
+            raise ValueError(f"DEXLABEL_SECRET_KEY is not set; prod needs {MIN_SECRET_LENGTH} or "
+                             "more random characters (e.g. `openssl rand -hex 32`)")
+        if self.env == "prod" and len(secret) < MIN_SECRET_LENGTH:
+            raise ValueError(f"DEXLABEL_SECRET_KEY is too short; prod needs {MIN_SECRET_LENGTH} "
+                             "or more random characters")
         requesters = parse_market_requesters(self.market_requesters, self.market_start_balance)
         if self.env == "prod":
             if DEV_MARKET_ACCESS_KEY in requesters:
@@ -182,6 +200,16 @@ class Settings(BaseSettings):
             if any(len(r.secret_key) < 20 for r in requesters.values()):
                 raise ValueError("market secret keys must be at least 20 characters outside dev")
         return self
+
+    @property
+    def signing_key(self) -> str:
+        """The key that signs tokens and seeds request tokens: DEXLABEL_SECRET_KEY, or unset,
+        the test suite's key in test and this instance's own random key in dev."""
+        if self.secret_key.strip():
+            return self.secret_key.strip()
+        if self.env == "test":
+            return TEST_SECRET
+        return instance_secret(self.var_dir)
 
     @property
     def queue_path(self) -> Path:
@@ -214,6 +242,46 @@ def _describe(exc: ValidationError) -> str:
         field = str(error["loc"][0]) if error["loc"] else ""
         lines.append(f"DEXLABEL_{field.upper()}: {message}" if field else message)
     return "\n".join(lines)
+
+
+_secret_lock = threading.Lock()
+_instance_secrets: dict[Path, str] = {}
+
+
+def instance_secret(var_dir: Path) -> str:
+    """The dev instance's signing key, kept in ``{var_dir}/secret_key`` (mode 0600): read, or
+    made once (a random 64-character key) the first time any process of the instance needs
+    it. Every process of the instance reads the same file, so they all sign alike."""
+    path = (var_dir / SECRET_FILE).absolute()
+    with _secret_lock:
+        key = _instance_secrets.get(path)
+        if key is None:
+            key = _instance_secrets[path] = _read_or_make_secret(path)
+        return key
+
+
+def _read_or_make_secret(path: Path) -> str:
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # Written whole under a temporary name, then linked into place: a process racing this
+        # one reads either no file or the whole key, and the first link wins.
+        temp = path.with_name(f".{SECRET_FILE}.{os.getpid()}.{secrets.token_hex(4)}")
+        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as out:
+            out.write(secrets.token_urlsafe(48) + "\n")
+        try:
+            os.link(temp, path)
+        except FileExistsError:
+            pass
+        finally:
+            os.unlink(temp)
+    if path.stat().st_mode & 0o077:
+        os.chmod(path, 0o600)
+    key = path.read_text().strip()
+    if len(key) < MIN_SECRET_LENGTH:
+        raise InvalidSettings(f"{path} does not hold a signing key (too short); delete it and "
+                              "a new one is made")
+    return key
 
 
 @lru_cache

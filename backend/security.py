@@ -98,6 +98,8 @@ def _unb64(text: str) -> bytes:
 
 def sign_token(payload: dict[str, Any], secret: str, ttl_s: int) -> str:
     """A URL-safe token carrying ``payload`` until ``ttl_s`` seconds from now."""
+    if not secret:
+        raise ValueError("no signing key: tokens are signed with Settings.signing_key")
     body = dict(payload, exp=int(time.time()) + ttl_s)
     raw = _b64(json.dumps(body, separators=(",", ":"), sort_keys=True).encode())
     sig = hmac.new(secret.encode(), raw.encode(), hashlib.sha256).digest()
@@ -107,6 +109,8 @@ def sign_token(payload: dict[str, Any], secret: str, ttl_s: int) -> str:
 def verify_token(token: str, secret: str, scope: str | tuple[str, ...]) -> dict[str, Any]:
     """The payload of a valid, unexpired token of ``scope`` (or of one of several scopes);
     Unauthorized otherwise."""
+    if not secret:
+        raise ValueError("no signing key: tokens are checked with Settings.signing_key")
     try:
         raw, sig = token.split(".")
         expected = hmac.new(secret.encode(), raw.encode(), hashlib.sha256).digest()

@@ -32,20 +32,20 @@ def admin_token(admin_id: int, token_epoch: int, ttl_s: int) -> str:
     """An admin's bearer token, valid until ``ttl_s`` or until the admin's token epoch moves
     on (logout, password change or reset)."""
     payload = {"scope": ADMIN_SCOPE, "sub": admin_id, "epoch": token_epoch}
-    return sign_token(payload, get_settings().secret_key, ttl_s)
+    return sign_token(payload, get_settings().signing_key, ttl_s)
 
 
 def view_token(sequence_id: int, serial: str, ttl_s: int) -> str:
     """A read-only token for one view's frames, the only token fit for a URL."""
     payload = {"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial}
-    return sign_token(payload, get_settings().secret_key, ttl_s)
+    return sign_token(payload, get_settings().signing_key, ttl_s)
 
 
 def current_admin(request: Request, session: SessionDep) -> Admin:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("admin login required: send 'Authorization: Bearer <token>'")
-    payload = verify_token(token, get_settings().secret_key, ADMIN_SCOPE)
+    payload = verify_token(token, get_settings().signing_key, ADMIN_SCOPE)
     return get_active_admin(session, int(payload["sub"]), payload.get("epoch"))
 
 
@@ -69,4 +69,4 @@ def require_view_access(
 
 def _frame_token(token: str) -> dict:
     """The payload of a token that may read one view's frames: a view token only."""
-    return verify_token(token, get_settings().secret_key, FRAME_SCOPES)
+    return verify_token(token, get_settings().signing_key, FRAME_SCOPES)

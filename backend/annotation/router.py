@@ -58,7 +58,7 @@ def _worker_claims(request: Request) -> dict[str, Any]:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")
-    return verify_token(token, get_settings().secret_key, (ASSIGNMENT_SCOPE, TASK_SCOPE))
+    return verify_token(token, get_settings().signing_key, (ASSIGNMENT_SCOPE, TASK_SCOPE))
 
 
 WorkerClaims = Annotated[dict[str, Any], Depends(_worker_claims)]
@@ -162,7 +162,7 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
     """Exchange a HIT's task token and the marketplace's ids for an assignment token."""
     if body.assignment_id == PREVIEW_ASSIGNMENT_ID:
         raise Unauthorized("the HIT is not accepted yet (preview)")
-    claims = verify_token(body.task_token, get_settings().secret_key, TASK_SCOPE)
+    claims = verify_token(body.task_token, get_settings().signing_key, TASK_SCOPE)
     task = service.get_task_or_raise(session, int(claims["task_id"]))
     assignment = service.start_assignment(session, task, body.assignment_id, body.worker_id,
                                           body.hit_id)

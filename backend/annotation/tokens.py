@@ -23,13 +23,13 @@ FRAME_TOKEN_TTL_S = 3600
 def task_token(task: Task) -> str:
     payload = {"scope": TASK_SCOPE, "task_id": task.id, "sequence_id": task.sequence_id,
                "serial": task.camera.serial}
-    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
+    return sign_token(payload, get_settings().signing_key, TOKEN_TTL_S)
 
 
 def assignment_token(task: Task, assignment: Assignment) -> str:
     payload = {"scope": ASSIGNMENT_SCOPE, "assignment_id": assignment.id, "task_id": task.id,
                "sequence_id": task.sequence_id, "serial": task.camera.serial}
-    return sign_token(payload, get_settings().secret_key, TOKEN_TTL_S)
+    return sign_token(payload, get_settings().signing_key, TOKEN_TTL_S)
 
 
 def frame_token(task: Task) -> str:

@@ -86,7 +86,7 @@ def create_view_token(
     """A token that lets its holder read this one view's frames (for sharing a clip)."""
     service.get_camera_or_raise(session, sequence_id, serial)
     payload = {"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial}
-    token = sign_token(payload, get_settings().secret_key, VIEW_TOKEN_TTL_S)
+    token = sign_token(payload, get_settings().signing_key, VIEW_TOKEN_TTL_S)
     return ViewTokenRead(token=token, expires_in=VIEW_TOKEN_TTL_S)
 
 

@@ -106,7 +106,7 @@ def reject(session: Session, client: MTurkClient, assignment_id: int, feedback: 
 
 def bonus_token(assignment_id: int, key: str) -> str:
     """Deterministic per (assignment, key) and deployment; at most 64 characters."""
-    seed = f"{get_settings().secret_key}|bonus|{assignment_id}|{key}".encode()
+    seed = f"{get_settings().signing_key}|bonus|{assignment_id}|{key}".encode()
     return f"dxbonus-{assignment_id}-{hashlib.sha256(seed).hexdigest()[:32]}"
 
 

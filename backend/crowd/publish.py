@@ -59,7 +59,7 @@ def check_assignments(count: int, allow_large_hits: bool) -> None:
 
 def request_token(task_id: int, round_: int) -> str:
     """Deterministic per (task, round) and per deployment (keyed by the secret)."""
-    seed = f"{get_settings().secret_key}|hit|{task_id}|{round_}".encode()
+    seed = f"{get_settings().signing_key}|hit|{task_id}|{round_}".encode()
     return f"dxhit-{task_id}-{round_}-{hashlib.sha256(seed).hexdigest()[:24]}"
 
 

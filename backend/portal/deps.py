@@ -24,14 +24,14 @@ def portal_token(account_id: int, worker_id: str, token_epoch: int) -> str:
     on (logout or password change)."""
     payload = {"scope": PORTAL_SCOPE, "sub": account_id, "worker_id": worker_id,
                "epoch": token_epoch}
-    return sign_token(payload, get_settings().secret_key, PORTAL_TOKEN_TTL_S)
+    return sign_token(payload, get_settings().signing_key, PORTAL_TOKEN_TTL_S)
 
 
 def current_worker(request: Request, session: SessionDep) -> PortalAccount:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("worker login required: send 'Authorization: Bearer <token>'")
-    payload = verify_token(token, get_settings().secret_key, PORTAL_SCOPE)
+    payload = verify_token(token, get_settings().signing_key, PORTAL_SCOPE)
     account = get_active_account(session, int(payload["sub"]))
     if account.worker_id != payload.get("worker_id"):
         raise Unauthorized("token does not belong to this worker account")
