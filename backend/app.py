@@ -2,25 +2,35 @@
 
 from __future__ import annotations
 
+import logging
+import time
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from sqlalchemy import Engine, create_engine, text
+from sqlalchemy.pool import NullPool
 
 from backend.accounts.router import router as auth_router
 from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
+from backend.config import get_settings
 from backend.crowd.router import router as crowd_router
-from backend.errors import install_error_handlers
+from backend.db import get_engine
+from backend.errors import install_database_outage_answer, install_error_handlers
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
 from backend.portal.router import router as portal_router
 from backend.progress.router import router as progress_router
 from backend.quality.router import router as review_router
+from backend.queue import check_queue
 from backend.solve.router import router as solve_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
@@ -29,6 +39,8 @@ FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 # fetches its vendor's logo from a CDN, and Swagger UI documents the same operations.
 DOCS_ASSETS_DIR = Path(str(files("fastapi_offline") / "static"))
 DOCS_ASSETS_URL = "/docs/assets"
+
+log = logging.getLogger(__name__)
 
 
 def create_app() -> FastAPI:
@@ -48,11 +60,16 @@ def create_app() -> FastAPI:
     app.include_router(solve_router)
     app.include_router(progress_router)
 
-    @app.get("/healthz", tags=["ops"])
-    def healthz() -> dict[str, str]:
-        return {"status": "ok"}
+    @app.get("/healthz", tags=["ops"], responses={503: {"description": "something is down"}})
+    def healthz() -> JSONResponse:
+        """Whether this server can do its work: the database answers a query and the queue
+        answers (Redis's ping, or the SQLite queue file's read), each within a few seconds.
+        503 names what is down."""
+        return health_answer()
 
     install_api_docs(app)
+    # Added last, so it wraps every other middleware.
+    install_database_outage_answer(app)
     if FRONTEND_DIR.is_dir():
         app.mount("/", StaticFiles(directory=FRONTEND_DIR, html=True), name="frontend")
     return app
@@ -74,3 +91,59 @@ def install_api_docs(app: FastAPI) -> None:
             # No badge from the public validator service: the page makes no outside request.
             swagger_ui_parameters={"validatorUrl": None})
 
+
+# ----- /healthz --------------------------------------------------------------------------
+
+HEALTH_TIMEOUT_S = 3.0
+_health_checks = ThreadPoolExecutor(max_workers=4, thread_name_prefix="healthz")
+
+
+@lru_cache(maxsize=4)
+def _health_engine(url: str) -> Engine:
+    """An engine that opens a new connection for each check, with a connect timeout: the
+    check sees whether the database answers now, not whether the app's pool has a free
+    connection."""
+    if url.startswith("postgresql"):
+        return create_engine(url, poolclass=NullPool, connect_args={
+            "connect_timeout": max(2, int(HEALTH_TIMEOUT_S)),
+            "options": f"-c statement_timeout={int(HEALTH_TIMEOUT_S * 1000)}"})
+    return get_engine()
+
+
+def _check_database() -> str | None:
+    try:
+        with _health_engine(get_settings().database_url).connect() as conn:
+            conn.execute(text("SELECT 1"))
+    except Exception as exc:  # any failure to reach it is the answer
+        log.warning("health: the database does not answer: %s", exc)
+        return f"no answer ({type(exc).__name__})"
+    return None
+
+
+def _check_queue() -> str | None:
+    problem = check_queue(HEALTH_TIMEOUT_S)
+    if problem is not None:
+        log.warning("health: the queue does not answer: %s", problem)
+        return f"no answer ({problem.split(':', 1)[0]})"
+    return None
+
+
+def health_answer() -> JSONResponse:
+    """Run both checks at once, each given HEALTH_TIMEOUT_S; 200 when both answer, else 503
+    with Retry-After and ``detail`` naming what is down."""
+    checks = {"database": _health_checks.submit(_check_database),
+              "queue": _health_checks.submit(_check_queue)}
+    deadline = time.monotonic() + HEALTH_TIMEOUT_S + 1.0
+    states: dict[str, str] = {}
+    for name, check in checks.items():
+        try:
+            problem = check.result(timeout=max(deadline - time.monotonic(), 0.0))
+        except FutureTimeout:
+            problem = f"no answer within {HEALTH_TIMEOUT_S:g} s"
+        states[name] = problem or "ok"
+    down = [f"{name}: {state}" for name, state in states.items() if state != "ok"]
+    if not down:
+        return JSONResponse({"status": "ok", **states})
+    return JSONResponse({"status": "unavailable", "error": "unavailable",
+                         "detail": "; ".join(down), **states},
+                        status_code=503, headers={"Retry-After": "5"})

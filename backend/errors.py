@@ -163,6 +163,63 @@ def install_error_handlers(app: FastAPI) -> None:
                             status_code=exc.status_code, headers=exc.headers)
 
 
+# ----- the database is down: 503 with Retry-After ------------------------------------------
+
+DATABASE_RETRY_AFTER_S = 5
+
+
+def install_database_outage_answer(app: FastAPI) -> None:
+    """Answer a request that could not reach the database 503 ``{"error": "unavailable"}``
+    with Retry-After, instead of a plain-text 500: a connection refused or lost, or any other
+    operational error of the database (``OperationalError``, ``InterfaceError``, or a DBAPI
+    error that invalidated its connection). Nothing of the request was committed; the same
+    request works once the database is back.
+
+    It wraps the exception handlers (an ASGI middleware), so it also answers for errors that a
+    more specific handler passes on; an error after the answer started is left alone.
+    """
+    import logging
+
+    from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError
+    from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+    log = logging.getLogger(__name__)
+
+    def database_down(exc: BaseException) -> bool:
+        return isinstance(exc, OperationalError | InterfaceError) or (
+            isinstance(exc, DBAPIError) and exc.connection_invalidated)
+
+    class DatabaseOutage:
+        def __init__(self, inner: ASGIApp) -> None:
+            self.inner = inner
+
+        async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+            if scope["type"] != "http":
+                await self.inner(scope, receive, send)
+                return
+            started = False
+
+            async def sending(message: Message) -> None:
+                nonlocal started
+                started = started or message["type"] == "http.response.start"
+                await send(message)
+
+            try:
+                await self.inner(scope, receive, sending)
+            except Exception as exc:
+                if started or not database_down(exc):
+                    raise
+                log.warning("%s %s: the database is unavailable: %s", scope.get("method"),
+                            scope.get("path"), str(exc).strip().splitlines()[0])
+                answer = JSONResponse(
+                    {"error": "unavailable",
+                     "detail": "the database is unavailable; please try again shortly"},
+                    status_code=503, headers={"Retry-After": str(DATABASE_RETRY_AFTER_S)})
+                await answer(scope, receive, send)
+
+    app.add_middleware(DatabaseOutage)
+
+
 # ----- the error shape in the OpenAPI document -------------------------------------------
 
 _METHODS = ("get", "put", "post", "delete", "patch", "head", "options", "trace")

@@ -49,6 +49,9 @@ class LazySqliteStorage:
 # block for at most a second (Huey's read timeout), well within the socket timeout.
 REDIS_CONNECT_TIMEOUT_S = 5.0
 REDIS_SOCKET_TIMEOUT_S = 10.0
+# The longest a consumer's worker thread waits before reading the queue again after an empty
+# read (the SQLite queue) or a failed one (Redis down).
+QUEUE_RETRY_MAX_S = 5.0
 
 
 def make_huey(settings: Settings) -> Huey:
@@ -137,7 +140,10 @@ def make_consumer(workers: int) -> Consumer:
     except Exception:
         log.exception("could not check the job table for stale jobs")
     # periodic: the reaper (worker.tasks.reap_jobs) runs every minute in every consumer.
-    return huey.create_consumer(workers=workers, worker_type="thread", periodic=True)
+    # max_delay: a worker thread that cannot read the queue (Redis down) tries again at least
+    # every QUEUE_RETRY_MAX_S, so it takes work within seconds of the queue coming back.
+    return huey.create_consumer(workers=workers, worker_type="thread", periodic=True,
+                                max_delay=QUEUE_RETRY_MAX_S)
 
 
 def start_inprocess_consumer(workers: int) -> Consumer:
