@@ -14,13 +14,16 @@ Layout (paths relative to the capture root)::
     <subject>/<sequence>/<serial>.mp4|.avi|.mov|.mkv  (instead of the folder: colour only)
     <subject>/<sequence>/pose.npz                   optional; pose_y[0] gives initial object poses
 
-Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres. Every problem raises
-InvalidCapture naming the file (relative to the root) and the field or frame at fault.
+Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres. Every colour and depth
+frame is decoded in full, not only its header. Every problem raises InvalidCapture naming the
+file (relative to the root) and the field or frame at fault.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +37,9 @@ from worker.dataset import YCB_CLASSES
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv")
 MESH_SUFFIXES = (".obj", ".ply")
+# Threads that decode a capture's colour and depth frames while it is checked (OpenCV decodes
+# without holding the GIL).
+DECODE_THREADS = min(8, os.cpu_count() or 1)
 
 
 @dataclass
@@ -278,7 +284,41 @@ def _attach_frames(
     num_frames = counts.pop()
     if num_frames <= 0:
         raise rd.fail(seq_dir / "meta.yml", "the views hold no frames")
+    _decode_frames(rd, cameras)
     return num_frames
+
+
+def _decode_frames(rd: _Reader, cameras: list[CameraPlan]) -> None:
+    """Decode every colour and depth frame in full: a header can be whole while the data after
+    it is truncated or corrupt. The first bad file, in camera and frame order, is refused."""
+    files: list[tuple[Path, bool]] = []
+    for cam in cameras:
+        for fr in cam.frames:
+            files.append((fr.color_path, False))
+            if fr.depth_path is not None:
+                files.append((fr.depth_path, True))
+    with ThreadPoolExecutor(DECODE_THREADS) as pool:
+        problems = pool.map(lambda f: _decode_problem(*f), files)
+        for (path, _), problem in zip(files, problems, strict=True):
+            if problem:
+                raise rd.fail(path, problem)
+
+
+def _decode_problem(path: Path, depth: bool) -> str | None:
+    """None if the image file decodes in full (depth: to 16-bit values), else what is wrong."""
+    import cv2
+
+    try:
+        data = np.fromfile(path, np.uint8)
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED if depth else cv2.IMREAD_COLOR)
+    except (OSError, cv2.error) as exc:
+        return f"cannot be decoded: {exc}"
+    if image is None:
+        what = "PNG depth image" if depth else "JPEG image"
+        return f"{what} does not decode (truncated or corrupt data)"
+    if depth and image.dtype != np.uint16:
+        return "depth must be a 16-bit single-channel PNG (millimetres)"
+    return None
 
 
 def _decode_video(rd: _Reader, cam: CameraPlan) -> list[bytes]:

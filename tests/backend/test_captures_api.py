@@ -127,3 +127,19 @@ def test_a_view_longer_than_the_bundle_limit_points_to_the_manifest(
     resp = client.get(f"/api/sequences/{imported['id']}/views/{imported['serials'][0]}/frames.bin",
                       headers=admin_headers)
     assert resp.status_code == 413 and "manifest" in resp.json()["detail"]
+
+
+def test_import_endpoint_refuses_a_truncated_jpeg_naming_it(
+    client: TestClient, admin_headers: dict, app_env: dict, small_capture: Path
+) -> None:
+    cap = edit.copy_capture(small_capture, Path(app_env["DEXLABEL_VAR_DIR"]) / "captures" / "c")
+    serial = str(edit.meta(cap)["serials"][0])
+    frame = edit.sequence_dir(cap) / serial / "color_000005.jpg"
+    frame.write_bytes(frame.read_bytes()[:-3000])
+    resp = client.post("/api/captures/import", json={"path": str(cap)}, headers=admin_headers)
+    assert resp.status_code == 422, resp.text
+    body = resp.json()
+    assert body["error"] == "invalid_capture"
+    assert body["path"].endswith(f"{serial}/color_000005.jpg")
+    assert "does not decode" in body["detail"]
+    assert client.get("/api/sequences", headers=admin_headers).json() == []

@@ -122,6 +122,59 @@ def test_missing_hand_calibration_is_refused(
     _assert_refused(app_env, cap, "mano.yml", "missing")
 
 
+@pytest.fixture(scope="module")
+def tiny_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A synthetic capture of small frames (2 views x 3 frames of 160x120); read-only."""
+    from worker.synth import generate_capture
+
+    root = tmp_path_factory.mktemp("tiny-capture")
+    generate_capture(root, seed=5, frames=3, views=2, objects=1, width=160, height=120,
+                     workers=1)
+    return root
+
+
+def truncate(path: Path, keep: float = 0.6) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[:int(len(data) * keep)])
+
+
+def corrupt(path: Path) -> None:
+    """Flip the bytes in the middle of a file, past its header."""
+    data = bytearray(path.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 8] = bytes(b ^ 0xFF for b in data[middle:middle + 8])
+    path.write_bytes(bytes(data))
+
+
+def test_a_truncated_jpeg_is_refused_naming_the_file(
+    app_env: dict, tiny_capture: Path, tmp_path: Path
+) -> None:
+    cap = edit.copy_capture(tiny_capture, tmp_path / "cap")
+    serial = str(edit.meta(cap)["serials"][1])
+    truncate(edit.sequence_dir(cap) / serial / "color_000001.jpg")
+    _assert_refused(app_env, cap, f"{serial}/color_000001.jpg", "JPEG image does not decode")
+
+
+def test_a_corrupt_depth_png_is_refused_naming_the_file(
+    app_env: dict, tiny_capture: Path, tmp_path: Path
+) -> None:
+    cap = edit.copy_capture(tiny_capture, tmp_path / "cap")
+    serial = str(edit.meta(cap)["serials"][0])
+    corrupt(edit.sequence_dir(cap) / serial / "aligned_depth_to_color_000002.png")
+    _assert_refused(app_env, cap, f"{serial}/aligned_depth_to_color_000002.png",
+                    "PNG depth image does not decode")
+
+
+def test_a_truncated_depth_png_is_refused_naming_the_file(
+    app_env: dict, tiny_capture: Path, tmp_path: Path
+) -> None:
+    cap = edit.copy_capture(tiny_capture, tmp_path / "cap")
+    serial = str(edit.meta(cap)["serials"][1])
+    truncate(edit.sequence_dir(cap) / serial / "aligned_depth_to_color_000000.png", 0.5)
+    _assert_refused(app_env, cap, f"{serial}/aligned_depth_to_color_000000.png",
+                    "PNG depth image does not decode")
+
+
 class _FailingStorage(LocalStorage):
     """Local storage whose 10th write fails, as a full disk or a dropped S3 link would."""
 
