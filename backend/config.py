@@ -8,6 +8,7 @@ PostgreSQL, Redis and S3 (see docker-compose.yml).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import re
@@ -16,10 +17,10 @@ import threading
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict, SettingsError
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict, SettingsError
 
 from backend.errors import DexlabelError
 
@@ -126,6 +127,10 @@ class Settings(BaseSettings):
     worker_threads: int = Field(default=2, ge=1, le=64)
     # Upper bound on frames served in one per-view bundle (a DexYCB clip has 72).
     max_bundle_frames: int = Field(default=2000, ge=1)
+    # Folders POST /api/captures/import may read a capture from (the path and the capture's
+    # root must lie inside one): a JSON list, or folders separated by os.pathsep (':'); empty =
+    # the instance folder's captures/ and the instance folder itself.
+    capture_roots: Annotated[list[Path], NoDecode] = Field(default_factory=list)
     # Requester accounts of the built-in MTurk-compatible marketplace: comma-separated
     # ACCESS_KEY:SECRET[:STARTING_BALANCE]; each key pair is one requester account.
     market_requesters: str = Field(default=DEV_MARKET_REQUESTERS, repr=False)
@@ -170,6 +175,17 @@ class Settings(BaseSettings):
     qc_auto_actions: bool = True
     qc_block_after_failures: int = Field(default=3, ge=0)
     qc_thresholds: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("capture_roots", mode="before")
+    @classmethod
+    def _split_capture_roots(cls, value: Any) -> Any:
+        """A JSON list of folders, or folders separated by os.pathsep."""
+        if not isinstance(value, str):
+            return value
+        text = value.strip()
+        if text.startswith("["):
+            return json.loads(text)
+        return [part.strip() for part in text.split(os.pathsep) if part.strip()]
 
     @field_validator("qc_thresholds")
     @classmethod

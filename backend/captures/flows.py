@@ -12,6 +12,7 @@ other, refused, removes its own files and finds the committed sequence when it a
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,8 +21,9 @@ from sqlalchemy.exc import IntegrityError
 
 from backend.captures import layout, service
 from backend.captures.models import Sequence
+from backend.config import Settings
 from backend.db import session_scope
-from backend.errors import StorageError
+from backend.errors import Forbidden, InvalidCapture, StorageError
 from backend.jobs.service import enqueue_job
 from backend.storage import Storage, get_storage
 
@@ -34,16 +36,76 @@ IMPORT_ATTEMPTS = 3
 log = logging.getLogger(__name__)
 
 
-def import_path(path: str | Path, storage: Storage | None = None) -> list[service.ImportResult]:
+def import_path(path: str | Path, storage: Storage | None = None,
+                roots: Seq[Path] | None = None) -> list[service.ImportResult]:
     """Import every sequence under ``path`` (a capture root or one sequence folder).
 
     All sequences are parsed and checked before the first one is written. A sequence already
     imported from the same capture is unchanged, except that stored files that went missing are
-    written again (``repaired``).
+    written again (``repaired``). With ``roots`` (the HTTP import), the path and the root of
+    every capture found must lie inside one of those folders, symbolic links followed.
+
+    Raises:
+        InvalidCapture: a path with a NUL character, longer than MAX_PATH_CHARS, unreadable, or
+            a capture with a missing or malformed file.
+        Forbidden: outside ``roots``.
     """
     storage = storage or get_storage()
-    plans = [layout.read_sequence(d) for d in layout.find_sequence_dirs(Path(path))]
+    folder = _checked_path(path, roots)
+    try:
+        seq_dirs = layout.find_sequence_dirs(folder)
+    except OSError as exc:  # a name too long for the file system, a folder it may not read
+        raise InvalidCapture(_shown(str(path)), f"cannot be read ({exc.strerror or exc})") from exc
+    if roots is not None:
+        for capture_root in sorted({layout.capture_root_of(d) for d in seq_dirs}):
+            _require_inside(capture_root, roots, f"the capture root {capture_root} (where its "
+                                                 "calibration and models are read)")
+    plans = [layout.read_sequence(d) for d in seq_dirs]
     return [_import_plan(storage, plan) for plan in plans]
+
+
+def allowed_capture_roots(settings: Settings) -> list[Path]:
+    """The folders an HTTP import may read from (DEXLABEL_CAPTURE_ROOTS), resolved; by default
+    the instance folder's captures/ and the instance folder itself."""
+    roots = settings.capture_roots or [settings.var_dir / "captures", settings.var_dir]
+    return [Path(root).resolve() for root in roots]
+
+
+def _shown(path: str) -> str:
+    """A path as an error message shows it: at most 200 characters."""
+    return path if len(path) <= 200 else f"{path[:200]}... ({len(path)} characters)"
+
+
+def _checked_path(path: str | Path, roots: Seq[Path] | None) -> Path:
+    text = str(path)
+    if "\x00" in text:
+        raise InvalidCapture(_shown(text.replace("\x00", "\\0")),
+                             "a path must not contain a NUL character")
+    if len(text) > layout.MAX_PATH_CHARS:
+        raise InvalidCapture(_shown(text), f"a path has at most {layout.MAX_PATH_CHARS} "
+                                           f"characters, this one has {len(text)}")
+    try:
+        resolved = Path(text).resolve()
+    except (OSError, RuntimeError) as exc:  # RuntimeError: a symbolic link loop
+        raise InvalidCapture(_shown(text), f"cannot be read ({exc})") from exc
+    if roots is not None:
+        _require_inside(resolved, roots, text if resolved == Path(text) else
+                        f"{text} (that is {resolved})")
+    try:
+        there = resolved.exists()
+    except OSError as exc:
+        raise InvalidCapture(_shown(text), f"cannot be read ({exc.strerror or exc})") from exc
+    if not there:
+        raise InvalidCapture(_shown(text), "path does not exist")
+    return resolved
+
+
+def _require_inside(path: Path, roots: Seq[Path], what: str) -> None:
+    if not any(path.is_relative_to(root) for root in roots):
+        raise Forbidden(
+            f"{_shown(what)} is outside the folders captures are imported from "
+            f"({', '.join(str(r) for r in roots)}); put the capture in one of them or list its "
+            "folder in DEXLABEL_CAPTURE_ROOTS")
 
 
 def _import_plan(storage: Storage, plan: layout.SequencePlan) -> service.ImportResult:

@@ -36,6 +36,8 @@ from backend.errors import InvalidCapture
 from worker.dataset import YCB_CLASSES
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv")
+# The longest import path taken (Linux's PATH_MAX).
+MAX_PATH_CHARS = 4096
 MESH_SUFFIXES = (".obj", ".ply")
 # Threads that decode a capture's colour and depth frames while it is checked (OpenCV decodes
 # without holding the GIL).

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from backend.captures.layout import MAX_PATH_CHARS
 
 
 class CameraRead(BaseModel):
@@ -61,8 +63,16 @@ class SequenceRead(BaseModel):
 
 
 class ImportRequest(BaseModel):
-    path: str = Field(min_length=1, max_length=4096,
-                      description="capture root or sequence folder on the server")
+    path: str = Field(min_length=1, max_length=MAX_PATH_CHARS,
+                      description="capture root or sequence folder on the server, inside one of "
+                                  "the folders of DEXLABEL_CAPTURE_ROOTS")
+
+    @field_validator("path")
+    @classmethod
+    def _no_nul(cls, value: str) -> str:
+        if "\x00" in value:
+            raise ValueError("a path must not contain a NUL character")
+        return value
 
 
 class ImportResultRead(BaseModel):

@@ -103,9 +103,9 @@ def test_frame_out_of_range_and_unknown_camera_are_404(
 
 
 def test_import_endpoint_reports_the_broken_file(
-    client: TestClient, admin_headers: dict, small_capture: Path, tmp_path: Path
+    client: TestClient, admin_headers: dict, small_capture: Path, app_env: dict
 ) -> None:
-    cap = edit.copy_capture(small_capture, tmp_path / "cap")
+    cap = edit.copy_capture(small_capture, Path(app_env["DEXLABEL_VAR_DIR"]) / "captures" / "c")
     (edit.sequence_dir(cap) / "meta.yml").write_text("serials: [")
     resp = client.post("/api/captures/import", json={"path": str(cap)}, headers=admin_headers)
     assert resp.status_code == 422
@@ -143,3 +143,85 @@ def test_import_endpoint_refuses_a_truncated_jpeg_naming_it(
     assert body["path"].endswith(f"{serial}/color_000005.jpg")
     assert "does not decode" in body["detail"]
     assert client.get("/api/sequences", headers=admin_headers).json() == []
+
+
+def _import(client: TestClient, headers: dict, path: str) -> tuple[int, dict]:
+    resp = client.post("/api/captures/import", json={"path": path}, headers=headers)
+    return resp.status_code, resp.json()
+
+
+def _nothing_imported(client: TestClient, headers: dict) -> bool:
+    return client.get("/api/sequences", headers=headers).json() == []
+
+
+def test_import_endpoint_takes_a_capture_in_the_instance_folder(
+    client: TestClient, admin_headers: dict, app_env: dict, small_capture: Path
+) -> None:
+    var_dir = Path(app_env["DEXLABEL_VAR_DIR"])
+    cap = edit.copy_capture(small_capture, var_dir / "captures" / "ok")
+    status, body = _import(client, admin_headers, str(cap))
+    assert status == 200 and body[0]["created"], body
+    other = edit.copy_capture(small_capture, var_dir / "demo-like")
+    status, body = _import(client, admin_headers, str(other))
+    assert status == 200 and not body[0]["created"], body
+
+
+def test_import_endpoint_refuses_a_path_with_a_nul_or_too_long(
+    client: TestClient, admin_headers: dict, app_env: dict
+) -> None:
+    captures = Path(app_env["DEXLABEL_VAR_DIR"]) / "captures"
+    status, body = _import(client, admin_headers, f"{captures}/a\x00b")
+    assert status == 422, body
+    assert "path" in body["detail"] and "NUL" in body["detail"]
+    status, body = _import(client, admin_headers, f"{captures}/" + "x" * 5000)
+    assert status == 422, body
+    assert "path" in body["detail"] and "4096" in body["detail"]
+    status, body = _import(client, admin_headers, f"{captures}/" + "y" * 3000)
+    assert status == 422 and body["error"] == "invalid_capture", body
+    assert "does not exist" in body["detail"] and len(body["detail"]) < 400
+    assert _nothing_imported(client, admin_headers)
+
+
+def test_import_endpoint_refuses_a_path_outside_the_capture_roots(
+    client: TestClient, admin_headers: dict, app_env: dict, small_capture: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from backend.config import get_settings
+
+    outside = edit.copy_capture(small_capture, tmp_path / "elsewhere")
+    for path in (str(outside), "/etc", f"{app_env['DEXLABEL_VAR_DIR']}/../elsewhere"):
+        status, body = _import(client, admin_headers, path)
+        assert status == 403, body
+        assert "outside the folders captures are imported from" in body["detail"]
+        assert "DEXLABEL_CAPTURE_ROOTS" in body["detail"]
+    link = Path(app_env["DEXLABEL_VAR_DIR"]) / "captures" / "link"
+    link.parent.mkdir(parents=True, exist_ok=True)
+    link.symlink_to(outside)
+    status, body = _import(client, admin_headers, str(link))
+    assert status == 403 and str(outside) in body["detail"], body
+    assert _nothing_imported(client, admin_headers)
+
+    monkeypatch.setenv("DEXLABEL_CAPTURE_ROOTS", f"/nowhere:{tmp_path}")
+    get_settings.cache_clear()
+    status, body = _import(client, admin_headers, str(outside))
+    assert status == 200 and body[0]["created"], body
+
+
+def test_import_endpoint_refuses_a_capture_whose_root_is_outside(
+    client: TestClient, admin_headers: dict, small_capture: Path, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A sequence folder right inside an allowed folder: its capture root (calibration and
+    models) is the folder above, outside."""
+    import shutil
+
+    from backend.config import get_settings
+
+    allowed = tmp_path / "allowed"
+    allowed.mkdir()
+    seq = shutil.copytree(edit.sequence_dir(small_capture), allowed / "seq")
+    monkeypatch.setenv("DEXLABEL_CAPTURE_ROOTS", f'["{allowed}"]')
+    get_settings.cache_clear()
+    status, body = _import(client, admin_headers, str(seq))
+    assert status == 403, body
+    assert f"the capture root {tmp_path}" in body["detail"]

@@ -247,3 +247,17 @@ def test_video_with_fewer_frames_than_meta_is_refused(
         p.unlink()
     folder.rmdir()
     _assert_refused(app_env, cap, "meta.yml", "num_frames is 6")
+
+
+@pytest.mark.parametrize(("path", "problem"), [
+    ("captures/a\x00b", "must not contain a NUL character"),
+    ("captures/" + "x" * 5000, "at most 4096 characters, this one has 5009"),
+    ("captures/" + "y" * 3000, "path does not exist"),
+])
+def test_an_unusable_import_path_is_refused_naming_the_problem(
+    app_env: dict, path: str, problem: str
+) -> None:
+    with pytest.raises(InvalidCapture) as info:
+        import_path(path)
+    assert problem in info.value.detail
+    assert len(info.value.detail) < 400

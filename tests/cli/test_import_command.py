@@ -25,3 +25,10 @@ def test_import_of_a_truncated_jpeg_is_one_error_line_naming_the_file(
     assert len(errors) == 1
     assert f"{serial}/color_000003.jpg: JPEG image does not decode" in errors[0]
     assert not any(p.is_file() for p in (instance / "storage").rglob("*"))
+
+
+def test_import_of_a_path_too_long_is_one_error_line(instance: Path, cli: CliRunner) -> None:
+    done = cli.invoke(app, ["import", "/tmp/" + "z" * 5000])
+    assert done.exit_code == 2, done.output
+    errors = [line for line in done.output.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "at most 4096 characters" in errors[0]
