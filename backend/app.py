@@ -22,7 +22,7 @@ from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.config import get_settings
 from backend.crowd.router import router as crowd_router
-from backend.db import get_engine
+from backend.db import get_engine, install_request_limits
 from backend.errors import install_database_outage_answer, install_error_handlers
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
@@ -48,6 +48,7 @@ def create_app() -> FastAPI:
                   description="Crowd-labelled multi-view video to 3D hand and object poses.",
                   docs_url=None, redoc_url=None)
     install_error_handlers(app)
+    install_request_limits(app)
     install_request_guards(app)
     app.include_router(auth_router)
     app.include_router(captures_router)

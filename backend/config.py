@@ -131,6 +131,17 @@ class Settings(BaseSettings):
     # root must lie inside one): a JSON list, or folders separated by os.pathsep (':'); empty =
     # the instance folder's captures/ and the instance folder itself.
     capture_roots: Annotated[list[Path], NoDecode] = Field(default_factory=list)
+    # Database concurrency of one server process, sized together (backend/db.py): at most
+    # db_pool_size requests work with the database at once, each with its own pooled
+    # connection; db_max_overflow more connections serve background work (the in-process
+    # queue consumer, the marketplace); a request waits at most db_wait_s for its turn (a
+    # connection, or SQLite's single writer) before it is answered 503 with Retry-After. The
+    # request threads (http_threads) outnumber the database slots, so a request that holds a
+    # connection always finds a thread to finish on.
+    db_pool_size: int = Field(default=10, ge=1, le=1000)
+    db_max_overflow: int = Field(default=10, ge=0, le=1000)
+    db_wait_s: float = Field(default=5.0, gt=0, le=300)
+    http_threads: int = Field(default=40, ge=2, le=1000)
     # Requester accounts of the built-in MTurk-compatible marketplace: comma-separated
     # ACCESS_KEY:SECRET[:STARTING_BALANCE]; each key pair is one requester account.
     market_requesters: str = Field(default=DEV_MARKET_REQUESTERS, repr=False)
@@ -198,6 +209,10 @@ class Settings(BaseSettings):
             self.database_url = f"sqlite:///{(self.var_dir / 'dexlabel.db').as_posix()}"
         if not self.storage_url:
             self.storage_url = (self.var_dir / "storage").as_posix()
+        if self.http_threads <= self.db_pool_size:
+            raise ValueError(
+                f"DEXLABEL_HTTP_THREADS ({self.http_threads}) must be above DEXLABEL_DB_POOL_SIZE "
+                f"({self.db_pool_size}): a request holding a connection needs a free thread")
         # The messages name the setting, never its value.
         secret = self.secret_key.strip()
         if secret.lower() in PLACEHOLDER_SECRETS:

@@ -6,18 +6,30 @@ commits through ``session_scope`` or the ``SessionDep`` dependency.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
+import collections
+import re
+import sqlite3
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager, contextmanager
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, cast
 
-from fastapi import Depends
+import anyio
+from anyio.lowlevel import RunVar
+from fastapi import Depends, FastAPI, Request
+from fastapi.responses import JSONResponse
 from sqlalchemy import DateTime, Dialect, Engine, MetaData, TypeDecorator, create_engine, event
+from sqlalchemy.exc import OperationalError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
 
 from backend.config import get_settings
+from backend.errors import Busy
 
 # Stable constraint names so Alembic migrations can drop and alter them on every backend.
 NAMING_CONVENTION = {
@@ -62,13 +74,170 @@ class TimestampMixin:
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
 
-def make_engine(url: str) -> Engine:
-    """An engine for ``url``; SQLite gets foreign keys, WAL and a created parent folder."""
+# ----- SQLite: one writer at a time, served in turn --------------------------------------
+
+class _WriterTurns:
+    """The turn to write to one SQLite file in this process, served first come, first served.
+
+    SQLite lets one connection write at a time. A writer that finds the file locked polls it,
+    sleeping up to 100 ms between tries, and can lose to newcomers until its busy timeout
+    runs out ("database is locked"). Writers waiting here instead get the turn in arrival
+    order the moment the one before them commits or rolls back.
+    """
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._waiting: collections.deque[object] = collections.deque()
+        self._held = False
+
+    def acquire(self, timeout_s: float) -> bool:
+        with self._cond:
+            if not self._held and not self._waiting:
+                self._held = True
+                return True
+            ticket = object()
+            self._waiting.append(ticket)
+            deadline = time.monotonic() + timeout_s
+            while self._held or self._waiting[0] is not ticket:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self._waiting.remove(ticket)
+                    self._cond.notify_all()
+                    return False
+                self._cond.wait(left)
+            self._waiting.popleft()
+            self._held = True
+            return True
+
+    def release(self) -> None:
+        with self._cond:
+            self._held = False
+            self._cond.notify_all()
+
+
+_TURNS: dict[str, _WriterTurns] = {}
+_TURNS_GUARD = threading.Lock()
+# Statements that never write; any other statement (INSERT, UPDATE, DELETE, DDL, SAVEPOINT)
+# takes the writer turn first.
+_READS = frozenset({"SELECT", "PRAGMA", "EXPLAIN", "WITH"})
+_FIRST_WORD = re.compile(r"\s*([A-Za-z]+)")
+
+
+def _turns_of(database: str) -> _WriterTurns:
+    key = database if database.startswith("file:") else str(Path(database).resolve())
+    with _TURNS_GUARD:
+        return _TURNS.setdefault(key, _WriterTurns())
+
+
+def _writes(sql: str) -> bool:
+    word = _FIRST_WORD.match(sql)
+    return word is None or word.group(1).upper() not in _READS
+
+
+class TurnTakingConnection(sqlite3.Connection):
+    """A SQLite connection that takes its process's writer turn (:class:`_WriterTurns`)
+    before the first write of a transaction and gives it back when the transaction ends.
+
+    Python's sqlite3 begins a transaction at the first INSERT, UPDATE or DELETE, which is
+    where SQLite takes its write lock, and the lock is held to the commit or rollback: the
+    turn spans exactly that. Waiting longer than the connection's timeout (seconds) raises
+    "database is locked", as SQLite's own busy timeout does.
+    """
+
+    def __init__(self, database: str, *args: Any, **kwargs: Any) -> None:
+        super().__init__(database, *args, **kwargs)
+        self.turns = _turns_of(str(database))
+        self.wait_s = float(kwargs.get("timeout", 5.0))
+        self.has_turn = False
+
+    def cursor(self, factory: Any = None) -> Any:
+        return super().cursor(factory or TurnTakingCursor)
+
+    def commit(self) -> None:
+        try:
+            super().commit()
+        finally:
+            self.give_turn_back()
+
+    def rollback(self) -> None:
+        try:
+            super().rollback()
+        finally:
+            self.give_turn_back()
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            self.give_turn_back()
+
+    def before_statement(self, sql: str) -> None:
+        if not self.has_turn and _writes(sql):
+            if not self.turns.acquire(self.wait_s):
+                raise sqlite3.OperationalError(
+                    f"database is locked: no turn to write came within {self.wait_s:g} s")
+            self.has_turn = True
+
+    def after_statement(self) -> None:
+        # A statement outside a transaction (DDL, a failed first write) ends its own.
+        if self.has_turn and not self.in_transaction:
+            self.give_turn_back()
+
+    def give_turn_back(self) -> None:
+        if self.has_turn:
+            self.has_turn = False
+            self.turns.release()
+
+
+class TurnTakingCursor(sqlite3.Cursor):
+    """The cursor of a :class:`TurnTakingConnection`: each statement asks for the turn."""
+
+    def execute(self, sql: str, parameters: Any = (), /) -> TurnTakingCursor:
+        conn = cast(TurnTakingConnection, self.connection)
+        conn.before_statement(sql)
+        try:
+            return super().execute(sql, parameters)
+        finally:
+            conn.after_statement()
+
+    def executemany(self, sql: str, seq_of_parameters: Any, /) -> TurnTakingCursor:
+        conn = cast(TurnTakingConnection, self.connection)
+        conn.before_statement(sql)
+        try:
+            return super().executemany(sql, seq_of_parameters)
+        finally:
+            conn.after_statement()
+
+    def executescript(self, sql_script: str, /) -> TurnTakingCursor:
+        conn = cast(TurnTakingConnection, self.connection)
+        conn.before_statement("SCRIPT")
+        try:
+            return cast(TurnTakingCursor, super().executescript(sql_script))
+        finally:
+            conn.after_statement()
+
+
+# ----- engines --------------------------------------------------------------------------
+
+def make_engine(url: str, *, pool_size: int = 10, max_overflow: int = 10,
+                wait_s: float = 5.0) -> Engine:
+    """An engine for ``url``; SQLite gets foreign keys, WAL, a created parent folder and
+    writers served in turn (:class:`TurnTakingConnection`).
+
+    ``pool_size`` connections are kept open and ``max_overflow`` more are opened under load;
+    asking for one waits at most ``wait_s`` seconds (then ``sqlalchemy.exc.TimeoutError``),
+    as does a SQLite writer for its turn and for the file's lock ("database is locked").
+    """
+    pool: dict[str, Any] = {"pool_size": pool_size, "max_overflow": max_overflow,
+                            "pool_timeout": wait_s}
     if url.startswith("sqlite"):
         path = url.split("///", 1)[-1]
-        if path and path != ":memory:":
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-        engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30})
+        memory = not path or path.startswith(":memory:") or "mode=memory" in path
+        if not memory:
+            Path(path.split("?", 1)[0]).parent.mkdir(parents=True, exist_ok=True)
+        engine = create_engine(url, connect_args={
+            "check_same_thread": False, "timeout": wait_s, "factory": TurnTakingConnection},
+            **({} if memory else pool))
 
         @event.listens_for(engine, "connect")
         def _sqlite_pragmas(dbapi_conn, _record) -> None:  # type: ignore[no-untyped-def]
@@ -78,12 +247,14 @@ def make_engine(url: str) -> Engine:
             cur.close()
 
         return engine
-    return create_engine(url, pool_pre_ping=True)
+    return create_engine(url, pool_pre_ping=True, **pool)
 
 
 @lru_cache
 def get_engine() -> Engine:
-    return make_engine(get_settings().database_url)
+    settings = get_settings()
+    return make_engine(settings.database_url, pool_size=settings.db_pool_size,
+                       max_overflow=settings.db_max_overflow, wait_s=settings.db_wait_s)
 
 
 @lru_cache
@@ -105,10 +276,122 @@ def session_scope() -> Iterator[Session]:
         session.close()
 
 
-def get_session() -> Iterator[Session]:
-    with session_scope() as session:
-        yield session
+# ----- the request's session --------------------------------------------------------------
+
+class DatabaseBusy(Busy):
+    """No turn at the database came within DEXLABEL_DB_WAIT_S; the same request later works."""
+
+    def __init__(self, detail: str, retry_after_s: int = 1) -> None:
+        super().__init__(detail)
+        self.headers = {"Retry-After": str(retry_after_s)}
 
 
-# scope="function": commit before the response is sent, so a failed commit is the reply.
+@dataclass(frozen=True)
+class _RequestSlots:
+    """One event loop's database slots: requests holding a session, and the threads their
+    commits run on (never queued behind other work: a commit releases a connection)."""
+
+    sessions: anyio.Semaphore
+    finishers: anyio.CapacityLimiter
+
+
+_SLOTS: RunVar[_RequestSlots] = RunVar("dexlabel_request_slots")
+
+
+def _request_slots() -> _RequestSlots:
+    try:
+        return _SLOTS.get()
+    except LookupError:
+        size = get_settings().db_pool_size
+        slots = _RequestSlots(anyio.Semaphore(size), anyio.CapacityLimiter(size))
+        _SLOTS.set(slots)
+        return slots
+
+
+def _finish(session: Session, commit: bool) -> None:
+    try:
+        if commit:
+            session.commit()
+    finally:
+        session.close()
+
+
+async def get_session() -> AsyncIterator[Session]:
+    """The request's unit of work: committed before the response is sent (so a failed
+    commit is the reply), rolled back on any error.
+
+    At most DEXLABEL_DB_POOL_SIZE requests of a process hold a session at once, which is the
+    number of pooled connections, so every one of them gets a connection without waiting and
+    a burst queues here rather than on the pool: a request that gets no turn within
+    DEXLABEL_DB_WAIT_S is answered 503 with Retry-After. A session holds its connection
+    across the request's thread hops (dependencies, endpoint, response validation), so a
+    request thread never waits on a connection that only a queued request could give back.
+    """
+    wait_s = get_settings().db_wait_s
+    slots = _request_slots()
+    with anyio.move_on_after(wait_s) as waited:
+        await slots.sessions.acquire()
+    if waited.cancelled_caught:
+        raise DatabaseBusy(f"the server is busy: no database connection came free within "
+                           f"{wait_s:g} s; please try again")
+    try:
+        session = get_sessionmaker()()
+        try:
+            yield session
+        except BaseException:
+            with anyio.CancelScope(shield=True):
+                await _end(session, slots, commit=False)
+            raise
+        with anyio.CancelScope(shield=True):
+            await _end(session, slots, commit=True)
+    finally:
+        slots.sessions.release()
+
+
+async def _end(session: Session, slots: _RequestSlots, *, commit: bool) -> None:
+    if not session.in_transaction() and not (session.new or session.dirty or session.deleted):
+        session.close()  # never touched the database: nothing to send
+        return
+    await anyio.to_thread.run_sync(_finish, session, commit, limiter=slots.finishers)
+
+
+def _busy_answer(retry_after_s: int = 1) -> JSONResponse:
+    return JSONResponse({"error": Busy.code, "detail": "the database is busy; please try again"},
+                        status_code=Busy.status_code,
+                        headers={"Retry-After": str(retry_after_s)})
+
+
+def install_request_limits(app: FastAPI) -> None:
+    """Size the app's request threads from the settings (DEXLABEL_HTTP_THREADS, checked to be
+    above DEXLABEL_DB_POOL_SIZE) when it starts, and answer a request that found no turn at
+    the database in time 503 with Retry-After: a full pool (``sqlalchemy.exc.TimeoutError``),
+    a SQLite file locked past its busy timeout, or no session slot (:class:`DatabaseBusy`)."""
+    inner = app.router.lifespan_context
+
+    @asynccontextmanager
+    async def lifespan(app_: Any) -> AsyncIterator[Any]:
+        limiter = anyio.to_thread.current_default_thread_limiter()
+        limiter.total_tokens = get_settings().http_threads
+        async with inner(app_) as state:
+            yield state
+
+    app.router.lifespan_context = lifespan
+
+    async def _busy(_: Request, exc: Exception) -> JSONResponse:
+        if isinstance(exc, DatabaseBusy):
+            return JSONResponse({"error": exc.code, "detail": exc.detail},
+                                status_code=exc.status_code, headers=exc.headers)
+        if isinstance(exc, OperationalError) and not _is_locked(exc):
+            raise exc  # any other database failure stays a server error
+        return _busy_answer()
+
+    for kind in (DatabaseBusy, PoolTimeout, OperationalError):
+        app.add_exception_handler(kind, _busy)
+
+
+def _is_locked(exc: OperationalError) -> bool:
+    return isinstance(exc.orig, sqlite3.OperationalError) and "locked" in str(exc.orig)
+
+
+# Function scope: the session ends (committed) before the response is sent.
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]

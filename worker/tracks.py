@@ -103,6 +103,8 @@ class TrackWarning(TypedDict):
 def _number_or_none(value: Any, field: str) -> float | None:
     if value is None:
         return None
+    if type(value) is float or type(value) is int:  # what JSON gives: the common case, fast
+        return float(value)
     if isinstance(value, bool) or not isinstance(value, Real):
         raise KeyframeError(f"{field} must be a number or null, got {value!r}")
     return float(value)
@@ -127,7 +129,8 @@ def parse_keyframe(raw: Any) -> Keyframe:
     else:
         expected = "{frame, x, y, visible} or [frame, x, y, visible01]"
         raise KeyframeError(f"expected {expected}, got {raw!r}")
-    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
+    if type(frame) is not int and (isinstance(frame, bool)
+                                   or not isinstance(frame, (int, np.integer))):
         raise KeyframeError(f"frame must be an integer, got {frame!r}")
     if visible not in (True, False, 0, 1):
         raise KeyframeError(f"visible must be a boolean or 0/1, got {visible!r}")
@@ -352,19 +355,22 @@ def validate_keyframes(
     seen: dict[int, int] = {}
     previous: int | None = None
     for index, raw in enumerate(keyframes):
-        label = _keyframe_label(index, raw)
+        found: list[str] = []
         try:
             kf = parse_keyframe(raw)
         except KeyframeError as exc:
-            problems.append(f"{label}: {exc}")
+            problems.append(f"{_keyframe_label(index, raw)}: {exc}")
             continue
         if not 0 <= kf.frame < num_frames:
-            problems.append(f"{label}: frame out of range 0-{num_frames - 1}")
+            found.append(f"frame out of range 0-{num_frames - 1}")
         if kf.frame in seen:
-            problems.append(f"{label}: duplicate of keyframe {seen[kf.frame]} at the same frame")
+            found.append(f"duplicate of keyframe {seen[kf.frame]} at the same frame")
         elif previous is not None and kf.frame < previous:
-            problems.append(f"{label}: not sorted by frame (follows frame {previous})")
+            found.append(f"not sorted by frame (follows frame {previous})")
         seen.setdefault(kf.frame, index)
         previous = kf.frame if previous is None else max(previous, kf.frame)
-        problems.extend(f"{label}: {p}" for p in _position_problems(kf, width, height))
+        found.extend(_position_problems(kf, width, height))
+        if found:  # the label is only made for a keyframe with problems
+            label = _keyframe_label(index, raw)
+            problems.extend(f"{label}: {p}" for p in found)
     return problems
