@@ -23,7 +23,11 @@ from backend.captures.router import router as captures_router
 from backend.config import get_settings
 from backend.crowd.router import router as crowd_router
 from backend.db import get_engine, install_request_limits
-from backend.errors import install_database_outage_answer, install_error_handlers
+from backend.errors import (
+    install_api_fallback,
+    install_database_outage_answer,
+    install_error_handlers,
+)
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
@@ -69,6 +73,7 @@ def create_app() -> FastAPI:
         return health_answer()
 
     install_api_docs(app)
+    install_api_fallback(app)
     # Added last, so it wraps every other middleware.
     install_database_outage_answer(app)
     if FRONTEND_DIR.is_dir():

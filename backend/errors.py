@@ -15,9 +15,11 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute, iter_route_contexts
 from pydantic import BaseModel, ConfigDict
 from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
+from starlette.routing import compile_path
 
 
 class DexlabelError(Exception):
@@ -100,6 +102,15 @@ class ErrorRead(BaseModel):
     fields: list[FieldProblem] | None = None
 
 
+class InvalidFields(HTTPException):
+    """Invalid input found by a request guard while the body is read: 422 naming the fields,
+    like a validation error (``problems`` are ``{"field", "message"}``)."""
+
+    def __init__(self, problems: list[dict[str, str]]) -> None:
+        super().__init__(422, "; ".join(f"{p['field']}: {p['message']}" for p in problems))
+        self.problems = problems
+
+
 def validation_error(problems: list[dict[str, str]]) -> JSONResponse:
     """422 naming each invalid field: ``problems`` are ``{"field", "message"}``."""
     detail = "; ".join(f"{p['field']}: {p['message']}" for p in problems)
@@ -159,6 +170,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(HTTPException)
     async def _http_error(_: Request, exc: HTTPException) -> JSONResponse:
+        if isinstance(exc, InvalidFields):
+            return validation_error(exc.problems)
         return JSONResponse({"error": _http_code(exc.status_code), "detail": str(exc.detail)},
                             status_code=exc.status_code, headers=exc.headers)
 
@@ -247,8 +260,11 @@ def document_errors(schema: dict[str, Any]) -> dict[str, Any]:
             responses = operation.setdefault("responses", {})
             responses["422"] = _error_response(
                 "Invalid input: `fields` names each invalid field and what is wrong with it")
-            responses.setdefault("4XX", _error_response(
+            refused = responses.setdefault("4XX", _error_response(
                 "Refused: `error` says why in a word, `detail` in a sentence"))
+            if "text/html" in responses.get("200", {}).get("content", {}):
+                # A page's own refusals are pages too (the guards' are still JSON).
+                refused["content"].setdefault("text/html", {"schema": {"type": "string"}})
     return schema
 
 
@@ -262,3 +278,32 @@ def install_error_schema(app: FastAPI) -> None:
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def install_api_fallback(app: FastAPI, prefix: str = "/api") -> None:
+    """Every address under ``prefix`` that no route serves answers in the error shape: 405
+    with an ``Allow`` header naming the methods the path has, or 404. Call it after the API's
+    routers are included and before anything mounted at "/" (the static pages)."""
+    paths: list[tuple[Any, set[str]]] = []
+
+    def allowed_methods(path: str) -> list[str]:
+        if not paths:
+            for route in iter_route_contexts(app.routes):
+                original = route.original_route
+                if (isinstance(original, APIRoute) and route.path
+                        and original.endpoint is not no_such_route):
+                    paths.append((compile_path(route.path)[0], set(route.methods or ())))
+        return sorted({m for regex, methods in paths if regex.match(path) for m in methods})
+
+    @app.api_route(f"{prefix}/{{rest:path}}", include_in_schema=False,
+                   methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"])
+    async def no_such_route(request: Request) -> JSONResponse:
+        allowed = allowed_methods(request.url.path)
+        if allowed:
+            return JSONResponse(
+                {"error": "method_not_allowed",
+                 "detail": f"{request.method} is not allowed here; allowed: {', '.join(allowed)}"},
+                status_code=405, headers={"Allow": ", ".join(allowed)})
+        return JSONResponse({"error": NotFound.code,
+                             "detail": f"no API endpoint at {request.url.path}"},
+                            status_code=404)

@@ -1,14 +1,20 @@
-"""Request guards that run before routing: NUL characters in the address, and body size.
+"""Request guards that run for every request, whatever route it reaches: NUL characters and
+body size.
 
-A NUL in the path or the query string is refused with 422 naming the parameter (no handler or
-database sees it). Every request body is counted as it arrives, whatever its framing (a
-Content-Length or chunks): past the route's limit the request is answered 413 without reading
-the rest. A route sets its own limit with ``openapi_extra=body_limit(n)``, which the OpenAPI
-document then shows as ``x-max-body-bytes``; every other route has the default.
+A NUL in the path or the query string is refused with 422 naming the parameter, before routing.
+A JSON or form body is checked when its last byte arrives, before the handler parses it: a NUL
+in any of its strings (keys included) is refused with 422 naming the field. No handler or
+database sees a NUL (PostgreSQL text cannot hold one).
+
+Every request body is counted as it arrives, whatever its framing (a Content-Length or chunks):
+past the route's limit the request is answered 413 without reading the rest. A route sets its
+own limit with ``openapi_extra=body_limit(n)``, which the OpenAPI document then shows as
+``x-max-body-bytes``; every other route has the default.
 """
 
 from __future__ import annotations
 
+import json
 from typing import Any
 from urllib.parse import parse_qsl
 
@@ -17,13 +23,17 @@ from starlette.datastructures import Headers
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from backend.errors import validation_error
-from backend.validation import NUL, NUL_MESSAGE
+from backend.errors import InvalidFields, validation_error
+from backend.validation import NUL, NUL_MESSAGE, nul_fields
 
 # The largest body any endpoint takes by default: a whole-assignment save of tracks is the
 # largest request the product sends.
 DEFAULT_MAX_BODY_BYTES = 1_000_000
 BODY_LIMIT_KEY = "x-max-body-bytes"
+# How a NUL can appear in a JSON body (raw control characters are invalid JSON anyway) and in
+# a form body.
+_JSON_NUL = b"\\u0000"
+_FORM_NUL = b"%00"
 
 
 def body_limit(limit: int) -> dict[str, Any]:
@@ -31,33 +41,46 @@ def body_limit(limit: int) -> dict[str, Any]:
     return {BODY_LIMIT_KEY: limit}
 
 
-def nul_problems(scope: Scope) -> list[dict[str, str]]:
+def _problems(fields: list[str]) -> list[dict[str, str]]:
+    return [{"field": field, "message": NUL_MESSAGE} for field in fields]
+
+
+def _form_nul_fields(text: str, prefix: str) -> list[str]:
+    return [f"{prefix}{name.replace(NUL, '?')}"
+            for name, value in parse_qsl(text, keep_blank_values=True)
+            if NUL in name or NUL in value]
+
+
+def address_nul_problems(scope: Scope) -> list[dict[str, str]]:
     """A problem for the path and for each query parameter that holds a NUL character."""
-    problems = []
-    if NUL in scope.get("path", ""):
-        problems.append({"field": "path", "message": NUL_MESSAGE})
+    fields = ["path"] if NUL in scope.get("path", "") else []
     query = scope.get("query_string", b"").decode("latin-1")
     if NUL in query or "%00" in query:
-        fields = [f"query.{name.replace(NUL, '?')}"
-                  for name, value in parse_qsl(query, keep_blank_values=True)
-                  if NUL in name or NUL in value]
-        problems += [{"field": field, "message": NUL_MESSAGE} for field in fields or ["query"]]
-    return problems
+        fields += _form_nul_fields(query, "query.") or ["query"]
+    return _problems(fields)
 
 
-class RequestGuardMiddleware:
-    """Refuses a NUL character anywhere in the path or query string with 422."""
+def _media_type(content_type: str) -> str:
+    return content_type.split(";", 1)[0].strip().lower()
 
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
 
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] == "http":
-            problems = nul_problems(scope)
-            if problems:
-                await validation_error(problems)(scope, receive, send)
-                return
-        await self.app(scope, receive, send)
+def _checks_body(content_type: str) -> bool:
+    kind = _media_type(content_type)
+    return "json" in kind or kind == "application/x-www-form-urlencoded"
+
+
+def body_nul_fields(body: bytes, content_type: str) -> list[str]:
+    """The fields of a JSON or form body whose strings hold a NUL; [] for other bodies and for
+    a body that does not parse (the handler reports that)."""
+    kind = _media_type(content_type)
+    if "json" in kind and _JSON_NUL in body:
+        try:
+            return nul_fields(json.loads(body))
+        except ValueError:
+            return []
+    if kind == "application/x-www-form-urlencoded" and _FORM_NUL in body:
+        return _form_nul_fields(body.decode("latin-1"), "")
+    return []
 
 
 def _route_limit(scope: Scope, default: int) -> int:
@@ -71,8 +94,8 @@ def _too_large(limit: int) -> HTTPException:
                               "endpoint accepts")
 
 
-class BodyLimitMiddleware:
-    """Counts each request body's bytes as the app reads them; 413 once past the limit."""
+class RequestGuardMiddleware:
+    """Refuses NUL characters (422) and bodies past their route's limit (413)."""
 
     def __init__(self, app: ASGIApp, default_limit: int = DEFAULT_MAX_BODY_BYTES) -> None:
         self.app = app
@@ -82,25 +105,40 @@ class BodyLimitMiddleware:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        problems = address_nul_problems(scope)
+        if problems:
+            await validation_error(problems)(scope, receive, send)
+            return
+        headers = Headers(scope=scope)
+        content_type = headers.get("content-type", "")
+        declared = headers.get("content-length", "")
+        checked = _checks_body(content_type)
+        body = bytearray()
         received = 0
 
-        async def counted_receive() -> Message:
+        async def guarded_receive() -> Message:
             nonlocal received
             limit = _route_limit(scope, self.default_limit)
-            if received == 0:
-                declared = Headers(scope=scope).get("content-length", "")
-                if declared.isdigit() and int(declared) > limit:
-                    raise _too_large(limit)
+            if received == 0 and declared.isdigit() and int(declared) > limit:
+                raise _too_large(limit)
             message = await receive()
-            if message["type"] == "http.request":
-                received += len(message.get("body", b""))
-                if received > limit:
-                    raise _too_large(limit)
+            if message["type"] != "http.request":
+                return message
+            chunk = message.get("body", b"")
+            received += len(chunk)
+            if received > limit:
+                raise _too_large(limit)
+            if checked:
+                body.extend(chunk)
+            if checked and not message.get("more_body", False):
+                fields = body_nul_fields(bytes(body), content_type)
+                body.clear()
+                if fields:
+                    raise InvalidFields(_problems(fields))
             return message
 
-        await self.app(scope, counted_receive, send)
+        await self.app(scope, guarded_receive, send)
 
 
 def install_request_guards(app: FastAPI) -> None:
-    app.add_middleware(BodyLimitMiddleware)
     app.add_middleware(RequestGuardMiddleware)

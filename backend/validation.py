@@ -3,8 +3,9 @@
 Every id, index, version and counter fits a 32-bit signed integer (PostgreSQL's INTEGER; SQLite
 holds it too), every float is finite and bounded, and no string holds a NUL character (PostgreSQL
 text cannot store one). A value outside these bounds is a 422 naming its field, like any other
-validation error; path and query strings are checked for NUL by
-``backend.middleware.RequestGuardMiddleware`` before routing.
+validation error. NUL is refused for every request in one place,
+``backend.middleware.RequestGuardMiddleware``: in the path and query string before routing, and
+anywhere in a JSON or form body before the handler parses it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import math
 from typing import Annotated, Any
 
 from fastapi import Path, Query
-from pydantic import AfterValidator, BaseModel, Field, StrictBool, field_validator
+from pydantic import AfterValidator, Field, StrictBool
 
 MAX_INT32 = 2**31 - 1
 MIN_INT32 = -(2**31)
@@ -29,15 +30,21 @@ NUMBER_MESSAGE = (f"numbers must be finite, integers within {MIN_INT32}..{MAX_IN
                   f"other numbers at most {MAX_ABS_FLOAT:g} in magnitude")
 
 
-def contains_nul(value: Any) -> bool:
-    """Whether a string anywhere in ``value`` (lists, dicts and their keys) holds a NUL."""
+def nul_fields(value: Any, path: tuple[str, ...] = ()) -> list[str]:
+    """Where a string in parsed JSON holds a NUL: ``tracks.0.name`` style, keys included."""
     if isinstance(value, str):
-        return NUL in value
+        return [".".join(path) or "body"] if NUL in value else []
+    found: list[str] = []
     if isinstance(value, dict):
-        return any(contains_nul(k) or contains_nul(v) for k, v in value.items())
-    if isinstance(value, (list, tuple)):
-        return any(contains_nul(v) for v in value)
-    return False
+        for key, item in value.items():
+            name = str(key).replace(NUL, "?")
+            if NUL in str(key):
+                found.append(".".join((*path, name)))
+            found += nul_fields(item, (*path, name))
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            found += nul_fields(item, (*path, str(index)))
+    return found
 
 
 def number_in_bounds(value: Any) -> bool:
@@ -84,14 +91,3 @@ Finite = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_ABS_FLOAT, le=MAX_A
 Scalar = StrictBool | Int32 | Finite
 # Free-form JSON (keyframe rows): every number in it within bounds.
 BoundedJson = Annotated[Any, AfterValidator(_bounded_numbers)]
-
-
-class RequestModel(BaseModel):
-    """Base of every request body: no string anywhere in it (keys included) holds a NUL."""
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _refuse_nul(cls, value: Any) -> Any:
-        if contains_nul(value):
-            raise ValueError(NUL_MESSAGE)
-        return value

@@ -7,9 +7,11 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.progress.schemas import TaskState
+from backend.validation import BoundedJson, Count, Finite
 
 # A keyframe row: [frame, x, y, visible01]; x and y in image pixels or null when occluded.
-KeyframeRow = list[Any]
+# Its form is checked against the task (worker.tracks); its numbers are bounded here.
+KeyframeRow = list[BoundedJson]
 # Generous bounds: a clip of up to 2000 frames, every frame keyed, 64 points.
 MAX_KEYFRAMES_PER_TRACK = 2000
 MAX_POINTS = 64
@@ -26,7 +28,7 @@ class TracksSave(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    version: int = Field(ge=0)
+    version: Count
     tracks: list[TrackIn] = Field(max_length=MAX_POINTS)
     edit_count: int = Field(default=0, ge=0, le=10_000_000)
     working_time_s: float = Field(default=0.0, ge=0, le=7 * 24 * 3600, allow_inf_nan=False)
@@ -85,7 +87,7 @@ class AnnotateTaskRead(BaseModel):
 
 
 class StartRequest(BaseModel):
-    task_token: str = Field(min_length=10)
+    task_token: str = Field(min_length=10, max_length=4096)
     assignment_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
     hit_id: str | None = Field(default=None, max_length=64)
     worker_id: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
@@ -112,4 +114,4 @@ class PreviewLink(BaseModel):
 
 
 class HighlightUpdate(BaseModel):
-    box: list[float] = Field(min_length=4, max_length=4, description="x0, y0, x1, y1 image px")
+    box: list[Finite] = Field(min_length=4, max_length=4, description="x0, y0, x1, y1 image px")

@@ -171,12 +171,15 @@ def _kind_name(kind: type | tuple[type, ...]) -> str:
 
 def find_sequence_dirs(path: Path) -> list[Path]:
     """The sequence folders (holding meta.yml) under ``path``, or ``path`` itself."""
-    path = path.resolve()
-    if not path.exists():
-        raise InvalidCapture(str(path), "path does not exist")
-    if (path / "meta.yml").is_file():
-        return [path]
-    found = sorted(p.parent for p in path.glob("*/*/meta.yml"))
+    try:
+        path = path.resolve()
+        if not path.exists():
+            raise InvalidCapture(str(path), "path does not exist")
+        if (path / "meta.yml").is_file():
+            return [path]
+        found = sorted(p.parent for p in path.glob("*/*/meta.yml"))
+    except OSError as exc:  # a name too long for the file system, a folder it may not read
+        raise InvalidCapture(str(path), f"cannot be read ({exc.strerror or exc})") from exc
     if not found:
         raise InvalidCapture(str(path), "no <subject>/<sequence>/meta.yml found under this folder")
     return found

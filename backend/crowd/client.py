@@ -12,11 +12,13 @@ type) is the caller's input at fault: 422 naming the fields; any other failure i
 from __future__ import annotations
 
 import re
+import threading
 from collections.abc import Iterator, Mapping
 from typing import Any
 from urllib.parse import urlparse
 
 import boto3
+import botocore.session
 from botocore.config import Config
 from botocore.exceptions import (
     BotoCoreError,
@@ -142,12 +144,24 @@ def credentials(settings: Settings) -> tuple[str, str]:
     return dev_key, dev_secret
 
 
+# One botocore session for every client: it loads the service model once (a new session per
+# client reads it again, about 0.2 s a request). A session is not safe to build clients from in
+# several threads at once, hence the lock; the clients themselves are.
+_botocore_session: botocore.session.Session | None = None
+_session_lock = threading.Lock()
+
+
 def make_client(settings: Settings, attempts: int = DEFAULT_ATTEMPTS) -> MTurkClient:
+    global _botocore_session
     key, secret = credentials(settings)
     config = Config(retries={"total_max_attempts": attempts, "mode": "standard"})
-    client = boto3.session.Session().client(
-        "mturk", endpoint_url=endpoint_url(settings), region_name=REGION,
-        aws_access_key_id=key, aws_secret_access_key=secret, config=config)
+    url = endpoint_url(settings)
+    with _session_lock:
+        if _botocore_session is None:
+            _botocore_session = botocore.session.get_session()
+        client = boto3.session.Session(botocore_session=_botocore_session).client(
+            "mturk", endpoint_url=url, region_name=REGION,
+            aws_access_key_id=key, aws_secret_access_key=secret, config=config)
     # Read back by unreachable() to name the setting in the message (ClientMeta declares no
     # such attribute, hence setattr).
     setattr(client.meta, HINT, endpoint_hint(settings))

@@ -29,6 +29,7 @@ from backend.crowd.schemas import (
     SyncResult,
 )
 from backend.db import SessionDep
+from backend.validation import Id, Key, QueryKey
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
@@ -62,45 +63,45 @@ def sync_submissions(session: SessionDep, _: CurrentAdmin, client: MTurk) -> Syn
 
 
 @router.post("/assignments/{assignment_id}/approve", response_model=PaymentRead)
-def approve(assignment_id: int, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
+def approve(assignment_id: Id, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
             client: MTurk) -> PaymentRead:
     return pipeline.approve(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/reject", response_model=PaymentRead)
-def reject(assignment_id: int, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
+def reject(assignment_id: Id, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
            client: MTurk) -> PaymentRead:
     return pipeline.reject(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)
-def bonus(assignment_id: int, body: BonusRequest, _: CurrentAdmin, client: MTurk) -> PaymentRead:
+def bonus(assignment_id: Id, body: BonusRequest, _: CurrentAdmin, client: MTurk) -> PaymentRead:
     # The flow commits its own units of work: the ledger row before paying, and after.
     return flows.pay_bonus(client, assignment_id, pricing.dollars_to_cents(body.amount),
                            body.reason, body.key)
 
 
 @router.post("/hits/{hit_id}/extend")
-def extend_hit(hit_id: str, body: ExtendRequest, session: SessionDep, _: CurrentAdmin,
+def extend_hit(hit_id: Key, body: ExtendRequest, session: SessionDep, _: CurrentAdmin,
                client: MTurk) -> dict[str, Any]:
     return _hit_read(actions.extend_hit(session, client, hit_id, body.seconds))
 
 
 @router.post("/hits/{hit_id}/expire")
-def expire_hit(hit_id: str, session: SessionDep, _: CurrentAdmin,
+def expire_hit(hit_id: Key, session: SessionDep, _: CurrentAdmin,
                client: MTurk) -> dict[str, Any]:
     return _hit_read(actions.expire_hit(session, client, hit_id))
 
 
 @router.post("/hits/{hit_id}/assignments")
-def add_assignments(hit_id: str, body: AddAssignmentsRequest, session: SessionDep,
+def add_assignments(hit_id: Key, body: AddAssignmentsRequest, session: SessionDep,
                     _: CurrentAdmin, client: MTurk) -> dict[str, Any]:
     hit = actions.add_assignments(session, client, hit_id, body.count, body.allow_large_hits)
     return _hit_read(hit)
 
 
 @router.post("/workers/{worker_id}/qualifications")
-def grant(worker_id: str, body: QualificationRequest, session: SessionDep, _: CurrentAdmin,
+def grant(worker_id: Key, body: QualificationRequest, session: SessionDep, _: CurrentAdmin,
           client: MTurk) -> dict[str, str]:
     type_id = actions.grant_qualification(session, client, worker_id, body.qualification_type_id,
                                           body.value, body.notify)
@@ -108,21 +109,21 @@ def grant(worker_id: str, body: QualificationRequest, session: SessionDep, _: Cu
 
 
 @router.delete("/workers/{worker_id}/qualifications")
-def revoke(worker_id: str, session: SessionDep, _: CurrentAdmin, client: MTurk,
-           qualification_type_id: str | None = None) -> dict[str, str]:
+def revoke(worker_id: Key, session: SessionDep, _: CurrentAdmin, client: MTurk,
+           qualification_type_id: QueryKey = None) -> dict[str, str]:
     type_id = actions.revoke_qualification(session, client, worker_id, qualification_type_id)
     return {"worker_id": worker_id, "qualification_type_id": type_id, "state": "revoked"}
 
 
 @router.post("/workers/{worker_id}/block")
-def block(worker_id: str, body: BlockRequest, session: SessionDep, _: CurrentAdmin,
+def block(worker_id: Key, body: BlockRequest, session: SessionDep, _: CurrentAdmin,
           client: MTurk) -> dict[str, str]:
     actions.block_worker(session, client, worker_id, body.reason)
     return {"worker_id": worker_id, "state": "blocked"}
 
 
 @router.delete("/workers/{worker_id}/block")
-def unblock(worker_id: str, session: SessionDep, _: CurrentAdmin, client: MTurk,
+def unblock(worker_id: Key, session: SessionDep, _: CurrentAdmin, client: MTurk,
             reason: Annotated[str | None, Query(max_length=1024)] = None) -> dict[str, str]:
     actions.unblock_worker(session, client, worker_id, reason)
     return {"worker_id": worker_id, "state": "unblocked"}

@@ -7,6 +7,8 @@ from typing import Annotated
 
 from pydantic import BaseModel, Field
 
+from backend.validation import BodyId, Int32
+
 # MTurk's own bounds: lifetime 30 s to 1 year, assignment duration 30 s to 1 year,
 # auto-approval delay 0 to 30 days.
 Seconds = Annotated[int, Field(ge=30, le=31_536_000)]
@@ -33,7 +35,7 @@ class PublishOptions(BaseModel):
 
 
 class PublishRequest(PublishOptions):
-    sequence_id: int | None = None
+    sequence_id: BodyId | None = None
     dry_run: bool = False
 
 
@@ -99,8 +101,9 @@ class AddAssignmentsRequest(BaseModel):
 
 
 class QualificationRequest(BaseModel):
-    qualification_type_id: str | None = None  # unset: our "passed training" type
-    value: int = 1
+    # Unset: our "passed training" type.
+    qualification_type_id: str | None = Field(default=None, min_length=1, max_length=64)
+    value: Int32 = 1
     notify: bool = False
 
 

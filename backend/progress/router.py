@@ -8,12 +8,13 @@ from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
 from backend.progress.schemas import SequenceProgress
 from backend.progress.service import sequence_progress
+from backend.validation import Id
 
 router = APIRouter(prefix="/api", tags=["progress"])
 
 
 @router.get("/sequences/{sequence_id}/progress", response_model=SequenceProgress)
-def get_progress(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> SequenceProgress:
+def get_progress(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> SequenceProgress:
     """Every view x target task's state (open, published, submitted, in review, accepted)
     with its HIT and assignment counts, the totals, and the sequence's latest solve run."""
     return sequence_progress(session, sequence_id)

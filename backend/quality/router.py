@@ -18,6 +18,7 @@ from backend.quality.schemas import (
     TrainingClipRead,
     WorkerQualityRead,
 )
+from backend.validation import Id, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/qc", tags=["quality"])
 
@@ -25,15 +26,15 @@ Outcome = Literal["approve", "review", "reject"]
 
 
 @router.get("/reports", response_model=list[QCReportRead])
-def list_reports(session: SessionDep, _: CurrentAdmin, sequence_id: int | None = None,
-                 outcome: Outcome | None = None, worker_id: str | None = None,
+def list_reports(session: SessionDep, _: CurrentAdmin, sequence_id: QueryId = None,
+                 outcome: Outcome | None = None, worker_id: QueryKey = None,
                  limit: int = Query(500, ge=1, le=5000)) -> list[QCReportRead]:
     rows = service.list_reports(session, sequence_id, outcome, worker_id, limit)
     return [QCReportRead.model_validate(r) for r in rows]
 
 
 @router.get("/reports/{assignment_id}", response_model=QCReportDetail)
-def read_report(assignment_id: int, session: SessionDep, _: CurrentAdmin) -> QCReportDetail:
+def read_report(assignment_id: Id, session: SessionDep, _: CurrentAdmin) -> QCReportDetail:
     return QCReportDetail.model_validate(service.get_report_or_raise(session, assignment_id))
 
 

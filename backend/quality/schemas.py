@@ -7,6 +7,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from backend.validation import BodyId, Finite, Int32
+
 
 class QCReportRead(BaseModel):
     model_config = ConfigDict(from_attributes=True)
@@ -38,7 +40,7 @@ class QCReportDetail(QCReportRead):
 
 
 class QCRunRequest(BaseModel):
-    sequence_id: int
+    sequence_id: BodyId
     # Unset: every target of the sequence that has submitted work.
     target_key: str | None = Field(default=None, pattern=r"^(hand|object):\d+$")
 
@@ -56,9 +58,9 @@ class WorkerQualityRead(BaseModel):
 class TrainingClipCreate(BaseModel):
     """Gold labels for a task: from an accepted assignment, or given (P tracks of rows)."""
 
-    task_id: int
-    from_assignment_id: int | None = None
-    tracks: list[list[list[int | float | None]]] | None = None
+    task_id: BodyId
+    from_assignment_id: BodyId | None = None
+    tracks: list[list[list[Int32 | Finite | None]]] | None = None
     note: str | None = Field(default=None, max_length=1000)
 
 

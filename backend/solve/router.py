@@ -11,6 +11,7 @@ from backend.db import SessionDep
 from backend.solve import pictures, service
 from backend.solve.models import SolveRun
 from backend.solve.schemas import InitialPoseUpdate, SolveFrameRead, SolveRequest, SolveRunRead
+from backend.validation import Id, Index, Key
 
 router = APIRouter(prefix="/api", tags=["solve"])
 
@@ -24,7 +25,7 @@ def _read(run: SolveRun, current: SolveRun | None) -> SolveRunRead:
 
 
 @router.post("/sequences/{sequence_id}/solve", response_model=SolveRunRead)
-def request_solve(sequence_id: int, session: SessionDep, _: CurrentAdmin,
+def request_solve(sequence_id: Id, session: SessionDep, _: CurrentAdmin,
                   body: SolveRequest | None = None) -> SolveRunRead:
     body = body or SolveRequest()
     run = service.request_solve(session, sequence_id, body.optimiser, body.params)
@@ -32,13 +33,13 @@ def request_solve(sequence_id: int, session: SessionDep, _: CurrentAdmin,
 
 
 @router.get("/sequences/{sequence_id}/solve-runs", response_model=list[SolveRunRead])
-def list_runs(sequence_id: int, session: SessionDep, _: CurrentAdmin) -> list[SolveRunRead]:
+def list_runs(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> list[SolveRunRead]:
     current = service.current_run(session, sequence_id)
     return [_read(run, current) for run in service.list_runs(session, sequence_id)]
 
 
 @router.put("/sequences/{sequence_id}/objects/{index}/initial-pose")
-def set_initial_pose(sequence_id: int, index: int, body: InitialPoseUpdate, session: SessionDep,
+def set_initial_pose(sequence_id: Id, index: Index, body: InitialPoseUpdate, session: SessionDep,
                      _: CurrentAdmin) -> dict:
     obj = service.set_initial_pose(session, sequence_id, index, body.pose)
     return {"sequence_id": sequence_id, "index": obj.index, "name": obj.name,
@@ -46,13 +47,13 @@ def set_initial_pose(sequence_id: int, index: int, body: InitialPoseUpdate, sess
 
 
 @router.get("/solve-runs/{run_id}", response_model=SolveRunRead)
-def read_run(run_id: int, session: SessionDep, _: CurrentAdmin) -> SolveRunRead:
+def read_run(run_id: Id, session: SessionDep, _: CurrentAdmin) -> SolveRunRead:
     run = service.get_run_or_raise(session, run_id)
     return _read(run, service.current_run(session, run.sequence_id))
 
 
 @router.get("/solve-runs/{run_id}/frames/{frame}", response_model=SolveFrameRead)
-def read_frame(run_id: int, frame: int, session: SessionDep, _: CurrentAdmin,
+def read_frame(run_id: Id, frame: Index, session: SessionDep, _: CurrentAdmin,
                vertices: bool = Query(False, description="include the hand mesh")) -> dict:
     run = service.finished_run_or_raise(session, run_id)
     return pictures.frame_outputs(run, frame, vertices)
@@ -60,7 +61,7 @@ def read_frame(run_id: int, frame: int, session: SessionDep, _: CurrentAdmin,
 
 @router.get("/solve-runs/{run_id}/frames/{frame}/views/{view}.png", responses=_PNG,
             response_class=Response)
-def view_overlay(run_id: int, frame: int, view: str, session: SessionDep,
+def view_overlay(run_id: Id, frame: Index, view: Key, session: SessionDep,
                  _: CurrentAdmin) -> Response:
     run = service.finished_run_or_raise(session, run_id)
     return Response(pictures.overlay_png(session, run, frame, view), media_type="image/png")
@@ -68,6 +69,6 @@ def view_overlay(run_id: int, frame: int, view: str, session: SessionDep,
 
 @router.get("/solve-runs/{run_id}/frames/{frame}/residuals.png", responses=_PNG,
             response_class=Response)
-def residuals(run_id: int, frame: int, session: SessionDep, _: CurrentAdmin) -> Response:
+def residuals(run_id: Id, frame: Index, session: SessionDep, _: CurrentAdmin) -> Response:
     run = service.finished_run_or_raise(session, run_id)
     return Response(pictures.residuals_png(run, frame), media_type="image/png")

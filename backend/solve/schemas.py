@@ -5,7 +5,9 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from backend.validation import Finite, Scalar
 
 Optimiser = Literal["paper", "default"]
 
@@ -20,7 +22,7 @@ class SolveRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     optimiser: Optimiser | None = None
-    params: dict[str, StrictBool | int | float] | None = None
+    params: dict[str, Scalar] | None = None
 
 
 class SolveRunRead(BaseModel):
@@ -71,7 +73,7 @@ class InitialPoseUpdate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    pose: list[list[float]] = Field(min_length=3, max_length=3)
+    pose: list[list[Finite]] = Field(min_length=3, max_length=3)
 
     @field_validator("pose")
     @classmethod
