@@ -75,7 +75,9 @@ def confirm_submission(args: dict[str, Any]) -> dict[str, Any]:
     return pipeline.confirm(int(args["assignment_id"]))
 
 
-@job_handler("solve", lease_s=3600)
+# No lease of its own: the heartbeat renews a long solve's lease (DEXLABEL_JOB_LEASE_S) while
+# it works, so the lease only bounds how soon a killed worker's solve is taken over.
+@job_handler("solve")
 def solve_run(args: dict[str, Any]) -> dict[str, Any]:
     """Solve run ``args["run_id"]`` of a sequence and store its outputs (idempotent)."""
     result = run_solve(int(args["run_id"]))
