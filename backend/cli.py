@@ -140,28 +140,43 @@ def create_admin(
         typer.echo(f"admin {admin.email} ready (id {admin.id})")
 
 
+# A stopping server finishes the requests it has for at most this long (every database wait
+# of a request is bounded by DEXLABEL_DB_WAIT_S), then closes what is left.
+SHUTDOWN_GRACE_S = 15
+
+
 @app.command()
 def serve(
     host: Annotated[str, typer.Option()] = "127.0.0.1",
     port: Annotated[int, typer.Option()] = 8000,
+    workers: Annotated[int, typer.Option(
+        min=1, max=64, help="server processes sharing the port (PostgreSQL only)")] = 1,
 ) -> None:
     """Run the API and pages (plus an in-process queue consumer on the embedded default);
-    the address is recorded in the instance for the other commands."""
+    the address is recorded in the instance for the other commands. ``--workers N`` serves
+    from N processes, which needs PostgreSQL: SQLite takes one writer at a time, and only
+    the writers of one process wait their turn (the others would fail on a locked file)."""
     import uvicorn
 
     from backend.queue import start_inprocess_consumer
 
     settings = serve_at(host, port)
+    if workers > 1 and settings.is_sqlite:
+        fail(f"--workers {workers} needs PostgreSQL (DEXLABEL_DATABASE_URL): the embedded SQLite "
+             "database takes one writer at a time, so it is served by one process; run "
+             "without --workers, or point DEXLABEL_DATABASE_URL at PostgreSQL")
     consumer = None
     if settings.inprocess_worker and not settings.redis_url:
         consumer = start_inprocess_consumer(settings.worker_threads)
     record_server(settings, client_url(host, port))
     # uvicorn stops on SIGINT/SIGTERM, then raises the signal again for the handler it found:
-    # this one ends the process through the ``finally`` below, so the record is removed.
+    # this one ends the process through the ``finally`` below, so the record is removed. With
+    # several processes, uvicorn's supervisor stops them and returns instead.
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _exit_cleanly)
     try:
-        uvicorn.run("backend.app:create_app", factory=True, host=host, port=port)
+        uvicorn.run("backend.app:create_app", factory=True, host=host, port=port,
+                    workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S)
     finally:
         forget_server(settings)
         if consumer is not None:
