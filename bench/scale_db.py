@@ -27,11 +27,13 @@ Prints a JSON summary on its last line:
     db_bytes, db_size         pg_database_size after the fill
     tables                    rows and total bytes (with indexes and TOAST) of the big tables
     queries                   per query: median ms over --repeat runs (after one warm-up),
-                              SQL statements per run, rows (or items) returned
+                              min_ms (the fastest run), sql_ms (median time spent executing
+                              SQL), SQL statements per run, rows (or items) returned
 Usage: python bench/scale_db.py [--sequences 1000] [--url URL] [--keep] [--repeat 5]
-       [--no-queries]
+       [--no-queries] [--time-only]
 The database (default dexlabel_scale on the local server) is dropped and made again; it is
-dropped at the end unless --keep.
+dropped at the end unless --keep. --time-only migrates a kept database to the newest schema
+and times the queries again without filling.
 """
 
 from __future__ import annotations
@@ -212,6 +214,7 @@ class _Filler:
         self.worker_weight = [1.0 / (1 + i) ** 0.6 for i in range(WORKERS)]
         self.rejections: dict[str, int] = {}
         self.serial = 0
+        self.subject_names: list[str] = []
 
     # names -------------------------------------------------------------------------------
 
@@ -231,19 +234,19 @@ class _Filler:
 
     def subjects(self) -> None:
         for i in range(SUBJECTS):
-            self.rows["subjects"].append(
-                (self.ids.take("subjects"), f"2020{7 + i // 5:02d}{9 + i:02d}-subject-{i + 1:02d}",
-                 START))
+            name = f"2020{7 + i // 5:02d}{9 + i:02d}-subject-{i + 1:02d}"
+            self.subject_names.append(name)
+            self.rows["subjects"].append((self.ids.take("subjects"), name, START))
 
     def sequence(self, index: int) -> None:
-        from backend.captures.service import storage_uid
-
         rng = self.rng
         seq_id = self.ids.take("sequences")
         subject_id = 1 + index % SUBJECTS
-        subject = f"subject-{subject_id:02d}"
-        name = f"20200{7 + subject_id // 5}{9 + subject_id:02d}_{index // SUBJECTS:06d}"
-        uid = storage_uid(subject, name)
+        subject = self.subject_names[subject_id - 1]
+        name = f"{subject[:8]}_{index // SUBJECTS:06d}"
+        # The storage prefix an import gives a sequence: a hash of its name, then its own part.
+        uid = (hashlib.sha256(f"{subject}/{name}".encode()).hexdigest()[:24]
+               + f"-{index:012x}")
         num_frames = rng.randint(64, 81)
         created = START + timedelta(days=90 * index / max(self.total, 1))
         self.rows["sequences"].append(
@@ -643,7 +646,9 @@ def sample_sequence(url: str) -> int:
 
 @dataclass
 class Timed:
-    ms: float
+    ms: float  # median wall time of a run
+    min_ms: float  # fastest run (the least disturbed by other load on the machine)
+    sql_ms: float  # median time inside the database driver's execute (the SQL itself)
     statements: int
     items: int
 
@@ -655,23 +660,34 @@ def _measure(fn: Callable[[], int], repeat: int) -> Timed:
 
     engine = get_engine()
     count = [0]
+    in_sql = [0.0]
+    started_at: list[float] = []
 
-    def _count(*_: Any) -> None:
+    def _before(*_: Any) -> None:
         count[0] += 1
+        started_at.append(time.perf_counter())
 
-    event.listen(engine, "before_cursor_execute", _count)
+    def _after(*_: Any) -> None:
+        in_sql[0] += time.perf_counter() - started_at.pop()
+
+    event.listen(engine, "before_cursor_execute", _before)
+    event.listen(engine, "after_cursor_execute", _after)
     try:
         items = fn()  # warm-up: connections, plan caches, the OS page cache
         count[0] = 0
-        times = []
+        times, sql = [], []
         for _ in range(repeat):
+            in_sql[0] = 0.0
             started = time.perf_counter()
             fn()
             times.append((time.perf_counter() - started) * 1000)
+            sql.append(in_sql[0] * 1000)
         statements = count[0] // repeat
     finally:
-        event.remove(engine, "before_cursor_execute", _count)
-    return Timed(round(statistics.median(times), 2), statements, items)
+        event.remove(engine, "before_cursor_execute", _before)
+        event.remove(engine, "after_cursor_execute", _after)
+    return Timed(round(statistics.median(times), 2), round(min(times), 2),
+                 round(statistics.median(sql), 2), statements, items)
 
 
 def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
@@ -744,6 +760,7 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
 
     seq = sequence_id
     return {
+        "GET /api/auth/me (floor)": get("/api/auth/me"),
         "GET /api/sequences": get("/api/sequences"),
         "GET /api/sequences/{id}/progress": get(f"/api/sequences/{seq}/progress"),
         "GET /api/qc/reports?sequence_id=": get(f"/api/qc/reports?sequence_id={seq}"),
@@ -763,9 +780,10 @@ def time_queries(url: str, repeat: int = 5) -> dict[str, dict[str, float | int]]
     out: dict[str, dict[str, float | int]] = {}
     for name, fn in {**api_queries(seq), **read_queries(seq)}.items():
         timed = _measure(fn, repeat)
-        out[name] = {"ms": timed.ms, "statements": timed.statements, "items": timed.items}
-        print(f"{name:40s} {timed.ms:9.2f} ms  {timed.statements:4d} statements  "
-              f"{timed.items} items", flush=True)
+        out[name] = {"ms": timed.ms, "min_ms": timed.min_ms, "sql_ms": timed.sql_ms,
+                     "statements": timed.statements, "items": timed.items}
+        print(f"{name:36s} {timed.ms:8.1f} ms (min {timed.min_ms:7.1f}, SQL {timed.sql_ms:7.1f})"
+              f" {timed.statements:4d} statements {timed.items:6d} items", flush=True)
     return out
 
 
@@ -775,6 +793,18 @@ def _human(n: float) -> str:
             return f"{n:.1f} {unit}"
         n /= 1024
     return f"{n:.1f} GB"
+
+
+def time_only(url: str, repeat: int) -> dict[str, Any]:
+    """The timings on a database filled before (``--keep``), after migrating it to head."""
+    from backend.migrate import upgrade
+
+    upgrade(url)
+    size, tables = table_sizes(url)
+    _point_at(url)
+    seq = sample_sequence(url)
+    return {"db_bytes": size, "db_size": _human(size), "tables": tables,
+            "sample_sequence_id": seq, "queries": time_queries(url, repeat)}
 
 
 def run(url: str, sequences: int, keep: bool, repeat: int, queries: bool,
@@ -831,8 +861,14 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per query")
     parser.add_argument("--no-queries", dest="queries", action="store_false")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--time-only", action="store_true",
+                        help="only time the queries on a database kept by an earlier run")
     args = parser.parse_args(argv)
-    summary = run(args.url, args.sequences, args.keep, args.repeat, args.queries, args.seed)
+    if args.time_only:
+        summary = time_only(args.url, args.repeat)
+    else:
+        summary = run(args.url, args.sequences, args.keep, args.repeat, args.queries,
+                      args.seed)
     print(json.dumps(summary))
 
 

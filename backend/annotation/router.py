@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 from urllib.parse import urlencode
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy.orm import Session
 
 from backend import pipeline
@@ -101,10 +101,11 @@ def create_tasks(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> list[
 
 
 @router.get("/tasks", response_model=list[TaskRead])
-def list_tasks(session: SessionDep, _: CurrentAdmin,
-               sequence_id: QueryId = None) -> list[TaskRead]:
-    return _task_reads(session, [service.get_task_or_raise(session, t.id)
-                                 for t in service.list_tasks(session, sequence_id)])
+def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: QueryId = None,
+               limit: int = Query(500, ge=1, le=5000),
+               offset: int = Query(0, ge=0)) -> list[TaskRead]:
+    """Tasks in id order, ``limit`` (500, at most 5,000) from ``offset`` on."""
+    return _task_reads(session, service.list_tasks(session, sequence_id, limit, offset))
 
 
 @router.put("/tasks/{task_id}/highlight", response_model=TaskRead)

@@ -62,8 +62,12 @@ def create_tasks(session: Session, storage: Storage, sequence_id: int) -> list[T
     return tasks
 
 
-def list_tasks(session: Session, sequence_id: int | None = None) -> list[Task]:
-    stmt = select(Task).options(selectinload(Task.camera)).order_by(Task.id)
+def list_tasks(session: Session, sequence_id: int | None = None, limit: int | None = None,
+               offset: int = 0) -> list[Task]:
+    """Tasks in id order (of one sequence), with their cameras and sequences loaded; a page
+    of them when ``limit`` is given."""
+    stmt = (select(Task).options(selectinload(Task.camera), selectinload(Task.sequence))
+            .order_by(Task.id).offset(offset).limit(limit))
     if sequence_id is not None:
         stmt = stmt.where(Task.sequence_id == sequence_id)
     return list(session.scalars(stmt))

@@ -87,8 +87,11 @@ def get_sequence_or_raise(session: Session, sequence_id: int) -> Sequence:
     return seq
 
 
-def list_sequences(session: Session) -> list[Sequence]:
-    stmt = (select(Sequence).order_by(Sequence.id)
+def list_sequences(session: Session, limit: int | None = None, offset: int = 0
+                   ) -> list[Sequence]:
+    """Sequences in id order with their cameras, objects, hands and subject; a page of them
+    when ``limit`` is given."""
+    stmt = (select(Sequence).order_by(Sequence.id).offset(offset).limit(limit)
             .options(selectinload(Sequence.cameras), selectinload(Sequence.objects),
                      selectinload(Sequence.hands), selectinload(Sequence.subject)))
     return list(session.scalars(stmt))

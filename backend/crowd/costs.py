@@ -12,9 +12,7 @@ to the project's committed total.
 
 from __future__ import annotations
 
-from collections import defaultdict
-
-from sqlalchemy import select
+from sqlalchemy import ColumnElement, case, exists, func, select, tuple_
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
@@ -27,6 +25,9 @@ FIELDS = ("spent_rewards", "spent_bonuses", "spent_fees",
 _Totals = dict[str, list[int]]  # key -> cents in the order of FIELDS
 _DECISIONS = ("approval", "rejection")
 
+# Each sum is taken by the database (one grouped query per kind of money, whatever the size of
+# the project); only the groups come back.
+
 
 def _add(totals: _Totals, key: str, **cents: int) -> None:
     entry = totals.setdefault(key, [0] * len(FIELDS))
@@ -34,63 +35,92 @@ def _add(totals: _Totals, key: str, **cents: int) -> None:
         entry[FIELDS.index(name)] += value
 
 
-def _payment_parts(payment: CrowdPayment) -> dict[str, int]:
-    if payment.kind == "rejection":
+def _payment_parts(kind: str, state: str, amount: int, fee: int) -> dict[str, int]:
+    if kind == "rejection":
         return {}  # costs nothing, but the worker and sequence are listed
-    if payment.kind == "approval":
-        return {"spent_rewards": payment.amount_cents, "spent_fees": payment.fee_cents}
-    if payment.state == "done":
-        return {"spent_bonuses": payment.amount_cents, "spent_fees": payment.fee_cents}
-    return {"committed_bonuses": payment.amount_cents, "committed_fees": payment.fee_cents}
+    if kind == "approval":
+        return {"spent_rewards": amount, "spent_fees": fee}
+    if state == "done":
+        return {"spent_bonuses": amount, "spent_fees": fee}
+    return {"committed_bonuses": amount, "committed_fees": fee}
 
 
 def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    stmt = (select(CrowdPayment, Task.sequence_id)
+    """Ledger sums per sequence and per worker in one pass (two grouping sets)."""
+    if session.get_bind().dialect.name != "postgresql":
+        # SQLite has no grouping sets: the two groupings one after the other.
+        _payments_each(session, by_sequence, by_worker)
+        return
+    sequence_id, worker_id = Task.sequence_id, CrowdPayment.worker_id
+    stmt = (select(sequence_id, worker_id, func.grouping(sequence_id), CrowdPayment.kind,
+                   CrowdPayment.state, func.sum(CrowdPayment.amount_cents),
+                   func.sum(CrowdPayment.fee_cents))
             .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
-            .join(Task, Task.id == Assignment.task_id))
-    for payment, sequence_id in session.execute(stmt):
-        parts = _payment_parts(payment)
-        _add(by_sequence, str(sequence_id), **parts)
-        _add(by_worker, payment.worker_id, **parts)
+            .join(Task, Task.id == Assignment.task_id)
+            .group_by(func.grouping_sets(
+                tuple_(sequence_id, CrowdPayment.kind, CrowdPayment.state),
+                tuple_(worker_id, CrowdPayment.kind, CrowdPayment.state))))
+    for seq, worker, no_sequence, kind, state, amount, fee in session.execute(stmt):
+        parts = _payment_parts(kind, state, int(amount), int(fee))
+        if no_sequence:
+            _add(by_worker, worker, **parts)
+        else:
+            _add(by_sequence, str(seq), **parts)
 
 
-def _decided_per_hit(session: Session) -> dict[str, int]:
-    stmt = (select(Assignment.hit_id)
-            .join(CrowdPayment, CrowdPayment.assignment_id == Assignment.id)
-            .where(CrowdPayment.kind.in_(_DECISIONS)))
-    counts: dict[str, int] = defaultdict(int)
-    for hit_id in session.scalars(stmt):
-        counts[hit_id or ""] += 1
-    return counts
+def _payments_each(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
+    for key, totals in ((Task.sequence_id, by_sequence), (CrowdPayment.worker_id, by_worker)):
+        stmt = (select(key, CrowdPayment.kind, CrowdPayment.state,
+                       func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents))
+                .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
+                .join(Task, Task.id == Assignment.task_id)
+                .group_by(key, CrowdPayment.kind, CrowdPayment.state))
+        for value, kind, state, amount, fee in session.execute(stmt):
+            _add(totals, str(value), **_payment_parts(kind, state, int(amount), int(fee)))
 
 
-def _waiting_per_hit(session: Session) -> dict[str, list[CrowdSubmission]]:
-    """Verified submissions with no approval or rejection yet, by HIT id."""
-    decided_ids = select(CrowdPayment.assignment_id).where(CrowdPayment.kind.in_(_DECISIONS))
-    waiting: dict[str, list[CrowdSubmission]] = defaultdict(list)
-    for submission in session.scalars(
-            select(CrowdSubmission).where(CrowdSubmission.assignment_id.not_in(decided_ids))):
-        waiting[submission.hit_id].append(submission)
-    return waiting
+def _undecided() -> ColumnElement[bool]:
+    """The condition "this submission has no approval or rejection yet"."""
+    return ~exists().where(CrowdPayment.assignment_id == CrowdSubmission.assignment_id,
+                           CrowdPayment.kind.in_(_DECISIONS))
 
 
 def _held(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    decided, waiting = _decided_per_hit(session), _waiting_per_hit(session)
-    hits = session.execute(select(CrowdHit, Task.sequence_id)
-                           .join(Task, Task.id == CrowdHit.task_id)
-                           .where(CrowdHit.hit_id.is_not(None)))
-    for hit, sequence_id in hits:
-        reward = hit.reward_cents
-        fee = pricing.fee_cents(reward, hit.max_assignments)
-        submitted = waiting.get(hit.hit_id or "", [])
-        for submission in submitted:
-            _add(by_worker, submission.worker_id, committed_rewards=reward, committed_fees=fee)
-        if hit.expired_at is not None:
-            slots = len(submitted)
-        else:
-            slots = max(hit.max_assignments - decided.get(hit.hit_id or "", 0), 0)
-        _add(by_sequence, str(sequence_id), committed_rewards=slots * reward,
-             committed_fees=slots * fee)
+    """Money still held: per sequence, every HIT's open slots (an expired HIT's: its waiting
+    submissions); per worker, their submitted work not decided yet."""
+    decided = (select(Assignment.hit_id.label("hit_id"), func.count().label("n"))
+               .join(CrowdPayment, CrowdPayment.assignment_id == Assignment.id)
+               .where(CrowdPayment.kind.in_(_DECISIONS))
+               .group_by(Assignment.hit_id).subquery())
+    waiting = (select(CrowdSubmission.hit_id.label("hit_id"), func.count().label("n"))
+               .where(_undecided()).group_by(CrowdSubmission.hit_id).subquery())
+    # Two-argument max is SQLite's greatest.
+    greatest = func.greatest if session.get_bind().dialect.name == "postgresql" else func.max
+    slots = case(
+        (CrowdHit.expired_at.is_not(None), func.coalesce(waiting.c.n, 0)),
+        else_=greatest(CrowdHit.max_assignments - func.coalesce(decided.c.n, 0), 0))
+    per_sequence = (
+        select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
+               func.sum(slots))
+        .join(Task, Task.id == CrowdHit.task_id)
+        .outerjoin(decided, decided.c.hit_id == CrowdHit.hit_id)
+        .outerjoin(waiting, waiting.c.hit_id == CrowdHit.hit_id)
+        .where(CrowdHit.hit_id.is_not(None))
+        .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
+    for sequence_id, reward, max_assignments, open_slots in session.execute(per_sequence):
+        fee = pricing.fee_cents(reward, max_assignments)
+        n = int(open_slots or 0)
+        _add(by_sequence, str(sequence_id), committed_rewards=n * reward,
+             committed_fees=n * fee)
+    per_worker = (
+        select(CrowdSubmission.worker_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
+               func.count())
+        .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
+        .where(_undecided())
+        .group_by(CrowdSubmission.worker_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
+    for worker_id, reward, max_assignments, n in session.execute(per_worker):
+        fee = pricing.fee_cents(reward, max_assignments)
+        _add(by_worker, worker_id, committed_rewards=n * reward, committed_fees=n * fee)
 
 
 def _line(key: str, cents: list[int]) -> CostLine:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 from sqlalchemy import select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
@@ -80,9 +80,10 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
                        cameras=[camera_model(c) for c in cameras],
                        tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
+    # Every assignment's tracks in one more query, not one per assignment.
     stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
                                      Assignment.status.in_(SCORED_STATUSES))
-            .order_by(Assignment.id))
+            .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
     for assignment in session.scalars(stmt):
         task = out.tasks[assignment.task_id]
         view = view_of[task.camera_id]

@@ -119,10 +119,18 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
     return results, methods, provisional
 
 
+# Reports the thresholds are learned from: the project's newest consensus-scored ones of the
+# target's kind. Medians and MADs of this many are stable to a few percent, and a QC job of a
+# project with tens of thousands of reports reads these instead of every one.
+POPULATION_LIMIT = 2000
+
+
 def _population(session: Session, kind: str, fresh: dict[str, dict]) -> list[dict]:
-    """Metrics of every consensus-scored assignment of the project for this kind of target."""
-    stmt = select(QCReport.assignment_id, QCReport.metrics).where(
-        QCReport.method == "consensus", QCReport.target_key.like(f"{kind}:%"))
+    """Metrics of the project's newest consensus-scored assignments (at most
+    ``POPULATION_LIMIT``) for this kind of target, with this run's fresh ones on top."""
+    stmt = (select(QCReport.assignment_id, QCReport.metrics)
+            .where(QCReport.method == "consensus", QCReport.target_key.like(f"{kind}:%"))
+            .order_by(QCReport.id.desc()).limit(POPULATION_LIMIT))
     rows = {str(aid): metrics for aid, metrics in session.execute(stmt)}
     rows.update(fresh)
     return list(rows.values())
@@ -144,12 +152,15 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     names = point_names(inputs.kind)
     views = len({lab.view for lab in inputs.labels})
     counts = {"approve": 0, "review": 0, "reject": 0, "provisional": 0}
+    # The reports being overwritten, in one query.
+    existing = {row.assignment_id: row for row in session.scalars(select(QCReport).where(
+        QCReport.assignment_id.in_([inputs.who[key].assignment_id for key in results])))}
     for key, qc in results.items():
         method = methods[key]
         is_provisional = provisional and method == "consensus"
         decision = decide(qc, thresholds, names)
         who = inputs.who[key]
-        row = session.scalar(select(QCReport).where(QCReport.assignment_id == who.assignment_id))
+        row = existing.get(who.assignment_id)
         if row is None:
             row = QCReport(assignment_id=who.assignment_id)
             session.add(row)
@@ -195,8 +206,10 @@ def list_reports(session: Session, sequence_id: int | None = None, outcome: str 
     return list(session.scalars(stmt))
 
 
-def worker_quality(session: Session, worker_id: str | None = None) -> list[dict[str, Any]]:
-    """Each worker's running quality: share of final (non-provisional) reports that passed."""
+def worker_quality(session: Session, worker_id: str | None = None, limit: int | None = None,
+                   offset: int = 0) -> list[dict[str, Any]]:
+    """Each worker's running quality: share of final (non-provisional) reports that passed;
+    ``limit`` workers by id from ``offset`` on when a limit is given."""
     stmt = (select(QCReport.worker_id, QCReport.outcome, func.count())
             .where(QCReport.provisional.is_(False))
             .group_by(QCReport.worker_id, QCReport.outcome))
@@ -208,7 +221,8 @@ def worker_quality(session: Session, worker_id: str | None = None) -> list[dict[
     blocked = set(session.scalars(select(CrowdWorkerAction.worker_id).where(
         CrowdWorkerAction.kind == "block")))
     out = []
-    for wid, t in sorted(tally.items()):
+    page = sorted(tally.items())[offset:None if limit is None else offset + limit]
+    for wid, t in page:
         total = sum(t.values())
         out.append({"worker_id": wid, "scored": total, "approved": t["approve"],
                     "review": t["review"], "rejected": t["reject"],

@@ -57,19 +57,24 @@ def merge_labels(labels: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarra
 def approved_labels(session: Session, sequence_id: int, num_frames: int
                     ) -> dict[tuple[int, str], tuple[np.ndarray, np.ndarray]]:
     """Merged approved labels keyed by (camera id, target key) of every task that has any."""
-    stmt = (select(Assignment, Task).join(Task, Assignment.task_id == Task.id)
-            .where(Task.sequence_id == sequence_id, Assignment.status == ACCEPTED)
+    # The sequence's tasks, then their approved work by task (each read by its index).
+    tasks = {task.id: task for task in session.scalars(
+        select(Task).where(Task.sequence_id == sequence_id))}
+    stmt = (select(Assignment)
+            .where(Assignment.task_id.in_(tasks), Assignment.status == ACCEPTED)
             .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
     grouped: dict[tuple[int, str], list] = defaultdict(list)
-    for assignment, task in session.execute(stmt):
+    for assignment in session.scalars(stmt):
+        task = tasks[assignment.task_id]
         grouped[(task.camera_id, task.target_key)].append(
             dense_labels(assignment, num_frames, task.num_points))
     return {key: merge_labels(labels) for key, labels in grouped.items()}
 
 
 def count_approved(session: Session, sequence_id: int) -> int:
-    stmt = (select(func.count(Assignment.id)).join(Task, Assignment.task_id == Task.id)
-            .where(Task.sequence_id == sequence_id, Assignment.status == ACCEPTED))
+    tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
+    stmt = select(func.count(Assignment.id)).where(Assignment.task_id.in_(tasks),
+                                                   Assignment.status == ACCEPTED)
     return int(session.scalar(stmt) or 0)
 
 
