@@ -12,7 +12,10 @@ to the project's committed total.
 
 from __future__ import annotations
 
-from sqlalchemy import ColumnElement, case, exists, func, select, tuple_
+from collections import defaultdict
+from typing import Any
+
+from sqlalchemy import ColumnElement, case, exists, func, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
@@ -24,9 +27,15 @@ FIELDS = ("spent_rewards", "spent_bonuses", "spent_fees",
           "committed_rewards", "committed_bonuses", "committed_fees")
 _Totals = dict[str, list[int]]  # key -> cents in the order of FIELDS
 _DECISIONS = ("approval", "rejection")
+# HITs of one price within a sequence: (sequence id, reward cents, max assignments).
+_Shape = tuple[int, int, int]
 
-# Each sum is taken by the database (one grouped query per kind of money, whatever the size of
-# the project); only the groups come back.
+# The database does the sums, in a few grouped passes over the ledger, the HITs and the
+# undecided submissions whatever the size of the project; only the groups come back. A live
+# HIT's open slots are its assignments not decided yet, max_assignments - decisions: a HIT's
+# decisions never outnumber its assignments (one approval or rejection per assignment, and the
+# marketplace gives a HIT at most MaxAssignments, which adding assignments keeps in step), so
+# the slots of HITs of one shape add up as their max_assignments less their decisions.
 
 
 def _add(totals: _Totals, key: str, **cents: int) -> None:
@@ -45,38 +54,41 @@ def _payment_parts(kind: str, state: str, amount: int, fee: int) -> dict[str, in
     return {"committed_bonuses": amount, "committed_fees": fee}
 
 
-def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    """Ledger sums per sequence and per worker in one pass (two grouping sets)."""
-    if session.get_bind().dialect.name != "postgresql":
-        # SQLite has no grouping sets: the two groupings one after the other.
-        _payments_each(session, by_sequence, by_worker)
-        return
-    sequence_id, worker_id = Task.sequence_id, CrowdPayment.worker_id
-    stmt = (select(sequence_id, worker_id, func.grouping(sequence_id), CrowdPayment.kind,
-                   CrowdPayment.state, func.sum(CrowdPayment.amount_cents),
-                   func.sum(CrowdPayment.fee_cents))
+def _live() -> ColumnElement[Any]:
+    """1 for a payment on an assignment of a live (not expired) HIT we published, else 0."""
+    return case((CrowdHit.id.is_not(None) & CrowdHit.expired_at.is_(None), 1), else_=0)
+
+
+def _ledger() -> Any:
+    return (select().select_from(CrowdPayment)
             .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
             .join(Task, Task.id == Assignment.task_id)
-            .group_by(func.grouping_sets(
-                tuple_(sequence_id, CrowdPayment.kind, CrowdPayment.state),
-                tuple_(worker_id, CrowdPayment.kind, CrowdPayment.state))))
-    for seq, worker, no_sequence, kind, state, amount, fee in session.execute(stmt):
-        parts = _payment_parts(kind, state, int(amount), int(fee))
-        if no_sequence:
-            _add(by_worker, worker, **parts)
-        else:
-            _add(by_sequence, str(seq), **parts)
+            .outerjoin(CrowdHit, CrowdHit.hit_id == Assignment.hit_id))
 
 
-def _payments_each(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    for key, totals in ((Task.sequence_id, by_sequence), (CrowdPayment.worker_id, by_worker)):
-        stmt = (select(key, CrowdPayment.kind, CrowdPayment.state,
-                       func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents))
-                .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
-                .join(Task, Task.id == Assignment.task_id)
-                .group_by(key, CrowdPayment.kind, CrowdPayment.state))
-        for value, kind, state, amount, fee in session.execute(stmt):
-            _add(totals, str(value), **_payment_parts(kind, state, int(amount), int(fee)))
+def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals
+              ) -> dict[_Shape, int]:
+    """Ledger sums per sequence and per worker; the decisions on live HITs by HIT shape."""
+    live = _live().label("live")
+    sums = (func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents), func.count())
+    per_sequence = _ledger().add_columns(
+        Task.sequence_id, CrowdPayment.kind, CrowdPayment.state, CrowdHit.reward_cents,
+        CrowdHit.max_assignments, live, *sums,
+    ).group_by(Task.sequence_id, CrowdPayment.kind, CrowdPayment.state, CrowdHit.reward_cents,
+               CrowdHit.max_assignments, live)
+    decided: dict[_Shape, int] = defaultdict(int)
+    for seq, kind, state, reward, slots, on_live, amount, fee, n in session.execute(
+            per_sequence):
+        _add(by_sequence, str(seq), **_payment_parts(kind, state, int(amount), int(fee)))
+        if on_live and kind in _DECISIONS:
+            decided[(seq, reward, slots)] += int(n)
+    # A payment row names its worker: no join.
+    per_worker = (select(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state,
+                         *sums[:2])
+                  .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state))
+    for worker, kind, state, amount, fee in session.execute(per_worker):
+        _add(by_worker, worker, **_payment_parts(kind, state, int(amount), int(fee)))
+    return decided
 
 
 def _undecided() -> ColumnElement[bool]:
@@ -85,42 +97,34 @@ def _undecided() -> ColumnElement[bool]:
                            CrowdPayment.kind.in_(_DECISIONS))
 
 
-def _held(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    """Money still held: per sequence, every HIT's open slots (an expired HIT's: its waiting
-    submissions); per worker, their submitted work not decided yet."""
-    decided = (select(Assignment.hit_id.label("hit_id"), func.count().label("n"))
-               .join(CrowdPayment, CrowdPayment.assignment_id == Assignment.id)
-               .where(CrowdPayment.kind.in_(_DECISIONS))
-               .group_by(Assignment.hit_id).subquery())
-    waiting = (select(CrowdSubmission.hit_id.label("hit_id"), func.count().label("n"))
-               .where(_undecided()).group_by(CrowdSubmission.hit_id).subquery())
-    # Two-argument max is SQLite's greatest.
-    greatest = func.greatest if session.get_bind().dialect.name == "postgresql" else func.max
-    slots = case(
-        (CrowdHit.expired_at.is_not(None), func.coalesce(waiting.c.n, 0)),
-        else_=greatest(CrowdHit.max_assignments - func.coalesce(decided.c.n, 0), 0))
-    per_sequence = (
-        select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
-               func.sum(slots))
-        .join(Task, Task.id == CrowdHit.task_id)
-        .outerjoin(decided, decided.c.hit_id == CrowdHit.hit_id)
-        .outerjoin(waiting, waiting.c.hit_id == CrowdHit.hit_id)
-        .where(CrowdHit.hit_id.is_not(None))
-        .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
-    for sequence_id, reward, max_assignments, open_slots in session.execute(per_sequence):
-        fee = pricing.fee_cents(reward, max_assignments)
-        n = int(open_slots or 0)
-        _add(by_sequence, str(sequence_id), committed_rewards=n * reward,
-             committed_fees=n * fee)
-    per_worker = (
-        select(CrowdSubmission.worker_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
-               func.count())
-        .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
-        .where(_undecided())
-        .group_by(CrowdSubmission.worker_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
-    for worker_id, reward, max_assignments, n in session.execute(per_worker):
-        fee = pricing.fee_cents(reward, max_assignments)
-        _add(by_worker, worker_id, committed_rewards=n * reward, committed_fees=n * fee)
+def _held(session: Session, decided: dict[_Shape, int], by_sequence: _Totals,
+          by_worker: _Totals) -> None:
+    """Money still held: per sequence, every live HIT's open slots and an expired HIT's
+    waiting submissions; per worker, their submitted work not decided yet."""
+    is_live = CrowdHit.expired_at.is_(None)
+    shapes = (select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
+                     func.sum(case((is_live, CrowdHit.max_assignments), else_=0)))
+              .join(Task, Task.id == CrowdHit.task_id).where(CrowdHit.hit_id.is_not(None))
+              .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
+    open_slots: dict[_Shape, int] = {}
+    for seq, reward, slots, live_slots in session.execute(shapes):
+        shape = (seq, reward, slots)
+        open_slots[shape] = max(int(live_slots or 0) - decided.get(shape, 0), 0)
+    waiting = (select(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
+                      CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None), func.count())
+               .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
+               .join(Task, Task.id == CrowdHit.task_id)
+               .where(_undecided())
+               .group_by(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
+                         CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None)))
+    for worker, seq, reward, slots, expired, n in session.execute(waiting):
+        fee = pricing.fee_cents(reward, slots)
+        _add(by_worker, worker, committed_rewards=n * reward, committed_fees=n * fee)
+        if expired:  # an expired HIT holds only its submitted, undecided work
+            open_slots[(seq, reward, slots)] = open_slots.get((seq, reward, slots), 0) + n
+    for (seq, reward, slots), n in open_slots.items():
+        fee = pricing.fee_cents(reward, slots)
+        _add(by_sequence, str(seq), committed_rewards=n * reward, committed_fees=n * fee)
 
 
 def _line(key: str, cents: list[int]) -> CostLine:
@@ -134,8 +138,8 @@ def costs(session: Session) -> CostsRead:
     """Spend and commitments for the project, per sequence (keyed by id) and per worker."""
     by_sequence: _Totals = {}
     by_worker: _Totals = {}
-    _payments(session, by_sequence, by_worker)
-    _held(session, by_sequence, by_worker)
+    decided = _payments(session, by_sequence, by_worker)
+    _held(session, decided, by_sequence, by_worker)
     total = [sum(column) for column in zip(*by_sequence.values(), strict=True)] \
         or [0] * len(FIELDS)
     return CostsRead(total=_line("project", total),

@@ -260,26 +260,68 @@ def test_worker_quality_reads_an_index_alone(filled: str) -> None:
     assert tally == [[("Index Only Scan", "qc_reports")]]
 
 
-def test_costs_on_postgresql_add_up_as_on_sqlite(filled: str) -> None:
-    """The ledger's sums by grouping sets (PostgreSQL) equal the two plain groupings (the
-    SQLite path), and the project's total is every approval and done bonus with its fee."""
-    from sqlalchemy import func
+def _costs_row_by_row(session: Any) -> tuple[dict[str, list[int]], dict[str, list[int]]]:
+    """Spent and committed cents per sequence and per worker, from every ledger row, HIT and
+    submission one by one: (by sequence, by worker), each [spent, committed]."""
+    from backend.annotation.models import Assignment, Task
+    from backend.crowd import pricing
+    from backend.crowd.models import CrowdHit, CrowdPayment, CrowdSubmission
 
+    by_sequence: dict[str, list[int]] = {}
+    by_worker: dict[str, list[int]] = {}
+
+    def add(totals: dict[str, list[int]], key: object, spent: int = 0, held: int = 0) -> None:
+        entry = totals.setdefault(str(key), [0, 0])
+        entry[0] += spent
+        entry[1] += held
+
+    decided_ids: set[int] = set()
+    decided_per_hit: dict[str, int] = {}
+    for pay, seq, hit_id in session.execute(
+            select(CrowdPayment, Task.sequence_id, Assignment.hit_id)
+            .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
+            .join(Task, Task.id == Assignment.task_id)):
+        money = pay.amount_cents + pay.fee_cents
+        spent = money if pay.kind == "approval" or (
+            pay.kind == "bonus" and pay.state == "done") else 0
+        held = money if pay.kind == "bonus" and pay.state == "pending" else 0
+        add(by_sequence, seq, spent, held)
+        add(by_worker, pay.worker_id, spent, held)
+        if pay.kind in ("approval", "rejection"):
+            decided_ids.add(pay.assignment_id)
+            decided_per_hit[hit_id] = decided_per_hit.get(hit_id, 0) + 1
+    waiting: dict[str, list[str]] = {}
+    for sub in session.scalars(select(CrowdSubmission)):
+        if sub.assignment_id not in decided_ids:
+            waiting.setdefault(sub.hit_id, []).append(sub.worker_id)
+    for hit, seq in session.execute(select(CrowdHit, Task.sequence_id)
+                                    .join(Task, Task.id == CrowdHit.task_id)
+                                    .where(CrowdHit.hit_id.is_not(None))):
+        each = hit.reward_cents + pricing.fee_cents(hit.reward_cents, hit.max_assignments)
+        workers = waiting.get(hit.hit_id, [])
+        for worker in workers:
+            add(by_worker, worker, held=each)
+        slots = len(workers) if hit.expired_at is not None else max(
+            hit.max_assignments - decided_per_hit.get(hit.hit_id, 0), 0)
+        add(by_sequence, seq, held=slots * each)
+    return by_sequence, by_worker
+
+
+def test_costs_summed_by_the_database_match_a_row_by_row_count(filled: str) -> None:
+    """The grouped sums give every sequence's and worker's spent and committed money as
+    adding up the ledger, the HITs and the submissions one row at a time does."""
     from backend.crowd import costs, pricing
-    from backend.crowd.models import CrowdPayment
     from backend.db import session_scope
 
+    def cents(money: str) -> int:
+        return pricing.dollars_to_cents(money)
+
     with session_scope() as session:
-        both: list[tuple[dict, dict]] = []
-        for gather in (costs._payments, costs._payments_each):
-            by_sequence: dict[str, list[int]] = {}
-            by_worker: dict[str, list[int]] = {}
-            gather(session, by_sequence, by_worker)
-            both.append((by_sequence, by_worker))
-        assert both[0] == both[1]
         report = costs.costs(session)
-        spent = session.scalar(
-            select(func.sum(CrowdPayment.amount_cents + CrowdPayment.fee_cents)).where(
-                CrowdPayment.state == "done", CrowdPayment.kind != "rejection"))
-    assert report.total.spent == pricing.cents_to_dollars(int(spent or 0))
+        by_sequence, by_worker = _costs_row_by_row(session)
+    assert {line.key: [cents(line.spent), cents(line.committed)]
+            for line in report.by_sequence} == by_sequence
+    assert {line.key: [cents(line.spent), cents(line.committed)]
+            for line in report.by_worker} == by_worker
     assert len(report.by_sequence) == SEQUENCES
+    assert cents(report.total.committed) > 0 and cents(report.total.spent) > 0
