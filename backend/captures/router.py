@@ -59,9 +59,9 @@ async def import_capture(body: ImportRequest, _: CurrentAdmin) -> list[ImportRes
 
 @router.get("/sequences", response_model=list[SequenceRead])
 def list_sequences(session: SessionDep, _: CurrentAdmin,
-                   limit: int = Query(100, ge=1, le=1000),
+                   limit: int = Query(50, ge=1, le=1000),
                    offset: int = Query(0, ge=0)) -> list[SequenceRead]:
-    """Sequences in id order, ``limit`` (100, at most 1,000) from ``offset`` on."""
+    """Sequences in id order, ``limit`` (50, at most 1,000) from ``offset`` on."""
     return [_sequence_read(s) for s in service.list_sequences(session, limit, offset)]
 
 

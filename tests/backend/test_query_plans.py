@@ -205,7 +205,7 @@ def test_task_and_sequence_listings_are_paged(api: Get) -> None:
     assert [t["id"] for t in page(None)] == list(range(201, 221))
     assert _no_seq_scans(page) <= 10
     assert len(api("/api/tasks")(None)) == 500
-    assert len(api("/api/sequences")(None)) == min(SEQUENCES, 100)
+    assert len(api("/api/sequences")(None)) == min(SEQUENCES, 50)
     assert [s["id"] for s in api("/api/sequences?limit=5&offset=10")(None)] == [
         11, 12, 13, 14, 15]
 
