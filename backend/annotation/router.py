@@ -11,6 +11,7 @@ from typing import Annotated, Any
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Query, Request
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend import pipeline
@@ -43,8 +44,9 @@ from backend.annotation.tokens import (
     task_token,
 )
 from backend.config import get_settings
-from backend.db import SessionDep
-from backend.errors import Unauthorized
+from backend.crowd import holds
+from backend.db import SessionDep, session_scope
+from backend.errors import Forbidden, Unauthorized
 from backend.middleware import body_limit
 from backend.progress.schemas import TaskState
 from backend.progress.service import task_states
@@ -158,13 +160,43 @@ def dense_tracks(assignment_id: Id, session: SessionDep, _: CurrentAdmin) -> dic
 
 # ----- worker-facing ---------------------------------------------------------------------
 
+def _opened_before(task_id: int, body: StartRequest) -> bool:
+    """Whether the assignment was opened here before (then for this task, worker and HIT);
+    read in a unit of work of its own, closed before the marketplace is asked."""
+    with session_scope() as session:
+        service.get_task_or_raise(session, task_id)
+        ours = session.scalars(select(Assignment).where(
+            Assignment.external_id == body.assignment_id)).one_or_none()
+        if ours is None:
+            return False
+        if (ours.task_id, ours.worker_id, ours.hit_id) != (task_id, body.worker_id,
+                                                           body.hit_id):
+            raise Forbidden(f"assignment {body.assignment_id} belongs to another task, worker "
+                            "or HIT")
+        return True
+
+
 @router.post("/annotate/start", response_model=TokenRead)
 def start(body: StartRequest, session: SessionDep) -> TokenRead:
-    """Exchange a HIT's task token and the marketplace's ids for an assignment token."""
+    """Exchange a HIT's task token and the marketplace's ids for an assignment token.
+
+    Only a marketplace assignment is started here, and only one the marketplace confirms
+    (backend.crowd.holds): its HIT shows this task and a worker holds an assignment of it, or
+    the marketplace's record of the assignment names that HIT and worker. A direct link
+    (no HIT) is made by an admin only (POST /api/tasks/{id}/assignments). 403/404 say why an
+    assignment is refused; 503 when the marketplace cannot be reached.
+    """
     if body.assignment_id == PREVIEW_ASSIGNMENT_ID:
         raise Unauthorized("the HIT is not accepted yet (preview)")
     claims = verify_token(body.task_token, get_settings().signing_key, TASK_SCOPE)
-    task = service.get_task_or_raise(session, int(claims["task_id"]))
+    task_id = int(claims["task_id"])
+    if not body.hit_id:
+        raise Forbidden("no HIT id: an assignment starts here only from its marketplace HIT "
+                        "(hitId, assignmentId and workerId in the page address); a direct "
+                        "link is made by an admin (POST /api/tasks/{id}/assignments)")
+    if not _opened_before(task_id, body):
+        holds.confirm_held(task_id, body.hit_id, body.assignment_id, body.worker_id)
+    task = service.get_task_or_raise(session, task_id)
     assignment = service.start_assignment(session, task, body.assignment_id, body.worker_id,
                                           body.hit_id)
     return TokenRead(token=assignment_token(task, assignment))

@@ -11,12 +11,13 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import or_, select
 from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
+from backend.crowd.models import CrowdSubmission
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracks import dense_points
@@ -28,6 +29,12 @@ if TYPE_CHECKING:
 DECODE_THREADS = 4
 # Assignments whose labels take part in scoring; rejected work is left out of the consensus.
 SCORED_STATUSES = ("submitted", "approved")
+# Marketplace work takes part once the requester API has vouched for it (its confirmation
+# recorded a CrowdSubmission: the marketplace's record names its HIT and worker), so work on
+# an assignment id the marketplace does not know never enters the consensus. Work from an
+# admin's direct link has no HIT.
+VOUCHED_FOR = or_(Assignment.hit_id.is_(None),
+                  Assignment.id.in_(select(CrowdSubmission.assignment_id)))
 
 
 @dataclass
@@ -82,7 +89,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     # Every assignment's tracks in one more query, not one per assignment.
     stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
-                                     Assignment.status.in_(SCORED_STATUSES))
+                                     Assignment.status.in_(SCORED_STATUSES), VOUCHED_FOR)
             .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
     for assignment in session.scalars(stmt):
         task = out.tasks[assignment.task_id]

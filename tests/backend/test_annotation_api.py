@@ -197,20 +197,28 @@ def test_preview_token_reads_but_cannot_save(
     assert resp.status_code == 401 and "accept the HIT" in resp.json()["detail"]
 
 
-def test_start_exchanges_a_task_token_once_per_assignment(
-    client: TestClient, admin_headers: dict, tasks: list[dict]
+def test_start_takes_only_an_assignment_the_marketplace_can_vouch_for(
+    client: TestClient, admin_headers: dict, tasks: list[dict], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """No HIT id: refused (direct links are an admin's). A HIT id with no marketplace to ask:
+    503 naming it. The genuine and forged starts against a live marketplace are in
+    tests/crowd/test_start.py."""
     task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token",
                              headers=admin_headers).json()["token"]
-    body = {"task_token": task_token, "assignment_id": "A1", "hit_id": "H1", "worker_id": "W9"}
-    first = client.post("/api/annotate/start", json=body)
-    assert first.status_code == 200
-    again = client.post("/api/annotate/start", json=body)
-    page1 = client.get("/api/annotate/task", headers=_bearer(first.json()["token"])).json()
-    page2 = client.get("/api/annotate/task", headers=_bearer(again.json()["token"])).json()
-    assert page1["assignment"]["id"] == page2["assignment"]["id"]
-    thief = client.post("/api/annotate/start", json={**body, "worker_id": "W10"})
-    assert thief.status_code == 403
+    body = {"task_token": task_token, "assignment_id": "FORGED0001", "worker_id": "NOBODY"}
+    forged = client.post("/api/annotate/start", json=body)
+    assert forged.status_code == 403 and "no HIT id" in forged.json()["detail"]
+    import socket
+
+    from backend.config import get_settings
+
+    with socket.socket() as sock:  # a port nothing listens on: the marketplace is down
+        sock.bind(("127.0.0.1", 0))
+        monkeypatch.setenv("DEXLABEL_PUBLIC_URL", f"http://127.0.0.1:{sock.getsockname()[1]}")
+    get_settings.cache_clear()
+    unreachable = client.post("/api/annotate/start", json={**body, "hit_id": "H1"})
+    assert unreachable.status_code == 503, unreachable.text
+    assert "cannot be checked with the marketplace" in unreachable.json()["detail"]
     preview = client.post("/api/annotate/start",
                           json={**body, "assignment_id": "ASSIGNMENT_ID_NOT_AVAILABLE"})
     assert preview.status_code == 401

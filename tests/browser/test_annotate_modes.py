@@ -6,8 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 from urllib.parse import parse_qs, urlparse
 
+import httpx
 from playwright.sync_api import BrowserContext, Page, expect
 
+from backend.config import DEV_MARKET_REQUESTERS
 from tests.browser.conftest import LiveServer
 from tests.browser.helpers import (
     click_image,
@@ -20,6 +22,7 @@ from tests.browser.helpers import (
     value_at,
     wait_saved,
 )
+from tests.market.helpers import external_question, make_client
 
 
 def _where(page: Page) -> list[int]:
@@ -94,18 +97,37 @@ def test_a_stale_tab_gets_409_and_stops_saving(
     other.close()
 
 
+def _accepted_hit(live_server: LiveServer, task: dict) -> dict:
+    """The task published as a HIT on the built-in marketplace and accepted by a portal
+    worker: the portal's reply (assignment_id, hit_id, work_url as MTurk frames it)."""
+    token = live_server.admin("POST", f"/api/tasks/{task['id']}/preview-token")["token"]
+    key, secret = DEV_MARKET_REQUESTERS.split(":")
+    hit = make_client(live_server.base, (key, secret)).create_hit(
+        Title="Track 21 hand joints (task link)", Description="Click each joint",
+        Reward="0.50", MaxAssignments=1, LifetimeInSeconds=3600,
+        AssignmentDurationInSeconds=1800, AutoApprovalDelayInSeconds=86400,
+        Question=external_question(f"{live_server.base}/annotate/?task={token}", 700))["HIT"]
+    email, password = "task-link-worker@example.org", "task link worker password"
+    live_server.admin("POST", "/api/portal/workers", {"email": email, "password": password})
+    login = httpx.post(f"{live_server.base}/api/portal/login", timeout=30,
+                       json={"email": email, "password": password}).json()
+    accepted = httpx.post(f"{live_server.base}/api/portal/hits/{hit['HITId']}/accept",
+                          headers={"Authorization": f"Bearer {login['access_token']}"},
+                          timeout=30)
+    assert accepted.status_code == 200, accepted.text
+    return accepted.json()
+
+
 def test_mturk_task_link_starts_the_assignment_and_puts_its_token_in_the_address(
     live_server: LiveServer, page: Page
 ) -> None:
-    task = live_server.task("hand", 1)
-    preview = live_server.admin("POST", f"/api/tasks/{task['id']}/preview-token")
-    url = (f"{live_server.base}/annotate/?task={preview['token']}&assignmentId=MT-A-1"
-           f"&hitId=MT-H-1&workerId=MTW1&turkSubmitTo={live_server.base}/sandbox")
-    open_task(page, url)
+    accepted = _accepted_hit(live_server, live_server.task("hand", 1))
+    open_task(page, accepted["work_url"])
     query = parse_qs(urlparse(page.url).query)
-    assert "task" not in query and query["assignmentId"] == ["MT-A-1"]
+    assert "task" not in query and query["assignmentId"] == [accepted["assignment_id"]]
     read = live_server.worker_get_task(query["token"][0])
-    assert read["mode"] == "edit" and read["assignment"]["external_id"] == "MT-A-1"
+    assert read["mode"] == "edit"
+    assert read["assignment"]["external_id"] == accepted["assignment_id"]
     click_image(page, 200, 200)
     wait_saved(page)
     page.reload()
