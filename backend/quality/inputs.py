@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from sqlalchemy import or_, select
+from sqlalchemy import exists, or_, select
 from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
@@ -32,9 +32,10 @@ SCORED_STATUSES = ("submitted", "approved")
 # Marketplace work takes part once the requester API has vouched for it (its confirmation
 # recorded a CrowdSubmission: the marketplace's record names its HIT and worker), so work on
 # an assignment id the marketplace does not know never enters the consensus. Work from an
-# admin's direct link has no HIT.
+# admin's direct link has no HIT. (Correlated: each candidate assignment is looked up by the
+# unique index on crowd_submissions.assignment_id, not the whole table read into a hash.)
 VOUCHED_FOR = or_(Assignment.hit_id.is_(None),
-                  Assignment.id.in_(select(CrowdSubmission.assignment_id)))
+                  exists().where(CrowdSubmission.assignment_id == Assignment.id))
 
 
 @dataclass

@@ -6,8 +6,8 @@ here with 100 sequences (4,000 tasks, ~58,000 frames), enough rows, once ANALYZE
 planner scans a big table whole only where nothing better exists. Each listing and read runs
 as the product runs it; every SQL statement it sends is recorded and EXPLAINed with its own
 parameters, and no plan may read a big table (tasks, assignments, tracks, qc_reports,
-crowd_hits, jobs, frames) with a sequential scan. The statement counts keep the reads free
-of one-query-per-row loops.
+crowd_hits, crowd_submissions, jobs, frames) with a sequential scan. The statement counts keep
+the reads free of one-query-per-row loops.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ from tests.conftest import _drop_all, reset_caches
 pytestmark = pytest.mark.postgres
 
 SEQUENCES = 100
-BIG_TABLES = {"tasks", "assignments", "tracks", "qc_reports", "crowd_hits", "jobs", "frames"}
+BIG_TABLES = {"tasks", "assignments", "tracks", "qc_reports", "crowd_hits", "jobs", "frames",
+              "crowd_submissions"}
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "scale_db.py"
 
 
@@ -185,6 +186,15 @@ def test_the_fill_is_dexycb_shaped(filled: str, sequence_id: int) -> None:
     assert progress.solve is not None and progress.solve.labels == "current"
 
 
+def _serial(sequence_id: int) -> str:
+    from backend.captures.models import Camera
+    from backend.db import session_scope
+
+    with session_scope() as session:
+        return str(session.scalar(select(Camera.serial).where(
+            Camera.sequence_id == sequence_id).order_by(Camera.view_index).limit(1)))
+
+
 def test_listings_use_indexes(api: Get, sequence_id: int) -> None:
     """The admin listings of one sequence or one page: indexes only, a bounded number of
     statements (the progress grid: the sequence with its cameras, objects, hands and subject,
@@ -194,7 +204,8 @@ def test_listings_use_indexes(api: Get, sequence_id: int) -> None:
                        (f"/api/qc/reports?sequence_id={seq}", 3),
                        ("/api/jobs", 3), ("/api/jobs?status=failed", 3),
                        ("/api/jobs?kind=solve", 3), (f"/api/tasks?sequence_id={seq}", 10),
-                       ("/api/sequences", 8)):
+                       ("/api/sequences", 8),
+                       (f"/api/sequences/{seq}/views/{_serial(seq)}/frames", 4)):
         statements = _no_seq_scans(api(path))
         assert statements <= most, (path, statements)
 
@@ -229,6 +240,12 @@ def test_accepted_labels_reads_use_indexes(filled: str, sequence_id: int) -> Non
     assert _no_seq_scans(lambda s: target_inputs(s, seq, "object:2")) <= 5
     assert _no_seq_scans(lambda s: approved_labels(s, seq, frames(s))) <= 4
     assert _no_seq_scans(lambda s: count_approved(s, seq)) == 2
+
+    # A view's depth maps as the QC job's visibility check finds them.
+    from backend.captures.service import sequence_cameras
+    from backend.quality.inputs import depth_maps
+
+    assert _no_seq_scans(lambda s: depth_maps(s, sequence_cameras(s, seq), {0, 3})) == 3
 
     # Lookups by id: a task's work, an assignment's tracks.
     def by_id(session: Any) -> None:
