@@ -737,9 +737,11 @@ def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
 def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     """The admin endpoints, through the app with an admin's token; each returns its items."""
     from fastapi.testclient import TestClient
+    from sqlalchemy import select
 
     from backend.accounts.service import create_admin
     from backend.app import create_app
+    from backend.captures.models import Camera
     from backend.db import session_scope
 
     email, password = "scale-bench@dexlabel.local", "scale-bench-password"
@@ -759,10 +761,15 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
                 return len(body)
             if "tasks" in body:
                 return len(body["tasks"])
+            if "frames" in body:
+                return len(body["frames"])
             return len(body.get("by_sequence", [])) + len(body.get("by_worker", []))
         return call
 
     seq = sequence_id
+    with session_scope() as session:
+        serial = session.scalar(select(Camera.serial).where(Camera.sequence_id == seq)
+                                .order_by(Camera.view_index).limit(1))
     return {
         "GET /api/auth/me (floor)": get("/api/auth/me"),
         "GET /api/sequences": get("/api/sequences"),
@@ -774,6 +781,8 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
         "GET /api/jobs?status=failed": get("/api/jobs?status=failed"),
         "GET /api/jobs?kind=solve": get("/api/jobs?kind=solve"),
         "GET /api/tasks?sequence_id=": get(f"/api/tasks?sequence_id={seq}"),
+        "GET /api/sequences/{id}/views/{serial}/frames": get(
+            f"/api/sequences/{seq}/views/{serial}/frames"),
     }
 
 
