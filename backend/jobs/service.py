@@ -195,6 +195,8 @@ def send(key: str, delay: float | None = None) -> bool:
 
 
 def _mark_unsent(keys: list[str], due: datetime) -> None:
+    if not keys:
+        return
     try:
         with session_scope() as session:
             session.execute(update(Job).where(Job.key.in_(keys), Job.status.in_(_CLAIMABLE))
