@@ -44,6 +44,9 @@ class Job(TimestampMixin, Base):
     # for again while it runs (new work arrived) is queued again when that attempt ends.
     requests: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     requests_claimed: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    # A running job: until when its attempt holds it (renewed by the attempt's heartbeat). A
+    # queued or retrying job: when its queue message, which the queue did not take, is due to
+    # be sent again by the reaper; None once sent.
     lease_until: Mapped[datetime | None] = mapped_column(UTCDateTime)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
