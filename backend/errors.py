@@ -280,8 +280,8 @@ def install_error_schema(app: FastAPI) -> None:
     app.openapi = openapi  # type: ignore[method-assign]
 
 
-def install_api_fallback(app: FastAPI, prefix: str = "/api") -> None:
-    """Every address under ``prefix`` that no route serves answers in the error shape: 405
+def install_api_fallback(app: FastAPI, prefixes: tuple[str, ...] = ("/api", "/mturk")) -> None:
+    """Every address under ``prefixes`` that no route serves answers in the error shape: 405
     with an ``Allow`` header naming the methods the path has, or 404. Call it after the API's
     routers are included and before anything mounted at "/" (the static pages)."""
     paths: list[tuple[Any, set[str]]] = []
@@ -295,8 +295,6 @@ def install_api_fallback(app: FastAPI, prefix: str = "/api") -> None:
                     paths.append((compile_path(route.path)[0], set(route.methods or ())))
         return sorted({m for regex, methods in paths if regex.match(path) for m in methods})
 
-    @app.api_route(f"{prefix}/{{rest:path}}", include_in_schema=False,
-                   methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"])
     async def no_such_route(request: Request) -> JSONResponse:
         allowed = allowed_methods(request.url.path)
         if allowed:
@@ -307,3 +305,7 @@ def install_api_fallback(app: FastAPI, prefix: str = "/api") -> None:
         return JSONResponse({"error": NotFound.code,
                              "detail": f"no API endpoint at {request.url.path}"},
                             status_code=404)
+
+    for prefix in prefixes:
+        app.add_api_route(f"{prefix}/{{rest:path}}", no_such_route, include_in_schema=False,
+                          methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"])

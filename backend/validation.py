@@ -80,6 +80,8 @@ Key = Annotated[str, Path(min_length=1, max_length=MAX_KEY_LENGTH)]
 QueryId = Annotated[int | None, Query(ge=1, le=MAX_INT32)]
 # An optional name filter in a query string.
 QueryKey = Annotated[str | None, Query(min_length=1, max_length=MAX_KEY_LENGTH)]
+# Where a page of a listing starts.
+Offset = Annotated[int, Query(ge=0, le=MAX_INT32)]
 
 # ----- body fields -----------------------------------------------------------------------
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Query, Request
 
 from backend.accounts.models import Admin
 from backend.accounts.service import get_active_admin
@@ -52,14 +52,19 @@ def current_admin(request: Request, session: SessionDep) -> Admin:
 CurrentAdmin = Annotated[Admin, Depends(current_admin)]
 
 
+ViewTokenQuery = Annotated[str | None, Query(
+    max_length=4096, description="a view token of this sequence and camera, instead of an "
+                                 "admin's bearer token")]
+
+
 def require_view_access(
-    request: Request, session: SessionDep, sequence_id: Id, serial: Key
+    request: Request, session: SessionDep, sequence_id: Id, serial: Key,
+    token: ViewTokenQuery = None,
 ) -> None:
     """An admin, or the holder of a view token for exactly this sequence and camera."""
     if bearer_token(request) is not None:
         current_admin(request, session)
         return
-    token = request.query_params.get("token")
     if not token:
         raise Unauthorized("send an admin bearer token or a view token (?token=...)")
     payload = _frame_token(token)

@@ -52,7 +52,7 @@ from backend.progress.schemas import TaskState
 from backend.progress.service import task_states
 from backend.security import verify_token
 from backend.storage import get_storage
-from backend.validation import Id, QueryId
+from backend.validation import Id, Offset, QueryId
 
 router = APIRouter(prefix="/api", tags=["annotation"])
 
@@ -105,7 +105,7 @@ def create_tasks(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> list[
 @router.get("/tasks", response_model=list[TaskRead])
 def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: QueryId = None,
                limit: int = Query(500, ge=1, le=5000),
-               offset: int = Query(0, ge=0)) -> list[TaskRead]:
+               offset: Offset = 0) -> list[TaskRead]:
     """Tasks in id order, ``limit`` (500, at most 5,000) from ``offset`` on."""
     return _task_reads(session, service.list_tasks(session, sequence_id, limit, offset))
 

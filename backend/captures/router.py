@@ -26,7 +26,7 @@ from backend.db import SessionDep
 from backend.errors import NotFound, PayloadTooLarge
 from backend.security import sign_token
 from backend.storage import get_storage
-from backend.validation import Id, Index, Key
+from backend.validation import Id, Index, Key, Offset
 
 router = APIRouter(prefix="/api", tags=["captures"])
 
@@ -60,7 +60,7 @@ async def import_capture(body: ImportRequest, _: CurrentAdmin) -> list[ImportRes
 @router.get("/sequences", response_model=list[SequenceRead])
 def list_sequences(session: SessionDep, _: CurrentAdmin,
                    limit: int = Query(50, ge=1, le=1000),
-                   offset: int = Query(0, ge=0)) -> list[SequenceRead]:
+                   offset: Offset = 0) -> list[SequenceRead]:
     """Sequences in id order, ``limit`` (50, at most 1,000) from ``offset`` on."""
     return [_sequence_read(s) for s in service.list_sequences(session, limit, offset)]
 
@@ -72,7 +72,7 @@ def get_sequence(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> Seque
 
 @router.delete("/sequences/{sequence_id}", response_model=SequenceDeletedRead)
 async def delete_sequence(
-    sequence_id: int, _: CurrentAdmin,
+    sequence_id: Id, _: CurrentAdmin,
     force: bool = Query(False, description="delete it even with submitted or approved work"),
 ) -> SequenceDeletedRead:
     """Delete a sequence: its rows, the tasks and work on it, and its stored files. 409 when it

@@ -84,7 +84,12 @@ INPUT_REFUSALS = frozenset({
     "ValidationException",
     "AWS.MechanicalTurk.InvalidParameterValue",
     "AWS.MechanicalTurk.QualificationTypeDoesNotExist",
+    "AWS.MechanicalTurk.InvalidMaximumAssignmentsIncrease",
 })
+# The parameter a refusal is about, where its message does not name it.
+REFUSED_PARAMETER = {
+    "AWS.MechanicalTurk.InvalidMaximumAssignmentsIncrease": "NumberOfAdditionalAssignments",
+}
 
 
 class MarketplaceUnreachable(MarketplaceError):
@@ -200,6 +205,8 @@ def refused_fields(message: str, turk_code: str, params: Mapping[str, Any],
     missing = re.fullmatch(r"AWS\.MechanicalTurk\.(\w+)DoesNotExist", turk_code)
     if missing and f"{missing[1]}Id" in params:
         named.add(f"{missing[1]}Id")
+    if REFUSED_PARAMETER.get(turk_code) in params:
+        named.add(REFUSED_PARAMETER[turk_code])
     names = fields or {}
     return [{"field": names.get(param, snake_case(param)), "message": message}
             for param in params if param in named]

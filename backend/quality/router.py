@@ -18,7 +18,7 @@ from backend.quality.schemas import (
     TrainingClipRead,
     WorkerQualityRead,
 )
-from backend.validation import Id, QueryId, QueryKey
+from backend.validation import Id, Offset, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/qc", tags=["quality"])
 
@@ -47,7 +47,7 @@ def run_qc(body: QCRunRequest, session: SessionDep, _: CurrentAdmin) -> list[Job
 
 @router.get("/workers", response_model=list[WorkerQualityRead])
 def workers(session: SessionDep, _: CurrentAdmin, limit: int = Query(500, ge=1, le=5000),
-            offset: int = Query(0, ge=0)) -> list[WorkerQualityRead]:
+            offset: Offset = 0) -> list[WorkerQualityRead]:
     """Workers by id, ``limit`` (500, at most 5,000) from ``offset`` on."""
     return [WorkerQualityRead(**row)
             for row in service.worker_quality(session, limit=limit, offset=offset)]
