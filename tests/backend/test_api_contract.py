@@ -451,6 +451,12 @@ RUNS = {
 }
 
 
+# On PostgreSQL (where NUL characters and 32-bit columns matter) the edge values only (the
+# coverage phase: NUL, boundaries, huge numbers), anonymous and as an admin, to keep the
+# whole test within a few minutes.
+POSTGRES_RUNS = ("anonymous", "admin")
+
+
 def _schemathesis(served: Served, name: str) -> tuple[dict, Path]:
     """One deterministic schemathesis run; its JSON report and its output's file."""
     run = RUNS[name]
@@ -471,6 +477,8 @@ def _schemathesis(served: Served, name: str) -> tuple[dict, Path]:
         "--request-timeout", "60", "--no-color", "--report", "json",
         "--report-json-path", str(report), "--report-dir", str(out),
     ]
+    if served.backend == "postgres":
+        command += ["--phases", "coverage"]
     if run.paths:
         command += ["--include-path-regex", run.paths]
     if run.paths != LAST:
@@ -494,6 +502,8 @@ def _schemathesis(served: Served, name: str) -> tuple[dict, Path]:
 def test_schemathesis_finds_no_server_error_and_no_answer_off_the_schema(
     served: Served, name: str
 ) -> None:
+    if served.backend == "postgres" and name not in POSTGRES_RUNS:
+        pytest.skip("on PostgreSQL: the edge values of anonymous and admin calls only")
     result, output = _schemathesis(served, name)
     found = [f"{f['code']} {f['title']} x{f['count']}: {', '.join(f['operations'])}"
              for f in result["failures"]]
