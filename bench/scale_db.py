@@ -29,7 +29,9 @@ Prints a JSON summary on its last line:
     queries                   per query: median ms over --repeat runs (after one warm-up),
                               min_ms (the fastest run), sql_ms (median time spent executing
                               SQL), cpu_ms (median CPU time of this process: the app's own
-                              work), SQL statements per run, rows (or items) returned
+                              work), db_cpu_ms (median CPU time of the database server's
+                              processes, when it runs on this machine), SQL statements per
+                              run, rows (or items) returned
 Usage: python bench/scale_db.py [--sequences 1000] [--url URL] [--keep] [--repeat 5]
        [--no-queries] [--time-only]
 The database (default dexlabel_scale on the local server) is dropped and made again; it is
@@ -651,8 +653,34 @@ class Timed:
     min_ms: float  # fastest run (the least disturbed by other load on the machine)
     sql_ms: float  # median time inside the database driver's execute (the SQL itself)
     cpu_ms: float  # median CPU time of this process (the app's own work, whatever the load)
+    # Median CPU time of the database's server processes (a local server only, else None):
+    # with cpu_ms, what a read costs whatever else the machine runs.
+    db_cpu_ms: float | None
     statements: int
     items: int
+
+
+def _server_pids() -> list[int]:
+    """The server processes of this database's connections (this process's pool)."""
+    from sqlalchemy import text
+
+    from backend.db import get_engine
+
+    with get_engine().connect() as conn:
+        return [int(pid) for pid in conn.scalars(text(
+            "SELECT pid FROM pg_stat_activity WHERE datname = current_database()"))]
+
+
+def _server_cpu_s(pids: list[int]) -> float | None:
+    """Seconds on a CPU so far of these server processes (/proc/PID/schedstat), or None when
+    the server is not on this machine."""
+    total = 0.0
+    for pid in pids:
+        try:
+            total += int(Path(f"/proc/{pid}/schedstat").read_text().split()[0]) / 1e9
+        except (OSError, ValueError, IndexError):
+            return None
+    return total
 
 
 def _measure(fn: Callable[[], int], repeat: int) -> Timed:
@@ -676,22 +704,27 @@ def _measure(fn: Callable[[], int], repeat: int) -> Timed:
     event.listen(engine, "after_cursor_execute", _after)
     try:
         items = fn()  # warm-up: connections, plan caches, the OS page cache
+        pids = _server_pids()
         count[0] = 0
-        times, sql, cpu = [], [], []
+        times, sql, cpu, db_cpu = [], [], [], []
         for _ in range(repeat):
             in_sql[0] = 0.0
+            db_started = _server_cpu_s(pids)
             started, cpu_started = time.perf_counter(), time.process_time()
             fn()
             times.append((time.perf_counter() - started) * 1000)
             cpu.append((time.process_time() - cpu_started) * 1000)
             sql.append(in_sql[0] * 1000)
+            db_now = _server_cpu_s(pids)
+            if db_started is not None and db_now is not None:
+                db_cpu.append((db_now - db_started) * 1000)
         statements = count[0] // repeat
     finally:
         event.remove(engine, "before_cursor_execute", _before)
         event.remove(engine, "after_cursor_execute", _after)
     return Timed(round(statistics.median(times), 2), round(min(times), 2),
                  round(statistics.median(sql), 2), round(statistics.median(cpu), 2),
-                 statements, items)
+                 round(statistics.median(db_cpu), 2) if db_cpu else None, statements, items)
 
 
 def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
@@ -786,19 +819,20 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     }
 
 
-def time_queries(url: str, repeat: int = 5) -> dict[str, dict[str, float | int]]:
+def time_queries(url: str, repeat: int = 5) -> dict[str, dict[str, float | int | None]]:
     """Median milliseconds, statements per run and items of each listing and heavy read."""
     _point_at(url)
     seq = sample_sequence(url)
-    out: dict[str, dict[str, float | int]] = {}
+    out: dict[str, dict[str, float | int | None]] = {}
     for name, fn in {**api_queries(seq), **read_queries(seq)}.items():
         timed = _measure(fn, repeat)
         out[name] = {"ms": timed.ms, "min_ms": timed.min_ms, "sql_ms": timed.sql_ms,
-                     "cpu_ms": timed.cpu_ms, "statements": timed.statements,
-                     "items": timed.items}
+                     "cpu_ms": timed.cpu_ms, "db_cpu_ms": timed.db_cpu_ms,
+                     "statements": timed.statements, "items": timed.items}
+        db_cpu = "-" if timed.db_cpu_ms is None else f"{timed.db_cpu_ms:6.1f}"
         print(f"{name:34s} {timed.ms:7.1f} ms (min {timed.min_ms:6.1f}, SQL {timed.sql_ms:6.1f},"
-              f" CPU {timed.cpu_ms:6.1f}) {timed.statements:3d} statements {timed.items:5d} items",
-              flush=True)
+              f" CPU {timed.cpu_ms:6.1f} + DB {db_cpu}) {timed.statements:3d} statements"
+              f" {timed.items:5d} items", flush=True)
     return out
 
 
