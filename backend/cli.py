@@ -109,7 +109,12 @@ def _import(path: Path) -> list[Any]:
         for r in results:
             step(f"{r.subject}/{r.name}")
     for r in results:
-        state = "imported" if r.created else "already imported, unchanged:"
+        if r.created:
+            state = "imported"
+        elif r.repaired:
+            state = f"already imported, {r.repaired} missing stored files written again:"
+        else:
+            state = "already imported, unchanged:"
         typer.echo(f"{state} {r.subject}/{r.name} (id {r.sequence_id}): "
                    f"{r.num_cameras} cameras x {r.num_frames} frames")
     return results

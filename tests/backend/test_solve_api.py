@@ -189,9 +189,12 @@ def _check_pictures(client: TestClient, headers: dict, run_id: int, camera: dict
 
 def _check_bad_addresses(client: TestClient, headers: dict, run_id: int) -> None:
     base = f"/api/solve-runs/{run_id}/frames"
-    for url in (f"{base}/6", f"{base}/-1/residuals.png", f"{base}/6/views/0.png"):
+    for url in (f"{base}/6", f"{base}/6/residuals.png", f"{base}/6/views/0.png"):
         resp = client.get(url, headers=headers)
         assert resp.status_code == 404 and "frames 0..5" in resp.json()["detail"], url
+    # A negative index is not an index at all: refused at the edge, naming the parameter.
+    resp = client.get(f"{base}/-1/residuals.png", headers=headers)
+    assert resp.status_code == 422 and "frame" in resp.json()["detail"], resp.json()
     resp = client.get(f"{base}/0/views/3.png", headers=headers)
     assert resp.status_code == 404 and "views 0..2" in resp.json()["detail"]
     assert client.get("/api/solve-runs/999", headers=headers).status_code == 404
