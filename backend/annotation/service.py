@@ -8,7 +8,7 @@ from __future__ import annotations
 import secrets
 from typing import Any, cast
 
-from sqlalchemy import CursorResult, select, update
+from sqlalchemy import CursorResult, insert, inspect, select, update
 from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.highlight import object_highlight
@@ -96,8 +96,8 @@ def set_highlight_box(session: Session, task: Task, box: list[float]) -> Task:
 
 
 def get_assignment_or_raise(session: Session, assignment_id: int) -> Assignment:
-    stmt = (select(Assignment).where(Assignment.id == assignment_id)
-            .options(selectinload(Assignment.tracks)))
+    """The assignment; its tracks load when first used (a save replaces them unread)."""
+    stmt = select(Assignment).where(Assignment.id == assignment_id)
     assignment = session.scalars(stmt).one_or_none()
     if assignment is None:
         raise NotFound(f"assignment {assignment_id} does not exist")
@@ -160,12 +160,21 @@ def _check_tracks(task: Task, body: TracksSave) -> list[list[list[Any]]]:
 
 
 def _compact(row: Any) -> list[Any]:
+    """A validated keyframe as stored: [frame, x, y, visible01]."""
+    if type(row) is list:  # the page's own form, checked already: no second parse
+        frame, x, y, visible = row
+        return [int(frame), None if x is None else float(x), None if y is None else float(y),
+                1 if visible else 0]
     kf = parse_keyframe(row)
     return [kf.frame, kf.x, kf.y, 1 if kf.visible else 0]
 
 
 def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
-    """Replace the assignment's tracks if ``body.version`` is current; bump the version."""
+    """Replace the assignment's tracks if ``body.version`` is current; bump the version.
+
+    The stored keyframes are never read: every point's track is written in one UPDATE by
+    primary key (and one INSERT of the points saved for the first time).
+    """
     if assignment.status != "working":
         raise Conflict(f"assignment is {assignment.status}; its labels can no longer change")
     task = get_task_or_raise(session, assignment.task_id)
@@ -187,14 +196,20 @@ def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> A
             current_version=assignment.version,
         )
     session.refresh(assignment)
-    existing = {t.point_index: t for t in assignment.tracks}
-    for point, keyframes in enumerate(rows):
-        track = existing.get(point)
-        if track is None:
-            assignment.tracks.append(Track(point_index=point, keyframes=keyframes))
-        else:
-            track.keyframes = keyframes
-    session.flush()
+    ids: dict[int, int] = dict(session.execute(
+        select(Track.point_index, Track.id).where(Track.assignment_id == assignment.id)).all())
+    changed = [{"id": ids[p], "keyframes": kf} for p, kf in enumerate(rows) if p in ids]
+    added = [{"assignment_id": assignment.id, "point_index": p, "keyframes": kf}
+             for p, kf in enumerate(rows) if p not in ids]
+    if changed:
+        session.execute(update(Track), changed)
+    if added:
+        session.execute(insert(Track), added)
+    # Tracks this session loaded before hold the old keyframes: load them again when used.
+    if "tracks" not in inspect(assignment).unloaded:
+        for track in assignment.tracks:
+            session.expire(track)
+    session.expire(assignment, ["tracks"])
     return assignment
 
 
