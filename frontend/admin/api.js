@@ -20,6 +20,16 @@ export class AdminApi extends BearerClient {
     return data;
   }
 
+  /** Revoke every token of this account on the server, then forget it here (also when the
+   * server cannot be reached: signing out never fails on this page). */
+  async logout() {
+    try {
+      if (this.token) await this.request("POST", "/auth/logout");
+    } finally {
+      this.setToken(null);
+    }
+  }
+
   me() { return this.request("GET", "/auth/me"); }
   sequences() { return this.request("GET", "/sequences"); }
   /** @param {number} id */

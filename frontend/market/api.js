@@ -25,6 +25,16 @@ export class PortalApi extends BearerClient {
     return this.request("POST", "/register", { invite, email, password });
   }
 
+  /** Revoke every token of this account on the server, then forget it here (also when the
+   * server cannot be reached: signing out never fails on this page). */
+  async logout() {
+    try {
+      if (this.token) await this.request("POST", "/logout");
+    } finally {
+      this.setToken(null);
+    }
+  }
+
   me() { return this.request("GET", "/me"); }
   hits() { return this.request("GET", "/hits"); }
   /** @param {string} hitId */

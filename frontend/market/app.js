@@ -168,8 +168,12 @@ async function loadMe() {
   $("who").textContent = `${me.email} · ${me.worker_id}`;
 }
 
-function signOut() {
-  api.setToken(null);
+async function signOut() {
+  try {
+    await api.logout();
+  } catch {
+    // The token is forgotten here either way; the server lets it expire.
+  }
   notify("");
   show("login-view");
 }

@@ -74,12 +74,24 @@ def _screenshots(page: Page, shots: Path) -> None:
     page.set_viewport_size(VIEWPORT)
 
 
+def _sign_out_revokes(page: Page, storage_key: str, me_url: str) -> None:
+    """Sign out: the form is back, and the token the page held is refused by the server."""
+    token = page.evaluate(f"sessionStorage.getItem('{storage_key}')")
+    headers = {"Authorization": f"Bearer {token}"}
+    assert token and httpx.get(me_url, headers=headers, timeout=10).status_code == 200
+    page.locator("#sign-out").click()
+    expect(page.locator("#login")).to_be_visible()
+    assert page.evaluate(f"sessionStorage.getItem('{storage_key}')") is None
+    assert httpx.get(me_url, headers=headers, timeout=10).status_code == 401
+
+
 def test_the_printed_worker_login_opens_the_portal(page: Page, demo_logins: dict,
                                                    output_dir: Path) -> None:
     url, email, password = demo_logins["worker portal"]
     _sign_in(page, url, email, password, output_dir / "demo-portal")
     expect(page.locator("#hits-view")).to_be_visible()
     _screenshots(page, output_dir / "demo-portal")
+    _sign_out_revokes(page, "dexlabel.portal.token", url.replace("/market/", "/api/portal/me"))
 
 
 def test_the_printed_admin_login_opens_the_admin_page(page: Page, demo_logins: dict,
@@ -88,3 +100,4 @@ def test_the_printed_admin_login_opens_the_admin_page(page: Page, demo_logins: d
     _sign_in(page, url, email, password, output_dir / "demo-admin")
     expect(page.locator("#sequences-view")).to_be_visible()
     _screenshots(page, output_dir / "demo-admin")
+    _sign_out_revokes(page, "dexlabel.admin.token", url.replace("/admin/", "/api/auth/me"))
