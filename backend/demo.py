@@ -130,9 +130,9 @@ def demo_logins() -> dict[str, Login]:
     and kept in ``{var_dir}/demo-logins.json``, so a re-run prints the same ones."""
     from backend.accounts.service import create_admin
     from backend.market.clock import now
-    from backend.portal.accounts import authenticate, create_account
+    from backend.portal.accounts import change_password, create_account
     from backend.portal.models import PortalAccount
-    from backend.security import hash_password
+    from backend.security import verify_password
 
     path = get_settings().var_dir / LOGINS_FILE
     saved = _saved_logins(path)
@@ -146,11 +146,11 @@ def demo_logins() -> dict[str, Login]:
         if account is None:
             create_account(session, worker.email, worker.password, now())
         else:
-            try:
-                authenticate(session, worker.email, worker.password)
-            except DexlabelError:  # the logins file was lost: the kept password wins
-                account.password_hash = hash_password(worker.password)
-                account.active = True
+            if not verify_password(worker.password, account.password_hash):
+                # The logins file was lost: the kept password wins, and tokens issued under
+                # the old one end.
+                change_password(session, account, worker.password)
+            account.active = True
     return logins
 
 
