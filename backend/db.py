@@ -13,6 +13,7 @@ import threading
 import time
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager, contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import lru_cache
@@ -27,6 +28,7 @@ from sqlalchemy import DateTime, Dialect, Engine, MetaData, TypeDecorator, creat
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.config import get_settings
 from backend.errors import Busy
@@ -123,6 +125,13 @@ _READS = frozenset({"SELECT", "PRAGMA", "EXPLAIN", "WITH"})
 _FIRST_WORD = re.compile(r"\s*([A-Za-z]+)")
 
 
+# When the request this thread works for stops waiting for the database (monotonic seconds).
+_REQUEST_DEADLINE: ContextVar[float | None] = ContextVar("dexlabel_request_deadline",
+                                                        default=None)
+# Where the scope records when the app started on a request.
+_STARTED = "dexlabel.started"
+
+
 def _turns_of(database: str) -> _WriterTurns:
     key = database if database.startswith("file:") else str(Path(database).resolve())
     with _TURNS_GUARD:
@@ -173,7 +182,10 @@ class TurnTakingConnection(sqlite3.Connection):
 
     def before_statement(self, sql: str) -> None:
         if not self.has_turn and _writes(sql):
-            if not self.turns.acquire(self.wait_s):
+            # A request waits only until its own deadline (see get_session).
+            deadline = _REQUEST_DEADLINE.get()
+            wait_s = self.wait_s if deadline is None else deadline - time.monotonic()
+            if not self.turns.acquire(wait_s):
                 raise sqlite3.OperationalError(
                     f"database is locked: no turn to write came within {self.wait_s:g} s")
             self.has_turn = True
@@ -316,24 +328,31 @@ def _finish(session: Session, commit: bool) -> None:
         session.close()
 
 
-async def get_session() -> AsyncIterator[Session]:
+async def get_session(request: Request) -> AsyncIterator[Session]:
     """The request's unit of work: committed before the response is sent (so a failed
     commit is the reply), rolled back on any error.
 
     At most DEXLABEL_DB_POOL_SIZE requests of a process hold a session at once, which is the
     number of pooled connections, so every one of them gets a connection without waiting and
-    a burst queues here rather than on the pool: a request that gets no turn within
-    DEXLABEL_DB_WAIT_S is answered 503 with Retry-After. A session holds its connection
-    across the request's thread hops (dependencies, endpoint, response validation), so a
-    request thread never waits on a connection that only a queued request could give back.
+    a burst queues here rather than on the pool. A request waits for its turn (a session, and
+    on SQLite the writer's turn) until DEXLABEL_DB_WAIT_S after the app started on it; then
+    it is answered 503 with Retry-After, so an overloaded server refuses work in seconds
+    instead of finishing it after the page gave up. A session holds its connection across
+    the request's thread hops (dependencies, endpoint, response validation), so a request
+    thread never waits on a connection that only a queued request could give back.
     """
     wait_s = get_settings().db_wait_s
+    deadline = request.scope.get(_STARTED, time.monotonic()) + wait_s
     slots = _request_slots()
-    with anyio.move_on_after(wait_s) as waited:
-        await slots.sessions.acquire()
-    if waited.cancelled_caught:
-        raise DatabaseBusy(f"the server is busy: no database connection came free within "
-                           f"{wait_s:g} s; please try again")
+    try:
+        slots.sessions.acquire_nowait()
+    except anyio.WouldBlock:
+        with anyio.move_on_after(deadline - time.monotonic()) as waited:
+            await slots.sessions.acquire()
+        if waited.cancelled_caught:
+            raise DatabaseBusy(f"the server is busy: this request got no turn at the database "
+                               f"within {wait_s:g} s; please try again") from None
+    _REQUEST_DEADLINE.set(deadline)
     try:
         session = get_sessionmaker()()
         try:
@@ -376,6 +395,7 @@ def install_request_limits(app: FastAPI) -> None:
             yield state
 
     app.router.lifespan_context = lifespan
+    app.add_middleware(_StartTime)
 
     async def _busy(_: Request, exc: Exception) -> JSONResponse:
         if isinstance(exc, DatabaseBusy):
@@ -387,6 +407,19 @@ def install_request_limits(app: FastAPI) -> None:
 
     for kind in (DatabaseBusy, PoolTimeout, OperationalError):
         app.add_exception_handler(kind, _busy)
+
+
+class _StartTime:
+    """Records in the scope when the app started on a request (its database deadline counts
+    from there)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            scope[_STARTED] = time.monotonic()
+        await self.app(scope, receive, send)
 
 
 def _is_locked(exc: OperationalError) -> bool:
