@@ -451,7 +451,10 @@ def requeue_stale(now: datetime | None = None, starting: bool = False,
             log.warning("job %s: queued for over %.0f s with no worker taking it; its message "
                         "is sent again", key, settings.job_requeue_after_s)
         elif queue_reset:
-            log.warning("job %s: the queue lost its messages; sent again", key)
+            if starting:  # a new queue, or one emptied while no worker ran: routine here
+                log.info("job %s: sent to this worker as it starts", key)
+            else:
+                log.warning("job %s: the queue lost its messages; sent again", key)
             if status == "retrying":  # at the time its retry was due
                 due = _aware(updated_at) + timedelta(seconds=_retry_delay(attempts))
                 delay = max((due - now).total_seconds(), 0.0)
