@@ -157,10 +157,8 @@ def demo_logins() -> dict[str, Login]:
 def demo_annotation_link(sequence_id: int, base: str) -> str:
     """Creates the sequence's tasks; the page link of a demo worker's own assignment on the
     first hand task (a direct link: its submission goes to QC without a marketplace)."""
-    from urllib.parse import urlencode
-
     from backend.annotation import service
-    from backend.annotation.tokens import assignment_token
+    from backend.annotation.tokens import assignment_token, page_url
     from backend.storage import get_storage
 
     with session_scope() as session:
@@ -169,9 +167,8 @@ def demo_annotation_link(sequence_id: int, base: str) -> str:
         assignment = next((a for a in task.assignments if a.worker_id == "demo-worker"), None)
         if assignment is None:
             assignment = service.create_assignment(session, task, "demo-worker")
-        work = {"token": assignment_token(task, assignment),
-                "assignmentId": assignment.external_id, "workerId": assignment.worker_id}
-    return f"{base.rstrip('/')}/annotate/?{urlencode(work)}"
+        return page_url(base, assignment_token(task, assignment),
+                        assignmentId=assignment.external_id, workerId=assignment.worker_id)
 
 
 # --- the crowd ---------------------------------------------------------------------------

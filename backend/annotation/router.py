@@ -8,7 +8,6 @@ and can be exchanged for an assignment token when the marketplace names the assi
 from __future__ import annotations
 
 from typing import Annotated, Any
-from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy import select
@@ -41,6 +40,7 @@ from backend.annotation.tokens import (
     TASK_SCOPE,
     assignment_token,
     frame_token,
+    page_url,
     task_token,
 )
 from backend.config import get_settings
@@ -89,8 +89,8 @@ def _task_read(task: Task, status: TaskState) -> TaskRead:
     )
 
 
-def _page_url(params: dict[str, str]) -> str:
-    return f"{get_settings().public_url.rstrip('/')}/annotate/?{urlencode(params)}"
+def _page_url(token: str, **params: str) -> str:
+    return page_url(get_settings().public_url, token, **params)
 
 
 # ----- admin -----------------------------------------------------------------------------
@@ -125,8 +125,7 @@ def create_assignment(task_id: Id, body: AssignmentCreate, session: SessionDep,
     task = service.get_task_or_raise(session, task_id)
     assignment = service.create_assignment(session, task, body.worker_id)
     token = assignment_token(task, assignment)
-    url = _page_url({"token": token, "assignmentId": assignment.external_id,
-                     "workerId": assignment.worker_id})
+    url = _page_url(token, assignmentId=assignment.external_id, workerId=assignment.worker_id)
     return AssignmentLink(assignment_id=assignment.id, external_id=assignment.external_id,
                           token=token, page_url=url)
 
@@ -136,7 +135,7 @@ def create_preview_token(task_id: Id, session: SessionDep, _: CurrentAdmin) -> P
     task = service.get_task_or_raise(session, task_id)
     token = task_token(task)
     return PreviewLink(token=token,
-                       page_url=_page_url({"token": token, "assignmentId": PREVIEW_ASSIGNMENT_ID}))
+                       page_url=_page_url(token, assignmentId=PREVIEW_ASSIGNMENT_ID))
 
 
 @router.get("/assignments/{assignment_id}/dense")

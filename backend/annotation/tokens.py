@@ -6,6 +6,8 @@ frame URL."""
 
 from __future__ import annotations
 
+from urllib.parse import urlencode
+
 from backend.accounts.deps import view_token
 from backend.annotation.models import Assignment, Task
 from backend.config import get_settings
@@ -35,3 +37,10 @@ def assignment_token(task: Task, assignment: Assignment) -> str:
 def frame_token(task: Task) -> str:
     """A read-only view token for the task's frames (sequence and camera), for frame URLs."""
     return view_token(task.sequence_id, task.camera.serial, FRAME_TOKEN_TTL_S)
+
+
+def page_url(base: str, token: str, **params: str) -> str:
+    """The annotation page's address for ``token``: the token rides in the fragment
+    (``#token=``), which browsers never send, so no server, proxy or access log sees it."""
+    query = f"?{urlencode(params)}" if params else ""
+    return f"{base.rstrip('/')}/annotate/{query}#{urlencode({'token': token})}"

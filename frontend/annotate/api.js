@@ -44,15 +44,18 @@ export class ApiError extends Error {
  */
 
 /**
- * Reads the page's query string.
+ * Reads the page's address: the marketplace's parameters from the query string, the token from
+ * the fragment (#token=, never sent to a server; an older ?token= link is still read).
  * @param {string} search  location.search
+ * @param {string} [hash]  location.hash
  * @returns {PageParams}
  */
-export function readPageParams(search) {
+export function readPageParams(search, hash = "") {
   const q = new URLSearchParams(search);
+  const h = new URLSearchParams(hash.replace(/^#/, ""));
   const assignmentId = q.get("assignmentId");
   return {
-    token: q.get("token"),
+    token: h.get("token") ?? q.get("token"),
     taskToken: q.get("task"),
     assignmentId,
     hitId: q.get("hitId"),

@@ -43,24 +43,38 @@ function localStorageOrNull() {
 }
 
 /**
- * The bearer token: from ?token=, or exchanged for a task link (?task=) once the HIT is
- * accepted; the assignment token then replaces the task token in the address, so a reload
- * reopens the same assignment.
+ * The bearer token: from #token=, or exchanged for a task link (?task=) once the HIT is
+ * accepted; the assignment token then replaces the task link, in the address's fragment, so a
+ * reload reopens the same assignment and no request carries the token in its URL.
  * @param {import("./api.js").PageParams} params
  */
 async function resolveToken(params) {
-  if (params.token) return params.token;
+  if (params.token) {
+    keepTokenInFragment(params.token);
+    return params.token;
+  }
   if (!params.taskToken) {
     const detail = "This page needs the link from your HIT (no token in the address).";
     throw new ApiError(401, { detail });
   }
   if (params.preview) return params.taskToken;
   const token = await new AnnotateApi(null).start(params);
+  keepTokenInFragment(token);
+  return token;
+}
+
+/**
+ * Puts the token in the address's fragment (a reload reopens the same assignment) and takes
+ * it and the task link out of the query string, which the browser would send to the server.
+ * @param {string} token
+ */
+function keepTokenInFragment(token) {
   const q = new URLSearchParams(location.search);
   q.delete("task");
-  q.set("token", token);
-  history.replaceState(null, "", `${location.pathname}?${q}`);
-  return token;
+  q.delete("token");
+  const query = q.toString();
+  const hash = new URLSearchParams({ token }).toString();
+  history.replaceState(null, "", `${location.pathname}${query ? `?${query}` : ""}#${hash}`);
 }
 
 /** Stops everything and says why (bad link, conflict, refused token). @param {any} err */
@@ -278,7 +292,7 @@ function taskTitle(task) {
 }
 
 async function main() {
-  const params = readPageParams(location.search);
+  const params = readPageParams(location.search, location.hash);
   let data;
   let api;
   try {

@@ -74,7 +74,8 @@ class LiveServer:
         return resp.json()
 
     def page_url(self, token: str, **extra: str) -> str:
-        return f"{self.base}/annotate/?{urlencode({'token': token, **extra})}"
+        query = f"?{urlencode(extra)}" if extra else ""
+        return f"{self.base}/annotate/{query}#{urlencode({'token': token})}"
 
     def truth(self, serial: str, frame: int) -> np.ndarray:
         """Ground-truth 2D joints (21 x 2, image px) of the synthetic hand in one frame."""

@@ -40,7 +40,8 @@ def logins(out: str) -> dict[str, tuple[str, str, str]]:
 def test_the_demo_reaches_a_finished_solve_and_prints_links_and_logins(tmp_path: Path) -> None:
     var_dir = tmp_path / "var"
     out = run_demo(var_dir)
-    assert re.search(r"^annotate: +http://127\.0\.0\.1:\d+/annotate/\?token=", out, re.MULTILINE)
+    assert re.search(r"^annotate: +http://127\.0\.0\.1:\d+/annotate/\?\S+#token=\S+$", out,
+                     re.MULTILINE)
     first = logins(out)
     assert first["worker portal"][0].endswith("/market/")
     assert first["admin page"][0].endswith("/admin/")

@@ -14,6 +14,15 @@ test("an MTurk preview link is recognised and its parameters read", () => {
   assert.equal(accepted.turkSubmitTo, "https://m.example");
 });
 
+test("the token is read from the address's fragment, which no request carries", () => {
+  const p = readPageParams("?assignmentId=X1&workerId=W", "#token=A.sig");
+  assert.equal(p.token, "A.sig");
+  assert.equal(p.assignmentId, "X1");
+  // The fragment wins over an older ?token= link.
+  assert.equal(readPageParams("?token=OLD.sig", "#token=NEW.sig").token, "NEW.sig");
+  assert.equal(readPageParams("?assignmentId=X1", "").token, null);
+});
+
 test("requests carry the token as a bearer header and never send cookies", async () => {
   const seen = [];
   const api = new AnnotateApi("tok.sig", { fetchFn: async (url, init) => {
