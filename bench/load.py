@@ -4,9 +4,10 @@ Starts its own `dexlabel serve` on a free local port in a new instance (a temp f
 PostgreSQL also a new database on the local server, dropped at the end), imports a synthetic
 capture (``--capture DIR`` reuses one written by `dexlabel synth`), creates the hand tasks and
 ``--annotators`` direct assignment links through the admin API, then runs that many simulated
-annotators (asyncio + httpx, one connection each) for ``--seconds``: each autosaves its full
-hand task (21 points keyed on every frame, PUT /api/annotate/tracks with the version it holds)
-every 2 s, one save in flight at a time, giving up on a save after 15 s as the page does.
+annotators (asyncio + httpx, one kept-alive connection each) for ``--seconds``: each autosaves
+its full hand task (21 points keyed on every frame, PUT /api/annotate/tracks with the version
+it holds) every 2 s, one save in flight at a time, giving up on a save after 15 s as the page
+does.
 ``--bursts`` times during the run, ``--burst`` page loads start at the same moment (GET
 /api/annotate/task, then the view's frame bundle). Everything is bounded: the run stops by
 itself after ``--seconds`` plus the last saves' timeout, and the server is stopped at the end.
@@ -32,7 +33,10 @@ Prints a JSON summary on its last line:
     server_cpu_s, cpu_s_per_save
                                 CPU seconds of the server process(es) during the run (autosaves
                                 and page loads together), and per acknowledged save
-    bench_cpu_s                 CPU seconds of this client process during the run
+    bench_cpu_s                 CPU seconds of the client (this process and the one that
+                                runs the page-load bursts) during the run
+    bench_loop_lag_ms           how late the annotators' event loop wakes from 100 ms sleeps
+                                (p50, p99, max): latencies include the client's own delay
     server_log                  counts of tracebacks and "database is locked" in its log
     stop_s                      seconds the server took to exit on SIGTERM
     load_before, load_after     the machine's 1-minute load average
@@ -47,6 +51,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import multiprocessing
 import os
 import random
 import signal
@@ -55,6 +60,7 @@ import sys
 import time
 import uuid
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -239,7 +245,16 @@ async def _send(client: Any, method: str, url: str, **kwargs: Any) -> Any:
             return await client.request(method, url, **kwargs)
 
 
-async def _annotate(client: Any, who: Annotator, start_in: float, stop: asyncio.Event,
+async def _annotate(base: str, who: Annotator, start_in: float, stop: asyncio.Event,
+                    stats: Stats) -> None:
+    """One annotator's page: its own connection (kept alive), one save at a time."""
+    import httpx
+
+    async with httpx.AsyncClient(base_url=base, limits=httpx.Limits(max_connections=1)) as client:
+        await _autosave(client, who, start_in, stop, stats)
+
+
+async def _autosave(client: Any, who: Annotator, start_in: float, stop: asyncio.Event,
                     stats: Stats) -> None:
     loop = asyncio.get_running_loop()
     headers = {"Authorization": f"Bearer {who.token}", "Content-Type": "application/json"}
@@ -269,9 +284,9 @@ async def _annotate(client: Any, who: Annotator, start_in: float, stop: asyncio.
                 await asyncio.wait_for(stop.wait(), wait)
 
 
-async def _page_load(base: str, who: Annotator, stats: Stats) -> None:
+async def _page_load(base: str, token: str) -> tuple[float | None, str | None]:
     """A page opening: its own connection (a new browser), the task, then the frame bundle
-    (streamed and counted, not kept)."""
+    (streamed and counted, not kept). Its milliseconds, or the kind of its failure."""
     import httpx
 
     loop = asyncio.get_running_loop()
@@ -279,25 +294,43 @@ async def _page_load(base: str, who: Annotator, stats: Stats) -> None:
     try:
         async with httpx.AsyncClient(base_url=base, timeout=REQUEST_TIMEOUT_S) as client:
             resp = await client.get("/api/annotate/task",
-                                    headers={"Authorization": f"Bearer {who.token}"})
+                                    headers={"Authorization": f"Bearer {token}"})
             if resp.status_code != 200:
-                stats.load_errors[f"task_http_{resp.status_code}"] += 1
-                return
+                return None, f"task_http_{resp.status_code}"
             url = resp.json()["frames"]["bundle_url"]
             async with client.stream("GET", url, timeout=60.0) as bundle:
                 if bundle.status_code != 200:
-                    stats.load_errors[f"bundle_http_{bundle.status_code}"] += 1
-                    return
+                    return None, f"bundle_http_{bundle.status_code}"
                 size = 0
                 async for chunk in bundle.aiter_raw(1 << 20):
                     size += len(chunk)
                 if size == 0:
-                    stats.load_errors["bundle_empty"] += 1
-                    return
+                    return None, "bundle_empty"
     except Exception as exc:  # every failure of the request counts, by kind
-        stats.load_errors[_error_kind(exc)] += 1
-        return
-    stats.load_ms.append((loop.time() - started) * 1000)
+        return None, _error_kind(exc)
+    return (loop.time() - started) * 1000, None
+
+
+def _burst(base: str, tokens: list[str]) -> list[tuple[float | None, str | None]]:
+    """Page loads of ``tokens`` started at the same moment, then a page read: run in a
+    process of its own, so receiving the bundles does not slow the annotators' event loop."""
+
+    async def run() -> list[tuple[float | None, str | None]]:
+        loads = await asyncio.gather(*(_page_load(base, t) for t in tokens))
+        after = await _after_load(base, tokens[0])
+        return [*loads, (after.get("after_load_ms"), after.get("after_load_error"))]
+
+    return asyncio.run(run())
+
+
+async def _loop_lag(stop: asyncio.Event, lags: list[float]) -> None:
+    """How late this event loop wakes from 100 ms sleeps (ms): when it is late, latencies
+    measured here include the client's own delay."""
+    loop = asyncio.get_running_loop()
+    while not stop.is_set():
+        t0 = loop.time()
+        await asyncio.sleep(0.1)
+        lags.append((loop.time() - t0 - 0.1) * 1000)
 
 
 async def _admin(client: Any, sequence_id: int, count: int, seed: int) -> list[Annotator]:
@@ -334,7 +367,7 @@ def _pct(values: list[float], q: float) -> float | None:
     return round(ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))], 1)
 
 
-async def _after_load(base: str, who: Annotator) -> dict[str, Any]:
+async def _after_load(base: str, token: str) -> dict[str, Any]:
     """The first page read once the load stopped (a new connection): its latency, or why it
     failed."""
     import httpx
@@ -343,7 +376,7 @@ async def _after_load(base: str, who: Annotator) -> dict[str, Any]:
     try:
         async with httpx.AsyncClient(base_url=base, timeout=AFTER_LOAD_LIMIT_S) as client:
             resp = await client.get("/api/annotate/task",
-                                    headers={"Authorization": f"Bearer {who.token}"})
+                                    headers={"Authorization": f"Bearer {token}"})
     except Exception as exc:  # a timeout or a refused connection is the finding
         return {"after_load_ms": None, "after_load_error": _error_kind(exc)}
     ms = round((time.perf_counter() - t0) * 1000, 1)
@@ -356,29 +389,40 @@ async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Na
                  database_url: str) -> dict[str, Any]:
     import httpx
 
-    limits = httpx.Limits(max_connections=args.annotators + 8,
-                          max_keepalive_connections=args.annotators + 8)
-    async with httpx.AsyncClient(base_url=base, limits=limits, timeout=60.0) as client:
+    async with httpx.AsyncClient(base_url=base, timeout=60.0) as client:
         annotators = await _admin(client, sequence_id, args.annotators, args.seed)
         rng = random.Random(args.seed)
         stats, stop = Stats(), asyncio.Event()
-        cpu0, bench0, t0 = _tree_cpu_s(server_pid), time.process_time(), time.monotonic()
-        crowd = [asyncio.create_task(_annotate(client, a, rng.uniform(0, SAVE_PERIOD_S), stop,
-                                               stats)) for a in annotators]
-        for i in range(args.bursts):
-            at = t0 + args.seconds * (i + 1) / (args.bursts + 1)
-            await asyncio.sleep(max(0.0, at - time.monotonic()))
-            picks = [annotators[(i * args.burst + k) % len(annotators)]
-                     for k in range(args.burst)]
-            await asyncio.gather(*(_page_load(base, a, stats) for a in picks))
-            stats.after_bursts.append(await _after_load(base, annotators[0]))
-        await asyncio.sleep(max(0.0, t0 + args.seconds - time.monotonic()))
-        stop.set()
-        await asyncio.gather(*crowd)
-        elapsed = time.monotonic() - t0
-        cpu = _tree_cpu_s(server_pid) - cpu0
-        bench_cpu = time.process_time() - bench0
-    after = await _after_load(base, annotators[0])
+        loop = asyncio.get_running_loop()
+        spawn = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(1, mp_context=spawn) as helper:
+            helper_pid = await loop.run_in_executor(helper, os.getpid)  # started before the run
+            cpu0 = _tree_cpu_s(server_pid)
+            bench0, helper0 = time.process_time(), _tree_cpu_s(helper_pid)
+            t0 = time.monotonic()
+            lags: list[float] = []
+            lag = asyncio.create_task(_loop_lag(stop, lags))
+            crowd = [asyncio.create_task(_annotate(base, a, rng.uniform(0, SAVE_PERIOD_S),
+                                                   stop, stats)) for a in annotators]
+            for i in range(args.bursts):
+                at = t0 + args.seconds * (i + 1) / (args.bursts + 1)
+                await asyncio.sleep(max(0.0, at - time.monotonic()))
+                picks = [annotators[(i * args.burst + k) % len(annotators)].token
+                         for k in range(args.burst)]
+                *loads, after_burst = await loop.run_in_executor(helper, _burst, base, picks)
+                for ms, error in loads:
+                    if error is None and ms is not None:
+                        stats.load_ms.append(ms)
+                    else:
+                        stats.load_errors[error or "unknown"] += 1
+                stats.after_bursts.append({"after_load_ms": after_burst[0]})
+            await asyncio.sleep(max(0.0, t0 + args.seconds - time.monotonic()))
+            stop.set()
+            await asyncio.gather(*crowd, lag)
+            elapsed = time.monotonic() - t0
+            cpu = _tree_cpu_s(server_pid) - cpu0
+            bench_cpu = time.process_time() - bench0 + _tree_cpu_s(helper_pid) - helper0
+    after = await _after_load(base, annotators[0].token)
     stored = _stored_versions(database_url, [a.assignment_id for a in annotators])
     lost = sum(1 for a in annotators if stored.get(a.assignment_id, 0) < a.acked)
     unacked = sum(1 for a in annotators if stored.get(a.assignment_id, 0) > a.acked)
@@ -396,7 +440,10 @@ async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Na
         "lost": lost, "committed_unacknowledged": unacked, **after,
         "server_cpu_s": round(cpu, 1),
         "cpu_s_per_save": round(cpu / saves, 4) if saves else None,
-        "bench_cpu_s": round(bench_cpu, 1), "run_s": round(elapsed, 1),
+        "bench_cpu_s": round(bench_cpu, 1),
+        "bench_loop_lag_ms": {"p50": _pct(lags, 0.5), "p99": _pct(lags, 0.99),
+                              "max": _pct(lags, 1.0)},
+        "run_s": round(elapsed, 1),
     }
 
 
