@@ -1,0 +1,63 @@
+"""The quick pass of keyframe validation accepts exactly what the full check accepts."""
+
+from __future__ import annotations
+
+import math
+import random
+from typing import Any
+
+from worker.tracks import _plainly_valid, validate_keyframes
+
+NUM_FRAMES, WIDTH, HEIGHT = 12, 64, 48
+ODD_VALUES: list[Any] = [None, True, False, 0, 1, 2, -1, 1.0, 0.0, 63.99, 64, 64.0, 47.5, 48,
+                         -0.01, math.nan, math.inf, "1", [1], {"x": 1}]
+
+
+def _valid_rows(rng: random.Random) -> list[list[Any]]:
+    frames = sorted(rng.sample(range(NUM_FRAMES), rng.randint(0, NUM_FRAMES)))
+    rows: list[list[Any]] = []
+    for frame in frames:
+        if rng.random() < 0.2:
+            rows.append([frame, None, None, 0])
+        else:
+            rows.append([frame, round(rng.uniform(0, WIDTH - 0.01), 2),
+                         rng.choice([rng.randint(0, HEIGHT - 1), rng.uniform(0, HEIGHT - 0.01)]),
+                         rng.choice([0, 1, True, False])])
+    return rows
+
+
+def _spoil(rows: list[list[Any]], rng: random.Random) -> list[Any]:
+    spoiled: list[Any] = [list(r) for r in rows]
+    if not spoiled or rng.random() < 0.1:
+        spoiled.append(rng.choice([[NUM_FRAMES, 1, 1, 1], (1, 1.0, 1.0, 1),
+                                   {"frame": 0, "x": 1, "y": 1, "visible": True}, [0, 1, 1]]))
+        return spoiled
+    row = spoiled[rng.randrange(len(spoiled))]
+    what = rng.randrange(5)
+    if what == 4:
+        spoiled.append(list(row))  # a duplicate frame
+    else:
+        row[what] = rng.choice(ODD_VALUES)
+    if rng.random() < 0.1:
+        rng.shuffle(spoiled)
+    return spoiled
+
+
+def test_well_formed_rows_pass_the_quick_pass() -> None:
+    rng = random.Random(1)
+    for _ in range(300):
+        rows = _valid_rows(rng)
+        assert validate_keyframes(rows, NUM_FRAMES, WIDTH, HEIGHT) == []
+        assert _plainly_valid(rows, NUM_FRAMES, WIDTH, HEIGHT)
+
+
+def test_the_quick_pass_never_accepts_what_the_full_check_refuses() -> None:
+    rng = random.Random(2)
+    refused = 0
+    for _ in range(3000):
+        rows = _spoil(_valid_rows(rng), rng)
+        if _plainly_valid(rows, NUM_FRAMES, WIDTH, HEIGHT):
+            assert validate_keyframes(rows, NUM_FRAMES, WIDTH, HEIGHT) == [], rows
+        else:
+            refused += 1
+    assert refused > 1000  # the spoiled rows did exercise the full check
