@@ -298,16 +298,60 @@ class DatabaseBusy(Busy):
         self.headers = {"Retry-After": str(retry_after_s)}
 
 
+class _SessionSlots:
+    """The session slots of one event loop, handed over in arrival order, except that reads
+    (GET, HEAD: a page opening, a listing) go before waiting writes (an autosave, which the
+    page keeps and sends again when refused)."""
+
+    def __init__(self, size: int) -> None:
+        self.free = size
+        self.reads: collections.deque[anyio.Event] = collections.deque()
+        self.writes: collections.deque[anyio.Event] = collections.deque()
+
+    async def acquire(self, timeout_s: float, *, read: bool) -> bool:
+        """Wait at most ``timeout_s`` for a slot; whether one was got."""
+        if self.free > 0:
+            self.free -= 1
+            return True
+        handed = anyio.Event()
+        queue = self.reads if read else self.writes
+        queue.append(handed)
+        try:
+            with anyio.move_on_after(timeout_s):
+                await handed.wait()
+        except BaseException:
+            self._forget(handed, queue)
+            raise
+        if handed.is_set():  # handed over, even if the time ran out at that moment
+            return True
+        queue.remove(handed)
+        return False
+
+    def _forget(self, handed: anyio.Event, queue: collections.deque[anyio.Event]) -> None:
+        if handed.is_set():
+            self.release()
+        else:
+            queue.remove(handed)
+
+    def release(self) -> None:
+        for queue in (self.reads, self.writes):
+            if queue:
+                queue.popleft().set()  # the slot passes straight to the next in line
+                return
+        self.free += 1
+
+
 @dataclass(frozen=True)
 class _RequestSlots:
     """One event loop's database slots: requests holding a session, and the threads their
     commits run on (never queued behind other work: a commit releases a connection)."""
 
-    sessions: anyio.Semaphore
+    sessions: _SessionSlots
     finishers: anyio.CapacityLimiter
 
 
 _SLOTS: RunVar[_RequestSlots] = RunVar("dexlabel_request_slots")
+_READ_METHODS = frozenset({"GET", "HEAD"})
 
 
 def _request_slots() -> _RequestSlots:
@@ -315,7 +359,7 @@ def _request_slots() -> _RequestSlots:
         return _SLOTS.get()
     except LookupError:
         size = get_settings().db_pool_size
-        slots = _RequestSlots(anyio.Semaphore(size), anyio.CapacityLimiter(size))
+        slots = _RequestSlots(_SessionSlots(size), anyio.CapacityLimiter(size))
         _SLOTS.set(slots)
         return slots
 
@@ -334,7 +378,8 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
 
     At most DEXLABEL_DB_POOL_SIZE requests of a process hold a session at once, which is the
     number of pooled connections, so every one of them gets a connection without waiting and
-    a burst queues here rather than on the pool. A request waits for its turn (a session, and
+    a burst queues here rather than on the pool (reads first, :class:`_SessionSlots`). A
+    request waits for its turn (a session, and
     on SQLite the writer's turn) until DEXLABEL_DB_WAIT_S after the app started on it; then
     it is answered 503 with Retry-After, so an overloaded server refuses work in seconds
     instead of finishing it after the page gave up. A session holds its connection across
@@ -344,14 +389,10 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     wait_s = get_settings().db_wait_s
     deadline = request.scope.get(_STARTED, time.monotonic()) + wait_s
     slots = _request_slots()
-    try:
-        slots.sessions.acquire_nowait()
-    except anyio.WouldBlock:
-        with anyio.move_on_after(deadline - time.monotonic()) as waited:
-            await slots.sessions.acquire()
-        if waited.cancelled_caught:
-            raise DatabaseBusy(f"the server is busy: this request got no turn at the database "
-                               f"within {wait_s:g} s; please try again") from None
+    if not await slots.sessions.acquire(deadline - time.monotonic(),
+                                        read=request.method in _READ_METHODS):
+        raise DatabaseBusy(f"the server is busy: this request got no turn at the database "
+                           f"within {wait_s:g} s; please try again")
     _REQUEST_DEADLINE.set(deadline)
     try:
         session = get_sessionmaker()()

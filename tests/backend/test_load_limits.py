@@ -205,3 +205,33 @@ def test_sqlite_writers_wait_their_turn_and_give_up_with_503(
     saved = httpx.put(f"{served.url}/api/annotate/tracks", json=_save_body(served.num_frames),
                       headers={"Authorization": f"Bearer {served.tokens[0]}"}, timeout=10)
     assert saved.status_code == 200 and saved.json()["version"] == 1
+
+
+def test_reads_get_a_free_session_slot_before_waiting_writes() -> None:
+    import anyio
+
+    from backend.db import _SessionSlots
+
+    order: list[str] = []
+
+    async def main() -> None:
+        slots = _SessionSlots(1)
+        assert await slots.acquire(0, read=False)  # the one slot is taken
+
+        async def wait(name: str, read: bool) -> None:
+            if await slots.acquire(5, read=read):
+                order.append(name)
+                slots.release()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(wait, "write", False)
+            await anyio.sleep(0.05)
+            tg.start_soon(wait, "read", True)
+            await anyio.sleep(0.05)
+            slots.release()
+        # Nobody waits: a slot is free again, and a wait that runs out gets none.
+        assert await slots.acquire(0, read=False)
+        assert not await slots.acquire(0.05, read=True)
+
+    anyio.run(main)
+    assert order == ["read", "write"]
