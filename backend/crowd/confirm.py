@@ -18,9 +18,10 @@ from backend.crowd.client import MarketplaceError, call, make_client
 from backend.crowd.models import CrowdSubmission
 from backend.crowd.sync import COLLECTED_STATUSES
 from backend.db import session_scope
+from backend.jobs.service import RetryLater
 
 
-class NotSubmittedYet(RuntimeError):
+class NotSubmittedYet(RetryLater):
     """The marketplace has not recorded the submission yet (the job retries later)."""
 
 

@@ -47,6 +47,11 @@ class Handler:
     lease_s: float | None
 
 
+class RetryLater(RuntimeError):
+    """Raised by a job that must wait for something outside (the marketplace has not
+    recorded a submission yet): recorded and retried like any failure, logged in one line."""
+
+
 _HANDLERS: dict[str, Handler] = {}
 # The module whose import registers the product's job handlers; loaded by the first job run in
 # a process that has not imported it (a CLI command running a job here, a test).
@@ -382,6 +387,9 @@ def execute(key: str) -> None:
         log.warning("job %s attempt %d lost its lease to a newer attempt: stopped without "
                     "acting further", key, attempt.number)
         return
+    except RetryLater as exc:  # an expected wait: one line, no traceback
+        log.info("job %s attempt %d: %s; it runs again later", key, attempt.number, exc)
+        failure = exc
     except Exception as exc:  # every failure is recorded on the job, then retried or failed
         log.exception("job %s attempt %d failed", key, attempt.number)
         failure = exc
