@@ -453,9 +453,9 @@ def requeue_stale(now: datetime | None = None, starting: bool = False,
         delay = None
         if status == "running":
             log.warning("job %s: its worker stopped before the lease ran out; queued again", key)
-        elif lease_until is not None and _aware(lease_until) <= now:
+        elif lease_until is not None and lease_until <= now:
             log.warning("job %s: the queue did not take its message; sent again", key)
-        elif _aware(updated_at) < lost_before:
+        elif updated_at < lost_before:
             log.warning("job %s: queued for over %.0f s with no worker taking it; its message "
                         "is sent again", key, settings.job_requeue_after_s)
         elif queue_reset:
@@ -464,7 +464,7 @@ def requeue_stale(now: datetime | None = None, starting: bool = False,
             else:
                 log.warning("job %s: the queue lost its messages; sent again", key)
             if status == "retrying":  # at the time its retry was due
-                due = _aware(updated_at) + timedelta(seconds=_retry_delay(attempts))
+                due = updated_at + timedelta(seconds=_retry_delay(attempts))
                 delay = max((due - now).total_seconds(), 0.0)
         else:  # queued recently, before this consumer started: routine, not a fault
             log.info("job %s: queued before this worker started; sent to it", key)
@@ -475,10 +475,6 @@ def requeue_stale(now: datetime | None = None, starting: bool = False,
             break
     return [key for key, *_ in rows]
 
-
-def _aware(moment: datetime) -> datetime:
-    """SQLite returns naive datetimes for timezone-aware columns (they are UTC)."""
-    return moment if moment.tzinfo else moment.replace(tzinfo=UTC)
 
 
 @huey.task()
