@@ -33,12 +33,12 @@ import yaml
 
 from backend.captures.imagefiles import check_jpeg, check_png16
 from backend.errors import InvalidCapture
-from worker.dataset import YCB_CLASSES
+from worker.formats import dexycb
+from worker.formats.dexycb import VIDEO_SUFFIXES, YCB_CLASSES
 
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv")
 # The longest import path taken (Linux's PATH_MAX).
 MAX_PATH_CHARS = 4096
-MESH_SUFFIXES = (".obj", ".ply")
+MESH_SUFFIXES = dexycb.MODEL_SUFFIXES
 # Threads that decode a capture's colour and depth frames while it is checked (OpenCV decodes
 # without holding the GIL).
 DECODE_THREADS = min(8, os.cpu_count() or 1)
@@ -175,9 +175,9 @@ def find_sequence_dirs(path: Path) -> list[Path]:
         path = path.resolve()
         if not path.exists():
             raise InvalidCapture(str(path), "path does not exist")
-        if (path / "meta.yml").is_file():
+        if (path / dexycb.META_FILE).is_file():
             return [path]
-        found = sorted(p.parent for p in path.glob("*/*/meta.yml"))
+        found = sorted(p.parent for p in path.glob(dexycb.META_GLOB))
     except OSError as exc:  # a name too long for the file system, a folder it may not read
         raise InvalidCapture(str(path), f"cannot be read ({exc.strerror or exc})") from exc
     if not found:
@@ -193,16 +193,16 @@ def read_sequence(seq_dir: Path) -> SequencePlan:
     """Parse and check one sequence and everything it refers to; touches nothing."""
     root = capture_root_of(seq_dir)
     rd = _Reader(root)
-    meta_path = seq_dir / "meta.yml"
+    meta_path = seq_dir / dexycb.META_FILE
     meta = rd.yaml(meta_path)
-    serials = [str(s) for s in rd.field(meta, meta_path, "serials", list)]
+    serials = [str(s) for s in rd.field(meta, meta_path, dexycb.META_SERIALS, list)]
     if not serials or len(set(serials)) != len(serials):
         raise rd.fail(meta_path, "field 'serials' must list distinct camera serials")
-    num_frames = meta.get("num_frames")
+    num_frames = meta.get(dexycb.META_NUM_FRAMES)
     if num_frames is not None and (not isinstance(num_frames, int) or num_frames <= 0):
         raise rd.fail(meta_path,
                       f"field 'num_frames' must be a positive integer, got {num_frames!r}")
-    extr_name = str(rd.field(meta, meta_path, "extrinsics", (str, int)))
+    extr_name = str(rd.field(meta, meta_path, dexycb.META_EXTRINSICS, (str, int)))
     extrinsics, master = _read_extrinsics(rd, root, extr_name, serials)
     cameras = [_read_camera(rd, root, seq_dir, s, extrinsics[s]) for s in serials]
     num_frames = _attach_frames(rd, seq_dir, cameras, num_frames)
@@ -218,9 +218,9 @@ def read_sequence(seq_dir: Path) -> SequencePlan:
 def _read_extrinsics(
     rd: _Reader, root: Path, name: str, serials: list[str]
 ) -> tuple[dict[str, list[list[float]]], str | None]:
-    path = root / "calibration" / f"extrinsics_{name}" / "extrinsics.yml"
+    path = root / dexycb.extrinsics_file(name)
     doc = rd.yaml(path)
-    table = rd.field(doc, path, "extrinsics", dict)
+    table = rd.field(doc, path, dexycb.EXTRINSICS, dict)
     table = {str(k): v for k, v in table.items()}
     out: dict[str, list[list[float]]] = {}
     for serial in serials:
@@ -231,27 +231,24 @@ def _read_extrinsics(
         if abs(np.linalg.det(mat[:, :3]) - 1.0) > 1e-3:
             raise rd.fail(path, f"field 'extrinsics.{serial}' rotation part is not a rotation")
         out[serial] = mat.tolist()
-    master = doc.get("master")
+    master = doc.get(dexycb.MASTER)
     return out, None if master is None else str(master)
 
 
 def _read_camera(
     rd: _Reader, root: Path, seq_dir: Path, serial: str, extrinsics: list[list[float]]
 ) -> CameraPlan:
-    candidates = sorted((root / "calibration" / "intrinsics").glob(f"{serial}_*.yml"))
+    candidates = sorted((root / dexycb.INTRINSICS_DIR).glob(dexycb.intrinsics_glob(serial)))
     if not candidates:
-        raise rd.fail(root / "calibration" / "intrinsics" / f"{serial}_640x480.yml",
-                      "file is missing")
+        raise rd.fail(root / dexycb.intrinsics_file(serial, dexycb.IMAGE_WIDTH,
+                                                    dexycb.IMAGE_HEIGHT), "file is missing")
     path = candidates[0]
     doc = rd.yaml(path)
-    color = rd.field(doc, path, "color", dict)
+    color = rd.field(doc, path, dexycb.COLOR, dict)
     vals = {k: rd.numbers([rd.field(color, path, k, (int, float))], path, f"color.{k}", 1)[0]
-            for k in ("fx", "fy", "ppx", "ppy")}
-    size = path.stem.rsplit("_", 1)[-1]
-    try:
-        size_w, size_h = (int(v) for v in size.split("x"))
-    except ValueError:
-        size_w, size_h = 640, 480
+            for k in dexycb.INTRINSIC_KEYS}
+    size_w, size_h = (dexycb.intrinsics_size(path.stem)
+                      or (dexycb.IMAGE_WIDTH, dexycb.IMAGE_HEIGHT))
     width, height = (int(rd.numbers([color.get(k, default)], path, f"color.{k}", 1)[0])
                      for k, default in (("width", size_w), ("height", size_h)))
     if width <= 0 or height <= 0:
@@ -272,7 +269,8 @@ def _attach_frames(
     for cam in cameras:
         folder = seq_dir / cam.serial
         if folder.is_dir():
-            count = num_frames if num_frames is not None else len(list(folder.glob("color_*.jpg")))
+            count = (num_frames if num_frames is not None
+                     else len(list(folder.glob(dexycb.COLOR_GLOB))))
             cam.frames = [_check_frame(rd, folder, cam, i) for i in range(count)]
         else:
             videos = [seq_dir / f"{cam.serial}{s}" for s in VIDEO_SUFFIXES]
@@ -284,11 +282,11 @@ def _attach_frames(
             rd.digest.update(f"{rd.rel(video)}:{video.stat().st_size}".encode())
     counts = {len(c.frames) if c.video_path is None else len(c.video_frames) for c in cameras}
     if len(counts) > 1 or (num_frames is not None and counts != {num_frames}):
-        raise rd.fail(seq_dir / "meta.yml",
+        raise rd.fail(seq_dir / dexycb.META_FILE,
                       f"num_frames is {num_frames} but the views hold {sorted(counts)} frames")
     num_frames = counts.pop()
     if num_frames <= 0:
-        raise rd.fail(seq_dir / "meta.yml", "the views hold no frames")
+        raise rd.fail(seq_dir / dexycb.META_FILE, "the views hold no frames")
     _decode_frames(rd, cameras)
     return num_frames
 
@@ -352,8 +350,8 @@ def _decode_video(rd: _Reader, cam: CameraPlan) -> list[bytes]:
 
 
 def _check_frame(rd: _Reader, folder: Path, cam: CameraPlan, index: int) -> FramePlan:
-    color = folder / f"color_{index:06d}.jpg"
-    depth = folder / f"aligned_depth_to_color_{index:06d}.png"
+    color = folder / dexycb.color_file(index)
+    depth = folder / dexycb.depth_file(index)
     if not color.is_file():
         raise rd.fail(color, f"frame {index} is missing")
     problem = check_jpeg(color, cam.width, cam.height)
@@ -374,19 +372,19 @@ def _read_objects(
 ) -> list[ObjectPlan]:
     from worker.geometry.mesh_io import read_mesh
 
-    ycb_ids = rd.field(meta, meta_path, "ycb_ids", list)
-    grasp = meta.get("ycb_grasp_ind")
+    ycb_ids = rd.field(meta, meta_path, dexycb.META_YCB_IDS, list)
+    grasp = meta.get(dexycb.META_GRASP_IND)
     if grasp is not None and (not isinstance(grasp, int) or not 0 <= grasp < len(ycb_ids)):
         raise rd.fail(meta_path, f"field 'ycb_grasp_ind' must index ycb_ids, got {grasp!r}")
-    poses = _initial_poses(rd, seq_dir / "pose.npz", len(ycb_ids), num_frames)
+    poses = _initial_poses(rd, seq_dir / dexycb.POSE_FILE, len(ycb_ids), num_frames)
     out = []
     for i, ycb_id in enumerate(ycb_ids):
         if not isinstance(ycb_id, int) or ycb_id not in YCB_CLASSES:
             raise rd.fail(meta_path, f"field 'ycb_ids[{i}]' is not a known YCB id: {ycb_id!r}")
         name = YCB_CLASSES[ycb_id]
-        folder = root / "models" / name
+        folder = root / dexycb.model_dir(name)
         meshes = sorted(p for p in folder.glob("*") if p.suffix.lower() in MESH_SUFFIXES)
-        preferred = folder / "textured_simple.obj"
+        preferred = folder / dexycb.MODEL_OBJ
         mesh_path = preferred if preferred.is_file() else (meshes[0] if meshes else preferred)
         if not mesh_path.is_file():
             raise rd.fail(preferred, f"object model of {name} is missing")
@@ -414,7 +412,7 @@ def _initial_poses(
         return None
     try:
         with np.load(path) as npz:
-            pose_y = np.asarray(npz["pose_y"], dtype=np.float64)
+            pose_y = np.asarray(npz[dexycb.POSE_Y], dtype=np.float64)
     except KeyError:
         raise rd.fail(path, "field 'pose_y' is missing") from None
     except (OSError, ValueError) as exc:
@@ -430,8 +428,8 @@ def _initial_poses(
 
 
 def _read_hands(rd: _Reader, root: Path, meta: dict[str, Any], meta_path: Path) -> list[HandPlan]:
-    sides = meta.get("mano_sides") or []
-    calibs = meta.get("mano_calib") or []
+    sides = meta.get(dexycb.META_MANO_SIDES) or []
+    calibs = meta.get(dexycb.META_MANO_CALIB) or []
     if not isinstance(sides, list) or not isinstance(calibs, list):
         raise rd.fail(meta_path, "fields 'mano_sides' and 'mano_calib' must be lists")
     hands = []
@@ -442,7 +440,8 @@ def _read_hands(rd: _Reader, root: Path, meta: dict[str, Any], meta_path: Path) 
         calib = str(calibs[i]) if i < len(calibs) else None
         betas = None
         if calib is not None:
-            path = root / "calibration" / f"mano_{calib}" / "mano.yml"
-            betas = rd.numbers(rd.field(rd.yaml(path), path, "betas", list), path, "betas", 10)
+            path = root / dexycb.mano_file(calib)
+            betas = rd.numbers(rd.field(rd.yaml(path), path, dexycb.BETAS, list), path,
+                               dexycb.BETAS, 10)
         hands.append(HandPlan(index=i, side=side, calib_name=calib, betas=betas))
     return hands

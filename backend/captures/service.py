@@ -18,6 +18,7 @@ from backend.captures.layout import SequencePlan
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.errors import Conflict, NotFound
 from backend.storage import Storage
+from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel
 
 UPLOAD_THREADS = 8
@@ -207,15 +208,15 @@ def _get_or_create_subject(session: Session, name: str) -> Subject:
 
 
 def color_key(prefix: str, serial: str, index: int) -> str:
-    return f"{prefix}/{serial}/color_{index:06d}.jpg"
+    return f"{prefix}/{serial}/{dexycb.color_file(index)}"
 
 
 def depth_key(prefix: str, serial: str, index: int) -> str:
-    return f"{prefix}/{serial}/aligned_depth_to_color_{index:06d}.png"
+    return f"{prefix}/{serial}/{dexycb.depth_file(index)}"
 
 
 def model_key(prefix: str, object_name: str, file_name: str) -> str:
-    return f"{prefix}/models/{object_name}/{file_name}"
+    return f"{prefix}/{dexycb.model_dir(object_name)}/{file_name}"
 
 
 def plan_files(plan: SequencePlan, prefix: str) -> list[StoredFile]:

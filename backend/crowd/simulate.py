@@ -21,6 +21,7 @@ import numpy as np
 
 from backend.captures.layout import SequencePlan, read_sequence
 from backend.errors import DexlabelError
+from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel, intrinsics_matrix
 from worker.geometry.mesh_io import read_mesh
 from worker.synth.annotators import annotate, draw_profiles, hand_visibility, mesh_landmarks
@@ -101,10 +102,10 @@ class CaptureTruth:
             folder = self._folder(serial)
             joints, segs, poses = [], [], []
             for f in range(frames):
-                with np.load(folder / f"labels_{f:06d}.npz") as labels:
-                    joints.append(labels["joint_2d"][0].astype(np.float64))
-                    segs.append(labels["seg"])
-                    poses.append(labels["pose_y"].astype(np.float64))
+                with np.load(folder / dexycb.labels_file(f)) as labels:
+                    joints.append(labels[dexycb.JOINT_2D][0].astype(np.float64))
+                    segs.append(labels[dexycb.SEG])
+                    poses.append(labels[dexycb.POSE_Y].astype(np.float64))
             self._views[serial] = (np.stack(joints), np.stack(segs), np.stack(poses))
         return self._views[serial]
 

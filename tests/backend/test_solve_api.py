@@ -30,7 +30,7 @@ from backend.solve.cli import calibrate_hand_command, solve_command
 from backend.solve.inputs import load_mesh, merge_labels
 from backend.solve.service import job_key
 from backend.storage import get_storage
-from worker.dataset import HAND_SEG_VALUE
+from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import project_camera_points
 from worker.hand import builtin_hand_model
 from worker.hand.calibrate import bone_lengths, rest_joint_map

@@ -11,7 +11,7 @@ import pytest
 import torch
 import yaml
 
-from worker.dataset import HAND_SEG_VALUE, YCB_CLASSES
+from worker.formats.dexycb import HAND_SEG_VALUE, YCB_CLASSES
 from worker.geometry import (
     intrinsics_matrix,
     invert_pose,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from worker.formats.files import npz_bytes, yaml_text
 from worker.geometry.cameras import intrinsics_matrix, pixels_to_rays
 from worker.synth.motion import minimum_jerk
 from worker.synth.raster import rasterize
@@ -16,7 +17,6 @@ from worker.synth.render import SceneMesh, TextureAtlas, combine, prepare_view, 
 from worker.synth.scene import object_sdf, place_objects, table_mesh
 from worker.synth.sensor import depth_sigma_m, simulate_depth
 from worker.synth.shapes import CATALOGUE, box_mesh, cylinder_mesh
-from worker.synth.writer import npz_bytes, yaml_text
 
 K = intrinsics_matrix(300.0, 300.0, 79.5, 59.5)
 W, H = 160, 120

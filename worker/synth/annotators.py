@@ -27,7 +27,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from worker.dataset import HAND_SEG_VALUE
+from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder"]

@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from worker.dataset import HAND_SEG_VALUE
+from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.transforms import (
     compose_poses,
     invert_pose,

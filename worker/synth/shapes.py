@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from worker.dataset import YCB_CLASSES
+from worker.formats.dexycb import YCB_CLASSES
 from worker.geometry.mesh_io import Mesh
 
 TEXTURE_SIZE = 512

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from worker.formats import dexycb
+from worker.formats.files import encode_image, npz_bytes
 from worker.synth.render import (
     ModelMesh,
     SceneMesh,
@@ -19,7 +21,6 @@ from worker.synth.render import (
     render_view,
 )
 from worker.synth.scene import CameraSpec, smooth_normals
-from worker.synth.writer import encode_image, npz_bytes
 
 
 @dataclass(frozen=True)
@@ -73,11 +74,11 @@ def run_view_job(job: ViewJob, hand_label: int) -> list[str]:
         rng = np.random.default_rng([job.seed, job.view, frame])
         color, depth, seg = render_view(combine(meshes), view, atlas, rng)
         labels = {name: values[frame] for name, values in job.labels.items()}
-        labels["seg"] = seg
+        labels[dexycb.SEG] = seg
         files = {
-            f"color_{frame:06d}.jpg": encode_image(".jpg", color),
-            f"aligned_depth_to_color_{frame:06d}.png": encode_image(".png", depth),
-            f"labels_{frame:06d}.npz": npz_bytes(labels),
+            dexycb.color_file(frame): encode_image(".jpg", color),
+            dexycb.depth_file(frame): encode_image(".png", depth),
+            dexycb.labels_file(frame): npz_bytes(labels),
         }
         for name, data in files.items():
             (job.directory / name).write_bytes(data)
