@@ -225,6 +225,7 @@ def approve_reviewed(sequence_id: int) -> int:
     """The demo's admin at work: for each task still without accepted work, approve the
     assignment QC left for review with the smallest error (as the admin page's Approve does),
     saying which; the number approved."""
+    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment
     from backend.crowd.client import make_client
     from backend.pipeline import approve
@@ -232,7 +233,7 @@ def approve_reviewed(sequence_id: int) -> int:
 
     with session_scope() as session:
         accepted = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.status == "approved")))
+            Assignment.status == ACCEPTED)))
         rows = session.execute(
             select(QCReport.task_id, QCReport.assignment_id, QCReport.target_key,
                    QCReport.metrics, QCReport.feedback)
@@ -312,18 +313,20 @@ def _hits(sequence_id: int, kind: str) -> int:
 
 def _unaccepted(sequence_id: int) -> tuple[int, int]:
     """(tasks without approved work, tasks) of the sequence."""
+    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment, Task
 
     with session_scope() as session:
         tasks = set(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
         accepted = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.task_id.in_(tasks), Assignment.status == "approved")))
+            Assignment.task_id.in_(tasks), Assignment.status == ACCEPTED)))
     return len(tasks - accepted), len(tasks)
 
 
 def _open_slots(sequence_id: int, extend: bool) -> int:
     """Assignments the marketplace still offers on the sequence's HITs; with ``extend``,
     first one more on each HIT whose task has no accepted work and nothing left on offer."""
+    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment, Task
     from backend.crowd.actions import add_assignments
     from backend.crowd.client import make_client, paginate
@@ -336,7 +339,7 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
             select(CrowdHit.hit_id, CrowdHit.task_id).join(Task, Task.id == CrowdHit.task_id)
             .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))).all())
         accepted = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.task_id.in_(hits.values()), Assignment.status == "approved")))
+            Assignment.task_id.in_(hits.values()), Assignment.status == ACCEPTED)))
     offered = {h["HITId"]: int(h.get("NumberOfAssignmentsAvailable", 0))
                for h in paginate(client, "list_hits", "HITs") if h["HITId"] in hits}
     for hit_id, available in offered.items():

@@ -20,6 +20,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation import service as annotation
+from backend.annotation.accepted import accepted_ids_by_task
 from backend.annotation.models import Assignment, Task
 from backend.annotation.schemas import TracksSave
 from backend.crowd import confirm as crowd_confirm
@@ -145,10 +146,7 @@ def accepted_digest(session: Session, sequence_id: int) -> tuple[str | None, int
     """(digest of the accepted assignments, tasks still without one); the digest is None
     while any task of the sequence lacks accepted work."""
     tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
-    accepted = session.execute(
-        select(Assignment.task_id, Assignment.id)
-        .where(Assignment.task_id.in_(tasks), Assignment.status == "approved")
-        .order_by(Assignment.id)).all()
+    accepted = accepted_ids_by_task(session, tasks)
     missing = len(set(tasks) - {task_id for task_id, _ in accepted})
     if not tasks or missing:
         return None, missing

@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Sequence
 from backend.captures.service import get_sequence_or_raise
@@ -38,7 +39,7 @@ from backend.solve.models import SolveRun
 
 
 def _state(assignments: dict[str, int], reviewed: int, hits_live: int) -> TaskState:
-    if assignments.get("approved"):
+    if assignments.get(ACCEPTED):
         return "accepted"
     if reviewed:
         return "in review"

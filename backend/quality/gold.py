@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Task
 from backend.annotation.service import get_assignment_or_raise, get_task_or_raise
 from backend.errors import Conflict, DexlabelError, NotFound
@@ -59,7 +60,7 @@ def create_clip(session: Session, body: TrainingClipCreate) -> TrainingClip:
             raise InvalidClip(f"assignment {source_assignment.id} is of task "
                               f"{source_assignment.task_id}, not {task.id}",
                               field="from_assignment_id")
-        if source_assignment.status != "approved":
+        if source_assignment.status != ACCEPTED:
             raise InvalidClip(f"assignment {source_assignment.id} is {source_assignment.status};"
                               " only approved labels can be gold", field="from_assignment_id")
         tracks = [t.keyframes for t in source_assignment.tracks]

@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from sqlalchemy import exists, or_, select
-from sqlalchemy.orm import Session, selectinload
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 
+from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
-from backend.crowd.models import CrowdSubmission
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracks import dense_points
@@ -27,15 +27,6 @@ if TYPE_CHECKING:
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
-# Assignments whose labels take part in scoring; rejected work is left out of the consensus.
-SCORED_STATUSES = ("submitted", "approved")
-# Marketplace work takes part once the requester API has vouched for it (its confirmation
-# recorded a CrowdSubmission: the marketplace's record names its HIT and worker), so work on
-# an assignment id the marketplace does not know never enters the consensus. Work from an
-# admin's direct link has no HIT. (Correlated: each candidate assignment is looked up by the
-# unique index on crowd_submissions.assignment_id, not the whole table read into a hash.)
-VOUCHED_FOR = or_(Assignment.hit_id.is_(None),
-                  exists().where(CrowdSubmission.assignment_id == Assignment.id))
 
 
 @dataclass
@@ -79,8 +70,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
     sequence = session.get_one(Sequence, sequence_id)
     cameras = sequence_cameras(session, sequence_id)
     view_of = {camera.id: i for i, camera in enumerate(cameras)}
-    tasks = list(session.scalars(select(Task).where(
-        Task.sequence_id == sequence_id, Task.target_key == target_key).order_by(Task.id)))
+    tasks = sequence_tasks(session, sequence_id, target_key)
     if not tasks:
         raise ValueError(f"sequence {sequence_id} has no tasks for target {target_key!r}")
     out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
@@ -89,10 +79,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
                        tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     # Every assignment's tracks in one more query, not one per assignment.
-    stmt = (select(Assignment).where(Assignment.task_id.in_(out.tasks),
-                                     Assignment.status.in_(SCORED_STATUSES), VOUCHED_FOR)
-            .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
-    for assignment in session.scalars(stmt):
+    for assignment in labelled_work(session, out.tasks, SCORED_STATUSES, vouched=True):
         task = out.tasks[assignment.task_id]
         view = view_of[task.camera_id]
         out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from backend.annotation.accepted import SCORED_STATUSES
 from backend.annotation.models import Assignment, Task
 from backend.annotation.points import point_names
 from backend.config import get_settings
@@ -33,7 +34,6 @@ from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
 from backend.quality import gold
 from backend.quality.inputs import (
-    SCORED_STATUSES,
     TargetInputs,
     depth_maps,
     highlight_mask,

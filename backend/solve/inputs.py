@@ -14,10 +14,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from sqlalchemy import func, select
-from sqlalchemy.orm import Session, selectinload
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 
-from backend.annotation.models import Assignment, Task
+from backend.annotation.accepted import count_accepted, labelled_work, sequence_tasks
+from backend.annotation.models import Assignment
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
@@ -28,8 +29,6 @@ from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import check_side
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
 from worker.tracks import dense_points
-
-ACCEPTED = "approved"
 
 
 def dense_labels(assignment: Assignment, num_frames: int,
@@ -58,13 +57,9 @@ def approved_labels(session: Session, sequence_id: int, num_frames: int
                     ) -> dict[tuple[int, str], tuple[np.ndarray, np.ndarray]]:
     """Merged approved labels keyed by (camera id, target key) of every task that has any."""
     # The sequence's tasks, then their approved work by task (each read by its index).
-    tasks = {task.id: task for task in session.scalars(
-        select(Task).where(Task.sequence_id == sequence_id))}
-    stmt = (select(Assignment)
-            .where(Assignment.task_id.in_(tasks), Assignment.status == ACCEPTED)
-            .options(selectinload(Assignment.tracks)).order_by(Assignment.id))
+    tasks = {task.id: task for task in sequence_tasks(session, sequence_id)}
     grouped: dict[tuple[int, str], list] = defaultdict(list)
-    for assignment in session.scalars(stmt):
+    for assignment in labelled_work(session, tasks):
         task = tasks[assignment.task_id]
         grouped[(task.camera_id, task.target_key)].append(
             dense_labels(assignment, num_frames, task.num_points))
@@ -72,10 +67,7 @@ def approved_labels(session: Session, sequence_id: int, num_frames: int
 
 
 def count_approved(session: Session, sequence_id: int) -> int:
-    tasks = list(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
-    stmt = select(func.count(Assignment.id)).where(Assignment.task_id.in_(tasks),
-                                                   Assignment.status == ACCEPTED)
-    return int(session.scalar(stmt) or 0)
+    return count_accepted(session, sequence_id)
 
 
 def load_mesh(storage: Storage, key: str) -> Mesh:
