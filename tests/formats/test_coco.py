@@ -14,7 +14,6 @@ from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from worker.dataset import HAND_SEG_VALUE
 from worker.formats.coco import (
     HAND_CATEGORY_ID,
     HAND_OKS_SIGMAS,
@@ -22,6 +21,7 @@ from worker.formats.coco import (
     HandKeypoints,
     encode_rle,
 )
+from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS
 
 WIDTH, HEIGHT = 160, 120
@@ -169,6 +169,15 @@ class TestCocoWriter:
         assert ann["num_keypoints"] == 3
         assert "segmentation" not in ann
 
+    def test_a_joint_outside_the_image_is_not_labelled(self) -> None:
+        xy = np.full((21, 2), 50.0)
+        xy[3] = [WIDTH - 0.5, 10.0]
+        xy[4] = [10.0, -0.6]
+        ann = _write([{"file_name": "a.jpg", "width": WIDTH, "height": HEIGHT,
+                       "hand": HandKeypoints(xy, np.ones(21, bool))}])["annotations"][0]
+        assert ann["keypoints"][9:15] == [0.0, 0.0, 0, 0.0, 0.0, 0]
+        assert ann["num_keypoints"] == 19
+
     def test_an_unlocated_hand_gets_no_annotation(self) -> None:
         hand = HandKeypoints(np.full((21, 2), np.nan), np.zeros(21, bool))
         document = _write([{"file_name": "a.jpg", "width": WIDTH, "height": HEIGHT,
@@ -222,3 +231,28 @@ class TestCocoWriter:
         with pytest.raises(RuntimeError, match="interrupted"):
             interrupted_export()
         assert out.getvalue() == b""
+
+
+def test_a_synthetic_capture_evaluates_to_ap_one_against_itself(small_capture: Path,
+                                                                tmp_path: Path) -> None:
+    """Every view and frame of a synthetic capture: the projected joints and the rendered seg."""
+    seq = next(small_capture.glob("*/*/meta.yml")).parent
+    path = tmp_path / "coco.json"
+    with path.open("wb") as out, CocoWriter(out, label_source="projected_3d") as writer:
+        for label_path in sorted(seq.glob("*/labels_*.npz")):
+            label = np.load(label_path)
+            height, width = label["seg"].shape
+            hand = HandKeypoints(label["joint_2d"][0].astype(np.float64), np.ones(21, bool))
+            writer.add_image(f"{label_path.parent.name}/{label_path.stem}.jpg", width, height,
+                             seg=label["seg"], hand=hand)
+    gt = COCO(str(path))
+    hands = [dict(a, score=1.0) for a in gt.loadAnns(gt.getAnnIds(catIds=[HAND_CATEGORY_ID]))]
+    assert any(a["num_keypoints"] == 21 for a in hands)
+    hands = [a for a in hands if a["num_keypoints"] > 0]
+    evaluation = COCOeval(gt, gt.loadRes(hands), iouType="keypoints")
+    evaluation.params.kpt_oks_sigmas = np.asarray(HAND_OKS_SIGMAS)
+    evaluation.params.catIds = [HAND_CATEGORY_ID]
+    evaluation.evaluate()
+    evaluation.accumulate()
+    evaluation.summarize()
+    assert evaluation.stats[0] == pytest.approx(1.0)

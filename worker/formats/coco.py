@@ -12,7 +12,8 @@ Input, per image (one camera view of one frame), passed to :meth:`CocoWriter.add
 - ``hand``: optional :class:`HandKeypoints`: ``xy`` (21, 2) float image pixels in DexYCB joint
   order (:data:`worker.hand.joints.JOINT_NAMES`), NaN where the joint carries no label;
   ``visible`` (21,) bool, True where the joint is seen, False where it is labelled but occluded
-  (ignored where ``xy`` is NaN). Pixels follow the project's convention (x right, y down, the
+  (ignored where ``xy`` is NaN). A joint outside the image counts as not labelled (v = 0).
+  Pixels follow the project's convention (x right, y down, the
   centre of the top-left pixel at (0, 0)), which is also COCO's for keypoints.
 - ``extra``: optional JSON-serialisable fields copied into the image record (sequence, camera
   serial, frame index, ...).
@@ -67,7 +68,7 @@ from typing import IO, Any, Literal
 
 import numpy as np
 
-from worker.dataset import HAND_SEG_VALUE, YCB_CLASSES
+from worker.formats.dexycb import HAND_SEG_VALUE, YCB_CLASSES
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS, NUM_JOINTS
 
 LabelSource = Literal["annotated_2d", "projected_3d"]
@@ -135,15 +136,20 @@ def mask_bbox(mask: np.ndarray) -> list[float]:
     return [float(x0), float(y0), float(xs.max() - x0 + 1), float(ys.max() - y0 + 1)]
 
 
-def hand_keypoints_field(hand: HandKeypoints) -> tuple[list[float], int]:
-    """COCO's flat [x1, y1, v1, ...] (63 numbers) and ``num_keypoints`` of one hand."""
+def hand_keypoints_field(hand: HandKeypoints, width: int, height: int
+                         ) -> tuple[list[float], int]:
+    """COCO's flat [x1, y1, v1, ...] (63 numbers) and ``num_keypoints`` of one hand in a
+    (width, height) image; a joint outside the image (a projected joint can be) is unlabelled."""
     xy = np.asarray(hand.xy, dtype=np.float64)
     visible = np.asarray(hand.visible, dtype=bool)
     if xy.shape != (NUM_JOINTS, 2):
         raise ValueError(f"hand.xy must have shape ({NUM_JOINTS}, 2), got {xy.shape}")
     if visible.shape != (NUM_JOINTS,):
         raise ValueError(f"hand.visible must have shape ({NUM_JOINTS},), got {visible.shape}")
-    labelled = np.asarray(np.isfinite(xy).all(axis=1), dtype=bool)
+    with np.errstate(invalid="ignore"):
+        # The image covers [-0.5, width - 0.5) x [-0.5, height - 0.5): pixel centres at integers.
+        inside = (xy >= -0.5).all(axis=1) & (xy[:, 0] < width - 0.5) & (xy[:, 1] < height - 0.5)
+    labelled = np.asarray(np.isfinite(xy).all(axis=1) & inside, dtype=bool)
     v = np.where(labelled, np.where(visible, 2, 1), 0)
     xy = np.where(labelled[:, None], np.round(xy, _KEYPOINT_DECIMALS), 0.0)
     flat = np.concatenate([xy, v[:, None]], axis=1).ravel().tolist()
@@ -238,15 +244,16 @@ class CocoWriter:
         self._spool(self._images, record)
         if hand is not None:
             hand_mask = None if seg is None else seg == HAND_SEG_VALUE
-            self._add_hand(image_id, hand, hand_mask)
+            self._add_hand(image_id, hand, hand_mask, width, height)
         if seg is not None:
             for value in np.unique(seg).tolist():
                 if value not in (0, HAND_SEG_VALUE):
                     self._add_object(image_id, value, seg == value)
         return image_id
 
-    def _add_hand(self, image_id: int, hand: HandKeypoints, mask: np.ndarray | None) -> None:
-        keypoints, num_keypoints = hand_keypoints_field(hand)
+    def _add_hand(self, image_id: int, hand: HandKeypoints, mask: np.ndarray | None,
+                  width: int, height: int) -> None:
+        keypoints, num_keypoints = hand_keypoints_field(hand, width, height)
         record: dict[str, Any] = {**hand.extra, "category_id": HAND_CATEGORY_ID,
                                   "keypoints": keypoints, "num_keypoints": num_keypoints,
                                   "iscrowd": 0}
