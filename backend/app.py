@@ -28,6 +28,7 @@ from backend.errors import (
     install_database_outage_answer,
     install_error_handlers,
 )
+from backend.exports.router import router as exports_router
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
@@ -64,6 +65,7 @@ def create_app() -> FastAPI:
     app.include_router(portal_router)
     app.include_router(solve_router)
     app.include_router(progress_router)
+    app.include_router(exports_router)
 
     @app.get("/healthz", tags=["ops"], responses={503: {"description": "something is down"}})
     def healthz() -> JSONResponse:

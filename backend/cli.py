@@ -446,6 +446,7 @@ def crowd_simulate(
 
 def _register_domain_commands() -> None:
     from backend.captures.cli import sequences_app
+    from backend.exports.cli import export_command
     from backend.jobs.cli import jobs_app
     from backend.progress.cli import status_command
     from backend.quality.cli import qc_app, training_app
@@ -454,6 +455,7 @@ def _register_domain_commands() -> None:
     app.command("status")(status_command)
     app.command("solve")(solve_command)
     app.command("calibrate-hand")(calibrate_hand_command)
+    app.command("export")(export_command)
     app.add_typer(qc_app, name="qc")
     app.add_typer(jobs_app, name="jobs")
     app.add_typer(training_app, name="training")

@@ -19,6 +19,7 @@ from backend import pipeline
 from backend.captures.flows import FRAME_STATS
 from backend.captures.models import Camera, Frame
 from backend.db import session_scope
+from backend.exports.flows import export_job
 from backend.jobs.service import job_handler, requeue_stale
 from backend.queue import huey, queue_lost_messages
 from backend.solve.flows import run_solve
@@ -83,3 +84,9 @@ def solve_run(args: dict[str, Any]) -> dict[str, Any]:
     result = run_solve(int(args["run_id"]))
     outcome = f"failed: {result['error']}" if result.get("error") else "done"
     return {**result, "message": f"solve run {result['run_id']} {outcome}"}
+
+
+@job_handler("export")
+def export_labels(args: dict[str, Any]) -> dict[str, Any]:
+    """Write an export's archive (backend.exports), progress on the job's row."""
+    return export_job(args)

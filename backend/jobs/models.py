@@ -40,6 +40,8 @@ class Job(TimestampMixin, Base):
     max_attempts: Mapped[int] = mapped_column(Integer, default=5)
     error: Mapped[str | None] = mapped_column(Text)
     result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    # How far a job that reports progress has come: {"done", "total", "stage"}; None otherwise.
+    progress: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     # Asks for this job so far, and the count its running attempt started from: a job asked
     # for again while it runs (new work arrived) is queued again when that attempt ends.
     requests: Mapped[int] = mapped_column(Integer, default=0, server_default="0")

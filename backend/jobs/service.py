@@ -327,6 +327,30 @@ def check_lease() -> None:
         raise LeaseLost(f"job {attempt.key} attempt {attempt.number} no longer holds the job")
 
 
+def current_job_id() -> int:
+    """The id of the job this thread runs (its row); LookupError outside a job."""
+    attempt = _current.get()
+    if attempt is None:
+        raise LookupError("not inside a job")
+    with session_scope() as session:
+        job_id = session.scalar(select(Job.id).where(Job.key == attempt.key))
+    if job_id is None:
+        raise LookupError(f"job {attempt.key} has no row")
+    return int(job_id)
+
+
+def report_progress(done: int, total: int, stage: str = "") -> None:
+    """Record how far the job this thread runs has come (one short committed UPDATE); a call
+    outside a job, or from an attempt that lost its job, records nothing."""
+    attempt = _current.get()
+    if attempt is None:
+        return
+    with session_scope() as session:
+        session.execute(update(Job).where(attempt.held())
+                        .values(progress={"done": done, "total": total, "stage": stage})
+                        .execution_options(synchronize_session=False))
+
+
 def checkpoint() -> None:
     """A point between a job's actions: a crash drill may kill the worker here (it pauses
     job_pause_s), and an attempt that no longer holds its job stops here (LeaseLost)."""

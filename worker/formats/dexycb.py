@@ -354,3 +354,54 @@ def split_lists(setup: str, sequences: Sequence[tuple[str, str, Sequence[str], i
                 split = _S3.get(grasped - 1, "train")
             out[split].append(f"{subject}/{name}/{serial}")
     return {k: sorted(v) for k, v in out.items()}
+
+
+# --- labels of one camera frame from world-frame poses --------------------------------------
+
+def render_seg(meshes: Sequence[tuple[np.ndarray, np.ndarray, int]], K: np.ndarray, width: int,
+               height: int) -> np.ndarray:
+    """The (H, W) uint8 segmentation of posed meshes seen by a pinhole camera (K alone).
+
+    meshes: (vertices (N, 3) in the camera frame, metres; faces (M, 3); seg value) each: an
+    object's YCB id or HAND_SEG_VALUE. The nearest surface wins each pixel; 0 elsewhere.
+    """
+    from worker.synth.raster import rasterize
+
+    seg = np.zeros(height * width, dtype=np.uint8)
+    drawn = [(np.asarray(v, np.float64), np.asarray(f, np.int64), value)
+             for v, f, value in meshes if len(f) and np.isfinite(v).all()]
+    if not drawn:
+        return seg.reshape(height, width)
+    offsets = np.cumsum([0] + [len(v) for v, _, _ in drawn[:-1]])
+    vertices = np.concatenate([v for v, _, _ in drawn])
+    faces = np.concatenate([f + o for (_, f, _), o in zip(drawn, offsets, strict=True)])
+    values = np.concatenate([np.full(len(f), value, np.uint8) for _, f, value in drawn])
+    frags = rasterize(vertices, faces, np.asarray(K, np.float64), width, height)
+    seg[frags.pixels] = values[frags.tri.reshape(-1)[frags.pixels]]
+    return seg.reshape(height, width)
+
+
+def camera_frame_labels(T_cam_to_world: np.ndarray, K: np.ndarray, object_poses: np.ndarray,
+                        pose_m: np.ndarray | None, joints: np.ndarray | None,
+                        root_joint: np.ndarray | None, seg: np.ndarray) -> dict[str, np.ndarray]:
+    """One camera frame's labels_%06d.npz arrays from world-frame labels.
+
+    T_cam_to_world: (3, 4) metres. K: (3, 3) px, the pinhole intrinsics of the exported image.
+    object_poses: (O, 3, 4) object-to-world (NaN: unlabelled). pose_m: (51,) world frame and
+    joints (21, 3) world metres, or None / NaN where the hand is unlabelled; root_joint: (3,)
+    the rest hand's root joint (MANO J0 of the subject's betas). seg: (H, W) uint8.
+    joint_2d is the pinhole projection of joint_3d with K alone, as DexYCB's loader computes it.
+    """
+    from worker.geometry.transforms import compose_poses, invert_pose, transform_points
+    from worker.geometry.transforms import transform_pose_m as move_pose_m
+
+    w2c = invert_pose(np.asarray(T_cam_to_world, np.float64))
+    pose_y = compose_poses(w2c, np.asarray(object_poses, np.float64))
+    hand_ok = (pose_m is not None and joints is not None and root_joint is not None
+               and np.isfinite(pose_m).all() and np.isfinite(joints).all())
+    if not hand_ok:
+        return label_arrays(seg, pose_y, None, None, None)
+    assert pose_m is not None and joints is not None and root_joint is not None
+    joint_3d = transform_points(w2c, np.asarray(joints, np.float64))
+    cam_pose_m = move_pose_m(np.asarray(pose_m, np.float64), w2c, np.asarray(root_joint))
+    return label_arrays(seg, pose_y, cam_pose_m, joint_3d, pinhole_project(joint_3d, K))

@@ -1,0 +1,63 @@
+"""The export command, registered on the main app by backend/cli.py:
+
+    dexlabel export SEQUENCE... | --all --format F --out PATH [--include accepted|submitted]
+                    [--frames] [--link-frames] [--split s0|s1|s2|s3] [--labels 2d|3d]
+
+PATH ending in .zip or .tar is an archive, anything else a folder; it must not exist. The export
+is written under a temporary name next to PATH and moved there only when complete.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import typer
+
+from backend.console import fail, progress, refusing_bad_input, resolve_sequence
+from backend.db import session_scope
+
+
+def export_command(
+    sequences: Annotated[list[str] | None, typer.Argument(
+        help="sequence ids or SUBJECT/NAME (or --all)", show_default=False)] = None,
+    all_sequences: Annotated[bool, typer.Option("--all", help="every sequence")] = False,
+    fmt: Annotated[str, typer.Option("--format", help="dexycb, coco, bop, cvat or json")] = "",
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="the archive (.zip, .tar) or folder to write; must not exist")] = None,
+    include: Annotated[str, typer.Option(
+        "--include", help="accepted labels, or all submitted work with its QC outcome")
+    ] = "accepted",
+    frames: Annotated[bool, typer.Option(
+        "--frames", help="copy the colour and depth frames too (dexycb, bop)")] = False,
+    link_frames: Annotated[bool, typer.Option(
+        "--link-frames", help="link the frames instead of copying them (tar or folder)")
+    ] = False,
+    split: Annotated[Literal["s0", "s1", "s2", "s3"] | None, typer.Option(
+        "--split", help="dexycb: write DexYCB's split lists of this setup")] = None,
+    labels: Annotated[Literal["2d", "3d"] | None, typer.Option(
+        "--labels", help="coco: hand keypoints from the 2D labels or the solve")] = None,
+) -> None:
+    """Export labels of one or more sequences (or --all) in a format, with a progress bar."""
+    from backend.exports.archive import kind_of
+    from backend.exports.service import check_request, run_export
+
+    if not fmt:
+        fail("give --format (dexycb, coco, bop, cvat or json)")
+    if out is None:
+        fail("give --out PATH (an archive .zip or .tar, or a folder)")
+    if bool(sequences) == all_sequences:
+        fail("give one or more sequences, or --all")
+    if out.exists() or out.is_symlink():
+        fail(f"{out} exists; give a path that does not")
+    options: dict[str, Any] = {"frames": "link" if link_frames else ("copy" if frames else None),
+                               "split": split, "labels": labels}
+    options = {k: v for k, v in options.items() if v is not None}
+    with refusing_bad_input(), session_scope() as session:
+        ids = None if all_sequences else [resolve_sequence(session, s) for s in sequences or []]
+        ids = check_request(session, fmt, ids, include, options, kind_of(out))
+    with progress(f"{fmt} export", total=None) as step:
+        result = run_export(fmt, ids, include, options, out,
+                            lambda done, total: step(f"view {done} of {total}"))
+    typer.echo(f"{out}: {result['sequences']} sequence(s), {result['frames']} frames, "
+               f"{result['files']} files, {result['bytes'] / 1e6:.1f} MB")

@@ -1,0 +1,212 @@
+"""What an export of one sequence holds, read from the database and storage in one short unit
+of work: cameras, objects, hands, the labelled work (accepted, or all submitted, with its QC
+outcome) as raw keyframes and dense per-frame tracks, and the current solve's arrays.
+
+Pixels x right, y down (as OpenCV projects); camera frames and world in metres; the world is the
+capture's master frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+import torch
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation.accepted import INCLUDE_STATUSES, labelled_work, sequence_tasks
+from backend.captures.models import Frame, Sequence
+from backend.captures.service import camera_model, sequence_cameras
+from backend.quality.models import QCReport
+from backend.solve.inputs import hand_model_for, merge_labels
+from backend.solve.results import decode_result
+from backend.solve.service import current_run
+from backend.storage import get_storage
+from worker.geometry import CameraModel
+from worker.hand import HandLayer
+from worker.tracks import dense_points
+
+
+@dataclass
+class ViewContent:
+    """One camera: as the worker packages take it, its serial and its frames' storage keys."""
+
+    serial: str
+    camera: CameraModel
+    color_keys: list[str]
+    depth_keys: list[str | None]
+
+
+@dataclass
+class ObjectContent:
+    index: int
+    ycb_id: int
+    name: str
+    grasped: bool
+    mesh_key: str
+
+
+@dataclass
+class HandContent:
+    index: int
+    side: str
+    calib_name: str | None
+    betas: list[float] | None
+
+
+@dataclass
+class WorkContent:
+    """One assignment's labels of one task (one view of one target).
+
+    keyframes: per point, the stored rows [frame, x, y, visible01] (px). xy: (F, P, 2) px, NaN
+    where the point has no position; visible: (F, P) bool (worker.tracks.dense_points).
+    """
+
+    assignment_id: int
+    external_id: str
+    worker_id: str
+    status: str
+    task_id: int
+    view: int
+    target_key: str
+    kind: str
+    keyframes: list[list[list[Any]]]
+    xy: np.ndarray
+    visible: np.ndarray
+    working_time_s: float
+    edit_count: int
+    submitted_at: datetime | None
+    qc: dict[str, Any] | None
+
+
+@dataclass
+class SolveContent:
+    """The sequence's current solve run and its arrays (see backend.solve.results)."""
+
+    run_id: int
+    optimiser: str
+    finished_at: datetime | None
+    arrays: dict[str, np.ndarray]
+    # The solved hand's vertices (F, N, 3) world metres (NaN rows where unlabelled), its faces
+    # and its rest root joint (3,), for pose_m in camera frames; None without a hand.
+    hand_vertices: np.ndarray | None = None
+    hand_faces: np.ndarray | None = None
+    root_joint: np.ndarray | None = None
+    result_key: str | None = None
+
+
+@dataclass
+class SequenceContent:
+    sequence_id: int
+    subject: str
+    name: str
+    num_frames: int
+    fps: float
+    master_serial: str | None
+    views: list[ViewContent]
+    objects: list[ObjectContent]
+    hands: list[HandContent]
+    work: list[WorkContent] = field(default_factory=list)
+    solve: SolveContent | None = None
+
+    def merged_labels(self, view: int, target_key: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The accepted work of one view and target merged as the solve merges it: (F, P, 2) px
+        and (F, P) bool; None when there is none."""
+        chosen = [(w.xy, w.visible) for w in self.work
+                  if w.view == view and w.target_key == target_key and w.status == "approved"]
+        return merge_labels(chosen) if chosen else None
+
+
+def _qc(report: QCReport | None) -> dict[str, Any] | None:
+    if report is None:
+        return None
+    return {"outcome": report.outcome, "action": report.action, "method": report.method,
+            "provisional": report.provisional, "reasons": list(report.reasons or []),
+            "metrics": report.metrics}
+
+
+def _work(session: Session, sequence_id: int, views: dict[int, int], num_frames: int,
+          include: str) -> list[WorkContent]:
+    tasks = {t.id: t for t in sequence_tasks(session, sequence_id)}
+    work = labelled_work(session, tasks, INCLUDE_STATUSES[include])
+    reports = {r.assignment_id: r for r in session.scalars(
+        select(QCReport).where(QCReport.assignment_id.in_([a.id for a in work])))}
+    out = []
+    for a in work:
+        task = tasks[a.task_id]
+        xy, visible = dense_points(((t.point_index, t.keyframes) for t in a.tracks), num_frames,
+                                   task.num_points)
+        keyframes: list[list[list[Any]]] = [[] for _ in range(task.num_points)]
+        for track in a.tracks:
+            if 0 <= track.point_index < task.num_points:
+                keyframes[track.point_index] = [list(row) for row in track.keyframes]
+        out.append(WorkContent(
+            assignment_id=a.id, external_id=a.external_id, worker_id=a.worker_id,
+            status=a.status, task_id=task.id, view=views[task.camera_id],
+            target_key=task.target_key, kind=task.kind, keyframes=keyframes, xy=xy,
+            visible=visible, working_time_s=float(a.working_time_s or 0.0),
+            edit_count=int(a.edit_count or 0), submitted_at=a.submitted_at,
+            qc=_qc(reports.get(a.id))))
+    return out
+
+
+def _solved_hand(solve: SolveContent) -> None:
+    """The hand mesh at every labelled frame and the rest root joint, from pose_m and betas."""
+    arrays = solve.arrays
+    side = str(arrays["hand_side"])
+    if not side or arrays["betas"].size == 0:
+        return
+    model = hand_model_for(side)
+    layer = HandLayer(model)
+    pose_m = np.asarray(arrays["hand_pose_m"], dtype=np.float64)
+    finite: np.ndarray = np.asarray(np.isfinite(pose_m).all(axis=1))
+    betas = torch.as_tensor(np.asarray(arrays["betas"], dtype=np.float64))
+    with torch.no_grad():
+        rest = layer.from_pose_m(torch.zeros(1, pose_m.shape[1], dtype=torch.float64), betas)
+        solve.root_joint = rest.joints[0, 0].numpy().astype(np.float64)
+        posed = layer.from_pose_m(torch.as_tensor(np.where(finite[:, None], pose_m, 0.0)), betas)
+    vertices = posed.vertices.numpy().astype(np.float64)
+    vertices[~finite] = np.nan
+    solve.hand_vertices = vertices
+    solve.hand_faces = np.asarray(model.faces, dtype=np.int64)
+
+
+def load_sequence(session: Session, sequence_id: int, include: str = "accepted",
+                  with_solve: bool = True) -> SequenceContent:
+    """Everything an export writes of one sequence from the database; frames stay in storage
+    and the solve's arrays are read by :func:`fetch_solve` once the unit of work is over."""
+    seq = session.get_one(Sequence, sequence_id)
+    cameras = sequence_cameras(session, sequence_id)
+    views = []
+    for camera in cameras:
+        frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)
+                                      .order_by(Frame.index)))
+        views.append(ViewContent(camera.serial, camera_model(camera),
+                                 [f.color_key for f in frames], [f.depth_key for f in frames]))
+    content = SequenceContent(
+        sequence_id=seq.id, subject=seq.subject.name, name=seq.name,
+        num_frames=seq.num_frames, fps=float(seq.fps), master_serial=seq.master_serial,
+        views=views,
+        objects=[ObjectContent(o.index, o.ycb_id, o.name, o.grasped, o.mesh_key)
+                 for o in seq.objects],
+        hands=[HandContent(h.index, h.side, h.calib_name, list(h.betas) if h.betas else None)
+               for h in seq.hands])
+    content.work = _work(session, sequence_id, {c.id: i for i, c in enumerate(cameras)},
+                         seq.num_frames, include)
+    run = current_run(session, sequence_id) if with_solve else None
+    if run is not None and run.result_key is not None:
+        content.solve = SolveContent(run.id, run.optimiser, run.finished_at, {},
+                                     result_key=run.result_key)
+    return content
+
+
+def fetch_solve(content: SequenceContent) -> None:
+    """Read the solve's arrays from storage and pose its hand (outside any transaction)."""
+    solve = content.solve
+    if solve is None or solve.arrays or solve.result_key is None:
+        return
+    solve.arrays = decode_result(get_storage().get_bytes(solve.result_key))
+    _solved_hand(solve)

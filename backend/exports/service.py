@@ -1,0 +1,183 @@
+"""Export rules: what may be exported, export jobs, and the export itself. Services flush, never
+commit; the job (kind ``export``) is a row of the job table whose ``progress`` counts the views
+written and whose ``result`` names the finished archive under ``<var>/exports``.
+"""
+
+from __future__ import annotations
+
+import secrets
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation.accepted import INCLUDE_STATUSES, sequence_tasks, work_query
+from backend.captures.models import Camera, Sequence
+from backend.config import get_settings
+from backend.db import session_scope
+from backend.errors import Conflict, DexlabelError, NotFound
+from backend.exports.archive import ExportArchive
+from backend.exports.content import fetch_solve, load_sequence
+from backend.exports.writers import EXPORTERS
+from backend.jobs.models import Job
+from backend.jobs.service import enqueue_job, get_job_or_raise
+from backend.solve.service import current_run
+from worker.formats import FORMATS, SOLVE_FORMATS
+from worker.formats.dexycb import SPLIT_SETUPS
+
+JOB_KIND = "export"
+INCLUDES = tuple(INCLUDE_STATUSES)
+ARCHIVES = ("zip", "tar")
+FRAME_MODES = ("copy", "link")
+# Options each format takes, and their allowed values.
+OPTIONS: dict[str, dict[str, tuple[str, ...]]] = {
+    "dexycb": {"frames": FRAME_MODES, "split": SPLIT_SETUPS},
+    "bop": {"frames": FRAME_MODES},
+    "coco": {"labels": ("2d", "3d")},
+    "json": {},
+    "cvat": {},
+}
+
+
+class InvalidExport(DexlabelError):
+    status_code = 422
+    code = "invalid_export"
+
+
+class NotExportable(Conflict):
+    code = "not_exportable"
+
+
+def check_request(session: Session, fmt: str, sequence_ids: list[int] | None, include: str,
+                  options: dict[str, Any], archive: str = "zip") -> list[int]:
+    """The sequence ids an export of ``fmt`` covers (all of the project's when None), once
+    every rule holds; InvalidExport (422) or NotExportable (409) naming the problem."""
+    if fmt not in FORMATS:
+        raise InvalidExport(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}",
+                            field="format")
+    if include not in INCLUDES:
+        raise InvalidExport(f"include must be one of {', '.join(INCLUDES)}, got {include!r}",
+                            field="include")
+    if fmt == "coco" and include != "accepted":
+        raise InvalidExport("the coco format holds one hand per image: it exports accepted "
+                            "labels only (include=accepted); json and cvat export submitted "
+                            "work", field="include")
+    _check_options(fmt, options, archive)
+    if sequence_ids is None:
+        ids = list(session.scalars(select(Sequence.id).order_by(Sequence.id)))
+        if not ids:
+            raise NotExportable("the project has no sequences to export")
+    else:
+        ids = list(dict.fromkeys(sequence_ids))
+        if not ids:
+            raise InvalidExport("sequences must list at least one sequence id, or ask for all",
+                                field="sequences")
+    for sequence_id in ids:
+        _check_sequence(session, sequence_id, fmt, include)
+    return ids
+
+
+def _check_options(fmt: str, options: dict[str, Any], archive: str) -> None:
+    allowed = OPTIONS[fmt]
+    for name, value in options.items():
+        if name not in allowed:
+            known = ", ".join(allowed) or "none"
+            raise InvalidExport(f"options.{name} is not an option of the {fmt} format "
+                                f"(options: {known})", field=f"options.{name}")
+        if value is not None and value not in allowed[name]:
+            raise InvalidExport(f"options.{name} must be one of {', '.join(allowed[name])}, "
+                                f"got {value!r}", field=f"options.{name}")
+    if options.get("frames") == "link" and archive == "zip":
+        raise InvalidExport("options.frames=link needs a tar archive or a folder; a zip "
+                            "archive cannot hold links", field="options.frames")
+
+
+def _check_sequence(session: Session, sequence_id: int, fmt: str, include: str) -> None:
+    seq = session.get(Sequence, sequence_id)
+    if seq is None:
+        raise NotFound(f"sequence {sequence_id} does not exist", field="sequences")
+    name = f"sequence {sequence_id} ({seq.subject.name}/{seq.name})"
+    if fmt in SOLVE_FORMATS:
+        if current_run(session, sequence_id) is None:
+            raise NotExportable(f"{name} has no finished solve; the {fmt} format exports its "
+                                f"3D labels (run `dexlabel solve {sequence_id}`)",
+                                field="sequences")
+        return
+    tasks = [t.id for t in sequence_tasks(session, sequence_id)]
+    found = session.scalars(work_query(tasks, INCLUDE_STATUSES[include], with_tracks=False)
+                            .limit(1)).first()
+    if found is None:
+        what = "accepted" if include == "accepted" else "submitted"
+        raise NotExportable(f"{name} has no {what} labels to export", field="sequences")
+
+
+def request_export(session: Session, fmt: str, sequence_ids: list[int] | None,
+                   include: str = "accepted", options: dict[str, Any] | None = None,
+                   archive: str = "zip") -> Job:
+    """Check the request and queue its export job (runs after commit)."""
+    options = {k: v for k, v in (options or {}).items() if v is not None}
+    if archive not in ARCHIVES:
+        raise InvalidExport(f"archive must be one of {', '.join(ARCHIVES)}, got {archive!r}",
+                            field="archive")
+    ids = check_request(session, fmt, sequence_ids, include, options, archive)
+    key = f"{JOB_KIND}:{secrets.token_hex(8)}"
+    args = {"format": fmt, "sequence_ids": ids, "include": include, "options": options,
+            "archive": archive}
+    job = enqueue_job(session, JOB_KIND, key, args)
+    job.max_attempts = 2
+    job.progress = {"done": 0, "total": 0, "stage": "queued"}
+    session.flush()
+    return job
+
+
+def get_export_or_raise(session: Session, export_id: int) -> Job:
+    job = get_job_or_raise(session, export_id)
+    if job.kind != JOB_KIND:
+        raise NotFound(f"no export {export_id}")
+    return job
+
+
+def archive_path(export_id: int, archive: str) -> Path:
+    return get_settings().var_dir / "exports" / f"export-{export_id:06d}.{archive}"
+
+
+def finished_archive(session: Session, export_id: int) -> Path:
+    """The archive of a finished export; 409 while it runs or when it failed."""
+    job = get_export_or_raise(session, export_id)
+    path = Path((job.result or {}).get("path", ""))
+    if job.status != "done" or not path.is_file():
+        raise Conflict(f"export {export_id} is {job.status}; its archive can be downloaded "
+                       "once it is done", state=job.status)
+    return path
+
+
+def run_export(fmt: str, sequence_ids: list[int], include: str, options: dict[str, Any],
+               out: Path, progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """Write the export to ``out`` (zip, tar or folder by its suffix); each sequence is read in
+    its own short unit of work. Returns counts for the job's result."""
+    with session_scope() as session:
+        views = {sid: len(list(session.scalars(select(Camera.id).where(
+            Camera.sequence_id == sid)))) for sid in sequence_ids}
+    total, done = sum(views.values()), 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    with ExportArchive(out) as archive:
+        exporter = EXPORTERS[fmt](archive, options, include)
+        for sequence_id in sequence_ids:
+            with session_scope() as session:
+                content = load_sequence(session, sequence_id, include,
+                                        with_solve=fmt != "cvat")
+            fetch_solve(content)
+            exporter.add(content, step)
+        exporter.finish()
+        archive.commit()
+        return {"path": str(out), "bytes": out.stat().st_size if out.is_file() else
+                archive.bytes_written, "files": archive.files, "sequences": len(sequence_ids),
+                "frames": exporter.frames_written}

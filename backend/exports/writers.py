@@ -1,0 +1,439 @@
+"""Feeding the formats of worker.formats from a sequence's content, one sequence at a time.
+
+Each exporter takes sequences with ``add`` (one view at a time, reporting progress through
+``step``) and ends with ``finish``; what a format needs across sequences (COCO's one document,
+BOP's models, DexYCB's split lists) is kept small. Frames are read from storage one at a time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from backend.exports.archive import ExportArchive
+from backend.exports.content import SequenceContent, ViewContent
+from backend.solve.inputs import load_mesh
+from backend.solve.results import frame_payload
+from backend.storage import LocalStorage, Storage, get_storage
+from worker.formats import bop, coco, cvat, dexycb, jsonfmt
+from worker.formats.files import encode_image, npz_bytes, yaml_text
+from worker.geometry.mesh_io import Mesh
+from worker.geometry.transforms import invert_pose, transform_points
+from worker.hand.joints import JOINT_NAMES
+
+Step = Callable[[], None]
+
+
+class Exporter:
+    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
+        self.archive, self.options, self.include = archive, options, include
+        self.storage: Storage = get_storage()
+        self._meshes: dict[str, Mesh] = {}
+        self.frames_written = 0
+
+    def mesh(self, key: str) -> Mesh:
+        if key not in self._meshes:
+            self._meshes[key] = load_mesh(self.storage, key)
+        return self._meshes[key]
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        raise NotImplementedError
+
+    def finish(self) -> None:
+        """Write what spans sequences (nothing by default)."""
+
+
+def _seq_dir(content: SequenceContent) -> str:
+    return dexycb.sequence_dir(content.subject, content.name)
+
+
+def _world_meshes(exporter: Exporter, content: SequenceContent, frame: int
+                  ) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """The solved hand and objects at ``frame``: world vertices, faces, seg value."""
+    solve = content.solve
+    assert solve is not None
+    out = []
+    for obj in content.objects:
+        pose = solve.arrays["object_poses"][obj.index, frame]
+        if np.isfinite(pose).all():
+            mesh = exporter.mesh(obj.mesh_key)
+            out.append((transform_points(pose, mesh.vertices), np.asarray(mesh.faces),
+                        obj.ycb_id))
+    if solve.hand_vertices is not None and solve.hand_faces is not None:
+        verts = solve.hand_vertices[frame]
+        if np.isfinite(verts).all():
+            out.append((verts, solve.hand_faces, dexycb.HAND_SEG_VALUE))
+    return out
+
+
+def seg_of(exporter: Exporter, content: SequenceContent, view: ViewContent, frame: int
+           ) -> np.ndarray:
+    """The pinhole (K alone) segmentation of one view-frame from the solved meshes."""
+    cam = view.camera
+    w2c = invert_pose(cam.T_cam_to_world)
+    meshes = [(transform_points(w2c, v), f, value)
+              for v, f, value in _world_meshes(exporter, content, frame)]
+    return dexycb.render_seg(meshes, cam.K, cam.width, cam.height)
+
+
+class _Frames:
+    """A view's colour and depth frames as the export writes them: pinhole images (undistorted
+    where the camera has distortion), copied or linked."""
+
+    def __init__(self, exporter: Exporter, view: ViewContent) -> None:
+        self.exporter, self.view = exporter, view
+        cam = view.camera
+        self.distorted = dexycb.has_distortion(cam.dist)
+        self.maps = (dexycb.undistort_maps(cam.K, np.asarray(cam.dist), cam.width, cam.height)
+                     if self.distorted else None)
+
+    def color(self, frame: int) -> bytes:
+        data = self.exporter.storage.get_bytes(self.view.color_keys[frame])
+        if self.maps is None:
+            return data
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        if image is None:
+            raise ValueError(f"colour frame {self.view.color_keys[frame]} does not decode")
+        return encode_image(".jpg", dexycb.undistort_image(image, self.maps))
+
+    def depth(self, frame: int) -> bytes | None:
+        key = self.view.depth_keys[frame]
+        if key is None:
+            return None
+        data = self.exporter.storage.get_bytes(key)
+        if self.maps is None:
+            return data
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise ValueError(f"depth frame {key} does not decode")
+        return encode_image(".png", dexycb.undistort_image(image, self.maps, nearest=True))
+
+    def local_path(self, key: str | None) -> Path | None:
+        storage = self.exporter.storage
+        if key is None or self.maps is not None or not isinstance(storage, LocalStorage):
+            return None
+        return storage.root / key
+
+    def put(self, folder: str, frame: int) -> None:
+        """Write (or link) the colour and depth frame under ``folder``."""
+        names = (dexycb.color_file(frame), dexycb.depth_file(frame))
+        keys = (self.view.color_keys[frame], self.view.depth_keys[frame])
+        link = self.exporter.options.get("frames") == "link"
+        for name, key, read in zip(names, keys, (self.color, self.depth), strict=True):
+            target = self.local_path(key) if link else None
+            if target is not None:
+                self.exporter.archive.link(f"{folder}/{name}", target)
+                continue
+            data = read(frame)
+            if data is not None:
+                self.exporter.archive.write(f"{folder}/{name}", data)
+
+
+class DexYCBExporter(Exporter):
+    """The DexYCB raw layout, so that ``dexlabel import`` reads the export back."""
+
+    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
+        super().__init__(archive, options, include)
+        self.models_written: set[str] = set()
+        self.split_items: list[tuple[str, str, list[str], int | None]] = []
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        solve = content.solve
+        assert solve is not None
+        seq = _seq_dir(content)
+        calib = f"{content.subject}_{content.name}"
+        undistorted = {}
+        for view in content.views:
+            cam = view.camera
+            coeffs = [float(c) for c in np.asarray(cam.dist if cam.dist is not None else [])]
+            if dexycb.has_distortion(coeffs):
+                undistorted[view.serial] = coeffs
+            self.archive.write(dexycb.intrinsics_file(view.serial, cam.width, cam.height),
+                               yaml_text(dexycb.intrinsics_doc(
+                                   cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2],
+                                   cam.width, cam.height, [0.0] * 5)).encode())
+        master = content.master_serial or content.views[0].serial
+        self.archive.write(dexycb.extrinsics_file(calib), yaml_text(dexycb.extrinsics_doc(
+            {v.serial: v.camera.T_cam_to_world for v in content.views}, master)).encode())
+        calibs = []
+        for hand in content.hands:
+            name = hand.calib_name or f"{calib}_{hand.side}"
+            calibs.append(name)
+            betas = hand.betas or solve.arrays["betas"].tolist()
+            self.archive.write(dexycb.mano_file(name), yaml_text(dexycb.mano_doc(betas)).encode())
+        self._models(content)
+        grasped = next((o.index for o in content.objects if o.grasped), 0)
+        self.archive.write(f"{seq}/{dexycb.META_FILE}", yaml_text(dexycb.meta_doc(
+            [v.serial for v in content.views], content.num_frames,
+            [o.ycb_id for o in content.objects], grasped, [h.side for h in content.hands],
+            calibs, calib, undistorted)).encode())
+        poses = np.transpose(solve.arrays["object_poses"], (1, 0, 2, 3))
+        hand_pose_m = np.asarray(solve.arrays["hand_pose_m"])[:, None]
+        if not content.hands:
+            hand_pose_m = hand_pose_m[:, :0]
+        self.archive.write(f"{seq}/{dexycb.POSE_FILE}",
+                           npz_bytes(dexycb.pose_arrays(poses, hand_pose_m)))
+        for view in content.views:
+            self._view(content, view, seq)
+            step()
+        self.split_items.append((content.subject, content.name,
+                                 [v.serial for v in content.views],
+                                 next((o.ycb_id for o in content.objects if o.grasped), None)))
+
+    def _models(self, content: SequenceContent) -> None:
+        for obj in content.objects:
+            if obj.name in self.models_written:
+                continue
+            self.models_written.add(obj.name)
+            folder = obj.mesh_key.rsplit("/", 1)[0]
+            names = {obj.mesh_key.rsplit("/", 1)[1], dexycb.MODEL_MTL, dexycb.MODEL_TEXTURE}
+            for name in sorted(names):
+                key = f"{folder}/{name}"
+                if self.storage.exists(key):
+                    self.archive.write(f"{dexycb.model_dir(obj.name)}/{name}",
+                                       self.storage.get_bytes(key))
+
+    def _view(self, content: SequenceContent, view: ViewContent, seq: str) -> None:
+        solve = content.solve
+        assert solve is not None
+        arrays = solve.arrays
+        frames = _Frames(self, view) if self.options.get("frames") else None
+        folder = f"{seq}/{view.serial}"
+        for f in range(content.num_frames):
+            seg = seg_of(self, content, view, f)
+            labels = dexycb.camera_frame_labels(
+                view.camera.T_cam_to_world, view.camera.K, arrays["object_poses"][:, f],
+                arrays["hand_pose_m"][f] if content.hands else None,
+                arrays["hand_joints"][f] if content.hands else None, solve.root_joint, seg)
+            self.archive.write(f"{folder}/{dexycb.labels_file(f)}", npz_bytes(labels))
+            if frames is not None:
+                frames.put(folder, f)
+            self.frames_written += 1
+
+    def finish(self) -> None:
+        setup = self.options.get("split")
+        if setup:
+            for name, lines in dexycb.split_lists(str(setup), self.split_items).items():
+                self.archive.write(f"splits/{setup}_{name}.txt",
+                                   "".join(f"{line}\n" for line in lines).encode())
+
+
+def _work_entry(content: SequenceContent, w: Any) -> dict[str, Any]:
+    names = list(JOINT_NAMES) if w.kind == "hand" else [
+        f"landmark_{p + 1}" for p in range(len(w.keyframes))]
+    dense = jsonfmt.dense_track(w.xy, w.visible)
+    return {
+        "assignment_id": w.assignment_id, "external_id": w.external_id,
+        "worker_id": w.worker_id, "status": w.status, "task_id": w.task_id, "view": w.view,
+        "serial": content.views[w.view].serial, "target_key": w.target_key, "kind": w.kind,
+        "working_time_s": w.working_time_s, "edit_count": w.edit_count,
+        "submitted_at": w.submitted_at.isoformat() if w.submitted_at else None, "qc": w.qc,
+        "points": [{"index": p, "name": names[p] if p < len(names) else f"point_{p}",
+                    "keyframes": w.keyframes[p], "dense": [row[p] for row in dense]}
+                   for p in range(len(w.keyframes))],
+    }
+
+
+def consensus(content: SequenceContent) -> list[dict[str, Any]]:
+    """The solved hand joints reprojected into every view (raw image pixels, with the view's
+    distortion): per frame 21 [x, y], None where the frame is unlabelled."""
+    solve = content.solve
+    if solve is None or not content.hands:
+        return []
+    joints = np.asarray(solve.arrays["hand_joints"], dtype=np.float64)
+    out = []
+    for view in content.views:
+        xy = view.camera.project(np.nan_to_num(joints))
+        points = [xy[f].tolist() if np.isfinite(joints[f]).all() else None
+                  for f in range(content.num_frames)]
+        out.append({"serial": view.serial, "target_key": f"hand:{content.hands[0].index}",
+                    "points": points})
+    return out
+
+
+class JsonExporter(Exporter):
+    """One JSON document per sequence: ``<subject>/<sequence>.json``."""
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        solve = None
+        if content.solve is not None:
+            arrays = content.solve.arrays
+            solve = {
+                "run_id": content.solve.run_id, "optimiser": content.solve.optimiser,
+                "finished_at": (content.solve.finished_at.isoformat()
+                                if content.solve.finished_at else None),
+                "hand_side": str(arrays["hand_side"]) or None,
+                "betas": arrays["betas"].tolist(),
+                "frames": [frame_payload(arrays, f) for f in range(content.num_frames)],
+                "consensus": consensus(content),
+            }
+        document = jsonfmt.sequence_document(
+            {"id": content.sequence_id, "subject": content.subject, "name": content.name,
+             "num_frames": content.num_frames, "fps": content.fps,
+             "master_serial": content.master_serial},
+            [{"view": i, "serial": v.serial, "width": v.camera.width,
+              "height": v.camera.height, "K": v.camera.K.tolist(),
+              "distortion": (np.zeros(5) if v.camera.dist is None else v.camera.dist).tolist(),
+              "T_cam_to_world": v.camera.T_cam_to_world.tolist()}
+             for i, v in enumerate(content.views)],
+            [{"index": o.index, "ycb_id": o.ycb_id, "name": o.name, "grasped": o.grasped}
+             for o in content.objects],
+            [{"index": h.index, "side": h.side, "calib_name": h.calib_name, "betas": h.betas}
+             for h in content.hands],
+            [_work_entry(content, w) for w in content.work], solve, self.include)
+        self.archive.write(f"{_seq_dir(content)}.json", jsonfmt.document_bytes(document))
+        self.frames_written += content.num_frames * len(content.views)
+        for _ in content.views:
+            step()
+
+
+class CvatExporter(Exporter):
+    """One CVAT for video 1.1 document per sequence and view: ``<subject>/<sequence>/<serial>.xml``,
+    one track per assignment (target) in that view."""
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        labels = [cvat.hand_label("hand")] + [cvat.object_label(f"object {o.index} {o.name}")
+                                              for o in content.objects]
+        label_of = {f"hand:{h.index}": "hand" for h in content.hands}
+        label_of.update({f"object:{o.index}": f"object {o.index} {o.name}"
+                         for o in content.objects})
+        for v, view in enumerate(content.views):
+            with self.archive.open(f"{_seq_dir(content)}/{view.serial}.xml") as out, \
+                    cvat.CvatVideoWriter(out, labels, num_frames=content.num_frames,
+                                         width=view.camera.width, height=view.camera.height,
+                                         name=f"{content.subject}/{content.name}/{view.serial}",
+                                         task_id=content.sequence_id) as writer:
+                for w in content.work:
+                    if w.view == v and w.target_key in label_of:
+                        writer.add_track(label_of[w.target_key], w.keyframes)
+            self.frames_written += content.num_frames
+            step()
+
+
+class CocoExporter(Exporter):
+    """One COCO keypoints document (``annotations.json``) over every view-frame image; hand
+    keypoints from the accepted 2D labels (``options.labels = "2d"``, the default) or the solve
+    projected (``"3d"``); object masks from the solve where there is one."""
+
+    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
+        super().__init__(archive, options, include)
+        self.projected = options.get("labels") == "3d"
+        self._member = archive.open("annotations.json")
+        self._out = self._member.__enter__()
+        self.writer = coco.CocoWriter(
+            self._out, label_source="projected_3d" if self.projected else "annotated_2d",
+            info={"include": include})
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        hand_key = f"hand:{content.hands[0].index}" if content.hands else None
+        for v, view in enumerate(content.views):
+            merged = content.merged_labels(v, hand_key) if hand_key else None
+            for f in range(content.num_frames):
+                seg = self._seg(content, view, f)
+                self.writer.add_image(
+                    f"{_seq_dir(content)}/{view.serial}/{dexycb.color_file(f)}",
+                    view.camera.width, view.camera.height, seg=seg,
+                    hand=self._hand(content, view, merged, f),
+                    extra={"sequence_id": content.sequence_id, "serial": view.serial,
+                           "frame": f})
+                self.frames_written += 1
+            step()
+
+    def _seg(self, content: SequenceContent, view: ViewContent, frame: int) -> np.ndarray | None:
+        if content.solve is None:
+            return None
+        # The frames of this format are the stored (raw) ones: the meshes are drawn where the
+        # lens shows them, each vertex moved by the distortion.
+        cam = view.camera
+        w2c = invert_pose(cam.T_cam_to_world)
+        meshes = []
+        for verts, faces, value in _world_meshes(self, content, frame):
+            points = transform_points(w2c, verts)
+            z = points[:, 2:3]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                from worker.geometry.cameras import distort_normalized
+                xy = distort_normalized(points[:, :2] / z, cam.dist)
+            meshes.append((np.concatenate([xy * z, z], axis=1), faces, value))
+        return dexycb.render_seg(meshes, cam.K, cam.width, cam.height)
+
+    def _hand(self, content: SequenceContent, view: ViewContent,
+              merged: tuple[np.ndarray, np.ndarray] | None, frame: int
+              ) -> coco.HandKeypoints | None:
+        side = content.hands[0].side if content.hands else None
+        if side not in ("right", "left"):
+            return None
+        if self.projected:
+            if content.solve is None:
+                return None
+            joints = content.solve.arrays["hand_joints"][frame]
+            if not np.isfinite(joints).all():
+                return None
+            return coco.HandKeypoints(view.camera.project(joints), np.ones(21, bool),
+                                      side=side)  # type: ignore[arg-type]
+        if merged is None:
+            return None
+        xy, visible = merged
+        return coco.HandKeypoints(xy[frame], visible[frame], side=side)  # type: ignore[arg-type]
+
+    def finish(self) -> None:
+        self.writer.close()
+        self._member.__exit__(None, None, None)
+
+
+class BopExporter(Exporter):
+    """BOP: one scene per sequence and view (ids in export order, listed in ``scenes.json``),
+    pinhole images, and the models of every object seen."""
+
+    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
+        super().__init__(archive, options, include)
+        self.scene_id = 0
+        self.scenes: dict[str, Any] = {}
+        self.models: dict[int, bop.ObjectModel] = {}
+
+    def add(self, content: SequenceContent, step: Step) -> None:
+        solve = content.solve
+        assert solve is not None
+        for obj in content.objects:
+            mesh = self.mesh(obj.mesh_key)
+            self.models.setdefault(obj.ycb_id, bop.ObjectModel(obj.ycb_id, mesh.vertices,
+                                                               mesh.faces))
+        models = {o.ycb_id: self.models[o.ycb_id] for o in content.objects}
+        with_frames = bool(self.options.get("frames"))
+        for view in content.views:
+            self.scene_id += 1
+            cam = view.camera
+            writer = bop.BopSceneWriter(self.archive.write, self.scene_id,
+                                        bop.SceneCamera(cam.K, cam.T_cam_to_world, cam.width,
+                                                        cam.height), models)
+            frames = _Frames(self, view) if with_frames else None
+            for f in range(content.num_frames):
+                poses = [(o.ycb_id, solve.arrays["object_poses"][o.index, f])
+                         for o in content.objects
+                         if np.isfinite(solve.arrays["object_poses"][o.index, f]).all()]
+                depth = rgb = None
+                if frames is not None:
+                    rgb = frames.color(f)
+                    raw = frames.depth(f)
+                    depth = (None if raw is None else
+                             cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED))
+                writer.add_image(f, seg_of(self, content, view, f), poses, depth=depth, rgb=rgb)
+                self.frames_written += 1
+            writer.close()
+            self.scenes[f"{self.scene_id:06d}"] = {
+                "sequence_id": content.sequence_id, "subject": content.subject,
+                "sequence": content.name, "serial": view.serial}
+            step()
+
+    def finish(self) -> None:
+        bop.write_models(self.archive.write, self.models.values())
+        self.archive.write("scenes.json", jsonfmt.document_bytes(self.scenes))
+
+
+EXPORTERS: dict[str, type[Exporter]] = {
+    "dexycb": DexYCBExporter, "json": JsonExporter, "cvat": CvatExporter,
+    "coco": CocoExporter, "bop": BopExporter,
+}

@@ -1,0 +1,205 @@
+"""Label export end to end on the small solved synthetic capture (3 views x 6 frames, 2 objects):
+REST jobs and downloads, the CLI, the DexYCB round trip through the importer, the JSON schema,
+and the refusals."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+from typer.testing import CliRunner
+
+from backend.captures.flows import import_path
+from backend.captures.layout import read_sequence
+from backend.captures.models import Camera, Frame, Sequence
+from backend.captures.service import delete_sequence
+from backend.cli import app
+from backend.db import session_scope
+from backend.jobs.service import execute
+from backend.solve.results import decode_result
+from backend.solve.service import current_run
+from backend.storage import get_storage
+from tests.backend.test_solve_api import _solve, approved, sequence  # noqa: F401
+from worker.formats import dexycb, jsonfmt
+from worker.geometry.transforms import invert_pose, transform_points
+
+pytestmark = pytest.mark.slow
+
+
+def _export(client: TestClient, headers: dict, body: dict) -> dict:
+    resp = client.post("/api/exports", json=body, headers=headers)
+    assert resp.status_code == 200, resp.text
+    job = resp.json()
+    assert job["status"] == "queued" and job["download_url"] is None
+    with session_scope() as s:
+        from backend.jobs.models import Job
+        key = s.get_one(Job, job["id"]).key
+    execute(key)
+    state = client.get(f"/api/exports/{job['id']}", headers=headers).json()
+    assert state["status"] == "done", state
+    assert state["progress"]["done"] == state["progress"]["total"] or state["progress"]
+    return state
+
+
+def _download(client: TestClient, headers: dict, state: dict) -> zipfile.ZipFile:
+    resp = client.get(state["download_url"], headers=headers)
+    assert resp.status_code == 200 and resp.headers["content-type"] == "application/zip"
+    return zipfile.ZipFile(io.BytesIO(resp.content))
+
+
+def _cameras(seq_id: int) -> dict[str, dict]:
+    with session_scope() as s:
+        cams = s.scalars(select(Camera).where(Camera.sequence_id == seq_id)).all()
+        return {c.serial: {"K": [c.fx, c.fy, c.ppx, c.ppy], "size": (c.width, c.height),
+                           "dist": list(c.distortion), "T": np.asarray(c.extrinsics),
+                           "frames": len(c.frames)} for c in cams}
+
+
+def _check_labels(root: Path, seq_id: int, cameras: dict[str, dict]) -> None:
+    """Exported labels equal the stored solve (float32) and joint_2d is K-only pinhole."""
+    with session_scope() as s:
+        run = current_run(s, seq_id)
+        assert run is not None and run.result_key
+        key = run.result_key
+    arrays = decode_result(get_storage().get_bytes(key))
+    seq_dir = next(root.glob(dexycb.META_GLOB)).parent
+    pose = np.load(seq_dir / dexycb.POSE_FILE)
+    labelled = arrays["labelled"]
+    assert np.array_equal(pose["pose_m"][labelled, 0],
+                          arrays["hand_pose_m"][labelled].astype(np.float32))
+    distorted = 0
+    for serial, cam in cameras.items():
+        distorted += any(cam["dist"])
+        K = np.array([[cam["K"][0], 0, cam["K"][2]], [0, cam["K"][1], cam["K"][3]], [0, 0, 1]])
+        w2c = invert_pose(cam["T"])
+        for f in range(cam["frames"]):
+            lab = np.load(seq_dir / serial / dexycb.labels_file(f))
+            assert lab["seg"].dtype == np.uint8 and lab["seg"].shape == cam["size"][::-1]
+            if not labelled[f]:
+                assert (lab["joint_3d"] == -1).all() and (lab["pose_m"] == -1).all()
+                continue
+            joints = transform_points(w2c, arrays["hand_joints"][f])
+            assert np.array_equal(lab["joint_3d"][0], joints.astype(np.float32))
+            poses = np.einsum("ij,ojk->oik", w2c[:, :3], arrays["object_poses"][:, f])
+            poses[:, :, 3] += w2c[:, 3]
+            np.testing.assert_allclose(lab["pose_y"], poses, atol=2e-6)
+            j3 = lab["joint_3d"][0].astype(np.float64)
+            pinhole = (j3 @ K.T)[:, :2] / (j3 @ K.T)[:, 2:]
+            assert np.abs(pinhole - lab["joint_2d"][0]).max() < 0.01
+            assert (lab["seg"] == dexycb.HAND_SEG_VALUE).sum() > 50
+    assert distorted >= 1, "the capture should have a camera with distortion"
+    meta = (seq_dir / dexycb.META_FILE).read_text()
+    assert dexycb.META_UNDISTORTED in meta
+
+
+def test_dexycb_export_round_trips_through_the_importer_with_pinhole_labels(
+    client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
+) -> None:
+    run = _solve(client, admin_headers, approved, {"optimiser": "default"})
+    assert run["status"] == "done"
+    state = _export(client, admin_headers, {"format": "dexycb", "sequences": [approved],
+                                            "options": {"frames": "copy", "split": "s0"}})
+    assert state["result"]["frames"] == 18 and "path" not in state["result"]
+    root = tmp_path / "export"
+    _download(client, admin_headers, state).extractall(root)
+    assert (root / "splits" / "s0_train.txt").read_text().count("\n") == 3
+    cameras = _cameras(approved)
+    _check_labels(root, approved, cameras)
+    plan = read_sequence(next(root.glob(dexycb.META_GLOB)).parent)
+    with session_scope() as s:
+        seq = s.get_one(Sequence, approved)
+        objects = [(o.ycb_id, o.name, o.grasped, o.num_vertices) for o in seq.objects]
+        name = (seq.subject.name, seq.name, seq.num_frames)
+        delete_sequence(s, approved, force=True)
+    assert [(o.ycb_id, o.name, o.grasped, o.num_vertices) for o in plan.objects] == objects
+    new_id = import_path(root)[0].sequence_id
+    again = _cameras(new_id)
+    assert set(again) == set(cameras)
+    for serial, cam in cameras.items():
+        assert again[serial]["K"] == cam["K"] and again[serial]["size"] == cam["size"]
+        assert again[serial]["frames"] == cam["frames"]
+        np.testing.assert_allclose(again[serial]["T"], cam["T"], atol=1e-12)
+        assert not any(again[serial]["dist"])  # undistorted: pinhole frames
+    with session_scope() as s:
+        seq = s.get_one(Sequence, new_id)
+        assert (seq.subject.name, seq.name, seq.num_frames) == name
+        assert [(o.ycb_id, o.name, o.grasped, o.num_vertices) for o in seq.objects] == objects
+        assert s.scalar(select(Frame.depth_key).join(Camera)
+                        .where(Camera.sequence_id == new_id).limit(1))
+
+
+def test_json_cvat_coco_and_bop_exports_are_written_and_json_validates(
+    client: TestClient, admin_headers: dict, approved: int  # noqa: F811
+) -> None:
+    _solve(client, admin_headers, approved, {"optimiser": "default"})
+    state = _export(client, admin_headers, {"format": "json", "all": True,
+                                            "include": "submitted"})
+    archive = _download(client, admin_headers, state)
+    [name] = archive.namelist()
+    document = json.loads(archive.read(name))
+    jsonschema.validate(document, jsonfmt.schema())
+    assert document["include"] == "submitted" and len(document["work"]) == 9
+    assert len(document["solve"]["frames"]) == 6 and len(document["solve"]["consensus"]) == 3
+    hand = next(w for w in document["work"] if w["kind"] == "hand")
+    assert len(hand["points"]) == 21 and len(hand["points"][0]["dense"]) == 6
+    for fmt, body in (("cvat", {}), ("coco", {}), ("bop", {"options": {"frames": "copy"}})):
+        state = _export(client, admin_headers, {"format": fmt, "sequences": [approved], **body})
+        names = _download(client, admin_headers, state).namelist()
+        assert names, fmt
+        if fmt == "cvat":
+            assert len([n for n in names if n.endswith(".xml")]) == 3
+        if fmt == "bop":
+            assert "models/models_info.json" in names and "scenes.json" in names
+
+
+def test_bad_export_requests_are_refused_naming_the_problem(
+    client: TestClient, admin_headers: dict, sequence: int, tmp_path: Path  # noqa: F811
+) -> None:
+    def refused(body: dict, status: int, words: str) -> None:
+        resp = client.post("/api/exports", json=body, headers=admin_headers)
+        assert resp.status_code == status and words in resp.json()["detail"], resp.text
+
+    refused({"format": "pascal", "all": True}, 422, "format must be one of dexycb")
+    refused({"format": "json", "sequences": [sequence]}, 409, "has no accepted labels")
+    refused({"format": "dexycb", "sequences": [sequence]}, 409, "has no finished solve")
+    refused({"format": "json", "sequences": [99999]}, 404, "sequence 99999 does not exist")
+    refused({"format": "json"}, 422, "either sequences")
+    refused({"format": "coco", "all": True, "include": "submitted"}, 422, "accepted labels only")
+    refused({"format": "json", "all": True, "options": {"frames": "copy"}}, 422,
+            "options.frames is not an option of the json format")
+    refused({"format": "dexycb", "all": True, "options": {"frames": "link"}}, 422,
+            "a zip archive cannot hold links")
+    assert client.post("/api/exports", json={"format": "json", "all": True}).status_code == 401
+    assert client.get("/api/exports/1").status_code == 401
+    assert client.get("/api/exports/1/download").status_code == 401
+    assert client.get("/api/exports/77", headers=admin_headers).status_code == 404
+    runner = CliRunner()
+    out = tmp_path / "x.zip"
+    out.write_bytes(b"")
+    result = runner.invoke(app, ["export", str(sequence), "--format", "json", "--out", str(out)])
+    assert result.exit_code == 2 and "exists" in result.output
+    result = runner.invoke(app, ["export", str(sequence), "--format", "bop", "--out",
+                                 str(tmp_path / "y.zip")])
+    assert result.exit_code == 2 and "has no finished solve" in result.output
+    assert not (tmp_path / "y.zip").exists()
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+def test_cli_export_writes_a_tar_with_progress(
+    client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
+) -> None:
+    out = tmp_path / "labels.tar"
+    result = CliRunner().invoke(app, ["export", str(approved), "--format", "cvat", "--out",
+                                      str(out)])
+    assert result.exit_code == 0, result.output
+    assert "view 3 of 3" in result.output and out.is_file()
+    import tarfile
+    with tarfile.open(out) as tar:
+        assert len([n for n in tar.getnames() if n.endswith(".xml")]) == 3
