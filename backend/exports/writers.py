@@ -139,6 +139,9 @@ class DexYCBExporter(Exporter):
     def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
         super().__init__(archive, options, include)
         self.models_written: set[str] = set()
+        # Calibration files are the project's, shared by sequences (DexYCB's are per serial):
+        # each is written once.
+        self.calibration_written: set[str] = set()
         self.split_items: list[tuple[str, str, list[str], int | None]] = []
 
     def add(self, content: SequenceContent, step: Step) -> None:
@@ -152,19 +155,19 @@ class DexYCBExporter(Exporter):
             coeffs = [float(c) for c in np.asarray(cam.dist if cam.dist is not None else [])]
             if dexycb.has_distortion(coeffs):
                 undistorted[view.serial] = coeffs
-            self.archive.write(dexycb.intrinsics_file(view.serial, cam.width, cam.height),
+            self._once(dexycb.intrinsics_file(view.serial, cam.width, cam.height),
                                yaml_text(dexycb.intrinsics_doc(
                                    cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2],
                                    cam.width, cam.height, [0.0] * 5)).encode())
         master = content.master_serial or content.views[0].serial
-        self.archive.write(dexycb.extrinsics_file(calib), yaml_text(dexycb.extrinsics_doc(
+        self._once(dexycb.extrinsics_file(calib), yaml_text(dexycb.extrinsics_doc(
             {v.serial: v.camera.T_cam_to_world for v in content.views}, master)).encode())
         calibs = []
         for hand in content.hands:
             name = hand.calib_name or f"{calib}_{hand.side}"
             calibs.append(name)
             betas = hand.betas or solve.arrays["betas"].tolist()
-            self.archive.write(dexycb.mano_file(name), yaml_text(dexycb.mano_doc(betas)).encode())
+            self._once(dexycb.mano_file(name), yaml_text(dexycb.mano_doc(betas)).encode())
         self._models(content)
         grasped = next((o.index for o in content.objects if o.grasped), 0)
         self.archive.write(f"{seq}/{dexycb.META_FILE}", yaml_text(dexycb.meta_doc(
@@ -183,6 +186,11 @@ class DexYCBExporter(Exporter):
         self.split_items.append((content.subject, content.name,
                                  [v.serial for v in content.views],
                                  next((o.ycb_id for o in content.objects if o.grasped), None)))
+
+    def _once(self, name: str, data: bytes) -> None:
+        if name not in self.calibration_written:
+            self.calibration_written.add(name)
+            self.archive.write(name, data)
 
     def _models(self, content: SequenceContent) -> None:
         for obj in content.objects:

@@ -61,6 +61,24 @@ export class AdminApi extends BearerClient {
   }
 
   /**
+   * Start an export job (POST /api/exports).
+   * @param {string} format  dexycb, coco, bop, cvat or json
+   * @param {number[]|null} sequences  null: the whole project
+   */
+  startExport(format, sequences) {
+    return this.request("POST", "/exports", sequences ? { format, sequences } : { format, all: true });
+  }
+
+  /** @param {number} exportId */
+  exportState(exportId) { return this.request("GET", `/exports/${exportId}`); }
+
+  /** A finished export's archive as a Blob. @param {number} exportId */
+  async exportArchive(exportId) {
+    const resp = await this.send("GET", `/exports/${exportId}/download`, undefined, "*/*");
+    return resp.blob();
+  }
+
+  /**
    * A solve run's overlay of one frame and view, as a Blob (the bearer header rules out a
    * plain <img src>).
    * @param {number} runId @param {number} frame @param {string} view  serial or index

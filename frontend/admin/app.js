@@ -254,6 +254,39 @@ async function loadMe() {
   $("who").textContent = me.email;
 }
 
+/** How often a running export is looked at, milliseconds. */
+const EXPORT_POLL_MS = 1000;
+
+/**
+ * Export one sequence (or the project, null) in the chosen format: start the job, show its
+ * progress, then save the archive.
+ * @param {number|null} sequenceId
+ */
+async function exportLabels(sequenceId) {
+  const format = /** @type {HTMLSelectElement} */ ($("export-format")).value;
+  const status = $("export-status");
+  const what = sequenceId === null ? "project" : `sequence #${sequenceId}`;
+  let job = await api.startExport(format, sequenceId === null ? null : [sequenceId]);
+  while (job.status !== "done" && job.status !== "failed") {
+    const p = job.progress || {};
+    status.textContent = `${format} export of ${what}: ${job.status}` +
+      (p.total ? ` (${p.done} of ${p.total} views)` : "");
+    await new Promise((resolve) => setTimeout(resolve, EXPORT_POLL_MS));
+    job = await api.exportState(job.id);
+  }
+  if (job.status === "failed") {
+    status.textContent = "";
+    throw new Error(`${format} export of ${what} failed: ${job.error || "see the job table"}`);
+  }
+  const blob = await api.exportArchive(job.id);
+  const link = document.createElement("a");
+  link.href = URL.createObjectURL(blob);
+  link.download = `dexlabel-${format}-${sequenceId === null ? "project" : sequenceId}.${job.archive}`;
+  link.click();
+  setTimeout(() => URL.revokeObjectURL(link.href), 60_000);
+  status.textContent = `${format} export of ${what}: done, ${(blob.size / 1e6).toFixed(1)} MB`;
+}
+
 async function signOut() {
   try {
     await api.logout();
@@ -273,6 +306,11 @@ function start() {
   $("job-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-retry]");
     if (button) retry(Number(/** @type {HTMLElement} */ (button).dataset.retry));
+  });
+  $("export-project").addEventListener("click", () => exportLabels(null).catch(fail));
+  $("sequence-rows").addEventListener("click", (e) => {
+    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-export]");
+    if (button) exportLabels(Number(/** @type {HTMLElement} */ (button).dataset.export)).catch(fail);
   });
   $("run-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-show-run]");

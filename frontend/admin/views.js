@@ -50,6 +50,7 @@ export function renderSequences(body, sequences) {
     el("td", {}, [s.objects.map((/** @type {any} */ o) => o.name).join(", ") || "–"]),
     el("td", {}, [s.hands.map((/** @type {any} */ h) => h.side).join(", ") || "–"]),
     el("td", {}, [when(s.created_at)]),
+    el("td", {}, [el("button", { type: "button", "data-export": String(s.id) }, ["Export"])]),
   ])));
 }
 
