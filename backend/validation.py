@@ -10,11 +10,10 @@ anywhere in a JSON or form body before the handler parses it.
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Any
 
 from fastapi import Path, Query
-from pydantic import AfterValidator, Field, StrictBool
+from pydantic import Field, StrictBool
 
 MAX_INT32 = 2**31 - 1
 MIN_INT32 = -(2**31)
@@ -47,27 +46,6 @@ def nul_fields(value: Any, path: tuple[str, ...] = ()) -> list[str]:
     return found
 
 
-def number_in_bounds(value: Any) -> bool:
-    """Whether every number anywhere in ``value`` is within the API's bounds (True otherwise)."""
-    if isinstance(value, bool) or value is None:
-        return True
-    if isinstance(value, int):
-        return MIN_INT32 <= value <= MAX_INT32
-    if isinstance(value, float):
-        return math.isfinite(value) and abs(value) <= MAX_ABS_FLOAT
-    if isinstance(value, dict):
-        return all(number_in_bounds(v) for v in value.values())
-    if isinstance(value, (list, tuple)):
-        return all(number_in_bounds(v) for v in value)
-    return True
-
-
-def _bounded_numbers(value: Any) -> Any:
-    if not number_in_bounds(value):
-        raise ValueError(NUMBER_MESSAGE)
-    return value
-
-
 # ----- path and query parameters ---------------------------------------------------------
 
 # A row id in a path: 1 up to the largest 32-bit integer.
@@ -91,5 +69,3 @@ Count = Annotated[int, Field(ge=0, le=MAX_INT32)]
 Finite = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_ABS_FLOAT, le=MAX_ABS_FLOAT)]
 # A JSON scalar of a track or setting: a boolean, a bounded integer or a bounded finite float.
 Scalar = StrictBool | Int32 | Finite
-# Free-form JSON (keyframe rows): every number in it within bounds.
-BoundedJson = Annotated[Any, AfterValidator(_bounded_numbers)]

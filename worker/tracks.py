@@ -103,11 +103,14 @@ class TrackWarning(TypedDict):
 def _number_or_none(value: Any, field: str) -> float | None:
     if value is None:
         return None
-    if type(value) is float or type(value) is int:  # what JSON gives: the common case, fast
-        return float(value)
+    if type(value) is float:  # what JSON gives: the common case, fast
+        return value
     if isinstance(value, bool) or not isinstance(value, Real):
         raise KeyframeError(f"{field} must be a number or null, got {value!r}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:  # an integer beyond any float, e.g. 10**400
+        raise KeyframeError(f"{field} is too large for a position") from None
 
 
 def parse_keyframe(raw: Any) -> Keyframe:
@@ -343,31 +346,62 @@ def _position_problems(kf: Keyframe, width: int, height: int) -> list[str]:
     return problems
 
 
-def _plainly_valid(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:
-    """True when every keyframe is a [frame, x, y, visible01] list of plain JSON values that
-    passes every check of :func:`validate_keyframes` (what the annotation page sends, in one
-    quick pass); False sends the keyframes through the full check, which names each problem."""
+def _plain_rows(
+    keyframes: Sequence[Any], num_frames: int, width: int, height: int
+) -> list[list[Any]] | None:
+    """The keyframes as stored ([frame, x, y, visible01] with float x, y) when every one is a
+    list of plain JSON values that passes every check of :func:`validate_keyframes` (what the
+    annotation page sends, in one quick pass); None sends them through the full check, which
+    names each problem."""
+    rows: list[list[Any]] = []
     previous = -1
     for row in keyframes:
         if type(row) is not list or len(row) != 4:
-            return False
+            return None
         frame, x, y, visible = row
         if type(frame) is not int or not previous < frame < num_frames:
-            return False
+            return None
         previous = frame
-        if not (visible is True or visible is False or (type(visible) is int and
-                                                         (visible == 0 or visible == 1))):
-            return False
+        if visible is True or (visible == 1 and type(visible) is int):
+            seen = 1
+        elif visible is False or (visible == 0 and type(visible) is int):
+            seen = 0
+        else:
+            return None
         if x is None and y is None:
-            if visible:
-                return False
+            if seen:
+                return None
+            rows.append([frame, None, None, 0])
             continue
         if (type(x) is not float and type(x) is not int) or (
                 type(y) is not float and type(y) is not int):
-            return False
+            return None
         if not (0 <= x < width and 0 <= y < height):  # NaN fails here too
-            return False
-    return True
+            return None
+        rows.append([frame, float(x), float(y), seen])
+    return rows
+
+
+def _plainly_valid(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:
+    return _plain_rows(keyframes, num_frames, width, height) is not None
+
+
+def checked_rows(
+    keyframes: Sequence[Any], num_frames: int, width: int, height: int
+) -> tuple[list[list[Any]], list[str]]:
+    """(the keyframes as stored, []) when they pass :func:`validate_keyframes`, else ([], its
+    problems). Stored form: sorted [frame, x, y, visible01] rows, x and y float px or None."""
+    rows = _plain_rows(keyframes, num_frames, width, height)
+    if rows is not None:
+        return rows, []
+    problems = validate_keyframes(keyframes, num_frames, width, height)
+    if problems:
+        return [], problems
+    stored = []
+    for raw in keyframes:
+        kf = parse_keyframe(raw)
+        stored.append([kf.frame, kf.x, kf.y, 1 if kf.visible else 0])
+    return stored, []
 
 
 def validate_keyframes(

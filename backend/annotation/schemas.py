@@ -7,11 +7,13 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.progress.schemas import TaskState
-from backend.validation import BoundedJson, Count, Finite
+from backend.validation import Count, Finite
 
 # A keyframe row: [frame, x, y, visible01]; x and y in image pixels or null when occluded.
-# Its form is checked against the task (worker.tracks); its numbers are bounded here.
-KeyframeRow = list[BoundedJson]
+# Its form and every number in it are checked once, against the task's clip and image
+# (worker.tracks.validate_keyframes: a frame in the clip, a position in the image), so a number
+# out of any bound is refused there by name.
+KeyframeRow = list[Any]
 # Generous bounds: a clip of up to 2000 frames, every frame keyed, 64 points.
 MAX_KEYFRAMES_PER_TRACK = 2000
 MAX_POINTS = 64

@@ -6,21 +6,22 @@ Services flush and never commit; the request is the unit of work.
 from __future__ import annotations
 
 import secrets
-from typing import Any, cast
+from typing import Any, NamedTuple
 
-from sqlalchemy import CursorResult, insert, inspect, select, update
+from sqlalchemy import bindparam, insert, inspect, select, update
 from sqlalchemy.orm import Session, selectinload
+from sqlalchemy.orm.attributes import set_committed_value
 
 from backend.annotation.highlight import object_highlight
 from backend.annotation.models import Assignment, Task, Track
 from backend.annotation.points import HAND_POINTS, OBJECT_POINTS, point_names
 from backend.annotation.schemas import TracksSave
-from backend.captures.models import Sequence
+from backend.captures.models import Camera, Sequence
 from backend.captures.service import get_sequence_or_raise
 from backend.db import utcnow
 from backend.errors import Conflict, DexlabelError, Forbidden, NotFound
 from backend.storage import Storage
-from worker.tracks import completeness, parse_keyframe, validate_keyframes
+from worker.tracks import checked_rows, completeness
 
 
 class InvalidTracks(DexlabelError):
@@ -136,37 +137,48 @@ def tracks_payload(assignment: Assignment) -> dict[str, Any] | None:
                        for t in assignment.tracks]}
 
 
-def _check_tracks(task: Task, body: TracksSave) -> list[list[list[Any]]]:
+class _Clip(NamedTuple):
+    """What a save is checked against: the task's points, its clip and its view's image."""
+
+    kind: str
+    num_points: int
+    num_frames: int
+    width: int
+    height: int
+
+
+def _clip_of(session: Session, task_id: int) -> _Clip:
+    """The task's clip facts in one query (a save needs nothing else of the task)."""
+    row = session.execute(
+        select(Task.kind, Task.num_points, Sequence.num_frames, Camera.width, Camera.height)
+        .join(Sequence, Sequence.id == Task.sequence_id)
+        .join(Camera, Camera.id == Task.camera_id)
+        .where(Task.id == task_id)).one_or_none()
+    if row is None:
+        raise NotFound(f"task {task_id} does not exist")
+    return _Clip(*row)
+
+
+def _check_tracks(clip: _Clip, body: TracksSave) -> list[list[list[Any]]]:
     """Per point keyframe rows, validated against the task's clip and image; 422 otherwise."""
-    seq: Sequence = task.sequence
     problems, by_point = [], {}
+    names = point_names(clip.kind)
     for track in body.tracks:
-        name = point_names(task.kind)[track.point] if track.point < task.num_points else None
+        name = names[track.point] if track.point < clip.num_points else None
         if name is None:
             problems.append(f"tracks: point {track.point} does not exist "
-                            f"(this task has points 0-{task.num_points - 1})")
+                            f"(this task has points 0-{clip.num_points - 1})")
             continue
         if track.point in by_point:
             problems.append(f"tracks: point {track.point} ({name}) appears twice")
             continue
-        issues = validate_keyframes(track.keyframes, seq.num_frames, task.camera.width,
-                                    task.camera.height)
+        rows, issues = checked_rows(track.keyframes, clip.num_frames, clip.width, clip.height)
         problems.extend(f"{name}: {issue}" for issue in issues)
         if not issues:
-            by_point[track.point] = [_compact(row) for row in track.keyframes]
+            by_point[track.point] = rows
     if problems:
         raise InvalidTracks("; ".join(problems[:20]), problems=problems)
-    return [by_point.get(p, []) for p in range(task.num_points)]
-
-
-def _compact(row: Any) -> list[Any]:
-    """A validated keyframe as stored: [frame, x, y, visible01]."""
-    if type(row) is list:  # the page's own form, checked already: no second parse
-        frame, x, y, visible = row
-        return [int(frame), None if x is None else float(x), None if y is None else float(y),
-                1 if visible else 0]
-    kf = parse_keyframe(row)
-    return [kf.frame, kf.x, kf.y, 1 if kf.visible else 0]
+    return [by_point.get(p, []) for p in range(clip.num_points)]
 
 
 def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> Assignment:
@@ -177,32 +189,41 @@ def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> A
     """
     if assignment.status != "working":
         raise Conflict(f"assignment is {assignment.status}; its labels can no longer change")
-    task = get_task_or_raise(session, assignment.task_id)
-    rows = _check_tracks(task, body)
+    rows = _check_tracks(_clip_of(session, assignment.task_id), body)
     # Compare-and-set on the version: of two tabs saving from one version, one wins.
-    # An UPDATE's result is a cursor result (it has a rowcount).
-    result = cast(CursorResult[Any], session.execute(
+    saved_at = utcnow()
+    version = session.execute(
         update(Assignment)
-        .where(Assignment.id == assignment.id, Assignment.version == body.version)
+        .where(Assignment.id == assignment.id, Assignment.version == body.version,
+               Assignment.status == "working")
         .values(version=Assignment.version + 1, edit_count=body.edit_count,
-                working_time_s=body.working_time_s, saved_at=utcnow())
+                working_time_s=body.working_time_s, saved_at=saved_at)
+        .returning(Assignment.version)
         .execution_options(synchronize_session=False)
-    ))
-    if result.rowcount != 1:
+    ).scalar_one_or_none()
+    if version is None:
         session.refresh(assignment)
+        if assignment.status != "working":  # submitted from another tab meanwhile
+            raise Conflict(f"assignment is {assignment.status}; its labels can no longer change")
         raise StaleVersion(
             f"these labels were saved from version {body.version}, but the assignment is at "
             f"version {assignment.version} (changed in another tab or window)",
             current_version=assignment.version,
         )
-    session.refresh(assignment)
+    # The row as written, without reading it again.
+    for field, value in (("version", version), ("edit_count", body.edit_count),
+                         ("working_time_s", body.working_time_s), ("saved_at", saved_at)):
+        set_committed_value(assignment, field, value)
     ids: dict[int, int] = dict(session.execute(
         select(Track.point_index, Track.id).where(Track.assignment_id == assignment.id)).all())
-    changed = [{"id": ids[p], "keyframes": kf} for p, kf in enumerate(rows) if p in ids]
+    changed = any(p in ids for p in range(len(rows)))
     added = [{"assignment_id": assignment.id, "point_index": p, "keyframes": kf}
              for p, kf in enumerate(rows) if p not in ids]
-    if changed:
-        session.execute(update(Track), changed)
+    if changed:  # one executemany by primary key, on the connection: no ORM bookkeeping
+        session.connection().execute(
+            update(Track).where(Track.id == bindparam("row_id"))
+            .values(keyframes=bindparam("rows")),
+            [{"row_id": ids[p], "rows": kf} for p, kf in enumerate(rows) if p in ids])
     if added:
         session.execute(insert(Track), added)
     # Tracks this session loaded before hold the old keyframes: load them again when used.

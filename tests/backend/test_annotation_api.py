@@ -251,3 +251,35 @@ def test_server_produces_the_dense_per_frame_track(
                               "interpolated", "interpolated"]
     assert wrist["xy"][0] == [None, None] and wrist["xy"][2] == [15.0, 30.0]
     assert wrist["visible"] == [False, True, True, False, False, False]
+
+
+def test_a_save_racing_a_submit_from_another_tab_is_refused_and_changes_nothing(
+    client: TestClient, admin_headers: dict, tasks: list[dict]
+) -> None:
+    from sqlalchemy.orm.attributes import set_committed_value
+
+    from backend.annotation.models import Assignment
+    from backend.annotation.schemas import TracksSave
+    from backend.annotation.service import get_assignment_or_raise, save_tracks
+    from backend.db import get_sessionmaker, session_scope
+    from backend.errors import Conflict
+
+    link = _assign(client, admin_headers, tasks[0]["id"])
+    body = {"version": 0, "tracks": _full_tracks(21, 6)}
+    assert client.post("/api/annotate/submit", json=body,
+                       headers=_bearer(link["token"])).status_code == 200
+    # This tab read the assignment while it was still being worked on ...
+    session = get_sessionmaker()()
+    try:
+        stale = get_assignment_or_raise(session, link["assignment_id"])
+        set_committed_value(stale, "status", "working")  # before the other tab submitted
+        later = TracksSave.model_validate({"version": 1, "tracks": _full_tracks(21, 6)[:1]})
+        with pytest.raises(Conflict, match="assignment is submitted"):
+            save_tracks(session, stale, later)
+    finally:
+        session.rollback()
+        session.close()
+    with session_scope() as s:
+        stored = s.get(Assignment, link["assignment_id"])
+        assert stored is not None and stored.status == "submitted" and stored.version == 1
+        assert len(stored.tracks) == 21

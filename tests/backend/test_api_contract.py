@@ -194,7 +194,8 @@ def test_numbers_out_of_range_are_refused_naming_the_field(served: Served) -> No
         resp = client.put("/api/annotate/tracks", content=huge_x, headers={
             **page, "Content-Type": "application/json"})
         assert resp.status_code == 422, resp.text
-        assert resp.json()["fields"][0]["field"].startswith("tracks.0.keyframes.0")
+        assert resp.json()["error"] == "invalid_tracks"
+        assert "keyframe 0 (frame 0): x is too large" in resp.json()["detail"], resp.text
         resp = client.put(f"/api/tasks/{served.task_id}/highlight",
                           content='{"box": [0, 0, 1e400, 5]}',
                           headers={**admin, "Content-Type": "application/json"})
