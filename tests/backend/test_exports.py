@@ -26,6 +26,7 @@ from backend.jobs.service import execute
 from backend.solve.results import decode_result
 from backend.solve.service import current_run
 from backend.storage import get_storage
+from tests.backend import export_checks
 from tests.backend.test_solve_api import _solve, approved, sequence  # noqa: F401
 from worker.formats import dexycb, jsonfmt
 from worker.geometry.transforms import invert_pose, transform_points
@@ -135,8 +136,8 @@ def test_dexycb_export_round_trips_through_the_importer_with_pinhole_labels(
                         .where(Camera.sequence_id == new_id).limit(1))
 
 
-def test_json_cvat_coco_and_bop_exports_are_written_and_json_validates(
-    client: TestClient, admin_headers: dict, approved: int  # noqa: F811
+def test_exports_read_back_in_each_format_s_own_reader_as_the_stored_labels_and_solve(
+    client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
 ) -> None:
     _solve(client, admin_headers, approved, {"optimiser": "default"})
     state = _export(client, admin_headers, {"format": "json", "all": True,
@@ -149,14 +150,17 @@ def test_json_cvat_coco_and_bop_exports_are_written_and_json_validates(
     assert len(document["solve"]["frames"]) == 6 and len(document["solve"]["consensus"]) == 3
     hand = next(w for w in document["work"] if w["kind"] == "hand")
     assert len(hand["points"]) == 21 and len(hand["points"][0]["dense"]) == 6
-    for fmt, body in (("cvat", {}), ("coco", {}), ("bop", {"options": {"frames": "copy"}})):
-        state = _export(client, admin_headers, {"format": fmt, "sequences": [approved], **body})
-        names = _download(client, admin_headers, state).namelist()
-        assert names, fmt
-        if fmt == "cvat":
-            assert len([n for n in names if n.endswith(".xml")]) == 3
-        if fmt == "bop":
-            assert "models/models_info.json" in names and "scenes.json" in names
+    stored = next(w for w in export_checks.accepted_work(approved)
+                  if w.assignment_id == hand["assignment_id"])
+    assert [p["keyframes"] for p in hand["points"]] == stored.keyframes
+
+    state = _export(client, admin_headers, {"format": "coco", "sequences": [approved]})
+    export_checks.check_coco(_download(client, admin_headers, state), tmp_path, approved)
+    state = _export(client, admin_headers, {"format": "bop", "sequences": [approved],
+                                            "options": {"frames": "copy"}})
+    export_checks.check_bop(_download(client, admin_headers, state), approved)
+    state = _export(client, admin_headers, {"format": "cvat", "sequences": [approved]})
+    export_checks.check_cvat(_download(client, admin_headers, state), approved)
 
 
 def test_bad_export_requests_are_refused_naming_the_problem(
