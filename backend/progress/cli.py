@@ -46,6 +46,42 @@ def _grid(p: SequenceProgress) -> list[str]:
     return lines
 
 
+# Sequences read and printed at a time by `dexlabel status` without a sequence.
+STATUS_PAGE = 200
+
+
+def _every_sequence(json: bool) -> None:
+    """One line (or one JSON object) per sequence, printed a page at a time as it is read."""
+    from sqlalchemy import select
+
+    from backend.captures.models import Sequence
+    from backend.db import session_scope
+    from backend.progress.service import sequences_progress
+
+    offset, printed = 0, 0
+    if json:
+        typer.echo("[", nl=False)
+    while True:
+        with session_scope() as session:
+            ids = list(session.scalars(select(Sequence.id).order_by(Sequence.id)
+                                       .offset(offset).limit(STATUS_PAGE)))
+            page = sequences_progress(session, ids)
+        for p in page:
+            if json:
+                typer.echo(("," if printed else "") + "\n" + p.model_dump_json(indent=2),
+                           nl=False)
+            else:
+                typer.echo(summary_line(p))
+            printed += 1
+        if len(ids) < STATUS_PAGE:
+            break
+        offset += STATUS_PAGE
+    if json:
+        typer.echo("\n]")
+    elif not printed:
+        typer.echo("no sequences yet: `dexlabel import PATH` or `dexlabel synth` adds one")
+
+
 def status_command(
     sequence: Annotated[str | None, typer.Argument(
         help="sequence id or SUBJECT/NAME (default: one line per sequence)",
@@ -54,24 +90,17 @@ def status_command(
 ) -> None:
     """Where the work stands: each view x target task's state (open, published, submitted,
     in review, accepted), HIT and assignment counts, and the current solve."""
-    from backend.captures.service import list_sequences
     from backend.db import session_scope
-    from backend.progress.service import sequence_progress
+    from backend.progress.service import sequences_progress
 
-    with refusing_bad_input(), session_scope() as session:
-        ids = ([resolve_sequence(session, sequence)] if sequence is not None
-               else [s.id for s in list_sequences(session)])
-        found = [sequence_progress(session, i) for i in ids]
-    if json:
-        body = ",\n".join(p.model_dump_json(indent=2) for p in found)
-        typer.echo(body if sequence is not None else f"[{body}]")
-        return
-    if not found:
-        typer.echo("no sequences yet: `dexlabel import PATH` or `dexlabel synth` adds one")
-        return
     if sequence is None:
-        for p in found:
-            typer.echo(summary_line(p))
+        with refusing_bad_input():
+            _every_sequence(json)
+        return
+    with refusing_bad_input(), session_scope() as session:
+        found = sequences_progress(session, [resolve_sequence(session, sequence)])
+    if json:
+        typer.echo(found[0].model_dump_json(indent=2))
         return
     p = found[0]
     typer.echo(summary_line(p))

@@ -17,14 +17,14 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable
 
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Sequence
-from backend.captures.service import get_sequence_or_raise
 from backend.crowd.models import CrowdHit
-from backend.pipeline import accepted_digest
+from backend.errors import NotFound
+from backend.pipeline import accepted_digests
 from backend.progress.schemas import (
     TASK_STATES,
     AssignmentCounts,
@@ -91,16 +91,12 @@ def _target_order(key: str) -> tuple[int, int, str]:
     return (0 if kind == "hand" else 1, int(index) if index.isdigit() else 0, key)
 
 
-def _solve(session: Session, sequence_id: int) -> SolveProgress | None:
-    run = session.scalar(select(SolveRun).where(SolveRun.sequence_id == sequence_id)
-                         .order_by(SolveRun.id.desc()).limit(1))
-    if run is None:
-        return None
+def _solve(run: SolveRun, digest: str | None) -> SolveProgress:
+    """A sequence's newest run, and whether the accepted labels (``digest``) changed since."""
     if run.labels_digest is None:
         labels = "by hand"
     else:
-        labels = "current" if accepted_digest(session, sequence_id)[0] == run.labels_digest \
-            else "outdated"
+        labels = "current" if digest == run.labels_digest else "outdated"
     return SolveProgress(run_id=run.id, status=run.status, labels=labels,
                          finished_at=run.finished_at, error=run.error)
 
@@ -111,16 +107,45 @@ def sequence_progress(session: Session, sequence_id: int) -> SequenceProgress:
     Raises:
         NotFound: no such sequence.
     """
-    seq: Sequence = get_sequence_or_raise(session, sequence_id)
-    ids = session.scalars(select(Task.id).where(Task.sequence_id == sequence_id))
-    cells = sorted(task_states(session, ids).values(),
-                   key=lambda t: (t.serial, _target_order(t.target_key)))
+    found = sequences_progress(session, [sequence_id])
+    if not found:
+        raise NotFound(f"sequence {sequence_id} does not exist")
+    return found[0]
+
+
+def sequences_progress(session: Session, sequence_ids: list[int]) -> list[SequenceProgress]:
+    """The progress of each existing sequence of ``sequence_ids``, in that order, in the same
+    few grouped statements whatever their number."""
+    seqs = {s.id: s for s in session.scalars(
+        select(Sequence).where(Sequence.id.in_(sequence_ids))
+        .options(selectinload(Sequence.subject), selectinload(Sequence.cameras)))}
+    ids = [i for i in sequence_ids if i in seqs]
+    by_sequence: dict[int, list[int]] = defaultdict(list)
+    for task_id, seq_id in session.execute(
+            select(Task.id, Task.sequence_id).where(Task.sequence_id.in_(ids))):
+        by_sequence[seq_id].append(task_id)
+    states = task_states(session, [t for tasks in by_sequence.values() for t in tasks])
+    solves = _solves(session, ids)
+    return [_progress(seqs[i], [states[t] for t in by_sequence[i]], solves.get(i)) for i in ids]
+
+
+def _solves(session: Session, sequence_ids: list[int]) -> dict[int, SolveProgress]:
+    newest = (select(func.max(SolveRun.id)).where(SolveRun.sequence_id.in_(sequence_ids))
+              .group_by(SolveRun.sequence_id))
+    runs = list(session.scalars(select(SolveRun).where(SolveRun.id.in_(newest))))
+    digests = accepted_digests(session, [r.sequence_id for r in runs if r.labels_digest])
+    return {run.sequence_id: _solve(run, digests.get(run.sequence_id, (None, 0))[0])
+            for run in runs}
+
+
+def _progress(seq: Sequence, tasks: list[TaskProgress], solve: SolveProgress | None
+              ) -> SequenceProgress:
+    cells = sorted(tasks, key=lambda t: (t.serial, _target_order(t.target_key)))
     counts = dict.fromkeys(TASK_STATES, 0)
     totals: Counter[str] = Counter()
     for cell in cells:
         counts[cell.state] += 1
         totals.update(cell.assignments.model_dump())
-    solve = _solve(session, sequence_id)
     state: SequenceState
     if not cells:
         state = "no tasks"

@@ -24,6 +24,7 @@ from typing import Any
 import pytest
 from sqlalchemy import Engine, event, select
 
+from backend.progress.schemas import SequenceProgress
 from tests.conftest import _drop_all, reset_caches
 
 pytestmark = pytest.mark.postgres
@@ -208,6 +209,41 @@ def test_listings_use_indexes(api: Get, sequence_id: int) -> None:
                        (f"/api/sequences/{seq}/views/{_serial(seq)}/frames", 4)):
         statements = _no_seq_scans(api(path))
         assert statements <= most, (path, statements)
+
+
+def test_progress_of_every_sequence_takes_the_same_few_statements(filled: str) -> None:
+    """`dexlabel status` without a sequence: every sequence's progress in a few grouped
+    statements, whatever their number, equal to each sequence's own progress. (A page of
+    many sequences reads a large share of these small tables: the planner may scan them.)"""
+    from backend.db import session_scope
+    from backend.progress.service import sequence_progress, sequences_progress
+
+    ids = list(range(1, SEQUENCES + 1))
+    found: list[Any] = []
+    plans = _plans(lambda session: found.extend(sequences_progress(session, ids)))
+    assert len(plans) <= 12, len(plans)
+    assert [p.sequence_id for p in found] == ids
+    assert {p.state for p in found} >= {"solved"}
+    with session_scope() as session:
+        for p in (found[0], found[SEQUENCES // 2], found[-1]):
+            assert sequence_progress(session, p.sequence_id) == p
+
+
+def test_status_lists_every_sequence_page_by_page(filled: str,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    from typer.testing import CliRunner
+
+    from backend.cli import app
+    from backend.progress import cli as progress_cli
+
+    monkeypatch.setattr(progress_cli, "STATUS_PAGE", 30)  # 100 sequences: 4 pages
+    runner = CliRunner()
+    lines = runner.invoke(app, ["status"]).output.splitlines()
+    assert [int(line.split()[0]) for line in lines] == list(range(1, SEQUENCES + 1))
+    listed = json.loads(runner.invoke(app, ["status", "--json"]).output)
+    assert [p["sequence_id"] for p in listed] == list(range(1, SEQUENCES + 1))
+    assert all(progress_cli.summary_line(SequenceProgress.model_validate(p)) == line
+               for p, line in zip(listed, lines, strict=True))
 
 
 def test_task_and_sequence_listings_are_paged(api: Get) -> None:
