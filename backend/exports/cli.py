@@ -16,6 +16,11 @@ import typer
 
 from backend.console import fail, progress, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
+from backend.errors import DexlabelError
+
+# Suffixes that name a file, not a folder: refused rather than made into a folder so named.
+_FILE_SUFFIXES = {".gz", ".tgz", ".bz2", ".xz", ".zst", ".7z", ".rar", ".json", ".xml", ".npz"}
+EXIT_CANCELLED = 130  # as a shell reports a command ended by Ctrl-C
 
 
 def export_command(
@@ -50,14 +55,30 @@ def export_command(
         fail("give one or more sequences, or --all")
     if out.exists() or out.is_symlink():
         fail(f"{out} exists; give a path that does not")
+    if not out.parent.is_dir():
+        fail(f"the folder {out.parent} does not exist; create it or give a path in an existing "
+             "folder")
+    if out.suffix.lower() in _FILE_SUFFIXES:
+        fail(f"{out.name}: an export is written as .zip, .tar or a folder (a path without one "
+             f"of those suffixes); {out.suffix} is none of them")
     options: dict[str, Any] = {"frames": "link" if link_frames else ("copy" if frames else None),
                                "split": split, "labels": labels}
     options = {k: v for k, v in options.items() if v is not None}
     with refusing_bad_input(), session_scope() as session:
         ids = None if all_sequences else [resolve_sequence(session, s) for s in sequences or []]
         ids = check_request(session, fmt, ids, include, options, kind_of(out))
-    with progress(f"{fmt} export", total=None) as step:
-        result = run_export(fmt, ids, include, options, out,
-                            lambda done, total: step(f"view {done} of {total}"))
+    try:
+        with progress(f"{fmt} export", total=None) as step:
+            result = run_export(fmt, ids, include, options, out,
+                                lambda done, total: step(f"view {done} of {total}"))
+    except KeyboardInterrupt:
+        typer.secho(f"export cancelled; nothing was written at {out}", err=True)
+        raise typer.Exit(EXIT_CANCELLED) from None
+    except (DexlabelError, OSError, ValueError) as exc:
+        # The temporary output is already removed; say what went wrong, not a traceback.
+        detail = exc.detail if isinstance(exc, DexlabelError) else str(exc)
+        typer.secho(f"error: the export failed: {detail}; nothing was written at {out}",
+                    fg=typer.colors.RED, err=True)
+        raise typer.Exit(1) from None
     typer.echo(f"{out}: {result['sequences']} sequence(s), {result['frames']} frames, "
                f"{result['files']} files, {result['bytes'] / 1e6:.1f} MB")

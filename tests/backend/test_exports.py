@@ -16,12 +16,15 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select
 from typer.testing import CliRunner
 
+from backend.annotation.models import Assignment, Task, Track
 from backend.captures.flows import import_path
 from backend.captures.layout import read_sequence
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import delete_sequence
 from backend.cli import app
+from backend.config import get_settings
 from backend.db import session_scope
+from backend.jobs.models import Job
 from backend.jobs.service import execute
 from backend.solve.results import decode_result
 from backend.solve.service import current_run
@@ -40,7 +43,6 @@ def _export(client: TestClient, headers: dict, body: dict) -> dict:
     job = resp.json()
     assert job["status"] == "queued" and job["download_url"] is None
     with session_scope() as s:
-        from backend.jobs.models import Job
         key = s.get_one(Job, job["id"]).key
     execute(key)
     state = client.get(f"/api/exports/{job['id']}", headers=headers).json()
@@ -175,6 +177,7 @@ def test_bad_export_requests_are_refused_naming_the_problem(
     refused({"format": "dexycb", "sequences": [sequence]}, 409, "has no finished solve")
     refused({"format": "json", "sequences": [99999]}, 404, "sequence 99999 does not exist")
     refused({"format": "json"}, 422, "either sequences")
+    refused({"format": "json", "sequences": []}, 422, "at least one sequence")
     refused({"format": "coco", "all": True, "include": "submitted"}, 422, "accepted labels only")
     refused({"format": "json", "all": True, "options": {"frames": "copy"}}, 422,
             "options.frames is not an option of the json format")
@@ -193,6 +196,14 @@ def test_bad_export_requests_are_refused_naming_the_problem(
                                  str(tmp_path / "y.zip")])
     assert result.exit_code == 2 and "has no finished solve" in result.output
     assert not (tmp_path / "y.zip").exists()
+    for args, words in (
+            (["--format", "pascal", "--out", str(tmp_path / "p.zip")], "format must be one of"),
+            (["--format", "json", "--out", str(tmp_path / "missing" / "j.zip")],
+             "folder " + str(tmp_path / "missing") + " does not exist"),
+            (["--format", "json", "--out", str(tmp_path / "j.tar.gz")], "is none of them")):
+        result = runner.invoke(app, ["export", str(sequence), *args])
+        assert result.exit_code == 2 and words in result.output, result.output
+    assert not (tmp_path / "missing").exists() and not (tmp_path / "j.tar.gz").exists()
     assert not list(tmp_path.glob(".*partial*"))
 
 
@@ -207,3 +218,36 @@ def test_cli_export_writes_a_tar_with_progress(
     import tarfile
     with tarfile.open(out) as tar:
         assert len([n for n in tar.getnames() if n.endswith(".xml")]) == 3
+
+
+def test_a_failing_export_leaves_no_archive_and_says_why(
+    client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
+) -> None:
+    # A stored track that no longer checks (a keyframe past the clip) in the last view: the
+    # export fails after writing the first views.
+    with session_scope() as s:
+        last_camera = max(s.scalars(select(Camera.id).where(Camera.sequence_id == approved)))
+        track = s.scalars(select(Track).join(Assignment).join(Task)
+                          .where(Task.camera_id == last_camera)).first()
+        assert track is not None
+        track.keyframes = [[99, 10.0, 10.0, 1]]
+    resp = client.post("/api/exports", json={"format": "cvat", "sequences": [approved]},
+                       headers=admin_headers)
+    job = resp.json()
+    with session_scope() as s:
+        key = s.get_one(Job, job["id"]).key
+    execute(key)
+    state = client.get(f"/api/exports/{job['id']}", headers=admin_headers).json()
+    assert state["status"] in ("retrying", "failed") and "frame" in state["error"]
+    assert state["download_url"] is None
+    resp = client.get(f"/api/exports/{job['id']}/download", headers=admin_headers)
+    assert resp.status_code == 409 and "can be downloaded once it is done" in resp.text
+    exports = get_settings().var_dir / "exports"
+    assert not exports.exists() or not list(exports.iterdir())
+    (tmp_path / "out").mkdir()
+    out = tmp_path / "out" / "labels.zip"
+    result = CliRunner().invoke(app, ["export", str(approved), "--format", "cvat", "--out",
+                                      str(out)])
+    assert result.exit_code == 1 and "the export failed" in result.output, result.output
+    assert "nothing was written at" in result.output and "Traceback" not in result.output
+    assert list((tmp_path / "out").iterdir()) == []
