@@ -31,14 +31,20 @@ export class AdminApi extends BearerClient {
   }
 
   me() { return this.request("GET", "/auth/me"); }
-  sequences() { return this.request("GET", "/sequences"); }
+  /** A page of sequences. @param {number} offset @param {number} limit */
+  sequences(offset, limit) {
+    return this.request("GET", `/sequences?offset=${offset}&limit=${limit}`);
+  }
   /** @param {number} id */
   sequence(id) { return this.request("GET", `/sequences/${id}`); }
   /** @param {number} sequenceId */
   reports(sequenceId) { return this.request("GET", `/qc/reports?sequence_id=${sequenceId}`); }
   /** @param {number} assignmentId */
   report(assignmentId) { return this.request("GET", `/qc/reports/${assignmentId}`); }
-  workers() { return this.request("GET", "/qc/workers"); }
+  /** A page of workers. @param {number} offset @param {number} limit */
+  workers(offset, limit) {
+    return this.request("GET", `/qc/workers?offset=${offset}&limit=${limit}`);
+  }
   jobs() { return this.request("GET", "/jobs"); }
   /** @param {number} jobId */
   retryJob(jobId) { return this.request("POST", `/jobs/${jobId}/retry`); }

@@ -5,7 +5,7 @@
  */
 
 import { AdminApi, ApiError } from "./api.js";
-import { orderReports, parseRoute, pointNames, tallyReports } from "./format.js";
+import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
 import {
   barChart, renderCosts, renderFacts, renderJobs, renderReports, renderRuns, renderSequences,
   renderSwaps, renderWorkers,
@@ -54,10 +54,40 @@ function fail(err) {
 
 const body = (/** @type {string} */ id) => /** @type {HTMLTableSectionElement} */ ($(id));
 
-async function showSequences() {
-  const sequences = await api.sequences();
+/** Rows a page of the sequence and worker listings holds. */
+const SEQUENCE_PAGE = 50;
+const WORKER_PAGE = 200;
+
+/**
+ * Fill a listing's pager: which rows are shown, and links to the pages around them.
+ * @param {string} id  the pager's element
+ * @param {string} route  the listing's hash, e.g. "#/sequences"
+ * @param {string} noun  what the rows are
+ * @param {ReturnType<typeof pageOf>} page
+ */
+function renderPager(id, route, noun, page) {
+  const pager = $(id);
+  pager.hidden = page.previous === null && page.next === null;
+  const link = (/** @type {string} */ text, /** @type {number|null} */ offset) => {
+    const a = document.createElement("a");
+    a.textContent = text;
+    if (offset === null) a.setAttribute("aria-disabled", "true");
+    else a.href = offset ? `${route}/from/${offset}` : route;
+    return a;
+  };
+  const where = document.createElement("span");
+  where.textContent = page.first ? `${noun} ${page.first}–${page.last}` : `no more ${noun}`;
+  pager.replaceChildren(link("‹ Previous", page.previous), where, link("Next ›", page.next));
+}
+
+/** @param {number} offset */
+async function showSequences(offset) {
+  const rows = await api.sequences(offset, SEQUENCE_PAGE + 1);
+  const sequences = rows.slice(0, SEQUENCE_PAGE);
   renderSequences(body("sequence-rows"), sequences);
-  $("no-sequences").hidden = sequences.length > 0;
+  renderPager("sequence-pager", "#/sequences", "sequences",
+    pageOf(offset, SEQUENCE_PAGE, sequences.length, rows.length > SEQUENCE_PAGE));
+  $("no-sequences").hidden = sequences.length > 0 || offset > 0;
   show("sequences-view");
 }
 
@@ -140,10 +170,14 @@ async function decide(kind) {
   }
 }
 
-async function showWorkers() {
-  const workers = await api.workers();
+/** @param {number} offset */
+async function showWorkers(offset) {
+  const rows = await api.workers(offset, WORKER_PAGE + 1);
+  const workers = rows.slice(0, WORKER_PAGE);
   renderWorkers(body("worker-rows"), workers);
-  $("no-workers").hidden = workers.length > 0;
+  renderPager("worker-pager", "#/workers", "workers",
+    pageOf(offset, WORKER_PAGE, workers.length, rows.length > WORKER_PAGE));
+  $("no-workers").hidden = workers.length > 0 || offset > 0;
   show("workers-view");
 }
 
@@ -225,11 +259,11 @@ async function route() {
   }
   const where = parseRoute(location.hash);
   try {
-    if (where.view === "workers") await showWorkers();
+    if (where.view === "workers") await showWorkers(where.offset);
     else if (where.view === "jobs") await showJobs();
     else if (where.view === "costs") await showCosts();
     else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
-    else await showSequences();
+    else await showSequences(where.offset);
   } catch (err) {
     fail(err);
   }

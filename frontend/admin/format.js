@@ -182,12 +182,13 @@ export function barLayout(values, labels, size = {}) {
 
 /**
  * @typedef {{view: "sequences"|"sequence"|"report"|"workers"|"jobs"|"costs",
- *            sequence: number|null, assignment: number|null}} Route
+ *            sequence: number|null, assignment: number|null, offset: number}} Route
  */
 
 /**
- * The page's place from its hash: #/sequences, #/sequences/<id>,
- * #/sequences/<id>/reports/<assignment>, #/workers, #/jobs, #/costs.
+ * The page's place from its hash: #/sequences, #/sequences/from/<offset>, #/sequences/<id>,
+ * #/sequences/<id>/reports/<assignment>, #/workers, #/workers/from/<offset>, #/jobs, #/costs.
+ * ``offset``: where the page of a paged listing (sequences, workers) starts; 0 elsewhere.
  * @param {string} hash
  * @returns {Route}
  */
@@ -196,15 +197,37 @@ export function parseRoute(hash) {
   const id = (/** @type {string|undefined} */ text) =>
     (text && /^\d+$/.test(text) ? Number(text) : null);
   const [view = "", seq, sub, aid] = parts;
-  if (["workers", "jobs", "costs"].includes(view)) {
-    return { view: /** @type {Route["view"]} */ (view), sequence: null, assignment: null };
+  const none = { sequence: null, assignment: null, offset: 0 };
+  const offset = seq === "from" ? Math.min(id(sub) ?? 0, MAX_OFFSET) : 0;
+  if (view === "workers") return { view, ...none, offset };
+  if (["jobs", "costs"].includes(view)) {
+    return { view: /** @type {Route["view"]} */ (view), ...none };
   }
   const sequence = view === "sequences" ? id(seq) : null;
   if (sequence !== null && sub === "reports" && id(aid) !== null) {
-    return { view: "report", sequence, assignment: id(aid) };
+    return { view: "report", sequence, assignment: id(aid), offset: 0 };
   }
-  if (sequence !== null) return { view: "sequence", sequence, assignment: null };
-  return { view: "sequences", sequence: null, assignment: null };
+  if (sequence !== null) return { view: "sequence", sequence, assignment: null, offset: 0 };
+  return { view: "sequences", ...none, offset: view === "sequences" ? offset : 0 };
+}
+
+/** The largest offset the API takes (a 32-bit integer). */
+const MAX_OFFSET = 2 ** 31 - 1;
+
+/**
+ * Where a page of a listing sits: its first and last row (1-based) and the offsets of the
+ * pages before and after it (null where there is none).
+ * @param {number} offset  the page's first row, 0-based
+ * @param {number} size  rows a page holds
+ * @param {number} shown  rows on this page
+ * @param {boolean} more  whether rows follow this page
+ */
+export function pageOf(offset, size, shown, more) {
+  return {
+    first: shown ? offset + 1 : 0, last: offset + shown,
+    previous: offset > 0 ? Math.max(offset - size, 0) : null,
+    next: more ? offset + size : null,
+  };
 }
 
 /** The money columns of a cost line (backend/crowd/schemas.py CostLine), with headings. */

@@ -457,3 +457,33 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
             time.sleep(0.1)
         assert page.evaluate(SHOWN_PNG) == want
     page.screenshot(path=str(output_dir / "admin-overlay.png"), full_page=True)
+
+
+def test_sequence_and_worker_listings_page_through_the_api(
+    admin_page: Page, live_server: LiveServer, output_dir: Path
+) -> None:
+    """One page: no pager. An address past the last page: a way back, nothing else. The
+    rows drawn are the API's page at the address's offset."""
+    page, server = admin_page, live_server
+    listed = server.admin("GET", "/api/sequences?limit=50")
+    assert isinstance(listed, list) and 0 < len(listed) <= 50
+    rows = page.locator("#sequence-rows tr")
+    expect(rows).to_have_count(len(listed))
+    expect(page.locator("#sequence-pager")).to_be_hidden()
+    page.goto(f"{server.base}/admin/#/sequences/from/50")
+    expect(page.locator("#sequence-pager")).to_be_visible()
+    expect(rows).to_have_count(0)
+    expect(page.locator("#sequence-pager span")).to_have_text("no more sequences")
+    expect(page.locator("#no-sequences")).to_be_hidden()
+    back = page.locator("#sequence-pager a", has_text="Previous")
+    expect(back).to_have_attribute("href", "#/sequences")
+    expect(page.locator("#sequence-pager a", has_text="Next")).to_have_attribute(
+        "aria-disabled", "true")
+    page.screenshot(path=str(output_dir / "admin-sequences-past-the-end.png"))
+    back.click()
+    expect(rows).to_have_count(len(listed))
+    expect(page.locator("#sequence-pager")).to_be_hidden()
+    page.goto(f"{server.base}/admin/#/workers/from/200")
+    expect(page.locator("#worker-pager span")).to_have_text("no more workers")
+    expect(page.locator("#worker-pager a", has_text="Previous")).to_have_attribute(
+        "href", "#/workers")

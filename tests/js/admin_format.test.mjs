@@ -5,7 +5,7 @@ import { test } from "node:test";
 
 import {
   HAND_JOINTS, barLayout, canRetry, costCells, dollars, jobOutcome, metric, orderReports,
-  parseRoute, percent, pointNames, px, tallyReports, when,
+  pageOf, parseRoute, percent, pointNames, px, tallyReports, when,
 } from "../../frontend/admin/format.js";
 
 test("px writes pixels with one decimal and a dash where unknown", () => {
@@ -158,21 +158,38 @@ test("costCells writes a cost line's key and money columns in dollars", () => {
     ["W1", "$1.20", "$1.00", "$0.00", "$0.20", "$0.60", "$0.50", "$0.00", "$0.10"]);
 });
 
-test("parseRoute maps each hash to its view, sequence and assignment", () => {
-  const none = { sequence: null, assignment: null };
+test("parseRoute maps each hash to its view, sequence, assignment and page", () => {
+  const none = { sequence: null, assignment: null, offset: 0 };
   assert.deepEqual(parseRoute(""), { view: "sequences", ...none });
   assert.deepEqual(parseRoute("#/sequences"), { view: "sequences", ...none });
   assert.deepEqual(parseRoute("#/sequences/3"),
-    { view: "sequence", sequence: 3, assignment: null });
+    { view: "sequence", sequence: 3, assignment: null, offset: 0 });
   assert.deepEqual(parseRoute("#/sequences/3/reports/17"),
-    { view: "report", sequence: 3, assignment: 17 });
+    { view: "report", sequence: 3, assignment: 17, offset: 0 });
   assert.deepEqual(parseRoute("#/sequences/3/reports/x"),
-    { view: "sequence", sequence: 3, assignment: null });
+    { view: "sequence", sequence: 3, assignment: null, offset: 0 });
   assert.deepEqual(parseRoute("#/sequences/abc"), { view: "sequences", ...none });
   assert.deepEqual(parseRoute("#/workers"), { view: "workers", ...none });
   assert.deepEqual(parseRoute("#/jobs"), { view: "jobs", ...none });
   assert.deepEqual(parseRoute("#/costs"), { view: "costs", ...none });
   assert.deepEqual(parseRoute("#/nowhere"), { view: "sequences", ...none });
+  // Pages of the paged listings; a page address that is not a number is the first page.
+  assert.deepEqual(parseRoute("#/sequences/from/50"), { view: "sequences", ...none, offset: 50 });
+  assert.deepEqual(parseRoute("#/workers/from/200"), { view: "workers", ...none, offset: 200 });
+  assert.deepEqual(parseRoute("#/sequences/from/-5"), { view: "sequences", ...none });
+  assert.deepEqual(parseRoute("#/workers/from/x"), { view: "workers", ...none });
+  assert.deepEqual(parseRoute("#/sequences/from/99999999999999"),
+    { view: "sequences", ...none, offset: 2 ** 31 - 1 });
+  assert.deepEqual(parseRoute("#/jobs/from/50"), { view: "jobs", ...none });
+});
+
+test("pageOf says which rows a page shows and where the pages around it start", () => {
+  assert.deepEqual(pageOf(0, 50, 50, true), { first: 1, last: 50, previous: null, next: 50 });
+  assert.deepEqual(pageOf(50, 50, 50, true), { first: 51, last: 100, previous: 0, next: 100 });
+  assert.deepEqual(pageOf(100, 50, 7, false), { first: 101, last: 107, previous: 50, next: null });
+  assert.deepEqual(pageOf(0, 50, 3, false), { first: 1, last: 3, previous: null, next: null });
+  // An address past the end: nothing shown, a way back.
+  assert.deepEqual(pageOf(30, 50, 0, false), { first: 0, last: 30, previous: 0, next: null });
 });
 
 test("metric writes each QC metric in its unit by name", () => {
