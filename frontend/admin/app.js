@@ -318,7 +318,9 @@ async function exportLabels(sequenceId) {
   link.download = `dexlabel-${format}-${sequenceId === null ? "project" : sequenceId}.${job.archive}`;
   link.click();
   setTimeout(() => URL.revokeObjectURL(link.href), 60_000);
-  status.textContent = `${format} export of ${what}: done, ${(blob.size / 1e6).toFixed(1)} MB`;
+  const size = blob.size < 1e6 ? `${Math.max(1, Math.round(blob.size / 1e3))} kB`
+    : `${(blob.size / 1e6).toFixed(1)} MB`;
+  status.textContent = `${format} export of ${what}: done, saved ${link.download} (${size})`;
 }
 
 async function signOut() {
