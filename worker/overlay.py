@@ -25,6 +25,8 @@ HAND_PART_COLOURS = np.array([
 OBJECT_COLOURS = np.array([
     [230, 220, 80], [90, 230, 230], [160, 120, 250], [120, 200, 160], [250, 140, 140],
     [140, 180, 250]], dtype=np.float64)
+# An object pose the solve does not trust is drawn in this colour (BGR red), whatever its own.
+FLAGGED_COLOUR = np.array([40, 40, 240], dtype=np.float64)
 DARKEN = 0.45  # the image keeps 45 % of its brightness behind the meshes
 MESH_ALPHA = 0.85  # a little of the image shows through, so edges stay readable
 AMBIENT = 0.35  # shading floor: surfaces seen edge-on stay coloured, not black
@@ -62,12 +64,13 @@ def hand_mesh(vertices: np.ndarray, faces: np.ndarray, vertex_parts: np.ndarray)
 
 
 def object_mesh(vertices: np.ndarray, faces: np.ndarray, pose: np.ndarray,
-                index: int) -> OverlayMesh:
-    """Object ``index``'s mesh (object frame, metres) moved by its (3, 4) object-to-world pose."""
+                index: int, flagged: bool = False) -> OverlayMesh:
+    """Object ``index``'s mesh (object frame, metres) moved by its (3, 4) object-to-world pose;
+    in FLAGGED_COLOUR when the pose is flagged as not trusted."""
     pose = np.asarray(pose, dtype=np.float64)
     world = np.asarray(vertices, dtype=np.float64) @ pose[:, :3].T + pose[:, 3]
     faces = np.asarray(faces, dtype=np.int64)
-    colour = OBJECT_COLOURS[index % len(OBJECT_COLOURS)]
+    colour = FLAGGED_COLOUR if flagged else OBJECT_COLOURS[index % len(OBJECT_COLOURS)]
     return OverlayMesh(world, faces, np.broadcast_to(colour, (len(faces), 3)))
 
 
@@ -119,6 +122,19 @@ def render_overlay(image: np.ndarray, camera: CameraModel, meshes: Sequence[Over
 
 # Residual plot layout, pixels.
 _PLOT_MARGIN = (56, 40, 16, 64)  # left, top, right, bottom
+def caption(image: np.ndarray, lines: Sequence[str],
+            colour: np.ndarray = FLAGGED_COLOUR) -> np.ndarray:
+    """``image`` (H, W, 3) BGR uint8 with ``lines`` written at its top left on a dark band."""
+    out = image.copy()
+    for k, line in enumerate(lines):
+        y = 18 + 18 * k
+        (width, _), _ = cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)
+        cv2.rectangle(out, (4, y - 13), (10 + width, y + 5), (0, 0, 0), cv2.FILLED)
+        cv2.putText(out, line, (7, y), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    tuple(int(c) for c in colour), 1, cv2.LINE_AA)
+    return out
+
+
 _VIEW_COLOURS = np.array([
     [230, 120, 40], [40, 160, 250], [80, 200, 80], [60, 60, 220], [200, 100, 200],
     [40, 200, 220], [160, 160, 60], [140, 140, 140]], dtype=np.int64)

@@ -22,7 +22,7 @@ from backend.captures.models import Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
 from backend.quality.models import QCReport
 from backend.solve.inputs import hand_model_for, merge_labels
-from backend.solve.results import decode_result
+from backend.solve.results import decode_result, trusted_object_poses
 from backend.solve.service import current_run
 from backend.storage import get_storage
 from worker.geometry import CameraModel
@@ -209,4 +209,7 @@ def fetch_solve(content: SequenceContent) -> None:
     if solve is None or solve.arrays or solve.result_key is None:
         return
     solve.arrays = decode_result(get_storage().get_bytes(solve.result_key))
+    # A pose the solve flagged as not trusted is exported as unlabelled, as DexYCB leaves what
+    # it cannot label: every writer reads the poses from here and skips a NaN one.
+    solve.arrays["object_poses"] = trusted_object_poses(solve.arrays)
     _solved_hand(solve)

@@ -66,6 +66,10 @@ def _solve_and_store(run: SolveRun) -> tuple[dict[str, Any], dict[str, float], s
     timings["total_s"] = time.perf_counter() - started
     summary = residual_summary(result.kpt_error_px, result.depth_rms_mm, result.labelled)
     summary["solver"] = result.to_summary()
+    # Every object pose the evidence cannot pin down, with the reason ("frame F: ..."): these
+    # are exported as unlabelled.
+    summary["object_flags"] = [f"frame {f}: {flags[f]}" for f in range(len(result.labelled))
+                               for flags in result.object_flags if flags[f] is not None]
     return summary, timings, key
 
 

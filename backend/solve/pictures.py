@@ -15,12 +15,13 @@ from backend.captures.service import camera_model, sequence_cameras
 from backend.errors import Conflict, StorageError
 from backend.solve.inputs import hand_model_for, load_mesh
 from backend.solve.models import SolveRun
-from backend.solve.results import decode_result, frame_payload
+from backend.solve.results import decode_result, frame_payload, object_trust
 from backend.solve.service import check_frame, resolve_view
 from backend.storage import get_storage
 from worker.hand import HandLayer
 from worker.hand.joints import JOINT_NAMES
 from worker.overlay import (
+    caption,
     hand_mesh,
     hand_part_of_vertices,
     object_mesh,
@@ -89,16 +90,21 @@ def overlay_png(session: Session, run: SolveRun, frame: int, view: str) -> bytes
     meshes = []
     objects = list(session.scalars(select(SceneObject).where(
         SceneObject.sequence_id == run.sequence_id).order_by(SceneObject.index)))
+    _, flags = object_trust(arrays)
     for o, obj in enumerate(objects[: arrays["object_poses"].shape[0]]):
         pose = arrays["object_poses"][o, frame]
         if np.isfinite(pose).all():
             mesh = load_mesh(get_storage(), obj.mesh_key)
-            meshes.append(object_mesh(mesh.vertices, mesh.faces, pose, o))
+            meshes.append(object_mesh(mesh.vertices, mesh.faces, pose, o,
+                                      flagged=bool(flags[o, frame])))
     hand = solved_hand(arrays, frame)
     if hand is not None:
         meshes.append(hand_mesh(*hand))
     picture = render_overlay(_colour_frame(session, camera, frame), camera_model(camera), meshes)
-    return _png(picture)
+    # A flagged pose is drawn in the flag colour, and why it is not trusted is written on top.
+    reasons = [f"not trusted: {flags[o, frame]}" for o in range(flags.shape[0])
+               if flags[o, frame]]
+    return _png(caption(picture, reasons) if reasons else picture)
 
 
 def residuals_png(run: SolveRun, frame: int) -> bytes:

@@ -5,7 +5,10 @@ Arrays (F frames, V views, O objects, world frame, metres unless named):
     object_poses (O, F, 3, 4) object-to-world; labelled (F,) bool; reasons (F,) str ("" = none);
     kpt_error_px (F, V, 21) NaN where unobserved; depth_rms_mm (F,);
     landmark_vertices (L, 2) int rows [object, vertex] in landmark order; betas (K,);
-    hand_side () str; serials (V,) str; object_names (O,) str.
+    hand_side () str; serials (V,) str; object_names (O,) str;
+    object_confidence (O, F) in [0, 1]; object_flags (O, F) str, why a pose is not trusted
+    ("" = trusted). A flagged object pose is unlabelled in every export. Results stored before
+    these two arrays existed read as fully trusted (see `object_trust`).
 """
 
 from __future__ import annotations
@@ -42,6 +45,10 @@ def encode_result(result: Any, serials: list[str], object_names: list[str],
         "hand_side": np.asarray(hand_side or ""),
         "serials": np.asarray(serials, dtype=str),
         "object_names": np.asarray(object_names, dtype=str),
+        "object_confidence": np.asarray(result.object_confidence, dtype=np.float64).reshape(
+            len(object_names), -1),
+        "object_flags": np.asarray([[r or "" for r in flags] for flags in result.object_flags],
+                                   dtype=str).reshape(len(object_names), -1),
     }
     buf = io.BytesIO()
     # The keys are the arrays' names above; none of them is savez's allow_pickle keyword.
@@ -52,6 +59,33 @@ def encode_result(result: Any, serials: list[str], object_names: list[str],
 def decode_result(data: bytes) -> dict[str, np.ndarray]:
     with np.load(io.BytesIO(data), allow_pickle=False) as npz:
         return {name: npz[name] for name in npz.files}
+
+
+def object_trust(arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(O, F) confidence and (O, F) flag reasons ("" = trusted) of a result's object poses."""
+    count, frames = arrays["object_poses"].shape[:2]
+    confidence = arrays.get("object_confidence")
+    flags = arrays.get("object_flags")
+    if confidence is None or confidence.shape != (count, frames):
+        confidence = np.ones((count, frames))
+    if flags is None or flags.shape != (count, frames):
+        flags = np.full((count, frames), "", dtype=str)
+    return confidence, flags
+
+
+def trusted_object_poses(arrays: dict[str, np.ndarray]) -> np.ndarray:
+    """(O, F, 3, 4) object poses with every flagged one NaN (unlabelled)."""
+    _, flags = object_trust(arrays)
+    poses = np.array(arrays["object_poses"], dtype=np.float64)
+    poses[flags != ""] = np.nan
+    return poses
+
+
+def flag_summary(arrays: dict[str, np.ndarray]) -> list[str]:
+    """Every flagged object pose as "frame F: reason", in frame order."""
+    _, flags = object_trust(arrays)
+    return [f"frame {f}: {flags[o, f]}" for f in range(flags.shape[1])
+            for o in range(flags.shape[0]) if flags[o, f]]
 
 
 def _mean_or_none(values: np.ndarray) -> float | None:
@@ -96,6 +130,7 @@ def frame_payload(arrays: dict[str, np.ndarray], frame: int) -> dict[str, Any]:
     serials = [str(s) for s in arrays["serials"]]
     errors = arrays["kpt_error_px"][frame]
     pose_m = arrays["hand_pose_m"][frame]
+    confidence, flags = object_trust(arrays)
     return {
         "frame": frame,
         "labelled": labelled,
@@ -104,7 +139,9 @@ def frame_payload(arrays: dict[str, np.ndarray], frame: int) -> dict[str, Any]:
         "hand_joints": (_finite_or_none(arrays["hand_joints"][frame])
                         if np.isfinite(arrays["hand_joints"][frame]).all() else None),
         "objects": [{"index": o, "name": str(name),
-                     "pose": _finite_or_none(arrays["object_poses"][o, frame])}
+                     "pose": _finite_or_none(arrays["object_poses"][o, frame]),
+                     "confidence": round(float(confidence[o, frame]), 3),
+                     "flag": str(flags[o, frame]) or None}
                     for o, name in enumerate(arrays["object_names"])],
         "kpt_error_px": {serial: _finite_or_none(errors[v]) for v, serial in enumerate(serials)},
         "depth_rms_mm": _finite_or_none(arrays["depth_rms_mm"][frame]),

@@ -46,9 +46,15 @@ class SolveRunRead(BaseModel):
 
 
 class ObjectPose(BaseModel):
+    """One object's solved pose (object-to-world 3x4, metres), how well its evidence supports
+    it (confidence 0..1) and, for a pose that is not trusted, the reason (then it is exported
+    as unlabelled)."""
+
     index: int
     name: str
     pose: list[list[float | None]]
+    confidence: float = 1.0
+    flag: str | None = None
 
 
 class SolveFrameRead(BaseModel):

@@ -164,6 +164,54 @@ def _check_frame_json(client: TestClient, headers: dict, run_id: int, cameras: l
     assert np.asarray(with_mesh["hand_faces"]).shape == model.faces.shape
 
 
+def _true_world_poses(root: Path, serial: str, extrinsics: list) -> np.ndarray:
+    """(F, O, 3, 4) true object-to-world poses, from one view's labels and its extrinsics."""
+    T = np.asarray(extrinsics)
+    cam = np.stack([lab["pose_y"] for lab in _labels(root, serial)])
+    return np.concatenate([T[:, :3] @ cam[..., :3], (T[:, :3] @ cam[..., 3:]) + T[:, 3:]], -1)
+
+
+def _add_mm(vertices: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Mean distance (mm) between the model's vertices posed by a and by b (3, 4)."""
+    pa, pb = vertices @ a[:, :3].T + a[:, 3], vertices @ b[:, :3].T + b[:, 3]
+    return float(np.linalg.norm(pa - pb, axis=1).mean() * 1000.0)
+
+
+def _check_object_poses(client: TestClient, headers: dict, run: dict, cameras: list[dict],
+                        root: Path) -> None:
+    """Every object pose in every frame is within 3 mm (ADD) of the truth or flagged with a
+    reason; an object that does not move keeps its pose exactly; the grasped object is held in
+    the frames where it is lifted, its landmarks hidden in some of them."""
+    truth = _true_world_poses(root, cameras[0]["serial"], cameras[0]["extrinsics"])
+    with session_scope() as s:
+        meshes = {o.index: load_mesh(get_storage(), o.mesh_key).vertices for o in s.scalars(
+            select(SceneObject).where(SceneObject.sequence_id == run["sequence_id"]))}
+    solved = []
+    for f in range(FRAMES):
+        frame = client.get(f"/api/solve-runs/{run['id']}/frames/{f}", headers=headers).json()
+        for obj in frame["objects"]:
+            o, pose = obj["index"], np.asarray(obj["pose"], dtype=np.float64)
+            error = _add_mm(meshes[o], pose, truth[f, o])
+            assert 0.0 <= obj["confidence"] <= 1.0
+            if obj["flag"] is None:
+                assert error < 3.0, (f, o, error)
+            else:
+                assert obj["confidence"] < 1.0 and len(obj["flag"]) > 10, obj["flag"]
+        solved.append([np.asarray(obj["pose"]) for obj in frame["objects"]])
+    poses = np.asarray(solved)  # (F, O, 3, 4)
+    moving = [o for o in meshes if _add_mm(meshes[o], truth[-1, o], truth[0, o]) > 1.0]
+    assert len(moving) == 1, "the fixture lifts one object"
+    for o in meshes:
+        if o not in moving:
+            assert np.abs(poses[:, o] - poses[0, o]).max() < 1e-9, "a static object moved"
+    lifted = poses[-1, moving[0]]
+    assert _add_mm(meshes[moving[0]], lifted, truth[-1, moving[0]]) < 3.0
+    assert run["summary"]["object_flags"] == [
+        f"frame {f}: {r}" for f in range(FRAMES) for o in sorted(meshes)
+        if (r := client.get(f"/api/solve-runs/{run['id']}/frames/{f}", headers=headers)
+            .json()["objects"][o]["flag"]) is not None]
+
+
 def _check_pictures(client: TestClient, headers: dict, run_id: int, camera: dict,
                     root: Path) -> None:
     serial = camera["serial"]
@@ -215,6 +263,7 @@ def test_a_solve_run_fits_the_accepted_labels_and_serves_frames_and_pictures(
     assert run["timings"]["total_s"] > 0 and run["timings"]["gather_s"] > 0
     cameras = client.get(f"/api/sequences/{approved}", headers=admin_headers).json()["cameras"]
     _check_frame_json(client, admin_headers, run["id"], cameras, small_capture)
+    _check_object_poses(client, admin_headers, run, cameras, small_capture)
     _check_pictures(client, admin_headers, run["id"], cameras[0], small_capture)
     _check_bad_addresses(client, admin_headers, run["id"])
 

@@ -1,7 +1,8 @@
 """The default optimiser: all frames at once, Levenberg-Marquardt from triangulation.
 
 Frames do not wait for each other: the hand starts from its triangulated joints in every frame
-and objects from their landmarks, then every frame is refined in one batch. Keypoint residuals
+and is refined in one batch; objects rest at their initial pose until the evidence moves them
+and are then held, fitted with a prior of moving with the palm (see `objects`). Keypoint residuals
 are reweighted with a Cauchy loss (iteratively reweighted least squares) so that gross
 labelling errors lose their pull; depth matches are renewed a few times (ICP-style rounds);
 an optional smoothness term pulls each frame's joints towards its neighbours' mean.
@@ -17,24 +18,17 @@ import torch
 from worker.solver.energies import (
     DepthData,
     HandData,
-    ObjectData,
     hand_residuals,
-    object_residuals,
 )
-from worker.solver.init import initial_hand, initial_object_poses
+from worker.solver.init import initial_hand
 from worker.solver.jacobians import hand_jacobian
-from worker.solver.lm import levenberg_marquardt
+from worker.solver.lm import cauchy_weights, levenberg_marquardt
 from worker.solver.mapping import map_landmarks, mapped_table
-from worker.solver.problem import MappedLandmarks, Problem
-from worker.solver.projection import pose_matrix
+from worker.solver.objects import palm_poses, refit_held, solve_motion
+from worker.solver.problem import Problem
 from worker.solver.state import SolveState
 
 ROBUST_ROUNDS = 3
-
-
-def cauchy_weights(errors: np.ndarray, scale: float) -> np.ndarray:
-    """IRLS weights 1 / (1 + (e / scale)^2) of the Cauchy loss for errors (...) px."""
-    return 1.0 / (1.0 + (np.nan_to_num(errors) / scale) ** 2)
 
 
 def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, iterations: int,
@@ -75,32 +69,8 @@ def _neighbour_mean(joints: np.ndarray, frames: np.ndarray) -> np.ndarray:
     return out
 
 
-def fit_object(problem: Problem, state: SolveState, index: int, marks: MappedLandmarks,
-               depth: DepthData | None, iterations: int, rounds: int) -> None:
-    """Refine state.object_poses[index] over all frames in place."""
-    settings = problem.settings
-    frames = np.arange(problem.num_frames)
-    for _ in range(rounds):
-        robust = None
-        if settings.robust and len(marks.views):
-            robust = cauchy_weights(state.landmark_errors(problem, index, marks),
-                                    settings.robust_scale_px)
-        base = state.object_poses[index]
-        data = problem.object_data(index, frames, base, marks, robust, depth)
-        if data.vertex_ids.numel() == 0 and data.depth is None:
-            return
-
-        def residuals(d: torch.Tensor, data: ObjectData = data) -> torch.Tensor:
-            return object_residuals(d, data)
-
-        zero = torch.zeros(len(frames), 6, dtype=torch.float64, device=problem.device)
-        delta, _ = levenberg_marquardt(residuals, zero, iterations)
-        rot, trans = pose_matrix(delta, data.base)
-        state.object_poses[index] = torch.cat((rot, trans[..., None]), -1).cpu().numpy()
-
-
 def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
-    """Run the default optimiser; returns the final state (poses, mapped landmarks)."""
+    """Run the default optimiser; returns the final state (poses, mapped landmarks, motion)."""
     settings = problem.settings
     state = SolveState.empty(problem)
     tick = time.perf_counter()
@@ -110,9 +80,10 @@ def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
         fit_hand(problem, state, None, settings.lm_iterations, ROBUST_ROUNDS)
     timings["hand_keypoints"] = time.perf_counter() - tick - timings.get("hand_init", 0.0)
     tick = time.perf_counter()
+    palm = palm_poses(problem, state)
     if problem.objects:
-        _solve_objects(problem, state)
-    timings["objects_keypoints"] = time.perf_counter() - tick
+        _solve_objects(problem, state, palm)
+    timings["objects"] = time.perf_counter() - tick
     robust_mm = settings.depth_robust_mm if settings.robust else None
     for _ in range(settings.icp_rounds if problem.clouds else 0):
         tick = time.perf_counter()
@@ -125,20 +96,22 @@ def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
                                        [matches[f] for f in state.hand_frames], problem.hand_faces,
                                        robust_mm)
             fit_hand(problem, state, depth, settings.lm_iterations, 1, smooth=True)
-        for o in range(len(problem.objects)):
-            depth = problem.depth_data(o, matches, problem.object_faces[o], robust_mm)
-            fit_object(problem, state, o, state.tables[o], depth, settings.lm_iterations, 2)
+            palm = palm_poses(problem, state)
+        for o, motion in enumerate(state.motion):
+            refit_held(problem, state, o, motion, matches, palm)
         timings["depth_refine"] = timings.get("depth_refine", 0.0) + time.perf_counter() - tick
     return state
 
 
-def _solve_objects(problem: Problem, state: SolveState) -> None:
-    """Map landmarks at frame 0 (the given poses), solve, map the rest from the solved poses,
-    and solve again with all of them."""
+def _solve_objects(problem: Problem, state: SolveState, palm: np.ndarray) -> None:
+    """Map landmarks at frame 0 (the given poses), decide each object's rest and held frames
+    and fit the held ones; then map the landmarks first seen later from those poses and fit
+    again with all of them."""
     hand_at = state.hand_at(problem)
     initial = problem.initial_poses
     state.landmarks = map_landmarks(problem, state.landmarks,
                                     lambda f: initial if f == 0 else None, hand_at)
+    state.object_poses[:] = initial[:, None]
     for second_pass in (False, True):
         if second_pass:
             before = [list(v) for v in state.landmarks]
@@ -146,11 +119,6 @@ def _solve_objects(problem: Problem, state: SolveState) -> None:
                                             lambda f: state.object_poses[:, f], hand_at)
             if before == state.landmarks:
                 break
-        for o in range(len(problem.objects)):
-            table = mapped_table(problem, o, state.landmarks[o])
-            state.tables[o] = table
-            if not second_pass:
-                state.object_poses[o] = initial_object_poses(problem, o, table)
-            fit_object(problem, state, o, table, None, problem.settings.lm_iterations,
-                       ROBUST_ROUNDS)
-
+        state.tables = [mapped_table(problem, o, v) for o, v in enumerate(state.landmarks)]
+        state.motion = [solve_motion(problem, state, o, palm)
+                        for o in range(len(problem.objects))]

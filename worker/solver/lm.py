@@ -11,10 +11,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import torch
 from torch.func import jvp, vmap
 
 ResidualFn = Callable[[torch.Tensor], torch.Tensor]
+
+
+def cauchy_weights(errors: np.ndarray, scale: float) -> np.ndarray:
+    """IRLS weights 1 / (1 + (e / scale)^2) of the Cauchy loss for errors (...) px (NaN: 1)."""
+    return 1.0 / (1.0 + (np.nan_to_num(errors) / scale) ** 2)
 
 
 def jacobian(residual_fn: ResidualFn, params: torch.Tensor) -> torch.Tensor:

@@ -19,6 +19,7 @@ from worker.solver.energies import DepthData, HandData, ObjectData
 from worker.solver.hand_fk import SubjectHand
 from worker.solver.mesh_query import AABBTree
 from worker.solver.projection import Rig
+from worker.solver.surface import surface_samples
 from worker.solver.types import SolveInputs, SolveSettings
 
 
@@ -69,6 +70,12 @@ class Problem:
                                            for o in inputs.objects])
         self.clouds = DepthClouds(inputs.cameras, inputs.depth, settings.depth_stride) \
             if settings.use_depth else None
+        # Per view (F, H, W) uint16 mm for the surface checks; None without any depth.
+        self.depth_images = list(inputs.depth) if settings.use_depth and any(
+            d is not None for d in inputs.depth) else None
+        self.object_samples = [surface_samples(v, f, seed=settings.seed)
+                               for v, f in zip(self.object_vertices, self.object_faces,
+                                               strict=True)]
         self.workspace = self._workspace()
         self._setup_hand(inputs)
 

@@ -7,6 +7,7 @@ import time
 import numpy as np
 import torch
 
+from worker.solver.confidence import object_confidence
 from worker.solver.default import solve_default
 from worker.solver.paper import solve_paper
 from worker.solver.problem import Problem
@@ -53,6 +54,7 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
         joints[hf] = state.joints(problem)
         errors[hf] = np.moveaxis(state.hand_errors(problem), 0, 1)
     depth_rms = state.depth_rms_mm(problem) if problem.clouds else np.full(frames, np.nan)
+    trust = object_confidence(problem, state)
     return SolveResult(
         hand_pose_m=pose, hand_joints=joints, object_poses=state.object_poses.copy(),
         labelled=labelled, reasons=list(problem.reasons), kpt_error_px=errors,
@@ -61,7 +63,8 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
                           for v in ids] for o, ids in enumerate(state.landmarks)],
         timings=timings,
         betas=None if problem.subject is None else problem.betas.copy(),
-        side=None if problem.hand is None else problem.hand.side)
+        side=None if problem.hand is None else problem.hand.side,
+        object_confidence=trust.confidence, object_flags=trust.flags)
 
 
 def hand_vertices(result: SolveResult, inputs: SolveInputs, frame: int) -> np.ndarray:

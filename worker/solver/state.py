@@ -5,7 +5,7 @@ World frame, metres; errors in pixels.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -24,10 +24,22 @@ def hand_vertices_world(problem: Problem, pose_m: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class ObjectMotion:
+    """One object's motion over F frames: rest (F,) bool, at its initial pose; held (F,) bool,
+    moving with the hand; prior (F, 3, 4) object-to-world the hand's grip predicts (NaN where
+    none)."""
+
+    rest: np.ndarray
+    held: np.ndarray
+    prior: np.ndarray
+
+
+@dataclass
 class SolveState:
     """hand_pose: (F, 51) pose_m (meaningful on hand_frames only); hand_frames: (B,) labelled
     frame ids; object_poses: (O, F, 3, 4) object-to-world; landmarks: per object, per landmark
-    vertex id (-1 unmapped); tables: per object the mapped landmarks as arrays."""
+    vertex id (-1 unmapped); tables: per object the mapped landmarks as arrays; motion: per
+    object where it rests and where it is held (the default optimiser's; empty otherwise)."""
 
     hand_pose: np.ndarray
     hand_frames: np.ndarray
@@ -35,6 +47,7 @@ class SolveState:
     landmarks: list[list[int]]
     tables: list[MappedLandmarks]
     matches: list[Matches | None] | None = None
+    motion: list[ObjectMotion] = field(default_factory=list)
 
     @classmethod
     def empty(cls, problem: Problem) -> SolveState:

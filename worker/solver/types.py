@@ -140,6 +140,9 @@ class SolveResult:
     not be): ids from the mesh's vertex count on are surface points added for landmarks.
     landmark_points: per object, per landmark that surface point (3,) in the object's frame,
     metres (None if unmapped). timings: seconds per stage.
+    object_confidence: (O, F) in [0, 1], how well each object pose is supported by its
+    evidence (see `worker.solver.confidence`). object_flags: per object, per frame None or the
+    reason that pose is not trusted; a flagged pose is exported as unlabelled.
     """
 
     hand_pose_m: np.ndarray
@@ -154,6 +157,8 @@ class SolveResult:
     landmark_points: list[list[list[float] | None]] = field(default_factory=list)
     betas: np.ndarray | None = None
     side: str | None = None
+    object_confidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    object_flags: list[list[str | None]] = field(default_factory=list)
 
     def to_summary(self) -> dict:
         """JSON-friendly summary: counts, error statistics (px, mm), timings (s)."""
@@ -173,4 +178,8 @@ class SolveResult:
             "landmark_vertices": [list(map(int, v)) for v in self.landmark_vertices],
             "landmark_points": self.landmark_points,
             "timings": {k: float(v) for k, v in self.timings.items()},
+            "flagged_object_frames": [sum(r is not None for r in flags)
+                                      for flags in self.object_flags],
+            "object_flags": {f"{o}:{f}": r for o, flags in enumerate(self.object_flags)
+                             for f, r in enumerate(flags) if r is not None},
         }
