@@ -5,7 +5,8 @@ Layout (paths relative to a capture root; ``WxH`` is the image size)::
 
     calibration/intrinsics/<serial>_<W>x<H>.yml     color: {fx, fy, ppx, ppy[, width, height,
                                                     coeffs]} (and depth: the same, aligned)
-    calibration/extrinsics_<name>/extrinsics.yml    extrinsics: {<serial>: 12 floats}, master
+    calibration/extrinsics_<name>/extrinsics.yml    extrinsics: {<serial>: 12 floats,
+                                                    apriltag: 12 floats}, master
     calibration/mano_<calib>/mano.yml               betas: 10 floats
     models/<ycb name>/textured_simple.obj           (+ .obj.mtl, texture_map.png)
     <subject>/<sequence>/meta.yml                   serials, num_frames, ycb_ids, ycb_grasp_ind,
@@ -21,7 +22,9 @@ YCB id, 255 the hand), ``pose_y`` float32 (O, 3, 4) object-to-camera, ``pose_m``
 in the camera frame, ``joint_3d`` float32 (1, 21, 3) metres in the camera frame, ``joint_2d``
 float32 (1, 21, 2) pixels; every entry -1 where there is no label.
 
-Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres. DexYCB's own loader
+Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres; ``apriltag`` is the
+table's frame in the world (DexYCB's viewer crops its point clouds in it; its loader needs the
+entry). DexYCB's own loader
 builds K from fx, fy, ppx, ppy alone and ignores distortion: a capture written for it has
 pinhole images, so the export undistorts (``undistort_image``, ``undistort_pixels``) and says so
 in meta.yml (``META_UNDISTORTED``).
@@ -141,6 +144,7 @@ DEPTH = "depth"
 INTRINSIC_KEYS = ("fx", "fy", "ppx", "ppy")
 EXTRINSICS = "extrinsics"
 MASTER = "master"
+APRILTAG = "apriltag"
 BETAS = "betas"
 META_SERIALS = "serials"
 META_NUM_FRAMES = "num_frames"
@@ -177,11 +181,15 @@ def intrinsics_doc(fx: float, fy: float, ppx: float, ppy: float, width: int, hei
     return {COLOR: entry, DEPTH: dict(entry)}
 
 
-def extrinsics_doc(table: Mapping[str, np.ndarray], master: str) -> dict[str, Any]:
-    """extrinsics.yml: camera-to-world (3, 4) per serial as 12 row-major floats, metres."""
-    return {EXTRINSICS: {serial: [float(x) for x in np.asarray(T).reshape(-1)]
-                         for serial, T in table.items()},
-            MASTER: master}
+def extrinsics_doc(table: Mapping[str, np.ndarray], master: str,
+                   tag: np.ndarray | None = None) -> dict[str, Any]:
+    """extrinsics.yml: camera-to-world (3, 4) per serial as 12 row-major floats, metres, and
+    the table's frame in the world as ``apriltag`` (``tag``; the world origin when unknown)."""
+    poses = {serial: [float(x) for x in np.asarray(T).reshape(-1)]
+             for serial, T in table.items()}
+    frame = np.eye(4)[:3] if tag is None else np.asarray(tag, dtype=np.float64)
+    poses[APRILTAG] = [float(x) for x in frame.reshape(-1)]
+    return {EXTRINSICS: poses, MASTER: master}
 
 
 def mano_doc(betas: Sequence[float] | np.ndarray) -> dict[str, Any]:

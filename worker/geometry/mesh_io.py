@@ -156,10 +156,28 @@ def _fmt_row(row: np.ndarray) -> str:
     return " ".join(repr(float(x)) for x in row)
 
 
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit normals at the vertices: the area-weighted mean of their faces' normals
+    (+z for a vertex no face uses)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length: 2 x area
+    normals = np.zeros_like(v)
+    for corner in range(3):
+        np.add.at(normals, f[:, corner], face_n)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    unused = length[:, 0] == 0
+    normals[unused] = (0.0, 0.0, 1.0)
+    length[unused] = 1.0
+    return normals / length
+
+
 def write_obj(
     path: str | Path, mesh: Mesh, mtl_name: str | None = None, material: str = "material_0"
 ) -> None:
-    """Write ``mesh`` as an OBJ (1-based ``v/vt`` faces when textured).
+    """Write ``mesh`` as an OBJ: one group, ``vn`` vertex normals (:func:`vertex_normals`) with
+    the normal index of every corner equal to its vertex index, 1-based ``v/vt/vn`` faces when
+    textured (``v//vn`` otherwise), as DexYCB's YCB models are written and its loader expects.
 
     Args:
         path: output file.
@@ -173,15 +191,16 @@ def write_obj(
     lines += [f"v {_fmt_row(v)}" for v in np.asarray(mesh.vertices, dtype=np.float64)]
     if mesh.uvs is not None:
         lines += [f"vt {_fmt_row(t)}" for t in np.asarray(mesh.uvs, dtype=np.float64)]
+    lines += [f"vn {_fmt_row(n)}" for n in vertex_normals(mesh.vertices, mesh.faces)]
     if mtl_name is not None:
         lines.append(f"usemtl {material}")
     faces = np.asarray(mesh.faces, dtype=np.int64) + 1
     if mesh.face_uvs is None:
-        lines += [f"f {a} {b} {c}" for a, b, c in faces.tolist()]
+        lines += [f"f {a}//{a} {b}//{b} {c}//{c}" for a, b, c in faces.tolist()]
     else:
         tex = np.asarray(mesh.face_uvs, dtype=np.int64) + 1
         lines += [
-            f"f {a}/{ta} {b}/{tb} {c}/{tc}"
+            f"f {a}/{ta}/{a} {b}/{tb}/{b} {c}/{tc}/{c}"
             for (a, b, c), (ta, tb, tc) in zip(faces.tolist(), tex.tolist(), strict=True)
         ]
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -63,7 +63,8 @@ def camera_labels(world: LabelSet, T_cam_to_world: np.ndarray, cam: CameraSpec,
 def write_calibration(root: Path, cams: list[CameraSpec], extrinsics: list[np.ndarray],
                       names: dict[str, str], betas: np.ndarray, width: int, height: int) -> None:
     """calibration/: per-camera intrinsics (depth is aligned to colour, so both are the colour
-    camera's), camera-to-world extrinsics with the master serial, and the subject's betas."""
+    camera's), camera-to-world extrinsics with the master serial and the table's frame (as
+    DexYCB's ``apriltag``), and the subject's betas."""
     (root / dexycb.INTRINSICS_DIR).mkdir(parents=True)
     for cam in cams:
         K = cam.K
@@ -72,8 +73,10 @@ def write_calibration(root: Path, cams: list[CameraSpec], extrinsics: list[np.nd
                                          cam.dist))
     extr_path = root / dexycb.extrinsics_file(names["extrinsics"])
     extr_path.parent.mkdir()
+    table_to_world = invert_pose(cams[0].T_cam_to_table)  # the world is the master camera's
     write_yaml(extr_path, dexycb.extrinsics_doc(
-        {c.serial: T for c, T in zip(cams, extrinsics, strict=True)}, cams[0].serial))
+        {c.serial: T for c, T in zip(cams, extrinsics, strict=True)}, cams[0].serial,
+        tag=table_to_world))
     mano_path = root / dexycb.mano_file(names["mano_calib"])
     mano_path.parent.mkdir()
     write_yaml(mano_path, dexycb.mano_doc(betas))
