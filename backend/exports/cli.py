@@ -66,7 +66,9 @@ def export_command(
     options = {k: v for k, v in options.items() if v is not None}
     with refusing_bad_input(), session_scope() as session:
         ids = None if all_sequences else [resolve_sequence(session, s) for s in sequences or []]
-        ids = check_request(session, fmt, ids, include, options, kind_of(out))
+        ids, skipped = check_request(session, fmt, ids, include, options, kind_of(out))
+    for reason in skipped:
+        typer.secho(f"skipped: {reason}", err=True)
     try:
         with progress(f"{fmt} export", total=None) as step:
             result = run_export(fmt, ids, include, options, out,

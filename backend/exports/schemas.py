@@ -46,6 +46,9 @@ class ExportRead(BaseModel):
     include: str
     archive: str
     sequence_ids: list[int]
+    # A whole-project export leaves out the sequences that cannot be exported yet, each with
+    # the reason ("sequence 3 (s/n) has no finished solve; ...").
+    skipped: list[str]
     options: dict[str, Any]
     progress: dict[str, Any] | None
     result: dict[str, Any] | None
@@ -61,6 +64,7 @@ class ExportRead(BaseModel):
         return cls(id=job.id, status=job.status, format=str(args.get("format")),
                    include=str(args.get("include")), archive=str(args.get("archive", "zip")),
                    sequence_ids=list(args.get("sequence_ids") or []),
+                   skipped=[str(r) for r in args.get("skipped") or []],
                    options=dict(args.get("options") or {}), progress=job.progress,
                    result=result, error=job.error, created_at=job.created_at,
                    finished_at=job.finished_at,

@@ -8,7 +8,7 @@ from __future__ import annotations
 import secrets
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -50,10 +50,20 @@ class NotExportable(Conflict):
     code = "not_exportable"
 
 
+class Covered(NamedTuple):
+    """What an export covers: its sequence ids, and for a whole-project export the sequences
+    left out with the reason ("sequence 3 (s/n) has no finished solve; ...")."""
+
+    ids: list[int]
+    skipped: list[str]
+
+
 def check_request(session: Session, fmt: str, sequence_ids: list[int] | None, include: str,
-                  options: dict[str, Any], archive: str = "zip") -> list[int]:
-    """The sequence ids an export of ``fmt`` covers (all of the project's when None), once
-    every rule holds; InvalidExport (422) or NotExportable (409) naming the problem."""
+                  options: dict[str, Any], archive: str = "zip") -> Covered:
+    """The sequences an export of ``fmt`` covers once every rule holds; InvalidExport (422) or
+    NotExportable (409) naming the problem. Listed sequences must all be exportable; the whole
+    project (``sequence_ids`` None) covers those that are, skipping the others by name, and is
+    refused only when none is."""
     if fmt not in FORMATS:
         raise InvalidExport(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}",
                             field="format")
@@ -74,9 +84,24 @@ def check_request(session: Session, fmt: str, sequence_ids: list[int] | None, in
         if not ids:
             raise InvalidExport("sequences must list at least one sequence id, or ask for all",
                                 field="sequences")
+    if sequence_ids is not None:
+        for sequence_id in ids:
+            _check_sequence(session, sequence_id, fmt, include)
+        return Covered(ids, [])
+    covered, skipped = [], []
     for sequence_id in ids:
-        _check_sequence(session, sequence_id, fmt, include)
-    return ids
+        try:
+            _check_sequence(session, sequence_id, fmt, include)
+        except NotExportable as exc:
+            skipped.append(exc.detail)
+        else:
+            covered.append(sequence_id)
+    if not covered:
+        raise NotExportable(f"no sequence of the project can be exported as {fmt}: "
+                            + "; ".join(skipped[:5])
+                            + (f"; and {len(skipped) - 5} more" if len(skipped) > 5 else ""),
+                            field="sequences")
+    return Covered(covered, skipped)
 
 
 def _check_options(fmt: str, options: dict[str, Any], archive: str) -> None:
@@ -121,10 +146,10 @@ def request_export(session: Session, fmt: str, sequence_ids: list[int] | None,
     if archive not in ARCHIVES:
         raise InvalidExport(f"archive must be one of {', '.join(ARCHIVES)}, got {archive!r}",
                             field="archive")
-    ids = check_request(session, fmt, sequence_ids, include, options, archive)
+    ids, skipped = check_request(session, fmt, sequence_ids, include, options, archive)
     key = f"{JOB_KIND}:{secrets.token_hex(8)}"
     args = {"format": fmt, "sequence_ids": ids, "include": include, "options": options,
-            "archive": archive}
+            "archive": archive, "skipped": skipped}
     job = enqueue_job(session, JOB_KIND, key, args)
     job.max_attempts = 2
     job.progress = {"done": 0, "total": 0, "stage": "queued"}

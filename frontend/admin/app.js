@@ -300,6 +300,7 @@ async function exportLabels(sequenceId) {
   const format = /** @type {HTMLSelectElement} */ ($("export-format")).value;
   const status = $("export-status");
   const what = sequenceId === null ? "project" : `sequence #${sequenceId}`;
+  status.title = "";
   let job = await api.startExport(format, sequenceId === null ? null : [sequenceId]);
   while (job.status !== "done" && job.status !== "failed") {
     const p = job.progress || {};
@@ -320,7 +321,11 @@ async function exportLabels(sequenceId) {
   setTimeout(() => URL.revokeObjectURL(link.href), 60_000);
   const size = blob.size < 1e6 ? `${Math.max(1, Math.round(blob.size / 1e3))} kB`
     : `${(blob.size / 1e6).toFixed(1)} MB`;
-  status.textContent = `${format} export of ${what}: done, saved ${link.download} (${size})`;
+  const skipped = /** @type {string[]} */ (job.skipped || []);
+  status.textContent = `${format} export of ${what}: done, saved ${link.download} (${size})` +
+    (skipped.length ? `; ${job.sequence_ids.length} exported, ${skipped.length} left out ` +
+      `(${skipped[0]}${skipped.length > 1 ? "; …" : ""})` : "");
+  status.title = skipped.join("\n");
 }
 
 async function signOut() {

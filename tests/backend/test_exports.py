@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from backend.annotation.models import Assignment, Task, Track
 from backend.captures.flows import import_path
 from backend.captures.layout import read_sequence
-from backend.captures.models import Camera, Frame, Sequence
+from backend.captures.models import Camera, Frame, Sequence, Subject
 from backend.captures.service import delete_sequence
 from backend.cli import app
 from backend.config import get_settings
@@ -138,12 +138,30 @@ def test_dexycb_export_round_trips_through_the_importer_with_pinhole_labels(
                         .where(Camera.sequence_id == new_id).limit(1))
 
 
+def _unlabelled_sequence() -> int:
+    """A sequence with no tasks yet (a capture imported after the labelling)."""
+    with session_scope() as s:
+        subject = Subject(name="late-subject")
+        s.add(subject)
+        s.flush()
+        seq = Sequence(subject_id=subject.id, name="late", storage_uid="late-uid",
+                       num_frames=6, fps=30.0, source_kind="images", fingerprint="0" * 64)
+        s.add(seq)
+        s.flush()
+        return seq.id
+
+
 def test_exports_read_back_in_each_format_s_own_reader_as_the_stored_labels_and_solve(
     client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
 ) -> None:
     _solve(client, admin_headers, approved, {"optimiser": "default"})
+    unlabelled = _unlabelled_sequence()
     state = _export(client, admin_headers, {"format": "json", "all": True,
                                             "include": "submitted"})
+    # The whole project: the sequence without labels is left out, by name.
+    assert state["sequence_ids"] == [approved]
+    skipped = f"sequence {unlabelled} (late-subject/late) has no submitted labels to export"
+    assert state["skipped"] == [skipped]
     archive = _download(client, admin_headers, state)
     [name] = archive.namelist()
     document = json.loads(archive.read(name))
@@ -174,6 +192,8 @@ def test_bad_export_requests_are_refused_naming_the_problem(
 
     refused({"format": "pascal", "all": True}, 422, "format must be one of dexycb")
     refused({"format": "json", "sequences": [sequence]}, 409, "has no accepted labels")
+    refused({"format": "json", "all": True}, 409,
+            "no sequence of the project can be exported as json: sequence")
     refused({"format": "dexycb", "sequences": [sequence]}, 409, "has no finished solve")
     refused({"format": "json", "sequences": [99999]}, 404, "sequence 99999 does not exist")
     refused({"format": "json"}, 422, "either sequences")
