@@ -40,8 +40,14 @@ Prints a JSON summary on its last line:
     server_log                  counts of tracebacks and "database is locked" in its log
     stop_s                      seconds the server took to exit on SIGTERM
     load_before, load_after     the machine's 1-minute load average
+    alone_cpu_ms_per_save, alone_ms_per_save
+                                before the crowd starts, ``--alone`` saves of one annotator
+                                back to back: the server's CPU ms per save with nothing else
+                                to do (what a save costs, little moved by other load on the
+                                machine), and the wall time per save
 Usage: python bench/load.py [--db sqlite|postgres] [--annotators 200] [--seconds 60]
        [--workers 1] [--burst 100] [--bursts 2] [--seed 7] [--views 2] [--capture DIR]
+       [--alone 300]
 The PostgreSQL server is DEXLABEL_BENCH_POSTGRES_URL (default the local one as user postgres).
 """
 
@@ -385,12 +391,38 @@ async def _after_load(base: str, token: str) -> dict[str, Any]:
     return {"after_load_ms": ms}
 
 
+async def _saves_alone(client: Any, server_pid: int, who: Annotator, count: int
+                       ) -> dict[str, Any]:
+    """``count`` saves of one annotator back to back before the crowd starts: the server's CPU
+    milliseconds per save with nothing else to do (a figure that the machine's other load
+    hardly moves, unlike latencies) and the wall time per save."""
+    if count == 0:
+        return {}
+    headers = {"Authorization": f"Bearer {who.token}", "Content-Type": "application/json"}
+
+    async def save(edits: int) -> None:
+        resp = await client.put("/api/annotate/tracks", content=_body(who, edits),
+                                headers=headers)
+        resp.raise_for_status()
+        who.version = who.acked = resp.json()["version"]
+
+    for i in range(min(count, 20)):  # warm-up
+        await save(i)
+    cpu0, t0 = _tree_cpu_s(server_pid), time.perf_counter()
+    for i in range(count):
+        await save(i)
+    return {"alone_saves": count,
+            "alone_cpu_ms_per_save": round((_tree_cpu_s(server_pid) - cpu0) / count * 1000, 2),
+            "alone_ms_per_save": round((time.perf_counter() - t0) / count * 1000, 2)}
+
+
 async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Namespace,
                  database_url: str) -> dict[str, Any]:
     import httpx
 
     async with httpx.AsyncClient(base_url=base, timeout=60.0) as client:
         annotators = await _admin(client, sequence_id, args.annotators, args.seed)
+        alone = await _saves_alone(client, server_pid, annotators[0], args.alone)
         rng = random.Random(args.seed)
         stats, stop = Stats(), asyncio.Event()
         loop = asyncio.get_running_loop()
@@ -443,7 +475,7 @@ async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Na
         "bench_cpu_s": round(bench_cpu, 1),
         "bench_loop_lag_ms": {"p50": _pct(lags, 0.5), "p99": _pct(lags, 0.99),
                               "max": _pct(lags, 1.0)},
-        "run_s": round(elapsed, 1),
+        "run_s": round(elapsed, 1), **alone,
     }
 
 
@@ -458,11 +490,14 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--views", type=int, default=2, help="views of a new capture")
     parser.add_argument("--capture", type=Path, help="reuse this synthetic capture")
+    parser.add_argument("--alone", type=int, default=300,
+                        help="back-to-back saves of one annotator before the crowd (0: none)")
     args = parser.parse_args()
     if not (1 <= args.annotators <= 2000 and 1 <= args.seconds <= 1800 and 0 <= args.bursts <= 20
-            and 1 <= args.burst <= 1000 and 1 <= args.workers <= 32):
+            and 1 <= args.burst <= 1000 and 1 <= args.workers <= 32
+            and 0 <= args.alone <= 100_000):
         parser.error("out of range: --annotators 1-2000, --seconds 1-1800, --bursts 0-20, "
-                     "--burst 1-1000, --workers 1-32")
+                     "--burst 1-1000, --workers 1-32, --alone 0-100000")
 
     port = free_port()
     base = f"http://127.0.0.1:{port}"
