@@ -33,12 +33,13 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from tests.servers import wait_for  # noqa: E402
 
 from _server import isolated_workdir, start_server  # noqa: E402
 
@@ -46,16 +47,6 @@ DRILLS = ("kill-qc", "kill-solve", "redis", "lease")
 CLI = [sys.executable, "-m", "backend.cli"]
 # The drill job of the redis drill: where each run is written down, one line per run.
 RUNS_LOG = "DEXLABEL_DRILL_RUNS"
-
-
-def _wait_for(predicate: Callable[[], Any], what: str, timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise RuntimeError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
 def _worker(log: Path, threads: int = 1, **settings: str) -> subprocess.Popen[bytes]:
@@ -153,7 +144,7 @@ def drill_kill_qc() -> dict[str, Any]:
             with session_scope() as session:
                 return bool(session.scalar(select(func.count()).select_from(CrowdPayment)))
 
-        _wait_for(paid, "the first worker's first action", 300)
+        wait_for(paid, "the first worker's first action", 300)
     finally:
         _kill(first)
         killed = time.monotonic()
@@ -161,8 +152,8 @@ def drill_kill_qc() -> dict[str, Any]:
     second = _worker(log, **settings)
     procs.append(second)
     try:
-        job = _wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
-                        "the job to finish after the kill", 600)
+        job = wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
+                       "the job to finish after the kill", 600)
         recovered_s = time.monotonic() - killed
     finally:
         _stop(*procs)
@@ -180,7 +171,7 @@ def drill_lease() -> dict[str, Any]:
     started = time.monotonic()
     procs += [_worker(log, **settings), _worker(log, **settings)]
     try:
-        job = _wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
+        job = wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
                         "the QC job to finish", 900)
     finally:
         _stop(*procs)
@@ -228,7 +219,7 @@ def drill_kill_solve() -> dict[str, Any]:
     settings = {"DEXLABEL_JOB_LEASE_S": "10"}
     first = _worker(log, **settings)
     try:
-        _wait_for(lambda: run_status() == "running", "the first worker to start solving", 600)
+        wait_for(lambda: run_status() == "running", "the first worker to start solving", 600)
         time.sleep(2)  # inside the solver
     finally:
         _kill(first)
@@ -236,7 +227,7 @@ def drill_kill_solve() -> dict[str, Any]:
     status_at_kill = run_status()
     second = _worker(log, **settings)
     try:
-        job = _wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
+        job = wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
                         "the solve to finish after the kill", 1800)
         recovered_s = time.monotonic() - killed
     finally:
@@ -315,9 +306,9 @@ def _redis_under_load(database_url: str, redis: Any) -> dict[str, Any]:
                     Job.key.in_([f"drill:{n}" for n in range(int(down_at * rate),
                                                                int(up_at * rate))]))))
 
-        _wait_for(done_after_return, "a job queued during the outage to run", 600)
+        wait_for(done_after_return, "a job queued during the outage to run", 600)
         first_s = time.monotonic() - back
-        _wait_for(lambda: done() == total, "every job to run", 900)
+        wait_for(lambda: done() == total, "every job to run", 900)
         all_s = time.monotonic() - back
     finally:
         _stop(*workers)

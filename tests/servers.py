@@ -15,7 +15,9 @@ import socket
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 
 class Unavailable(RuntimeError):
@@ -34,13 +36,17 @@ def _listening(port: int) -> bool:
         return sock.connect_ex(("127.0.0.1", port)) == 0
 
 
-def _wait(predicate: object, what: str, timeout_s: float = 30.0) -> None:
+def wait_for(predicate: Callable[[], Any], what: str, timeout_s: float = 30.0,
+             interval_s: float = 0.05) -> Any:
+    """The first true value ``predicate()`` returns, polling every ``interval_s``; TimeoutError
+    naming ``what`` after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if predicate():  # type: ignore[operator]
-            return
-        time.sleep(0.05)
-    raise RuntimeError(f"timed out waiting for {what}")
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval_s)
+    raise TimeoutError(f"timed out after {timeout_s:g} s waiting for {what}")
 
 
 def _pg_bin(name: str) -> str:
@@ -113,7 +119,7 @@ class ThrowawayRedis:
         self._proc = subprocess.Popen(
             ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--save", "",
              "--appendonly", "no", "--dir", str(self.root)], stdout=log, stderr=log)
-        _wait(lambda: _listening(self.port), f"Redis on port {self.port}")
+        wait_for(lambda: _listening(self.port), f"Redis on port {self.port}")
         return self
 
     def stop(self) -> None:
@@ -121,7 +127,7 @@ class ThrowawayRedis:
             self._proc.kill()
             self._proc.wait(timeout=10)
             self._proc = None
-        _wait(lambda: not _listening(self.port), "Redis to stop")
+        wait_for(lambda: not _listening(self.port), "Redis to stop")
 
     def running(self) -> bool:
         return self._proc is not None and self._proc.poll() is None

@@ -7,13 +7,16 @@ cannot claim someone else's work by replaying an id.
 
 from __future__ import annotations
 
-from sqlalchemy import select
+from sqlalchemy import select, update
+from sqlalchemy.dialects.postgresql import insert as pg_insert
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment
 from backend.crowd.client import MTurkClient, paginate
 from backend.crowd.models import CrowdHit, CrowdSubmission
 from backend.crowd.schemas import SyncResult
+from backend.db import utcnow
 from backend.errors import Conflict
 
 COLLECTED_STATUSES = ["Submitted", "Approved", "Rejected"]
@@ -30,16 +33,24 @@ def verified_submission(session: Session, assignment: Assignment) -> CrowdSubmis
 
 
 def _accept(session: Session, ours: Assignment, record: dict) -> bool:
-    """Record a matching submission; False when already recorded."""
-    row = session.scalar(select(CrowdSubmission).where(
-        CrowdSubmission.assignment_id == ours.id))
-    if row is not None:
-        row.market_status = record["AssignmentStatus"]
-        return False
-    session.add(CrowdSubmission(assignment_id=ours.id, hit_id=record["HITId"],
-                                worker_id=record["WorkerId"],
-                                market_status=record["AssignmentStatus"]))
-    return True
+    """Record a matching submission; False when already recorded (also when a concurrent unit
+    of work, a confirm job beside a `crowd sync`, records it first: the insert then waits for
+    that one and does nothing)."""
+    insert = pg_insert if session.get_bind().dialect.name == "postgresql" else sqlite_insert
+    made = session.execute(
+        insert(CrowdSubmission).values(assignment_id=ours.id, hit_id=record["HITId"],
+                                       worker_id=record["WorkerId"],
+                                       market_status=record["AssignmentStatus"],
+                                       created_at=utcnow())
+        .on_conflict_do_nothing(index_elements=["assignment_id"])
+        .returning(CrowdSubmission.id)).scalar_one_or_none()
+    if made is not None:
+        return True
+    session.execute(update(CrowdSubmission)
+                    .where(CrowdSubmission.assignment_id == ours.id)
+                    .values(market_status=record["AssignmentStatus"])
+                    .execution_options(synchronize_session=False))
+    return False
 
 
 def accept_record(session: Session, record: dict) -> tuple[str, Assignment | None]:

@@ -9,30 +9,19 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
+from tests.servers import wait_for
 
 
 @pytest.fixture
 def database_url(tmp_path: Path) -> str:
     """SQLite only: the drill is about the worker, not the database."""
     return f"sqlite:///{tmp_path / 'test.db'}"
-
-
-def _wait_for(predicate: Callable[[], Any], what: str, timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def _state(run_id: int) -> tuple[str, str, int]:
@@ -75,8 +64,8 @@ def test_a_worker_killed_mid_solve_leaves_the_run_to_the_next_worker(
     log = tmp_path / "workers.log"
     first = _worker(env, log)
     try:
-        _wait_for(lambda: _state(run_id)[0] == "running", "the first worker to start solving",
-                  timeout_s=120)
+        wait_for(lambda: _state(run_id)[0] == "running", "the first worker to start solving",
+                 timeout_s=120, interval_s=0.1)
         time.sleep(0.5)  # inside the solver
     finally:
         first.send_signal(signal.SIGKILL)  # no clean-up runs
@@ -86,8 +75,8 @@ def test_a_worker_killed_mid_solve_leaves_the_run_to_the_next_worker(
 
     second = _worker(env, log)
     try:
-        _wait_for(lambda: _state(run_id)[1] in ("done", "failed"),
-                  "the second worker to finish the solve", timeout_s=600)
+        wait_for(lambda: _state(run_id)[1] in ("done", "failed"),
+                 "the second worker to finish the solve", timeout_s=600, interval_s=0.1)
     finally:
         second.terminate()
         second.wait(timeout=30)

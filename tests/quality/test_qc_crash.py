@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -16,21 +15,12 @@ from sqlalchemy import select
 
 from backend.db import session_scope
 from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
+from tests.servers import wait_for
 
 
 def _worker(env: dict[str, str], log: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
                             env=env, stdout=log.open("ab"), stderr=subprocess.STDOUT)
-
-
-def _wait_for(predicate, what: str, timeout_s: float = 60.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def _payments() -> list:
@@ -69,19 +59,19 @@ def test_killed_worker_mid_qc_job_is_retried_and_acts_once(crowd_url: str, qc_ca
     log = tmp_path / "workers.log"
     first = _worker({**base_env, "DEXLABEL_JOB_PAUSE_S": "60", "DEXLABEL_JOB_LEASE_S": "3"}, log)
     try:  # killed after its first action (a payment), before the other five
-        _wait_for(lambda: len(_payments()) == 1, "the first worker's first action")
+        wait_for(lambda: len(_payments()) == 1, "the first worker's first action", 60, 0.2)
     finally:
         first.send_signal(signal.SIGKILL)  # killed mid-job: no clean-up runs
         first.wait(timeout=10)
     dead = _job(key)
     assert (dead.status, dead.attempts) == ("running", 1)
-    _wait_for(lambda: dead.lease_until.replace(tzinfo=UTC) < datetime.now(UTC),
-              "the dead worker's lease to run out", timeout_s=10)
+    wait_for(lambda: dead.lease_until.replace(tzinfo=UTC) < datetime.now(UTC),
+             "the dead worker's lease to run out", timeout_s=10)
 
     second = _worker(base_env, log)
     try:
-        done = _wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
-                         "the second worker to finish the job", timeout_s=90)
+        done = wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
+                        "the second worker to finish the job", timeout_s=90, interval_s=0.2)
     finally:
         second.terminate()
         second.wait(timeout=15)
