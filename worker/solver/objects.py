@@ -1,10 +1,13 @@
 """Object poses over a sequence (default optimiser): at rest unless the evidence moves them.
 
 An object rests at its initial pose until the hand has touched it and the evidence (its
-landmarks, or depth that sees through it where it rested) puts it elsewhere. From that frame on
-it is held: it moves rigidly with the palm, so its pose in the palm's frame is one constant, the
-grip G. Each held frame is fitted to its landmarks and depth with a prior towards palm(f) G;
-the prior is what carries a frame whose landmarks are all hidden. An object that never moves
+landmarks, or depth that sees through it where it rested) puts it elsewhere. Then it is held:
+it moves rigidly with the palm, so its pose in the palm's frame is one constant, the grip G,
+taken where the hand held it still at rest (G = palm^-1 rest, averaged over those frames: the
+initial pose is exact and the palm is good to about a degree, while an object's own landmarks
+and depth can be biased by the fingers over it). Held frames start where the palm leaves that
+stillness. Each is fitted to its landmarks and depth with a prior towards palm(f) G; the prior
+is what carries a frame whose landmarks are all hidden. An object that never moves
 keeps its initial pose in every frame, exactly. World frame, metres; pixels; residuals px, mm.
 """
 
@@ -27,18 +30,22 @@ from worker.solver.triangulate import reprojection_px
 # A hand vertex this close to an object's resting surface (m) touches it; only a touched
 # object can leave its rest (the fingers close a few mm short of the surface).
 CONTACT_M = 0.02
-# A free fit this far from rest (mean distance of the model's box corners, mm) has moved: well
-# above the ~1 mm a fit of 3 px labels and depth scatters by at rest.
-DEPART_MM = 4.0
+# Landmarks whose median reprojection error at rest exceeds this (px) say it moved: the
+# robust loss's scale, about twice the median error of 3-5 px labels; a frame needs
+# DEPART_LANDMARKS seen for its median to count. Frames between the true start of the motion and
+# this evidence are recovered by comparing rest and grip frame by frame (see solve_motion).
+DEPART_PX = 8.0
+DEPART_LANDMARKS = 3
 # ... or the cameras see through this share of its surface where it rested.
 DEPART_THROUGH = 0.3
-# Median landmark error (px) of a frame whose pose may vote for the grip: a few label sigmas.
-INLIER_FIT_PX = 8.0
+# A palm that moves the grasped object's box corners less than this from one frame to the
+# next (mm) holds still (a solved palm jitters by 1-2 mm there).
+STILL_MM = 3.0
 # Consecutive frames that must agree before an object is taken as lifted.
 DEPART_RUN = 3
 # Weight of the grip prior per squared mm of mean box-corner distance: about the palm's pose
 # error (1-2 mm at the object), so that two views of landmarks or depth outweigh it.
-W_GRIP = 0.5
+W_GRIP = 1.5
 
 
 def box_corners(vertices: np.ndarray) -> np.ndarray:
@@ -160,21 +167,22 @@ def fit_poses(problem: Problem, index: int, marks: MappedLandmarks, frames: np.n
     return poses
 
 
-def departure(problem: Problem, index: int, marks: MappedLandmarks, touch: np.ndarray,
-              free: np.ndarray) -> int | None:
+def departure(problem: Problem, index: int, marks: MappedLandmarks, touch: np.ndarray
+              ) -> int | None:
     """The first frame at which object `index` has left its rest, or None: from the first
-    touched frame on, the first of DEPART_RUN frames (fewer at the clip's end) in which the
-    landmarks' own fit, free (F, 3, 4), lands DEPART_MM from rest (where two views or more
-    see landmarks) or the cameras see through its resting surface."""
+    touched frame on, the first of DEPART_RUN frames (fewer at the clip's end) in which its
+    landmarks (DEPART_LANDMARKS or more seen) reproject DEPART_PX off at rest (median), or the
+    cameras see through its resting surface."""
     touched_at = np.flatnonzero(np.cumsum(touch) > 0)
     if not len(touched_at):
         return None
     frames = problem.num_frames
     rest = np.repeat(problem.initial_poses[index][None], len(touched_at), 0)
-    corners = box_corners(np.asarray(problem.objects[index].vertices, np.float64))
     moved = np.zeros(frames, bool)
-    moved[touched_at] = ((corner_distance_mm(corners, free[touched_at], rest) > DEPART_MM)
-                         & (_landmark_views(marks, touched_at) >= 2))
+    errors = landmark_errors(problem, index, marks, touched_at, rest)
+    counted = np.isfinite(errors).sum(axis=1) >= DEPART_LANDMARKS
+    if counted.any():
+        moved[touched_at[counted]] = np.nanmedian(errors[counted], axis=1) > DEPART_PX
     if problem.depth_images is not None:
         support = depth_support(problem.cameras, problem.depth_images,
                                 problem.object_samples[index], rest, touched_at)
@@ -196,68 +204,75 @@ def grip(palm: np.ndarray, poses: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return np.concatenate([rot, np.einsum("b,bi->i", w, rel[:, :, 3])[:, None]], axis=1)
 
 
-def _grip_prior(problem: Problem, index: int, marks: MappedLandmarks, held: np.ndarray,
-                palm: np.ndarray, poses: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """(B, 3, 4) palm(f) G at the held frames (B,), G from their poses (B, 3, 4) where two
-    views or more see landmarks that fit (median within INLIER_FIT_PX), else `fallback` (3, 4)."""
-    errors = landmark_errors(problem, index, marks, held, poses)
-    fit = np.full(len(held), np.inf)
-    some = np.isfinite(errors).any(axis=1)
-    if some.any():
-        fit[some] = np.nanmedian(errors[some], axis=1)
-    good = (_landmark_views(marks, held) >= 2) & (fit < INLIER_FIT_PX)
-    hold = grip(palm[held], poses, good.astype(np.float64)) if good.sum() >= 2 else fallback
-    return compose_poses(palm[held], hold)
-
-
 def solve_motion(problem: Problem, state: SolveState, index: int,
                  palm: np.ndarray) -> ObjectMotion:
-    """Decide where object `index` rests and where it is held; fit the held frames to their
-    landmarks and the grip prior (writes state.object_poses[index]; depth comes later)."""
+    """Decide where object `index` rests and where it is held; fit the grip and the held
+    frames to their landmarks (writes state.object_poses[index]; depth comes later)."""
     frames = problem.num_frames
     marks = state.tables[index]
     initial = problem.initial_poses[index]
     rest = np.ones(frames, bool)
-    prior = np.full((frames, 3, 4), np.nan)
     state.object_poses[index] = initial
-    every = np.arange(frames)
-    free = fit_poses(problem, index, marks, every, initial_object_poses(problem, index, marks),
-                     None, None, 3)
-    start = departure(problem, index, marks, touched(problem, state, index), free)
+    touch = touched(problem, state, index)
+    start = departure(problem, index, marks, touch)
     if start is None:
-        return ObjectMotion(rest, ~rest, prior)
+        return ObjectMotion(rest, ~rest, np.full((frames, 3, 4), np.nan))
     rest[start:] = False
-    held = np.flatnonzero(~rest)
     if not np.isfinite(palm[0]).all():
-        state.object_poses[index, held] = free[held]
-        return ObjectMotion(rest, ~rest, prior)
-    # Just before it leaves, the object still rests where it was: the grip if no frame says.
-    before = max(start - 1, 0)
-    fallback = compose_poses(invert_pose(palm[before]), initial)
-    prior[held] = _grip_prior(problem, index, marks, held, palm, free[held], fallback)
-    poses = fit_poses(problem, index, marks, held, prior[held], None, prior[held], 3)
-    prior[held] = _grip_prior(problem, index, marks, held, palm, poses, fallback)
-    state.object_poses[index, held] = fit_poses(problem, index, marks, held, poses, None,
+        # No hand to move with: each frame from its own landmarks and, later, depth.
+        held = np.flatnonzero(~rest)
+        starts = initial_object_poses(problem, index, marks)[held]
+        state.object_poses[index, held] = fit_poses(problem, index, marks, held, starts, None,
+                                                    None, 3)
+        return ObjectMotion(rest, ~rest, np.full((frames, 3, 4), np.nan))
+    # The hand closes on the resting object and holds still before lifting it: the grip is
+    # the mean of palm(k)^-1 rest over those still frames (the palm's own frame-to-frame error
+    # averages out); the frame before the departure if none is still.
+    first = int(np.flatnonzero(np.cumsum(touch) > 0)[0])
+    still = _still_frames(problem, index, palm, np.arange(max(first, 1), start), touch)
+    if not len(still):
+        still = np.array([max(start - 1, 0)])
+    hold = grip(palm[still], np.repeat(initial[None], len(still), 0), np.ones(len(still)))
+    # Once the palm has moved on from holding still, the object moves with it: rest and grip
+    # agree while the palm is still, so the frames after the last still one are held.
+    rest[still[-1] + 1:] = False
+    held = np.flatnonzero(~rest)
+    prior = np.full((frames, 3, 4), np.nan)
+    prior[held] = compose_poses(palm[held], hold)
+    state.object_poses[index, held] = fit_poses(problem, index, marks, held, prior[held], None,
                                                 prior[held], 2)
-    return ObjectMotion(rest, ~rest, prior)
+    return ObjectMotion(rest, ~rest, prior, hold)
+
+
+def _still_frames(problem: Problem, index: int, palm: np.ndarray, frames: np.ndarray,
+                  touch: np.ndarray) -> np.ndarray:
+    """The touched frames among frames (B,) where the palm moves object `index`, if it held
+    it at rest, by less than STILL_MM from the frame before."""
+    if not len(frames):
+        return frames
+    initial = problem.initial_poses[index]
+    corners = box_corners(np.asarray(problem.objects[index].vertices, np.float64))
+    in_palm = compose_poses(invert_pose(palm[frames]), initial)
+    moved = corner_distance_mm(corners, compose_poses(palm[frames - 1], in_palm),
+                               np.repeat(initial[None], len(frames), 0))
+    return frames[touch[frames] & (moved < STILL_MM)]
 
 
 def refit_held(problem: Problem, state: SolveState, index: int, motion: ObjectMotion,
                matches: list[Matches | None] | None, palm: np.ndarray) -> None:
-    """Refit the held frames of object `index` from their current poses with new depth
-    matches, the grip estimated again from them."""
+    """Refit the held frames of object `index` with new depth matches, the grip prior moved
+    with the palm as the hand's depth refit has moved it."""
     held = np.flatnonzero(motion.held)
     if not len(held):
         return
     marks = state.tables[index]
     prior = None
-    if np.isfinite(motion.prior[held]).all():
-        current = state.object_poses[index, held]
-        fallback = compose_poses(invert_pose(palm[held[0]]), motion.prior[held[0]])
-        motion.prior[held] = _grip_prior(problem, index, marks, held, palm, current, fallback)
+    if motion.grip is not None:
+        motion.prior[held] = compose_poses(palm[held], motion.grip)
         prior = motion.prior[held]
     state.object_poses[index, held] = fit_poses(
-        problem, index, marks, held, state.object_poses[index, held], matches, prior, 2)
+        problem, index, marks, held, state.object_poses[index, held] if prior is None else prior,
+        matches, prior, 2)
 
 
 def _landmark_views(marks: MappedLandmarks, frames: np.ndarray) -> np.ndarray:

@@ -27,11 +27,12 @@ def hand_vertices_world(problem: Problem, pose_m: np.ndarray) -> np.ndarray:
 class ObjectMotion:
     """One object's motion over F frames: rest (F,) bool, at its initial pose; held (F,) bool,
     moving with the hand; prior (F, 3, 4) object-to-world the hand's grip predicts (NaN where
-    none)."""
+    none); grip (3, 4) the object's pose in the palm's frame while held (None: no hand)."""
 
     rest: np.ndarray
     held: np.ndarray
     prior: np.ndarray
+    grip: np.ndarray | None = None
 
 
 @dataclass
