@@ -28,6 +28,10 @@ from worker.hand.joints import JOINT_NAMES
 Step = Callable[[], None]
 
 
+# Object and hand meshes kept in memory between uses: a sequence's objects, many times over.
+MESHES_KEPT = 32
+
+
 class Exporter:
     def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
         self.archive, self.options, self.include = archive, options, include
@@ -36,9 +40,15 @@ class Exporter:
         self.frames_written = 0
 
     def mesh(self, key: str) -> Mesh:
-        if key not in self._meshes:
-            self._meshes[key] = load_mesh(self.storage, key)
-        return self._meshes[key]
+        """The mesh at ``key``, from the few most recently used (each sequence keeps its own
+        models, so a cache of every mesh seen would grow with the project)."""
+        mesh = self._meshes.pop(key, None)
+        if mesh is None:
+            mesh = load_mesh(self.storage, key)
+        self._meshes[key] = mesh  # newest last
+        while len(self._meshes) > MESHES_KEPT:
+            del self._meshes[next(iter(self._meshes))]
+        return mesh
 
     def add(self, content: SequenceContent, step: Step) -> None:
         raise NotImplementedError
