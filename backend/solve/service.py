@@ -1,9 +1,11 @@
 """Solve rules: who may be solved, runs, reading a run's outputs. Services flush, never commit.
 
-A sequence can be solved once every object has an initial pose, its hand has betas (the
-subject's shape) and at least one assignment has been approved. A request creates a run and
-queues the ``solve`` job; the run's outputs become the sequence's current result only when the
-job finishes, so a re-run (or a failed one) never hides the previous result.
+A sequence can be solved once its hand has betas (the subject's shape) and at least one
+assignment has been approved. An object without an initial pose gets one fitted to frame 0 by
+the solve, which fails, naming the object and why, where that fit fails (then an admin gives
+it). A request creates a run and queues the ``solve`` job; the run's outputs become the
+sequence's current result only when the job finishes, so a re-run (or a failed one) never
+hides the previous result.
 """
 
 from __future__ import annotations
@@ -53,12 +55,6 @@ def job_key(run_id: int) -> str:
 
 def check_ready(session: Session, seq: Sequence) -> None:
     """Raise SolveNotReady naming the first thing the sequence lacks."""
-    for obj in seq.objects:
-        if obj.initial_pose is None:
-            raise SolveNotReady(
-                f"object '{obj.name}' has no initial pose; give one with PUT "
-                f"/api/sequences/{seq.id}/objects/{obj.index}/initial-pose or in the capture "
-                "(pose.npz)", object_index=obj.index)
     for hand in seq.hands:
         if not hand.betas:
             raise SolveNotReady(

@@ -123,10 +123,11 @@ class TestDepthTerm:
 
 
 class TestInputChecks:
-    def test_object_without_initial_pose_is_refused(self):
+    def test_object_without_initial_pose_or_depth_to_fit_one_is_refused(self):
         inputs, _, _ = _scene(0.5, with_depth=False)
         inputs.objects[0].initial_pose = None
-        with pytest.raises(ValueError, match="no initial pose"):
+        with pytest.raises(ValueError, match=r"objects\[0\] \(box\) has no initial pose and "
+                           "none could be fitted to frame 0: there is no depth to fit it to"):
             solve(inputs)
 
     def test_wrong_keypoint_shape_names_the_actual_shape(self):

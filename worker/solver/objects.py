@@ -36,6 +36,7 @@ CONTACT_M = 0.02
 # this evidence are recovered by comparing rest and grip frame by frame (see solve_motion).
 DEPART_PX = 8.0
 DEPART_LANDMARKS = 3
+DEPART_NOISE = 2.5
 # ... or the cameras see through this share of its surface where it rested.
 DEPART_THROUGH = 0.3
 # A palm that moves the grasped object's box corners less than this from one frame to the
@@ -171,18 +172,27 @@ def departure(problem: Problem, index: int, marks: MappedLandmarks, touch: np.nd
               ) -> int | None:
     """The first frame at which object `index` has left its rest, or None: from the first
     touched frame on, the first of DEPART_RUN frames (fewer at the clip's end) in which its
-    landmarks (DEPART_LANDMARKS or more seen) reproject DEPART_PX off at rest (median), or the
-    cameras see through its resting surface."""
+    landmarks (DEPART_LANDMARKS or more seen) reproject DEPART_PX off at rest (median; or
+    DEPART_NOISE times the median of the untouched frames, if larger), or the cameras see
+    through its resting surface."""
     touched_at = np.flatnonzero(np.cumsum(touch) > 0)
     if not len(touched_at):
         return None
     frames = problem.num_frames
     rest = np.repeat(problem.initial_poses[index][None], len(touched_at), 0)
     moved = np.zeros(frames, bool)
-    errors = landmark_errors(problem, index, marks, touched_at, rest)
+    errors = landmark_errors(problem, index, marks, np.arange(frames),
+                             np.repeat(problem.initial_poses[index][None], frames, 0))
     counted = np.isfinite(errors).sum(axis=1) >= DEPART_LANDMARKS
-    if counted.any():
-        moved[touched_at[counted]] = np.nanmedian(errors[counted], axis=1) > DEPART_PX
+    median = np.full(frames, np.nan)
+    median[counted] = np.nanmedian(errors[counted], axis=1)
+    # Noisier labels scatter more at rest: the threshold grows with what the untouched frames
+    # (surely at rest) show.
+    untouched = median[:touched_at[0]]
+    limit = DEPART_PX
+    if np.isfinite(untouched).any():
+        limit = max(DEPART_PX, DEPART_NOISE * float(np.nanmedian(untouched)))
+    moved[touched_at] = median[touched_at] > limit
     if problem.depth_images is not None:
         support = depth_support(problem.cameras, problem.depth_images,
                                 problem.object_samples[index], rest, touched_at)

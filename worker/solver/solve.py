@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -9,6 +10,7 @@ import torch
 
 from worker.solver.confidence import object_confidence
 from worker.solver.default import solve_default
+from worker.solver.initial_pose import fit_initial_pose
 from worker.solver.paper import solve_paper
 from worker.solver.problem import Problem
 from worker.solver.state import SolveState, hand_vertices_world
@@ -19,8 +21,10 @@ from worker.solver.validate import check_inputs
 def solve(inputs: SolveInputs, settings: SolveSettings | None = None) -> SolveResult:
     """Fit the hand's MANO pose and the objects' 6D poses in every frame (world frame).
 
-    Raises ValueError (naming the field and its actual shape) on unusable input, including an
-    object without an initial pose; RuntimeError if settings.device is CUDA and none exists.
+    An object without an initial pose gets one fitted to frame 0's depth and landmarks
+    (`worker.solver.initial_pose`). Raises ValueError (naming the field and its actual shape)
+    on unusable input, including an object without an initial pose whose fit fails (naming it
+    and why); RuntimeError if settings.device is CUDA and none exists.
     """
     settings = settings or SolveSettings()
     check_inputs(inputs, settings)
@@ -28,6 +32,8 @@ def solve(inputs: SolveInputs, settings: SolveSettings | None = None) -> SolveRe
         raise RuntimeError(f"device {settings.device!r} was asked for but CUDA is not available")
     start = time.perf_counter()
     timings: dict[str, float] = {}
+    inputs = with_initial_poses(inputs, settings)
+    timings["initial_fit"] = time.perf_counter() - start
     problem = Problem(inputs, settings)
     timings["setup"] = time.perf_counter() - start
     if settings.optimiser == "paper":
@@ -40,6 +46,26 @@ def solve(inputs: SolveInputs, settings: SolveSettings | None = None) -> SolveRe
     timings["total"] = time.perf_counter() - start
     timings["per_frame"] = timings["total"] / problem.num_frames
     return result
+
+
+def with_initial_poses(inputs: SolveInputs, settings: SolveSettings) -> SolveInputs:
+    """The inputs with every missing initial pose fitted to frame 0's depth and landmarks
+    (`initial_pose`); ValueError naming the object and why where that fit fails."""
+    objects = []
+    for i, obj in enumerate(inputs.objects):
+        if obj.initial_pose is None:
+            depth: list[np.ndarray | None] = list(inputs.depth) if settings.use_depth \
+                else [None] * len(inputs.cameras)
+            fit = fit_initial_pose(inputs.cameras, depth, obj.vertices, obj.faces,
+                                   obj.landmarks, settings.seed)
+            if fit.pose is None:
+                raise ValueError(
+                    f"objects[{i}] ({obj.name}) has no initial pose and none could be fitted "
+                    f"to frame 0: {fit.reason}; give its pose at frame 0 (initial_pose, a 3x4 "
+                    "object-to-world matrix)")
+            obj = dataclasses.replace(obj, initial_pose=fit.pose)
+        objects.append(obj)
+    return dataclasses.replace(inputs, objects=objects)
 
 
 def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> SolveResult:

@@ -46,8 +46,9 @@ class Landmark:
 class ObjectTarget:
     """One rigid object: its mesh (object frame, metres), pose at frame 0 and landmarks.
 
-    vertices: (N, 3) metres. faces: (M, 3) int. initial_pose: (3, 4) object-to-world at frame 0,
-    required (the solver refuses None). landmarks: usually 2 per view.
+    vertices: (N, 3) metres. faces: (M, 3) int. initial_pose: (3, 4) object-to-world at frame 0;
+    None: fitted to frame 0's depth and landmarks, the solve refused where that fit fails.
+    landmarks: usually 2 per view.
     """
 
     name: str

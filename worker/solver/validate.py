@@ -48,10 +48,8 @@ def check_inputs(inputs: SolveInputs, settings: SolveSettings) -> None:
 
 def _check_object(i: int, obj: ObjectTarget, views: int, frames: int) -> None:
     name = f"objects[{i}] ({obj.name})"
-    if obj.initial_pose is None:
-        raise ValueError(f"{name} has no initial pose: the solver needs each object's pose at "
-                         "frame 0 (initial_pose, a 3x4 object-to-world matrix)")
-    _shape(f"{name}.initial_pose", obj.initial_pose, (3, 4))
+    if obj.initial_pose is not None:
+        _shape(f"{name}.initial_pose", obj.initial_pose, (3, 4))
     vertices = _shape(f"{name}.vertices", obj.vertices, (None, 3))
     faces = _shape(f"{name}.faces", obj.faces, (None, 3))
     if len(faces) == 0 or faces.min() < 0 or faces.max() >= len(vertices):
