@@ -39,8 +39,8 @@ def _scene(model: np.ndarray, faces: np.ndarray):
     marks = []
     for v, cam in enumerate(cams):
         seen = visible_vertices(cam, world, faces)
-        for vid in seen[:: max(len(seen) // 3, 1)][:3]:
-            marks.append(Landmark(v, cam.project(world[vid])[None], np.ones(1, bool)))
+        marks.extend(Landmark(v, cam.project(world[vid])[None], np.ones(1, bool))
+                     for vid in seen[:: max(len(seen) // 3, 1)][:3])
     return cams, depth, marks
 
 
