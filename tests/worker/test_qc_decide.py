@@ -15,6 +15,8 @@ from worker.quality.evaluate import assignment_plan, confusion, evaluate_hand_qc
 from worker.quality.metrics import AssignmentQC
 
 NAMES = list(JOINT_NAMES)
+# The review bounds of the median error, (strictest, most lenient) px.
+REVIEW_MEDIAN = QCThresholds().bounds["median_error_px"].review
 
 
 def _metrics(**overrides) -> dict:
@@ -41,11 +43,12 @@ def thresholds() -> dict[str, float]:
 
 class TestLearnThresholds:
     def test_threshold_is_median_plus_k_robust_sigmas_inside_the_bounds(self):
-        errors = np.array([3.4, 3.5, 3.6, 3.7, 3.8, 3.9, 4.0, 4.1, 4.2])
+        lo, hi = REVIEW_MEDIAN
+        errors = np.linspace(lo - 0.6, lo, 9)
         learned = learn_thresholds([_metrics(median_error_px=float(e)) for e in errors])
         mad = np.median(np.abs(errors - np.median(errors)))
         expected = np.median(errors) + 3.0 * 1.4826 * mad
-        assert 3.5 < expected < 5.0
+        assert lo < expected < hi
         assert learned["median_error_px.review_above"] == pytest.approx(expected)
 
     def test_a_minority_of_bad_workers_barely_moves_the_threshold(self):
@@ -60,12 +63,12 @@ class TestLearnThresholds:
     def test_bounds_clamp_a_bad_population_and_a_tight_one(self):
         bad_pool = learn_thresholds([_metrics(median_error_px=30.0 + i) for i in range(20)])
         tight_pool = learn_thresholds([_metrics(median_error_px=2.0) for _ in range(20)])
-        assert bad_pool["median_error_px.review_above"] == 5.0
-        assert tight_pool["median_error_px.review_above"] == 3.5
+        assert bad_pool["median_error_px.review_above"] == REVIEW_MEDIAN[1]
+        assert tight_pool["median_error_px.review_above"] == REVIEW_MEDIAN[0]
 
     def test_small_population_uses_the_strict_end_of_the_bounds(self):
         learned = learn_thresholds([_metrics()] * 3)
-        assert learned["median_error_px.review_above"] == 3.5
+        assert learned["median_error_px.review_above"] == REVIEW_MEDIAN[0]
         assert learned["motion_ratio.review_below"] == 0.6
 
     def test_keys_say_which_way_each_threshold_cuts_and_bounds_are_configurable(self):

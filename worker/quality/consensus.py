@@ -53,7 +53,20 @@ from worker.quality.metrics import (
     surface_check,
     track_metrics,
 )
-from worker.quality.swaps import find_swaps, swap_corrections, undo_swaps
+from worker.quality.motion import TargetMotion, moved_with, others_motion, track_jitter
+from worker.quality.support import (
+    MIN_VIEWS,
+    normalised_errors,
+    reference_spread,
+    spread_px,
+)
+from worker.quality.swaps import (
+    find_swaps,
+    moved_joints,
+    overlaps,
+    swap_corrections,
+    undo_swaps,
+)
 
 # Rayleigh median / sigma: the median pixel distance of isotropic 2-D noise with per-axis sigma.
 _RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
@@ -85,8 +98,15 @@ class HandOptions:
     reliability_points: points sampled to measure each label's reliability (its inlier rate).
     min_sigma_px: floor of a label's estimated noise in the re-weighting.
     min_vote: floor of a label's vote (its inlier rate) when hypotheses are compared.
-    swap_refits: times the consensus is refitted with detected swaps undone.
+    swap_refits: times the consensus is refitted with detected swaps undone (the clearest
+        first: a second round judges labels the first one's correction cleared).
+    min_reliability: a label whose inlier rate is below this does not count as one of the two
+        other views a verdict needs (a spammer's or a frozen track's chance agreement).
+    suspect_vote: factor on the vote of a label found swapping when the consensus is refitted.
     cauchy_k: the robust refinement's Cauchy scale, in multiples of each label's own noise.
+    label_sigma_px: per-axis noise of a careful label (2 px at 640x480, keyframes and
+        interpolation included: what the simulated careful annotator measures against the
+        truth); errors are normalised to it through the reference's spread (support.py).
     surface_margin_m, hidden_margin_m: depth margins of the visibility check (see metrics).
     """
 
@@ -95,8 +115,11 @@ class HandOptions:
     reliability_points: int = 48
     min_sigma_px: float = 1.0
     min_vote: float = 0.05
-    swap_refits: int = 1
+    swap_refits: int = 2
+    suspect_vote: float = 0.25
+    min_reliability: float = 0.5
     cauchy_k: float = 2.5
+    label_sigma_px: float = 2.0
     surface_margin_m: float = SURFACE_MARGIN_M
     hidden_margin_m: float = HIDDEN_MARGIN_M
 
@@ -204,22 +227,29 @@ def _distinct_views(inliers: np.ndarray, views: np.ndarray) -> np.ndarray:
 @dataclass
 class _Fit:
     """A consensus fit over N = F * P points and L labels: pixels (N, L, 2) observations,
-    points (N, 3) world m, inliers (N, L), loo (N, L, 2) leave-one-out residuals px, views (L,),
-    reliability (L,) inlier rates, weights (L,) 1 / sigma^2 per label."""
+    points (N, 3) world m, inliers (N, L), loo (N, L, 2) leave-one-out residuals px, spread
+    (N, L, 2, 2) px^2 covariance of each leave-one-out reference in the label's view (NaN
+    without two other views), views (L,), reliability (L,) inlier rates, weights (L,)
+    1 / sigma^2 per label, trusted (L,) the labels that count as a view behind a verdict (by
+    their first reliability: a cut vote of a suspected swapper does not change it)."""
 
     pixels: np.ndarray
     points: np.ndarray
     inliers: np.ndarray
     loo: np.ndarray
+    spread: np.ndarray
     views: np.ndarray
     reliability: np.ndarray
     weights: np.ndarray
+    trusted: np.ndarray
 
 
 def _solve(cams: list[CameraModel], pixels: np.ndarray, views: np.ndarray,
-           reliability: np.ndarray, opts: HandOptions, weights: np.ndarray | None = None
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Robust points, inliers, leave-one-out residuals and label weights of ``pixels``."""
+           reliability: np.ndarray, opts: HandOptions, weights: np.ndarray | None = None,
+           trusted: np.ndarray | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Robust points, inliers, leave-one-out residuals, their references' spread and label
+    weights of ``pixels``."""
     pairs = _hypothesis_pairs(cams, views, reliability, opts)
     # A label's vote counts by its reliability, so that a spammer's point that happens to lie
     # near the epipolar line of a good one cannot outvote a true two-view point; the floor keeps
@@ -241,44 +271,100 @@ def _solve(cams: list[CameraModel], pixels: np.ndarray, views: np.ndarray,
     errors = reprojection_errors(stack, pixels, points)
     effective = weights * cauchy_weights(np.where(inliers, errors, 0.0), scales)
     loo = leave_one_out_residuals(cams, pixels, points, inliers, effective)
-    return points, inliers, loo, weights
+    spread = reference_spread(stack, points, inliers, effective, views,
+                              trusted=_trusted(reliability, opts) if trusted is None else trusted)
+    return points, inliers, loo, spread, weights
+
+
+def _trusted(reliability: np.ndarray, opts: HandOptions) -> np.ndarray:
+    return np.asarray(reliability >= opts.min_reliability)
 
 
 def _fit(cameras: list[CameraModel], labels: list[ViewLabels], opts: HandOptions,
-         previous: _Fit | None = None) -> _Fit:
+         previous: _Fit | None = None, reliability: np.ndarray | None = None,
+         also: np.ndarray | None = None) -> _Fit:
     """The consensus of ``labels``; with ``previous`` (a fit of the same labels before some
-    were corrected) only the points whose observations changed are solved again."""
+    were corrected) only the points whose observations changed, and the rows ``also`` (N,)
+    bool, are solved again, with ``reliability`` (L,) if given."""
     cams = [cameras[lab.view] for lab in labels]
     views = np.array([lab.view for lab in labels])
     pixels = _observations(labels)
     if previous is None:
         reliability = _label_reliability(cams, pixels, opts)
-        points, inliers, loo, weights = _solve(cams, pixels, views, reliability, opts)
-        return _Fit(pixels, points, inliers, loo, views, reliability, weights)
+        points, inliers, loo, spread, weights = _solve(cams, pixels, views, reliability, opts)
+        return _Fit(pixels, points, inliers, loo, spread, views, reliability, weights,
+                    _trusted(reliability, opts))
     same = np.isclose(pixels, previous.pixels, equal_nan=True).all(axis=(1, 2))
-    rows = np.flatnonzero(~same)
+    rows = np.flatnonzero(~same | (False if also is None else also))
     fit = _Fit(pixels, previous.points.copy(), previous.inliers.copy(), previous.loo.copy(),
-               views, previous.reliability, previous.weights)
+               previous.spread.copy(), views,
+               previous.reliability if reliability is None else reliability,
+               previous.weights if reliability is None
+               else previous.weights * np.divide(reliability, previous.reliability,
+                                                 out=np.ones(len(reliability)),
+                                                 where=previous.reliability > 0),
+               previous.trusted)
     if rows.size:
-        solved = _solve(cams, pixels[rows], views, fit.reliability, opts, fit.weights)
-        fit.points[rows], fit.inliers[rows], fit.loo[rows] = solved[:3]
+        solved = _solve(cams, pixels[rows], views, fit.reliability, opts, fit.weights,
+                        fit.trusted)
+        fit.points[rows], fit.inliers[rows], fit.loo[rows], fit.spread[rows] = solved[:4]
     return fit
 
 
-def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors: np.ndarray,
-            outlier: np.ndarray, other_views: np.ndarray, surface: SurfaceCheck | None,
+@dataclass
+class _Judged:
+    """One label against its leave-one-out references, (F, P) each unless named: errors px
+    normalised to the reference's spread (NaN where not scored: fewer than two other views),
+    raw px distances, other_views (distinct views behind the reference), reference (F, P, 2)
+    px where the other views place each point, spread (F, P, 2, 2) px^2 its covariance."""
+
+    errors: np.ndarray
+    raw: np.ndarray
+    other_views: np.ndarray
+    reference: np.ndarray
+    spread: np.ndarray
+
+
+# The hand counts as moving when the other labels' joints get this far (median over labels, px)
+# from where they were first placed: ten careful clicks' noise.
+HAND_MOVES_PX = 20.0
+# A label scored on less than this share of its visible points is provisional: the other
+# views agree too rarely (or too few views are in) to judge it.
+MIN_SCORED_FRACTION = 0.25
+
+
+def _issues(judged: _Judged, outlier_px: float) -> list[dict]:
+    """Spans where a point is far off by the normalised error, told in raw pixels."""
+    issues = error_issues(judged.errors, outlier_px, judged.other_views)
+    for issue in issues:
+        first, last = issue["frames"]
+        span = judged.raw[first:last + 1, issue["point"]]
+        span = span[np.isfinite(judged.errors[first:last + 1, issue["point"]]) & np.isfinite(span)]
+        if span.size:
+            issue["error_px"] = num(np.median(span), 1)
+    return issues
+
+
+def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged: _Judged,
+            surface: SurfaceCheck | None, motion: TargetMotion | None,
             opts: HandOptions) -> AssignmentQC:
-    """Metrics of one label. consensus (F, P, 3) world m; errors, outlier, other_views (F, P):
-    leave-one-out error px (NaN where not scored), not an inlier, other distinct views;
-    surface: the view's depth map looked up at the consensus (None without depth)."""
+    """Metrics of one label. consensus (F, P, 3) world m; judged: the label against its
+    leave-one-out references; surface: the view's depth map looked up at the consensus (None
+    without depth); motion: the hand's motion as the other labels' own tracks show it."""
     xy = np.asarray(lab.xy, dtype=np.float64)
     visible = np.asarray(lab.visible, bool)
-    reference = camera.project(consensus)
-    # Motion and jitter are measured only where two other views fix the point without this label.
-    judged_reference = np.where((other_views >= 2)[..., None], reference, np.nan)
+    errors = judged.errors
+    # Motion and jitter are measured only where two other trusted views fix the point without
+    # this label (support.MIN_OTHER_VIEWS).
+    fixed = np.isfinite(judged.spread).all(axis=(-1, -2))
+    judged_reference = np.where(fixed[..., None], camera.project(consensus), np.nan)
     scored = np.isfinite(errors)
     metrics = error_summary(errors)
-    metrics["outlier_fraction"] = num(outlier[scored].mean()) if scored.any() else None
+    metrics["outlier_fraction"] = num((errors[scored] > opts.outlier_px).mean()) \
+        if scored.any() else None
+    metrics["raw_median_error_px"] = num(np.median(judged.raw[scored])) if scored.any() else None
+    spread = spread_px(judged.spread)
+    metrics["reference_spread_px"] = num(np.median(spread[scored])) if scored.any() else None
     vis_metrics = dict.fromkeys(("visibility_disagreement", "occluded_on_surface",
                                  "visible_behind_surface"))
     if surface is not None:
@@ -286,13 +372,26 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, errors:
     metrics.update(vis_metrics)
     metrics.update(track_metrics(xy, visible, judged_reference, lab.working_time_s))
     metrics["scored_fraction"] = num(scored.mean())
+    # Checks of the label's own track, which hold where the views cannot decide.
+    shown_xy = np.where(visible[..., None], xy, np.nan)
+    metrics["track_jitter_px"] = track_jitter(shown_xy)
+    shown = visible & np.isfinite(xy).all(axis=-1)
+    provisional = bool(scored.sum() / max(int(shown.sum()), 1) < MIN_SCORED_FRACTION)
+    # Where the views cannot decide, the track against the other views' own tracks: the
+    # same clip's motion shakes every view's track alike, what is left over is the worker's
+    # hand. (Views see the motion at different scales, so where a consensus judges the
+    # label, its errors and jitter_px say more.)
+    own = track_jitter(xy)
+    metrics["track_jitter_ratio"] = num(own / motion.jitter) if provisional and own \
+        is not None and motion is not None and motion.jitter else None
+    metrics["moved_with_hand"] = moved_with(xy, motion, HAND_MOVES_PX) \
+        if motion is not None else None
     per_joint, per_frame = per_point_and_frame(errors)
-    swaps = find_swaps(xy, visible, reference) if xy.shape[1] == 21 else []
-    support = np.median(other_views[scored]) if scored.any() else 0.0
+    swaps = find_swaps(xy, visible, judged.reference, judged.spread, opts.label_sigma_px) \
+        if xy.shape[1] == 21 else []
     return AssignmentQC(key=lab.key, view=lab.view, metrics=metrics, per_joint=per_joint,
-                        per_frame=per_frame, swaps=swaps,
-                        issues=error_issues(errors, opts.outlier_px, other_views),
-                        provisional=bool(support < 2))
+                        per_frame=per_frame, swaps=swaps, issues=_issues(judged, opts.outlier_px),
+                        provisional=provisional)
 
 
 def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
@@ -324,9 +423,95 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
             break
         # Refit with the swaps undone, so that swapped points stop pulling (or, with several
         # swappers, outvoting) the consensus; every label is then judged as it was sent.
+        corrections = _resolve_conflicts(cameras, labels, corrections, report, fit, opts)
         fit_labels = [_undone(lab, corrections[lab.key]) for lab in labels]
-        report, fit = _score(cameras, labels, fit_labels, depth, opts, fit)
+        reliability, rows = _suspects(report, labels, corrections, fit, opts)
+        report, fit = _score(cameras, labels, fit_labels, depth, opts, fit, reliability, rows)
     return report
+
+
+def _own_swaps(report: HandReport, corrections: dict[str, list[dict]]) -> list[tuple[str, dict]]:
+    """(label key, swap) of every correction that undoes the label's own detected swap (not
+    one the consensus made)."""
+    return [(key, s) for key, found in corrections.items() for s in found
+            if any(overlaps(s, t) for t in report.assignments[key].swaps)]
+
+
+def _conflicts(items: list[tuple[str, dict]]) -> list[list[tuple[str, dict]]]:
+    """Groups of swaps of the same fingers over overlapping frames from different labels."""
+    groups: list[list[tuple[str, dict]]] = []
+    for item in items:
+        joined = [g for g in groups if any(overlaps(item[1], other) for _, other in g)]
+        merged = [item] + [x for g in joined for x in g]
+        groups = [g for g in groups if g not in joined] + [merged]
+    return [g for g in groups if len({key for key, _ in g}) > 1]
+
+
+def _resolve_conflicts(cameras: list[CameraModel], labels: list[ViewLabels],
+                       corrections: dict[str, list[dict]], report: HandReport, fit: _Fit,
+                       opts: HandOptions) -> dict[str, list[dict]]:
+    """Where labels accuse each other of the same swap over overlapping frames, keep the
+    explanation that makes the views agree best.
+
+    With few views a careful label's reference may be made from a swapper and one other view;
+    it then looks swapped too. Each accused label alone, and all of them together (several
+    swappers), are undone in turn; the consensus of the affected points is refitted, and the
+    choice with the least robust reprojection cost over every label wins.
+    """
+    groups = _conflicts(_own_swaps(report, corrections))
+    if not groups:
+        return corrections
+    for group in groups:
+        rows = np.zeros(report.consensus.shape[:2], bool)
+        frames = [min(s["frames"][0] for _, s in group), max(s["frames"][1] for _, s in group)]
+        rows[frames[0]:frames[1] + 1, moved_joints([s for _, s in group])] = True
+        flat = np.flatnonzero(rows.ravel())
+        choices = [[item] for item in group] + [group]
+        costs = []
+        for chosen in choices:
+            trial = {key: [s for s in found if (key, s) not in group or (key, s) in chosen]
+                     for key, found in corrections.items()}
+            trial_fit = _fit(cameras, [_undone(lab, trial[lab.key]) for lab in labels], opts,
+                             fit, also=rows.ravel())
+            costs.append(_robust_cost(cameras, labels, trial_fit, flat, opts.outlier_px))
+        best = choices[int(np.argmin(costs))]
+        corrections = {key: [s for s in found if (key, s) not in group or (key, s) in best]
+                       for key, found in corrections.items()}
+    return corrections
+
+
+def _robust_cost(cameras: list[CameraModel], labels: list[ViewLabels], fit: _Fit,
+                 rows: np.ndarray, cap_px: float) -> float:
+    """Sum over the rows' observations of min(error, cap)^2 px^2, each label against the
+    fitted points as it entered the fit."""
+    stack = CameraStack.of([cameras[lab.view] for lab in labels])
+    errors = reprojection_errors(stack, fit.pixels[rows], fit.points[rows])
+    capped = np.minimum(np.where(np.isfinite(errors), errors, 0.0), cap_px)
+    observed = np.isfinite(fit.pixels[rows]).all(axis=-1)
+    # A point the trial could not fit at all costs every observation the cap.
+    capped = np.where(np.isfinite(fit.points[rows]).all(axis=1)[:, None], capped, cap_px)
+    return float((np.where(observed, capped, 0.0) ** 2).sum())
+
+
+def _suspects(report: HandReport, labels: list[ViewLabels], corrections: dict[str, list[dict]],
+              fit: _Fit, opts: HandOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Label reliabilities (L,) with the detected swappers' votes (and weights) cut, and the
+    rows (N,) bool
+    to solve again: every frame of the joints their swaps move. Where a swapper and one
+    careful view are the only two views of a point left, the two hypotheses tie; a swap
+    found elsewhere in the clip is what breaks the tie, beyond the span already undone."""
+    reliability = fit.reliability.copy()
+    swaps: list[dict] = []
+    for col, lab in enumerate(labels):
+        own = [s for s in corrections[lab.key]
+               if any(overlaps(s, t) for t in report.assignments[lab.key].swaps)]
+        if own:
+            reliability[col] *= opts.suspect_vote
+            swaps += own
+    rows = np.zeros(report.consensus.shape[:2], bool)
+    if swaps:
+        rows[:, moved_joints(swaps)] = True
+    return reliability, rows.ravel()
 
 
 def _undone(lab: ViewLabels, swaps: list[dict]) -> ViewLabels:
@@ -337,51 +522,64 @@ def _undone(lab: ViewLabels, swaps: list[dict]) -> ViewLabels:
 
 
 def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus: np.ndarray,
-             errors: np.ndarray, outlier: np.ndarray,
-             outlier_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (F, P) px and outlier flags of the label as sent where the fit used a corrected
-    copy: plain distances to the consensus there (the copy's residuals describe other joints)."""
+             judged: _Judged, sigma_px: float) -> _Judged:
+    """The label as sent where the fit used a corrected copy: plain distances to the consensus
+    there (the copy's residuals describe other joints)."""
     sent_xy = np.asarray(lab.xy, np.float64)
     changed = (np.asarray(lab.visible) != np.asarray(fitted.visible)) \
         | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1)
-    plain = np.linalg.norm(sent_xy - camera.project(consensus), axis=-1)
-    plain = np.where(np.asarray(lab.visible, bool), plain, np.nan)
-    errors = np.where(changed, plain, errors)
-    outlier = np.where(changed, ~(plain <= outlier_px), outlier)
-    return errors, outlier
+    reference = camera.project(consensus)
+    offset = np.where(np.asarray(lab.visible, bool)[..., None], sent_xy - reference, np.nan)
+    plain = normalised_errors(offset, judged.spread, sigma_px)
+    return _Judged(errors=np.where(changed, plain, judged.errors),
+                   raw=np.where(changed, np.linalg.norm(offset, axis=-1), judged.raw),
+                   other_views=judged.other_views,
+                   reference=np.where(changed[..., None], reference, judged.reference),
+                   spread=judged.spread)
 
 
 def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: list[ViewLabels],
            depth: Mapping[int, DepthMaps] | None, opts: HandOptions,
-           previous: _Fit | None = None) -> tuple[HandReport, _Fit]:
+           previous: _Fit | None = None, reliability: np.ndarray | None = None,
+           also: np.ndarray | None = None) -> tuple[HandReport, _Fit]:
     """Consensus from ``fit_labels`` (updating ``previous`` where given), every label of
     ``labels`` judged against it; the report and the fit."""
     frames, points = np.shape(labels[0].xy)[:2]
-    fit = _fit(cameras, fit_labels, opts, previous)
+    fit = _fit(cameras, fit_labels, opts, previous, reliability, also)
     fitted, inliers, loo, views = fit.points, fit.inliers, fit.loo, fit.views
     consensus = fitted.reshape(frames, points, 3)
     distinct = _distinct_views(inliers, views)
     support = distinct.sum(axis=1)
     view_ids = np.unique(views)
     has_point = np.isfinite(fitted).all(axis=1)
-    provisional = not has_point.any() or float(np.median(support[has_point])) < 3
-    errors = np.linalg.norm(loo, axis=-1)
+    # The three-views rule for the target: a consensus needs three views behind its points.
+    provisional = not has_point.any() or float(np.median(support[has_point])) < MIN_VIEWS
+    raw = np.linalg.norm(loo, axis=-1)
+    normalised = normalised_errors(loo, fit.spread, opts.label_sigma_px)
+    # Where each label's other views place its points: its observation less its residual
+    # against the point fitted without it; the consensus where it did not observe the point.
+    projected = np.stack([cameras[lab.view].project(fitted) for lab in labels], axis=1)
+    observed = np.isfinite(loo).all(axis=-1)
+    reference = np.where(observed[..., None], fit.pixels - loo, projected)
     # Each view's depth map is looked up once, at the consensus every label of it is judged by.
     surfaces = {view: surface_check(cameras[view], consensus, dm, opts.surface_margin_m,
                                     opts.hidden_margin_m)
                 for view, dm in (depth or {}).items() if view in {lab.view for lab in labels}}
+    motion = others_motion({lab.key: np.asarray(lab.xy, np.float64) for lab in labels})
     assignments = {}
     for col, lab in enumerate(labels):
         own = distinct[:, np.searchsorted(view_ids, lab.view)]
-        other = (support - own).reshape(frames, points)
-        err = errors[:, col].reshape(frames, points)
-        err = np.where(has_point.reshape(frames, points), err, np.nan)
-        outlier = ~inliers[:, col].reshape(frames, points)
+        judged = _Judged(
+            errors=normalised[:, col].reshape(frames, points),
+            raw=raw[:, col].reshape(frames, points),
+            other_views=(support - own).reshape(frames, points),
+            reference=reference[:, col].reshape(frames, points, 2),
+            spread=fit.spread[:, col].reshape(frames, points, 2, 2))
         if fit_labels[col] is not lab:
-            err, outlier = _as_sent(lab, fit_labels[col], cameras[lab.view], consensus, err,
-                                    outlier, opts.outlier_px)
-        qc = _assess(lab, cameras[lab.view], consensus, err, outlier, other,
-                     surfaces.get(lab.view), opts)
+            judged = _as_sent(lab, fit_labels[col], cameras[lab.view], consensus, judged,
+                              opts.label_sigma_px)
+        qc = _assess(lab, cameras[lab.view], consensus, judged, surfaces.get(lab.view),
+                     motion[lab.key], opts)
         qc.provisional = qc.provisional or provisional
         assignments[lab.key] = qc
     report = HandReport(consensus=consensus, support=support.reshape(frames, points),

@@ -8,8 +8,6 @@ for those frames), and how much of the clip it stands still. Pixels x right, y d
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 
@@ -24,6 +22,7 @@ from worker.quality.metrics import (
     per_point_and_frame,
     static_fraction,
 )
+from worker.quality.motion import TargetMotion, moved_with, others_motion
 
 # A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
 # at pixel centres and a careful click lands within ~2 px.
@@ -35,6 +34,8 @@ JUMP_FLOOR_PX = 8.0
 # The object counts as moving in a clip when the other labels' landmarks get this far (median
 # over labels, px) from where they were first placed: ten careful clicks' noise.
 OBJECT_MOVES_PX = 20.0
+# The object's motion as the other labels show it.
+ObjectMotion = TargetMotion
 # A step is the object's own motion, not a jump, unless it exceeds this multiple of the step
 # the other labels take in the same frame (views see the motion at different scales).
 JUMP_OVER_OTHERS = 3.0
@@ -98,58 +99,16 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
     return np.nan_to_num(step) > allowed[:, None], typical
 
 
-def track_motion(xy: np.ndarray) -> tuple[np.ndarray, float]:
-    """A label's motion: (F-1,) median step of its landmarks, px (NaN where unknown), and the
-    largest median distance of its landmarks from where they were first placed, px."""
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
-    first = np.full(xy.shape[1:], np.nan)
-    for p in range(xy.shape[1]):
-        placed = np.flatnonzero(np.isfinite(xy[:, p]).all(axis=-1))
-        if placed.size:
-            first[p] = xy[placed[0], p]
-    dist = np.linalg.norm(xy - first, axis=-1)
-    has_step, has_dist = np.isfinite(step).any(axis=1), np.isfinite(dist).any(axis=1)
-    med_step = np.full(step.shape[0], np.nan)
-    if has_step.any():
-        med_step[has_step] = np.nanmedian(step[has_step], axis=1)
-    reach = float(np.nanmedian(dist[has_dist], axis=1).max()) if has_dist.any() else 0.0
-    return med_step, reach
-
-
-@dataclass
-class ObjectMotion:
-    """How the OTHER labels of an object see it move: step (F-1,) px, their median per-frame
-    step; reach px, their median largest distance from the first position."""
-
-    step: np.ndarray
-    reach: float
-
-
 def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
     """For each label, the object's motion as the other labels (other views or other workers)
     show it; None with fewer than two other labels."""
-    motions = {lab.key: track_motion(np.asarray(lab.xy, dtype=np.float64)) for lab in labels}
-    out: dict[str, ObjectMotion | None] = {}
-    for key in motions:
-        others = [m for k, m in motions.items() if k != key]
-        if len(others) < 2:
-            out[key] = None
-            continue
-        steps = np.stack([m[0] for m in others])
-        has = np.isfinite(steps).any(axis=0)
-        step = np.full(steps.shape[1], np.nan)
-        step[has] = np.nanmedian(steps[:, has], axis=0)
-        out[key] = ObjectMotion(step=step, reach=float(np.median([m[1] for m in others])))
-    return out
+    return others_motion({lab.key: np.asarray(lab.xy, dtype=np.float64) for lab in labels})
 
 
 def moved_with_object(xy: np.ndarray, motion: ObjectMotion) -> float | None:
     """How far the label's landmarks travel compared with the other labels' (1 = as far or
     farther), when the object clearly moves; None for an object that stays put."""
-    if motion.reach < OBJECT_MOVES_PX:
-        return None
-    _, reach = track_motion(xy)
-    return num(min(reach / motion.reach, 1.0))
+    return moved_with(xy, motion, OBJECT_MOVES_PX)
 
 
 def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | None:

@@ -2,9 +2,17 @@
 
 A worker who confuses two fingers (or labels the hand as if it were the other hand) places good
 points on the wrong joints: the label is far from the reference where it claims to be, but close
-to where the exchanged joints are. For each candidate permutation we compare, frame by frame,
-the label's error as given with its error after the permutation, over the joints it moves, and
-report runs of frames where the permuted error is decisively lower.
+to where the exchanged joints are. The reference is where the OTHER views place each joint in
+this view (leave-one-out), so no second worker of the same view is needed, and its spread (how
+well those views fix the point, worker.quality.support) sets how much a pixel counts.
+
+For each candidate permutation, every frame casts a log-likelihood-ratio vote over the joints
+the permutation moves: sum of (e_given^2 - e_permuted^2) / (2 sigma^2), errors normalised to
+the reference's spread and capped (a wild point counts as far off either way, not as
+evidence). A swap is the frame run with the largest summed vote (the maximum-sum
+subarray) where that sum is decisive and the permuted label looks like careful work. Fingers
+that project a few pixels apart still add up over a run of frames: evidence the per-frame
+ratio of a single comparison would miss.
 
 Swaps feed back into the consensus (swap_corrections): the consensus is refitted with them
 undone; when the consensus itself jumps between the fingers at a span's edges, the swappers
@@ -22,24 +30,25 @@ import numpy as np
 
 from worker.hand.joints import FINGER_NAMES
 
-# A frame votes "swapped" when the permuted error is below this fraction of the error as given
-WEAK_RATIO = 0.8
-# and small in absolute terms: the permuted points must then look like good labels.
-MAX_SWAPPED_PX = 10.0
-# A vote is strong when the permuted error is also below half the error as given and lower by
-# at least 4 px (careful labels differ from the reference by ~2.5 px of noise).
-STRONG_RATIO = 0.5
-STRONG_GAIN_PX = 4.0
-# A run of votes is a swap with this many strong votes, or, where the fingers project close
-# together (a few px apart), with this many votes whose mean errors differ decisively.
-MIN_STRONG_FRAMES = 4
-MIN_WEAK_FRAMES = 8
-WEAK_RUN_RATIO = 0.6
-WEAK_RUN_GAIN_PX = 2.0
-# Up to this many frames without a vote (none of them clearly against) do not break a run.
-GAP_FRAMES = 3
+# Normalised errors are capped at this many sigmas before they vote: beyond it a point is far off
+# whatever it is compared with.
+CAP_SIGMAS = 6.0
+# A run is a swap when its summed log-likelihood ratio reaches this (the labels as permuted
+# are e^40 times likelier), over at least MIN_FRAMES frames that vote for it,
+MIN_LOG_RATIO = 40.0
+MIN_FRAMES = 4
+# and the permuted label then looks like careful work: mean error of the moved joints below
+# this many sigmas (a sloppy or random label gains by chance, never this close).
+MAX_SWAPPED_SIGMAS = 3.0
 # Fewest moved joints, visible in the label, that make a frame's comparison.
 MIN_JOINTS = 2
+# A run's first and last frames must each favour the permutation by this much, and by this
+# share of the run's median vote: a frame interpolated halfway between a swapped and a correct
+# keyframe votes about 0, give or take what the hand's motion between keyframes adds.
+EDGE_VOTE = 2.0
+EDGE_SHARE = 0.35
+# Runs looked for per permutation (a worker may swap, fix it, and swap again).
+MAX_RUNS = 3
 
 
 @dataclass(frozen=True)
@@ -75,49 +84,53 @@ def hand_permutations(points: int = 21) -> list[Permutation]:
     return out
 
 
-def _frame_costs(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
-                 perm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean error (F,) of the moved joints as labelled and as permuted; NaN where fewer than
-    half of them can be measured."""
+def _normalised(offset: np.ndarray, spread: np.ndarray, sigma_px: float) -> np.ndarray:
+    """(...,) offsets (..., 2) px against references of covariance spread (..., 2, 2) px^2, in
+    px as against an exact reference (see worker.quality.support.normalised_errors)."""
+    cov = sigma_px ** 2 * np.eye(2) + spread
+    r = np.nan_to_num(offset)
+    maha = np.einsum("...a,...ab,...b->...", r, np.linalg.inv(cov), r)
+    return np.where(np.isfinite(offset).all(axis=-1), sigma_px * np.sqrt(maha), np.nan)
+
+
+def _frame_votes(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
+                 spread: np.ndarray, perm: np.ndarray, sigma_px: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame (F,): the log-likelihood ratio of the permutation over the moved joints (0
+    where fewer than MIN_JOINTS are measured), the mean normalised error of the permuted
+    joints, and the mean raw px errors as labelled and as permuted (NaN where unmeasured)."""
     moved = np.flatnonzero(perm != np.arange(len(perm)))
     lab = np.where(visible[:, moved, None], xy[:, moved], np.nan)
-    given = np.linalg.norm(lab - reference[:, moved], axis=-1)
-    swapped = np.linalg.norm(lab - reference[:, perm[moved]], axis=-1)
-    ok = np.isfinite(given) & np.isfinite(swapped)
+    given_off = lab - reference[:, moved]
+    perm_off = lab - reference[:, perm[moved]]
+    given = _normalised(given_off, spread[:, moved], sigma_px)
+    permuted = _normalised(perm_off, spread[:, perm[moved]], sigma_px)
+    ok = np.isfinite(given) & np.isfinite(permuted)
     count = ok.sum(axis=1)
     enough = count >= MIN_JOINTS
+    cap = CAP_SIGMAS * sigma_px
+    g, p = np.minimum(np.nan_to_num(given), cap), np.minimum(np.nan_to_num(permuted), cap)
+    vote = np.where(ok, (g ** 2 - p ** 2) / (2.0 * sigma_px ** 2), 0.0).sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean_given = np.where(ok, given, 0.0).sum(axis=1) / count
-        mean_swapped = np.where(ok, swapped, 0.0).sum(axis=1) / count
-    return np.where(enough, mean_given, np.nan), np.where(enough, mean_swapped, np.nan)
+        mean_perm = np.where(ok, p, 0.0).sum(axis=1) / count
+        raw_given = np.where(ok, np.linalg.norm(given_off, axis=-1), 0.0).sum(axis=1) / count
+        raw_perm = np.where(ok, np.linalg.norm(perm_off, axis=-1), 0.0).sum(axis=1) / count
+    nan = np.full(len(vote), np.nan)
+    return (np.where(enough, vote, 0.0), np.where(enough, mean_perm, nan),
+            np.where(enough, raw_given, nan), np.where(enough, raw_perm, nan))
 
 
-def _runs(votes: np.ndarray, against: np.ndarray) -> list[tuple[int, int]]:
-    """Inclusive frame runs of ``votes`` (F,) bool, bridging up to GAP_FRAMES frames that do not
-    vote ``against`` (F,) bool."""
-    frames: list[int] = np.flatnonzero(votes).tolist()
-    if not frames:
-        return []
-    runs: list[tuple[int, int]] = []
-    start = last = frames[0]
-    for f in frames[1:]:
-        if f - last - 1 > GAP_FRAMES or against[last + 1:f].any():
-            runs.append((start, last))
-            start = f
-        last = f
-    runs.append((start, last))
-    return runs
-
-
-def _decisive(given: np.ndarray, swapped: np.ndarray, weak: np.ndarray, strong: np.ndarray) -> bool:
-    """Whether a run's votes (arrays over the run's frames) make a swap."""
-    if strong.sum() >= MIN_STRONG_FRAMES:
-        return True
-    if weak.sum() < MIN_WEAK_FRAMES:
-        return False
-    mean_given, mean_swapped = given[weak].mean(), swapped[weak].mean()
-    return mean_swapped <= WEAK_RUN_RATIO * mean_given and \
-        mean_given - mean_swapped >= WEAK_RUN_GAIN_PX
+def _best_run(votes: np.ndarray) -> tuple[int, int, float]:
+    """The inclusive frame run with the largest sum of ``votes`` (F,) (Kadane), and the sum."""
+    best, best_span = -np.inf, (0, -1)
+    total, start = 0.0, 0
+    for f, vote in enumerate(votes):
+        if total <= 0.0:
+            total, start = 0.0, f
+        total += float(vote)
+        if total > best:
+            best, best_span = total, (start, f)
+    return best_span[0], best_span[1], float(best)
 
 
 def _describe(kind: str, fingers: tuple[str, ...], first: int, last: int) -> str:
@@ -127,41 +140,79 @@ def _describe(kind: str, fingers: tuple[str, ...], first: int, last: int) -> str
     return f"{fingers[0]} and {fingers[1]} swapped in frames {first}-{last}"
 
 
-def find_swaps(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray) -> list[dict]:
+def _runs_of(cand: Permutation, votes: tuple[np.ndarray, ...], sigma_px: float) -> list[dict]:
+    """The decisive runs of one permutation's frame votes."""
+    vote, mean_perm, raw_given, raw_perm = votes
+    vote = vote.copy()
+    found = []
+    for _ in range(MAX_RUNS):
+        first, last, total = _best_run(vote)
+        if last < first or total < MIN_LOG_RATIO:
+            break
+        vote_span = vote[first:last + 1].copy()
+        vote[first:last + 1] = 0.0
+        typical = float(np.median(vote_span[vote_span > 0])) if (vote_span > 0).any() else 0.0
+        strong = np.flatnonzero(vote_span >= max(EDGE_VOTE, EDGE_SHARE * typical))
+        if strong.size == 0:
+            continue
+        first, last = first + int(strong[0]), first + int(strong[-1])
+        span = slice(first, last + 1)
+        for_it = votes[0][span] > 0
+        if for_it.sum() < MIN_FRAMES or \
+                np.nanmean(mean_perm[span][for_it]) > MAX_SWAPPED_SIGMAS * sigma_px:
+            continue
+        found.append({
+            "kind": cand.kind, "fingers": list(cand.fingers), "frames": [first, last],
+            "error_px": round(float(np.nanmean(raw_given[span][for_it])), 1),
+            "error_swapped_px": round(float(np.nanmean(raw_perm[span][for_it])), 1),
+            "log_ratio": round(float(votes[0][span].sum()), 1),
+            "message": _describe(cand.kind, cand.fingers, first, last)})
+    return found
+
+
+def find_swaps(xy: np.ndarray, visible: np.ndarray, reference: np.ndarray,
+               spread: np.ndarray | None = None, sigma_px: float = 2.0) -> list[dict]:
     """Finger confusions of one hand label against the reference.
 
     Args:
         xy: (F, 21, 2) the label's positions, image px (NaN where none).
         visible: (F, 21) bool, the label's visibility flags (only visible points are compared).
         reference: (F, 21, 2) where the other views place each joint in this view, px.
+        spread: optional (F, 21, 2, 2) px^2 covariance of the reference (zero: exact).
+        sigma_px: per-axis noise of a careful label, px.
 
     Returns:
         [{"kind": "swap" | "mirror", "fingers": [...], "frames": [first, last],
           "error_px": mean error of the moved joints as labelled,
-          "error_swapped_px": the same after the exchange, "message": text}], by first frame.
+          "error_swapped_px": the same after the exchange, "log_ratio": the run's summed
+          vote (its evidence), "message": text}], by first frame.
     """
     if xy.shape != reference.shape or xy.ndim != 3 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy and reference (F, 21, 2) and visible (F, 21), got "
                          f"{xy.shape}, {reference.shape} and {visible.shape}")
+    if spread is None:
+        spread = np.zeros(xy.shape + (2,))
+    elif spread.shape != xy.shape + (2,):
+        raise ValueError(f"expected spread {xy.shape + (2,)}, got {spread.shape}")
+    # A reference without a spread (too few other views) casts no vote.
+    fixed = np.asarray(np.isfinite(spread).all(axis=(-1, -2)))
+    reference = np.where(fixed[..., None], reference, np.nan)
+    spread = np.nan_to_num(spread)
     found = []
     for cand in hand_permutations(xy.shape[1]):
-        given, swapped = _frame_costs(xy, visible, reference, cand.perm)
-        with np.errstate(invalid="ignore"):
-            weak = (swapped < WEAK_RATIO * given) & (swapped < MAX_SWAPPED_PX)
-            strong = weak & (swapped < STRONG_RATIO * given) & (given - swapped > STRONG_GAIN_PX)
-            # Only frames where the labels as given fit clearly better break a run.
-            against = given < WEAK_RATIO * swapped
-        for first, last in _runs(weak, against):
-            span = slice(first, last + 1)
-            ok = weak[span]
-            if not _decisive(given[span], swapped[span], ok, strong[span]):
-                continue
-            found.append({
-                "kind": cand.kind, "fingers": list(cand.fingers), "frames": [first, last],
-                "error_px": round(float(np.mean(given[span][ok])), 1),
-                "error_swapped_px": round(float(np.mean(swapped[span][ok])), 1),
-                "message": _describe(cand.kind, cand.fingers, first, last)})
+        votes = _frame_votes(xy, np.asarray(visible, bool), reference, spread, cand.perm,
+                             sigma_px)
+        found += _runs_of(cand, votes, sigma_px)
     return sorted(found, key=lambda s: s["frames"][0])
+
+
+def moved_joints(swaps: list[dict]) -> np.ndarray:
+    """(K,) the joints any of ``swaps`` moves, sorted."""
+    moved: set[int] = set()
+    for swap in swaps:
+        perm = permutation_of(swap)
+        moved |= set(np.flatnonzero(perm != np.arange(len(perm))).tolist())
+    return np.array(sorted(moved), dtype=int)
 
 
 def permutation_of(swap: dict) -> np.ndarray:
@@ -187,24 +238,86 @@ def undo_swaps(xy: np.ndarray, visible: np.ndarray,
     return xy, visible
 
 
-def consensus_swapped(consensus: np.ndarray, swap: dict) -> bool:
-    """Whether the consensus itself exchanges the swap's fingers at the span's edges: then it
-    was the swappers who won that span (several swappers in a small pool), not this label who
-    swapped. consensus: (F, P, 3) world metres; a true swap leaves it smooth across the edges."""
+# The palm's joints (wrist and the four finger MCPs) keep their distances to each other
+# through a clip, whatever the fingers do.
+PALM = (0, 5, 9, 13, 17)
+# The consensus is swapped over a span when its palm there matches the rest of the clip this
+# much better exchanged than as it is, and is off as it is by at least this much (metres).
+PALM_RATIO = 0.5
+PALM_MIN_OFF_M = 0.004
+
+
+def _palm_costs(consensus: np.ndarray, swap: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per frame (F,): how far the consensus's palm is, as it is and with the swap's fingers
+    exchanged, from the palm outside the swap's span (summed |distance - reference|, m); None
+    where nothing outside the span (or no palm joint the swap moves) gives a reference."""
     perm = permutation_of(swap)
-    moved = np.flatnonzero(perm != np.arange(len(perm)))
     first, last = swap["frames"]
-    edges = [(first - 1, first)] if first > 0 else []
-    edges += [(last, last + 1)] if last + 1 < consensus.shape[0] else []
-    ratios = []
-    for before, after in edges:
-        a = consensus[before, moved]
-        as_is = np.nansum(np.linalg.norm(consensus[after, moved] - a, axis=-1))
-        exchanged = np.nansum(np.linalg.norm(consensus[after, perm[moved]] - a, axis=-1))
-        ratios.append(exchanged / max(as_is, 1e-9))
-    # One clean edge suffices (the other may be blurred by interpolated keyframes), as long as
-    # no edge speaks against it.
-    return bool(ratios) and min(ratios) < 0.5 and max(ratios) < 1.0
+    frames = np.arange(consensus.shape[0])
+    outside = np.setdiff1d(frames, frames[first:last + 1])
+    pairs = [(i, j) for n, i in enumerate(PALM) for j in PALM[n + 1:]
+             if perm[i] != i or perm[j] != j]
+    if outside.size == 0 or not pairs:
+        return None
+    ii, jj = np.array([i for i, _ in pairs]), np.array([j for _, j in pairs])
+
+    def distances(order: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(consensus[:, order[ii]] - consensus[:, order[jj]], axis=-1)
+
+    as_is = distances(np.arange(len(perm)))
+    if not np.isfinite(as_is[outside]).any():
+        return None
+    reference = np.nanmedian(np.where(np.isfinite(as_is[outside]), as_is[outside], np.nan),
+                             axis=0)
+
+    def cost(dist: np.ndarray) -> np.ndarray:
+        off = np.abs(dist - reference)
+        return np.where(np.isfinite(off).any(axis=1), np.nansum(off, axis=1), np.nan)
+
+    return cost(as_is), cost(distances(perm))
+
+
+def _palm_swapped(as_is: np.ndarray, exchanged: np.ndarray) -> bool:
+    has = np.isfinite(as_is) & np.isfinite(exchanged)
+    if not has.any():
+        return False
+    a, e = float(np.median(as_is[has])), float(np.median(exchanged[has]))
+    return a > PALM_MIN_OFF_M and e < PALM_RATIO * a
+
+
+def consensus_swapped(consensus: np.ndarray, swap: dict) -> bool:
+    """Whether the consensus itself exchanges the swap's fingers over the span: then it was the
+    swappers who won that span (several swappers in a small pool), not this label who swapped.
+
+    A hand's palm is rigid: the distances between the wrist and the MCPs outside the span are
+    the reference. A consensus that holds the true fingers keeps them inside the span; one
+    that exchanged them matches them only once exchanged back. consensus: (F, P, 3) world m.
+    """
+    costs = _palm_costs(consensus, swap)
+    if costs is None:
+        return False
+    first, last = swap["frames"]
+    return _palm_swapped(costs[0][first:last + 1], costs[1][first:last + 1])
+
+
+def consensus_swapped_span(consensus: np.ndarray, swap: dict) -> list[int]:
+    """The swap's span grown over the neighbouring frames where the consensus is swapped too
+    (a label that shows the fingers only in part of the span accuses only that part)."""
+    costs = _palm_costs(consensus, swap)
+    first, last = swap["frames"]
+    if costs is None:
+        return [first, last]
+    as_is, exchanged = costs
+
+    def swapped(f: int) -> bool:
+        return bool(np.isfinite(as_is[f]) and np.isfinite(exchanged[f])
+                    and as_is[f] > PALM_MIN_OFF_M and exchanged[f] < PALM_RATIO * as_is[f])
+
+    while first > 0 and swapped(first - 1):
+        first -= 1
+    while last + 1 < len(as_is) and swapped(last + 1):
+        last += 1
+    return [first, last]
 
 
 def merge_swaps(swaps: list[dict], gap: int = 10) -> list[dict]:
@@ -216,9 +329,16 @@ def merge_swaps(swaps: list[dict], gap: int = 10) -> list[dict]:
         if last is not None and (last["kind"], last["fingers"]) == (swap["kind"], swap["fingers"]) \
                 and swap["frames"][0] - last["frames"][1] <= gap + 1:
             last["frames"] = [last["frames"][0], max(last["frames"][1], swap["frames"][1])]
+            last["log_ratio"] = last.get("log_ratio", 0.0) + swap.get("log_ratio", 0.0)
         else:
             out.append(dict(swap, frames=list(swap["frames"])))
     return out
+
+
+def overlaps(a: dict, b: dict) -> bool:
+    """Whether two swaps exchange the same fingers over overlapping frames."""
+    return (a["kind"], a["fingers"]) == (b["kind"], b["fingers"]) and \
+        a["frames"][0] <= b["frames"][1] and b["frames"][0] <= a["frames"][1]
 
 
 def swap_corrections(swaps: dict[str, list[dict]],
@@ -230,23 +350,24 @@ def swap_corrections(swaps: dict[str, list[dict]],
         consensus: (F, 21, 3) world metres, the consensus they were detected against.
 
     Returns:
-        {label key: swaps to undo}: a label's own swaps, except where the consensus jumps at the
-        span's edges; then the consensus was swapped there, and the labels that agreed with it
-        (not flagged with that swap) are the ones to correct.
+        {label key: swaps to undo}: a label's own swaps, except where the consensus itself is
+        swapped over the span (consensus_swapped); then the labels that agreed with it (not
+        flagged with that swap) are the ones to correct.
     """
-    out: dict[str, list[dict]] = {key: [] for key in swaps}
+    own: dict[str, list[dict]] = {key: [] for key in swaps}
     # Flipped spans of one permutation are merged, so that no label is exchanged twice.
     flipped: dict[tuple, dict] = {}
     for key, found in swaps.items():
         for swap in merge_swaps(found):
             if not consensus_swapped(consensus, swap):
-                out[key].append(swap)
+                own[key].append(swap)
                 continue
+            span = consensus_swapped_span(consensus, swap)
             group = flipped.setdefault((swap["kind"], tuple(swap["fingers"])),
-                                       {"frames": list(swap["frames"]), "keys": set()})
-            group["frames"] = [min(group["frames"][0], swap["frames"][0]),
-                               max(group["frames"][1], swap["frames"][1])]
+                                       {"frames": span, "keys": set()})
+            group["frames"] = [min(group["frames"][0], span[0]), max(group["frames"][1], span[1])]
             group["keys"].add(key)
+    out = own
     for (kind, fingers), group in flipped.items():
         swap = {"kind": kind, "fingers": list(fingers), "frames": group["frames"]}
         for key in out:
