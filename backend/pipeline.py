@@ -1,4 +1,5 @@
-"""The one place that moves work between stages: submitted -> confirmed -> QC -> solve.
+"""The one place that moves work between stages: submitted -> confirmed -> QC -> solve, and
+solve -> landmark QC (object landmarks checked against the solved objects).
 
 Each domain does its own step and knows nothing of the next one (annotation saves and
 submits, crowd talks to the marketplace, quality scores and acts, solve fits poses); this
@@ -32,7 +33,7 @@ from backend.db import session_scope
 from backend.errors import DexlabelError
 from backend.jobs.service import enqueue_job, mark_waiting
 from backend.quality import flows as quality_flows
-from backend.quality.service import record_decision, request_qc
+from backend.quality.service import record_decision, request_landmark_qc, request_qc
 from backend.solve.models import SolveRun
 from backend.solve.service import request_solve
 
@@ -190,3 +191,21 @@ def solve_if_ready(session: Session, sequence_id: int) -> str:
                      exc.detail)
         return f"solve not started: {exc.detail}"
     return f"solve run {run.id} queued"
+
+
+# --- solve -> landmark QC ----------------------------------------------------------------
+
+
+def run_solve(run_id: int) -> dict[str, Any]:
+    """The solve job (backend.solve.flows), then, once the run is done, the QC of every
+    object target with submitted work: its landmarks are checked against the solved objects."""
+    # The solver (PyTorch) is loaded by the worker that runs this job, not by the API.
+    from backend.solve.flows import run_solve as solve_run
+
+    result = solve_run(run_id)
+    if not result.get("error"):
+        with session_scope() as session:
+            sequence_id = session.get_one(SolveRun, run_id).sequence_id
+            jobs = request_landmark_qc(session, sequence_id)
+        result["landmark_qc"] = len(jobs)
+    return result

@@ -22,7 +22,6 @@ from backend.db import session_scope
 from backend.exports.flows import export_job
 from backend.jobs.service import job_handler, requeue_stale
 from backend.queue import huey, queue_lost_messages
-from backend.solve.flows import run_solve
 from backend.storage import get_storage
 from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
 
@@ -80,8 +79,9 @@ def confirm_submission(args: dict[str, Any]) -> dict[str, Any]:
 # it works, so the lease only bounds how soon a killed worker's solve is taken over.
 @job_handler("solve")
 def solve_run(args: dict[str, Any]) -> dict[str, Any]:
-    """Solve run ``args["run_id"]`` of a sequence and store its outputs (idempotent)."""
-    result = run_solve(int(args["run_id"]))
+    """Solve run ``args["run_id"]`` of a sequence and store its outputs (idempotent); a done
+    run queues the landmark QC of its objects."""
+    result = pipeline.run_solve(int(args["run_id"]))
     outcome = f"failed: {result['error']}" if result.get("error") else "done"
     return {**result, "message": f"solve run {result['run_id']} {outcome}"}
 

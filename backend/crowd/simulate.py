@@ -136,6 +136,18 @@ class CaptureTruth:
                                         faces, poses[:, index], rng)
         return xy, visible
 
+    def object_poses(self) -> np.ndarray:
+        """(O, F, 3, 4) true object-to-world poses of the capture's (first) sequence, metres,
+        from its first view's labels (object-to-camera) and that camera's extrinsics."""
+        seq_dir = min(p.parent for p in self.root.glob(f"*/*/{dexycb.META_FILE}"))
+        plan = self._plan(seq_dir)
+        camera = plan.cameras[0]
+        _, _, in_cam = self._labels(camera.serial, plan.num_frames)
+        to_world = np.asarray(camera.extrinsics, dtype=np.float64)
+        rot = np.einsum("ij,fojk->ofik", to_world[:, :3], in_cam[..., :3])
+        trans = np.einsum("ij,foj->ofi", to_world[:, :3], in_cam[..., 3]) + to_world[:, 3]
+        return np.concatenate([rot, trans[..., None]], axis=-1)
+
     def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """The task's true points (F, P, 2) px and visibility (F, P)."""
         if task["kind"] == "hand":

@@ -18,11 +18,15 @@ from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
+from backend.solve.inputs import load_mesh
+from backend.solve.models import SolveRun
+from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracks import dense_points
 
 if TYPE_CHECKING:
+    from worker.quality.anchored import SolvedObjects
     from worker.quality.consensus import ViewLabels
 
 # Depth maps decoded at once when the visibility check reads a view.
@@ -146,3 +150,39 @@ def highlight_mask(task: Task, width: int, height: int) -> np.ndarray | None:
     mask = np.zeros((height, width), dtype=np.uint8)
     cv2.fillPoly(mask, [np.round(np.asarray(polygon, dtype=np.float64)).astype(np.int32)], 1)
     return mask.astype(bool)
+
+
+def latest_solve(session: Session, sequence_id: int) -> SolveRun | None:
+    """The sequence's newest finished solve run with stored results, if any."""
+    return session.scalar(select(SolveRun).where(
+        SolveRun.sequence_id == sequence_id, SolveRun.status == "done",
+        SolveRun.result_key.is_not(None)).order_by(SolveRun.id.desc()).limit(1))
+
+
+def solved_objects(session: Session, sequence_id: int) -> tuple[SolvedObjects, int] | None:
+    """The sequence's objects as its newest solve left them (meshes in their own frames, poses
+    (O, F, 3, 4) object-to-world in SceneObject.index order, NaN where the solve flags the
+    pose) and the run's id; None before any solve. The result is read through
+    backend.solve.results only."""
+    from worker.quality.anchored import SolvedObjects
+
+    run = latest_solve(session, sequence_id)
+    if run is None or run.result_key is None:
+        return None
+    arrays = decode_result(get_storage().get_bytes(run.result_key))
+    sequence = session.get_one(Sequence, sequence_id)
+    names = [str(n) for n in arrays["object_names"]]
+    poses = np.asarray(arrays["object_poses"], dtype=np.float64)
+    if names != [o.name for o in sequence.objects] or poses.shape[:2] != (
+            len(names), sequence.num_frames):
+        raise ValueError(f"solve run {run.id} holds objects {names} over {poses.shape[1]} "
+                         f"frames; the sequence has {[o.name for o in sequence.objects]} over "
+                         f"{sequence.num_frames}")
+    # A pose the solve flags as not pinned down by its evidence judges nobody.
+    _, flags = object_trust(arrays)
+    poses = np.where((flags == "")[..., None, None], poses, np.nan)
+    storage = get_storage()
+    meshes = [load_mesh(storage, o.mesh_key) for o in sequence.objects]
+    return SolvedObjects(vertices=[np.asarray(m.vertices, np.float64) for m in meshes],
+                         faces=[np.asarray(m.faces, np.int64) for m in meshes],
+                         poses=poses), run.id

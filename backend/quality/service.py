@@ -37,6 +37,7 @@ from backend.quality.inputs import (
     TargetInputs,
     depth_maps,
     highlight_mask,
+    solved_objects,
     target_inputs,
 )
 from backend.quality.models import QCReport, TrainingClip
@@ -73,6 +74,19 @@ def request_qc_for(session: Session, sequence_id: int, target_key: str | None) -
     return [request_qc(session, task) for task in firsts.values()]
 
 
+def request_landmark_qc(session: Session, sequence_id: int) -> list[Job]:
+    """Queue QC for every object target of the sequence with submitted work (after a solve:
+    its landmarks are then checked against the solved objects)."""
+    stmt = (select(Task).join(Assignment, Assignment.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, Task.kind == "object",
+                   Assignment.status.in_(SCORED_STATUSES))
+            .order_by(Task.id))
+    firsts: dict[str, Task] = {}
+    for task in session.scalars(stmt):
+        firsts.setdefault(task.target_key, task)
+    return [request_qc(session, task) for task in firsts.values()]
+
+
 def thresholds_bounds() -> QCThresholds:
     from worker.quality.decide import QCThresholds
 
@@ -100,16 +114,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         results.update(report.assignments)
         provisional = bool(report.provisional)
     elif crowd:
-        from worker.quality.landmarks import score_object
-
-        masks = {}
-        for task in inputs.tasks.values():
-            view = inputs.view_of_task[task.id]
-            camera = inputs.cameras[view]
-            mask = highlight_mask(task, camera.width, camera.height)
-            if mask is not None:
-                masks[view] = {0: mask}
-        results.update(score_object(inputs.cameras, crowd, masks))
+        results.update(_score_landmarks(session, inputs, crowd, timings))
     methods = dict.fromkeys(results, "consensus")
     for lab in inputs.labels:
         if lab.key not in results:
@@ -117,6 +122,38 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
             results[lab.key] = gold.score_training(session, task_id, lab, inputs.num_frames)
             methods[lab.key] = "gold"
     return results, methods, provisional
+
+
+def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
+                     timings: dict[str, float]) -> dict[str, Any]:
+    """Object landmarks: each label on its own and against the object's motion as the other
+    labels show it (worker.quality.landmarks); once the sequence is solved, also against the
+    solved object (worker.quality.anchored): each landmark anchored to the object's surface
+    and its track reprojected, visibility judged against the solved meshes and depth."""
+    from worker.quality.anchored import merge_anchored, score_anchored
+    from worker.quality.landmarks import score_object
+
+    masks = {}
+    for task in inputs.tasks.values():
+        view = inputs.view_of_task[task.id]
+        camera = inputs.cameras[view]
+        mask = highlight_mask(task, camera.width, camera.height)
+        if mask is not None:
+            masks[view] = {0: mask}
+    results = score_object(inputs.cameras, crowd, masks)
+    started = time.perf_counter()
+    solved = solved_objects(session, inputs.sequence_id)
+    if solved is None:
+        return results
+    scene, run_id = solved
+    target = int(inputs.target_key.split(":", 1)[1])
+    depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
+    for lab in crowd:
+        anchored = score_anchored(inputs.cameras[lab.view], lab, scene, target,
+                                  depth.get(lab.view))
+        results[lab.key] = merge_anchored(results[lab.key], anchored, run_id)
+    timings["anchored_s"] = round(time.perf_counter() - started, 3)
+    return results
 
 
 # Reports the thresholds are learned from: the project's newest consensus-scored ones of the

@@ -1,0 +1,256 @@
+"""Object-landmark QC after the solve: every landmark anchored to the solved object's surface.
+
+Once the objects are solved (poses in every frame), a worker's landmark is a point on the
+object: its ray at a frame where it is labelled visible hits the object's surface there (the
+paper maps each landmark once, at its first visible frame). A careful track then follows that
+point's projection through every frame, and is marked occluded exactly where the point is
+hidden. So each landmark is anchored at the candidate hit (over a few of its visible frames)
+whose projection the track follows best, and judged:
+
+- error: pixels between the track and the anchored point's projection, over the frames where
+  both the track and the solve say it is visible (median, 90th percentile);
+- visibility: the point is hidden where it faces away, where another solved mesh (or its own)
+  is nearer along the ray, or where the depth camera reads a surface well in front of it (a
+  hand); the share of visible frames marked occluded and of hidden frames marked visible;
+- drift: how much the error grows from the first third of the clip to the last.
+
+Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from worker.geometry.cameras import CameraModel, pixels_to_rays
+from worker.quality.consensus import ViewLabels
+from worker.quality.metrics import (
+    AssignmentQC,
+    DepthMaps,
+    error_issues,
+    num,
+    per_point_and_frame,
+)
+
+# Visible frames tried as the anchor's frame (evenly over the track): a sloppy first click
+# does not decide where a careful track is anchored.
+ANCHOR_TRIES = 12
+# A mesh nearer than the point by this much along its ray hides it (metres): the point lies on
+# a face, and the face it lies on must not hide it.
+MESH_MARGIN_M = 0.004
+# The depth camera hides a point when it reads a surface this much nearer (metres): a hand
+# over the object reads 1-3 cm nearer; sensor noise at 0.7 m is ~1 mm.
+DEPTH_MARGIN_M = 0.012
+# An issue span: the track this far off the anchored point (px).
+ISSUE_PX = 10.0
+
+
+@dataclass(frozen=True)
+class SolvedObjects:
+    """The solved scene: per object vertices (N, 3) and faces (M, 3) in its own frame
+    (metres), and poses (O, F, 3, 4) object-to-world (NaN where unsolved)."""
+
+    vertices: Sequence[np.ndarray]
+    faces: Sequence[np.ndarray]
+    poses: np.ndarray
+
+    def triangles(self, index: int, frame: int) -> np.ndarray:
+        """(M, 3, 3) world triangles of object ``index`` at ``frame`` (NaN if unsolved)."""
+        pose = self.poses[index, frame]
+        return (self.vertices[index] @ pose[:, :3].T + pose[:, 3])[self.faces[index]]
+
+
+def ray_hits(origin: np.ndarray, dirs: np.ndarray,
+             tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest hit of each ray with the triangles (Moller-Trumbore).
+
+    origin (3,), dirs (R, 3) unit, tri (M, 3, 3) world metres. Returns (R,) distance along the
+    ray (inf where none) and (R,) the face hit (-1 where none).
+    """
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(dirs[:, None, :], e2[None])
+    det = np.einsum("mk,rmk->rm", e1, p)
+    ok = np.abs(det) > 1e-12
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    s = origin - tri[:, 0]
+    u = np.einsum("mk,rmk->rm", s, p) * inv
+    q = np.cross(s, e1)
+    v = np.einsum("rk,mk->rm", dirs, q) * inv
+    t = np.einsum("mk,mk->m", e2, q)[None] * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(t)
+    dist = np.where(hit, t, np.inf)
+    face = np.argmin(dist, axis=1)
+    best = dist[np.arange(len(dirs)), face]
+    return best, np.where(np.isfinite(best), face, -1)
+
+
+def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centre (3,) and unit world directions (K, 3) through pixels (K, 2)."""
+    rays_cam = pixels_to_rays(np.atleast_2d(xy), camera.K, camera.dist)
+    dirs = rays_cam @ camera.T_cam_to_world[:, :3].T
+    return camera.T_cam_to_world[:, 3], dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+
+
+def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: SolvedObjects,
+                target: int) -> np.ndarray:
+    """(K, 3) object-frame surface points the landmark's rays hit at a few visible frames."""
+    frames = np.flatnonzero(ok)
+    if frames.size > ANCHOR_TRIES:
+        frames = frames[np.linspace(0, frames.size - 1, ANCHOR_TRIES).astype(int)]
+    out = []
+    for f in frames:
+        tri = scene.triangles(target, int(f))
+        if not np.isfinite(tri).all():
+            continue
+        origin, dirs = _ray(camera, xy[f])
+        dist, _ = ray_hits(origin, dirs, tri)
+        if np.isfinite(dist[0]):
+            world = origin + dist[0] * dirs[0]
+            pose = scene.poses[target, f]
+            out.append(pose[:, :3].T @ (world - pose[:, 3]))
+    return np.array(out).reshape(-1, 3)
+
+
+def _track_of(camera: CameraModel, point: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(F, 3) world positions of an object-frame point under poses (F, 3, 4)."""
+    return np.einsum("fij,j->fi", poses[:, :, :3], point) + poses[:, :, 3]
+
+
+def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: SolvedObjects,
+           target: int) -> np.ndarray | None:
+    """The object-frame point (3,) of one landmark track (xy (F, 2) px, visible (F,)) whose
+    projection the track follows best (least median error), or None where no ray hits."""
+    ok = np.asarray(visible, bool) & np.isfinite(xy).all(axis=1)
+    candidates = _candidates(camera, xy, ok, scene, target)
+    if not len(candidates):
+        return None
+    errors = [np.median(np.linalg.norm(
+        camera.project(_track_of(camera, c, scene.poses[target]))[ok] - xy[ok], axis=1))
+        for c in candidates]
+    return candidates[int(np.nanargmin(errors))]
+
+
+def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
+                  depth: DepthMaps | None) -> np.ndarray:
+    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
+    solved mesh nearer along its ray, and no depth reading well in front of it."""
+    frames = len(world)
+    pix = camera.project(world)
+    z = camera.depth_of(world)
+    inside = np.isfinite(z) & (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < camera.width) \
+        & (pix[:, 1] >= 0) & (pix[:, 1] < camera.height)
+    shown = inside.copy()
+    origin = camera.T_cam_to_world[:, 3]
+    for f in np.flatnonzero(inside):
+        offset = world[f] - origin
+        reach = float(np.linalg.norm(offset))
+        dirs = (offset / reach)[None]
+        for index in range(len(scene.vertices)):
+            tri = scene.triangles(index, int(f))
+            if np.isfinite(tri).all() and ray_hits(origin, dirs, tri)[0][0] < reach - MESH_MARGIN_M:
+                shown[f] = False
+                break
+    if depth is not None:
+        rows, cols = np.rint(pix[:, 1]), np.rint(pix[:, 0])
+        at = np.flatnonzero(shown)
+        if at.size:
+            reading = depth[(at, rows[at].astype(int).clip(0, camera.height - 1),
+                             cols[at].astype(int).clip(0, camera.width - 1))] / 1000.0
+            hidden = (reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)
+            shown[at[hidden]] = False
+    assert shown.shape == (frames,)
+    return shown
+
+
+def _drift(errors: np.ndarray) -> float | None:
+    """Median error of the last third of the clip less that of the first third, px (the
+    largest over the landmarks)."""
+    third = max(1, errors.shape[0] // 3)
+    out = []
+    for p in range(errors.shape[1]):
+        first, last = errors[:third, p], errors[-third:, p]
+        if np.isfinite(first).any() and np.isfinite(last).any():
+            out.append(np.nanmedian(last) - np.nanmedian(first))
+    return num(max(out)) if out else None
+
+
+def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects, target: int,
+                   depth: DepthMaps | None = None) -> AssignmentQC:
+    """One worker's landmark label of object ``target`` against the solved scene.
+
+    Args:
+        camera: the label's view. label: xy (F, P, 2) px, visible (F, P).
+        scene: the solved objects; target: the labelled object's index in it.
+        depth: optional (F, H, W) uint16 mm of the view.
+
+    Returns:
+        AssignmentQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
+        frames both call visible), anchored_visible_occluded (share of the point's visible
+        frames marked occluded), anchored_hidden_visible (share of its hidden frames marked
+        visible), anchored_drift_px, anchored_fraction (landmarks that could be anchored);
+        per_joint / per_frame median errors; issues where a landmark is over ISSUE_PX off.
+    """
+    xy = np.asarray(label.xy, np.float64)
+    visible = np.asarray(label.visible, bool)
+    frames, points = visible.shape
+    if scene.poses.shape[:2] != (len(scene.vertices), frames) or not 0 <= target < len(
+            scene.vertices):
+        raise ValueError(f"scene poses must have shape (O={len(scene.vertices)}, F={frames}, 3, "
+                         f"4) and target be an object index, got {scene.poses.shape}, {target}")
+    errors = np.full((frames, points), np.nan)
+    shown = np.zeros((frames, points), bool)
+    # Frames without a solved pose of the object judge nothing.
+    known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
+    anchored = 0
+    for p in range(points):
+        point = anchor(camera, xy[:, p], visible[:, p], scene, target)
+        if point is None:
+            continue
+        anchored += 1
+        world = _track_of(camera, point, scene.poses[target])
+        shown[:, p] = point_visible(camera, world, scene, depth)
+        both = shown[:, p] & visible[:, p] & np.isfinite(xy[:, p]).all(axis=1)
+        errors[both, p] = np.linalg.norm(camera.project(world)[both] - xy[both, p], axis=1)
+    judged = np.isfinite(errors)
+    hidden = ~shown & known[:, None]
+    metrics: dict[str, float | None] = {
+        "anchored_median_px": num(np.median(errors[judged])) if judged.any() else None,
+        "anchored_p90_px": num(np.percentile(errors[judged], 90)) if judged.any() else None,
+        "anchored_visible_occluded": num((shown & ~visible).sum() / shown.sum())
+        if anchored and shown.any() else None,
+        "anchored_hidden_visible": num((hidden & visible).sum() / hidden.sum())
+        if anchored and hidden.any() else None,
+        "anchored_drift_px": _drift(errors),
+        "anchored_fraction": num(anchored / points),
+    }
+    per_joint, per_frame = per_point_and_frame(errors)
+    issues = [dict(i, about="anchored") for i in error_issues(errors, ISSUE_PX)]
+    return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
+                        per_frame=per_frame, issues=issues,
+                        provisional=not known.any())
+
+
+# What the label's own track says of its motion (worker.quality.landmarks) only stands in for
+# the solved object's: a landmark that follows its anchored point moves with the object and
+# does not leap, whatever the other views' tracks suggest (with one worker per view, half of
+# them may be random or frozen).
+SUPERSEDED = ("moved_with_object", "jump_fraction", "max_step_ratio")
+
+
+def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) -> AssignmentQC:
+    """A landmark label's QC with the solved object's verdict added: the anchored metrics
+    join the label's own (replacing the SUPERSEDED motion guesses where the label could be
+    judged), its per-landmark and per-frame errors are the anchored ones, and it is
+    provisional only where neither check could judge it. run_id: the solve run used."""
+    metrics = {**before.metrics, **anchored.metrics, "solve_run": float(run_id)}
+    if anchored.metrics.get("anchored_median_px") is not None:
+        metrics.update(dict.fromkeys(SUPERSEDED))
+    issues = anchored.issues + [i for i in before.issues if i.get("about") != "jump"] \
+        if anchored.metrics.get("anchored_median_px") is not None \
+        else anchored.issues + before.issues
+    return AssignmentQC(key=before.key, view=before.view, metrics=metrics,
+                        per_joint=anchored.per_joint, per_frame=anchored.per_frame,
+                        swaps=before.swaps, issues=issues,
+                        provisional=before.provisional and anchored.provisional)
