@@ -14,7 +14,8 @@ from sqlalchemy import select
 
 from backend.db import session_scope
 from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
-from tests.quality.test_qc_crash import _job, _wait_for
+from tests.quality.test_qc_crash import _job
+from tests.servers import wait_for
 
 # A consumer whose reaper runs every second instead of every minute.
 WORKER = ("import huey.consumer; huey.consumer.Scheduler.periodic_task_seconds = 1; "
@@ -43,8 +44,8 @@ def test_a_qc_job_longer_than_its_lease_runs_once_with_two_workers(
                                 stdout=log.open("ab"), stderr=subprocess.STDOUT)
                for _ in range(2)]
     try:
-        done = _wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
-                         "the QC job to finish", timeout_s=180)
+        done = wait_for(lambda: (j := _job(key)).status in ("done", "failed") and j,
+                        "the QC job to finish", timeout_s=180)
     finally:
         for worker in workers:
             worker.terminate()
