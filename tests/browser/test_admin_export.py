@@ -22,6 +22,9 @@ from tests.browser.test_admin import (  # noqa: F401  (fixtures)
 )
 
 SIZES = ({"width": 1024, "height": 700}, {"width": 1440, "height": 900})
+# The export job runs on the suite's one queue consumer, possibly behind QC and solve jobs of
+# the other admin tests: its archive may take a while on a busy machine.
+DOWNLOAD_MS = 180_000
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +69,7 @@ def test_admin_exports_a_sequence_and_the_project_and_gets_each_archive(
     page.locator("#export-format").select_option("json")
     status = page.locator("#export-status")
     row_button = page.locator(f"#sequence-rows button[data-export='{server.sequence_id}']")
-    with page.expect_download() as download_info:
+    with page.expect_download(timeout=DOWNLOAD_MS) as download_info:
         row_button.click()
         # The job's state is drawn while it runs (queued, running, then views done).
         expect(status).to_contain_text(f"json export of sequence #{server.sequence_id}")
@@ -84,7 +87,7 @@ def test_admin_exports_a_sequence_and_the_project_and_gets_each_archive(
     assert {w["assignment_id"] for w in document["work"]} >= set(accepted)
 
     page.locator("#export-format").select_option("cvat")
-    with page.expect_download() as download_info:
+    with page.expect_download(timeout=DOWNLOAD_MS) as download_info:
         page.locator("#export-project").click()
         expect(status).to_contain_text("cvat export of project")
     download = download_info.value
