@@ -157,12 +157,14 @@ class TestScoreAnchored:
             score_anchored(camera, label(camera, solved, points, "careful"), short, 0)
 
 
-def test_merge_replaces_motion_guesses_once_the_label_is_anchored():
+def test_merge_replaces_motion_and_outline_guesses_once_the_label_is_anchored():
     before = AssignmentQC("k", 0, {"moved_with_object": 0.01, "jump_fraction": 0.2,
-                                   "completeness": 1.0}, [], [],
-                          issues=[{"point": 0, "frames": [3, 4], "about": "jump"}])
+                                   "outlier_fraction": 0.5, "completeness": 1.0}, [], [],
+                          issues=[{"point": 0, "frames": [3, 4], "about": "jump"},
+                                  {"point": 1, "frames": [0, 0], "about": "silhouette"}])
     anchored = AssignmentQC("k", 0, {"anchored_median_px": 1.5}, [1.5, 1.5], [1.5])
     merged = merge_anchored(before, anchored, 7)
     assert merged.metrics["moved_with_object"] is None and merged.metrics["jump_fraction"] is None
+    assert merged.metrics["outlier_fraction"] is None
     assert merged.metrics["completeness"] == 1.0 and merged.metrics["solve_run"] == 7.0
     assert merged.issues == [] and merged.per_joint == [1.5, 1.5]

@@ -232,11 +232,13 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
                         provisional=not known.any())
 
 
-# What the label's own track says of its motion (worker.quality.landmarks) only stands in for
-# the solved object's: a landmark that follows its anchored point moves with the object and
-# does not leap, whatever the other views' tracks suggest (with one worker per view, half of
-# them may be random or frozen).
-SUPERSEDED = ("moved_with_object", "jump_fraction", "max_step_ratio")
+# What the label's own track says (worker.quality.landmarks) only stands in for the solved
+# object: a landmark that follows its anchored point moves with the object and does not leap,
+# whatever the other views' tracks suggest (with one worker per view, half of them may be
+# random or frozen), and its distance to the object in every frame says more than its
+# distance to the outline of the initial pose in the first.
+SUPERSEDED = ("moved_with_object", "jump_fraction", "max_step_ratio", "median_error_px",
+              "mean_error_px", "p90_error_px", "outlier_fraction", "motion_ratio")
 
 
 def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) -> AssignmentQC:
@@ -247,7 +249,8 @@ def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) ->
     metrics = {**before.metrics, **anchored.metrics, "solve_run": float(run_id)}
     if anchored.metrics.get("anchored_median_px") is not None:
         metrics.update(dict.fromkeys(SUPERSEDED))
-    issues = anchored.issues + [i for i in before.issues if i.get("about") != "jump"] \
+    issues = anchored.issues + [i for i in before.issues
+                                if i.get("about") not in ("jump", "silhouette")] \
         if anchored.metrics.get("anchored_median_px") is not None \
         else anchored.issues + before.issues
     return AssignmentQC(key=before.key, view=before.view, metrics=metrics,
