@@ -61,6 +61,7 @@ from worker.quality.support import (
     spread_px,
 )
 from worker.quality.swaps import (
+    consensus_swapped,
     find_swaps,
     moved_joints,
     overlaps,
@@ -454,9 +455,12 @@ def _resolve_conflicts(cameras: list[CameraModel], labels: list[ViewLabels],
     explanation that makes the views agree best.
 
     With few views a careful label's reference may be made from a swapper and one other view;
-    it then looks swapped too. Each accused label alone, and all of them together (several
-    swappers), are undone in turn; the consensus of the affected points is refitted, and the
-    choice with the least robust reprojection cost over every label wins.
+    it then looks swapped too; where the swappers outnumber them, careful labels are the
+    accused. Each accused label alone, all of them together (several swappers), and every
+    other label instead (the accused were right) are undone in turn; the consensus of the
+    affected points is refitted, and the choice with the least robust reprojection cost over
+    every label wins, among those whose palm is not exchanged over the span
+    (consensus_swapped) where there are any.
     """
     groups = _conflicts(_own_swaps(report, corrections))
     if not groups:
@@ -466,18 +470,34 @@ def _resolve_conflicts(cameras: list[CameraModel], labels: list[ViewLabels],
         frames = [min(s["frames"][0] for _, s in group), max(s["frames"][1] for _, s in group)]
         rows[frames[0]:frames[1] + 1, moved_joints([s for _, s in group])] = True
         flat = np.flatnonzero(rows.ravel())
-        choices = [[item] for item in group] + [group]
+        span = {"kind": group[0][1]["kind"], "fingers": group[0][1]["fingers"],
+                "frames": frames}
+        accused = {key for key, _ in group}
+        # Each accused label alone, all of them, or none of them but everyone else (the
+        # consensus was the swappers' and the accused were right).
+        choices = [_trial(corrections, group, [item]) for item in group]
+        choices.append(_trial(corrections, group, group))
+        flipped = _trial(corrections, group, [])
+        choices.append({key: found + ([] if key in accused or any(overlaps(span, t)
+                                                                    for t in found) else [span])
+                        for key, found in flipped.items()})
         costs = []
-        for chosen in choices:
-            trial = {key: [s for s in found if (key, s) not in group or (key, s) in chosen]
-                     for key, found in corrections.items()}
+        for trial in choices:
             trial_fit = _fit(cameras, [_undone(lab, trial[lab.key]) for lab in labels], opts,
                              fit, also=rows.ravel())
-            costs.append(_robust_cost(cameras, labels, trial_fit, flat, opts.outlier_px))
-        best = choices[int(np.argmin(costs))]
-        corrections = {key: [s for s in found if (key, s) not in group or (key, s) in best]
-                       for key, found in corrections.items()}
+            # An explanation that leaves the palm exchanged over the span is the swappers'
+            # (two against two ties on the reprojection cost alone).
+            palm = consensus_swapped(trial_fit.points.reshape(report.consensus.shape), span)
+            costs.append((palm, _robust_cost(cameras, labels, trial_fit, flat, opts.outlier_px)))
+        corrections = choices[min(range(len(choices)), key=lambda i: costs[i])]
     return corrections
+
+
+def _trial(corrections: dict[str, list[dict]], group: list[tuple[str, dict]],
+           chosen: list[tuple[str, dict]]) -> dict[str, list[dict]]:
+    """``corrections`` with, of the conflicting ``group``, only the ``chosen`` swaps undone."""
+    return {key: [s for s in found if (key, s) not in group or (key, s) in chosen]
+            for key, found in corrections.items()}
 
 
 def _robust_cost(cameras: list[CameraModel], labels: list[ViewLabels], fit: _Fit,
