@@ -46,9 +46,9 @@ def encode_result(result: Any, serials: list[str], object_names: list[str],
         "serials": np.asarray(serials, dtype=str),
         "object_names": np.asarray(object_names, dtype=str),
         "object_confidence": np.asarray(result.object_confidence, dtype=np.float64).reshape(
-            len(object_names), -1),
+            len(object_names), len(result.labelled)),
         "object_flags": np.asarray([[r or "" for r in flags] for flags in result.object_flags],
-                                   dtype=str).reshape(len(object_names), -1),
+                                   dtype=str).reshape(len(object_names), len(result.labelled)),
     }
     buf = io.BytesIO()
     # The keys are the arrays' names above; none of them is savez's allow_pickle keyword.
@@ -79,13 +79,6 @@ def trusted_object_poses(arrays: dict[str, np.ndarray]) -> np.ndarray:
     poses = np.array(arrays["object_poses"], dtype=np.float64)
     poses[flags != ""] = np.nan
     return poses
-
-
-def flag_summary(arrays: dict[str, np.ndarray]) -> list[str]:
-    """Every flagged object pose as "frame F: reason", in frame order."""
-    _, flags = object_trust(arrays)
-    return [f"frame {f}: {flags[o, f]}" for f in range(flags.shape[1])
-            for o in range(flags.shape[0]) if flags[o, f]]
 
 
 def _mean_or_none(values: np.ndarray) -> float | None:

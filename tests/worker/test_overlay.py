@@ -7,9 +7,11 @@ from worker.geometry.cameras import CameraModel
 from worker.hand import JOINT_NAMES, builtin_hand_model
 from worker.overlay import (
     DARKEN,
+    FLAGGED_COLOUR,
     HAND_PART_COLOURS,
     OBJECT_COLOURS,
     OverlayMesh,
+    caption,
     hand_part_of_vertices,
     object_mesh,
     render_overlay,
@@ -56,6 +58,19 @@ def test_overlay_darkens_the_frame_and_draws_the_object_only_where_it_projects()
     centre = out[60, 80].astype(float)
     blue_dominant = np.argmax(OBJECT_COLOURS[0])
     assert np.argmax(centre) == blue_dominant
+
+
+def test_a_flagged_object_is_drawn_in_the_flag_colour_and_its_reason_written() -> None:
+    vertices, faces = _cube(0.05)
+    own = object_mesh(vertices, faces, _pose(0, 0, 0.5), 1)
+    flagged = object_mesh(vertices, faces, _pose(0, 0, 0.5), 1, flagged=True)
+    assert (own.colours == OBJECT_COLOURS[1]).all() and (flagged.colours == FLAGGED_COLOUR).all()
+    picture = render_overlay(_image(), _camera(), [flagged])
+    centre = picture[H // 2, W // 2].astype(float)
+    assert centre[2] > centre[0] + 40 and centre[2] > centre[1] + 40  # red (BGR) dominates
+    written = caption(picture, ["not trusted: grasped object 'box' seen by 1 view"])
+    assert written.shape == picture.shape and (written[:24] != picture[:24]).any()
+    assert (written[40:] == picture[40:]).all()
 
 
 def test_the_nearer_mesh_hides_the_farther_one() -> None:
