@@ -74,7 +74,7 @@ def object_confidence(problem: Problem, state: SolveState) -> ObjectConfidence:
         role = "grasped object" if motion is not None and motion.held.any() else "object"
         for f in range(frames):
             at_rest = motion is not None and bool(motion.rest[f])
-            out.confidence[o, f], out.flags[o][f] = _judge(
+            out.confidence[o, f], out.flags[o][f] = judge(
                 f"{role} {obj.name!r}", at_rest, int(lm_views[f]), float(lm_px[f]),
                 int(depth_views[f]), float(through[f]), float(grip_mm[f]))
         out.landmark_views[o], out.depth_views[o], out.through[o] = lm_views, depth_views, through
@@ -97,9 +97,12 @@ def _landmark_evidence(state: SolveState, index: int, errors: np.ndarray
     return views, px
 
 
-def _judge(what: str, at_rest: bool, lm_views: int, lm_px: float, depth_views: int,
+def judge(what: str, at_rest: bool, lm_views: int, lm_px: float, depth_views: int,
            through: float, grip_mm: float) -> tuple[float, str | None]:
-    """(confidence, reason or None) of one pose from its evidence."""
+    """(confidence in [0, 1], reason or None) of one pose from its evidence: `what` names the
+    object in the reason; at_rest: the motion prior holds it at its initial pose; lm_views,
+    lm_px (NaN: none), depth_views, through (share) and grip_mm (NaN: not held) as in the
+    module's list."""
     c_through = 1.0 - min(through / (2 * THROUGH_FLAG), 1.0)
     seen_through = (f"{what}: depth sees through {through:.0%} of its surface"
                     + (" where it rests" if at_rest else ""))
