@@ -43,6 +43,14 @@ MESH_MARGIN_M = 0.004
 # The depth camera hides a point when it reads a surface this much nearer (metres): a hand
 # over the object reads 1-3 cm nearer; sensor noise at 0.7 m is ~1 mm.
 DEPTH_MARGIN_M = 0.012
+# A click this close to the object's outline (px) is on it: a careful click lands within ~2 px,
+# and a landmark near the silhouette may miss by that much.
+SNAP_PX = 4.0
+_SNAPS = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (SNAP_PX / 2, SNAP_PX)
+                                  for a in np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)])
+# Hidden frames (summed over the landmarks) needed to judge visible flags there: a landmark hidden
+# for a frame or two at the hand's edge says little.
+MIN_HIDDEN_FRAMES = 6
 # An issue span: the track this far off the anchored point (px).
 ISSUE_PX = 10.0
 
@@ -95,7 +103,8 @@ def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: SolvedObjects,
                 target: int) -> np.ndarray:
-    """(K, 3) object-frame surface points the landmark's rays hit at a few visible frames."""
+    """(K, 3) object-frame surface points the landmark's rays hit at a few visible frames
+    (within SNAP_PX of the click)."""
     frames = np.flatnonzero(ok)
     if frames.size > ANCHOR_TRIES:
         frames = frames[np.linspace(0, frames.size - 1, ANCHOR_TRIES).astype(int)]
@@ -104,10 +113,12 @@ def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: Solv
         tri = scene.triangles(target, int(f))
         if not np.isfinite(tri).all():
             continue
-        origin, dirs = _ray(camera, xy[f])
+        # The click itself, else the nearest of a few points around it that is on the object.
+        origin, dirs = _ray(camera, xy[f] + _SNAPS)
         dist, _ = ray_hits(origin, dirs, tri)
-        if np.isfinite(dist[0]):
-            world = origin + dist[0] * dirs[0]
+        hit = np.flatnonzero(np.isfinite(dist))
+        if hit.size:
+            world = origin + dist[hit[0]] * dirs[hit[0]]
             pose = scene.poses[target, f]
             out.append(pose[:, :3].T @ (world - pose[:, 3]))
     return np.array(out).reshape(-1, 3)
@@ -221,7 +232,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         "anchored_visible_occluded": num((shown & ~visible).sum() / shown.sum())
         if anchored and shown.any() else None,
         "anchored_hidden_visible": num((hidden & visible).sum() / hidden.sum())
-        if anchored and hidden.any() else None,
+        if anchored and hidden.sum() >= MIN_HIDDEN_FRAMES else None,
         "anchored_drift_px": _drift(errors),
         "anchored_fraction": num(anchored / points),
     }

@@ -71,7 +71,9 @@ def _bounds() -> dict[str, MetricBound]:
         "anchored_median_px": MetricBound("above", (3.5, 4.5), (12.0, 20.0)),
         "anchored_p90_px": MetricBound("above", (8.0, 10.0), (25.0, 40.0)),
         "anchored_visible_occluded": MetricBound("above", (0.3, 0.35), (0.45, 0.5)),
-        "anchored_hidden_visible": MetricBound("above", (0.3, 0.5)),
+        # Near the hand's edge the depth camera and a careful eye part ways: careful tracks
+        # keep up to 0.78 of their few hidden frames visible; this only asks for a look.
+        "anchored_hidden_visible": MetricBound("above", (0.85, 0.9)),
         "anchored_drift_px": MetricBound("above", (5.0, 8.0)),
         "anchored_fraction": MetricBound("below", (0.75, 0.75), (0.4, 0.4)),
         # Hands, from the label's own track (they hold where too few views agree to compare).
