@@ -442,6 +442,7 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
     expect(image).to_have_attribute("src", re.compile(r"^blob:"))
     expect(page.locator("#overlay-view option")).to_have_count(run["num_views"])
 
+    hands = 0
     for frame, view in ((0, "0"), (run["num_frames"] - 1, str(run["num_views"] - 1))):
         page.locator("#overlay-frame").fill(str(frame))
         page.locator("#overlay-frame").dispatch_event("change")
@@ -456,7 +457,62 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
         while page.evaluate(SHOWN_PNG) != want and time.monotonic() < deadline:
             time.sleep(0.1)
         assert page.evaluate(SHOWN_PNG) == want
+        hands += _meshes_drawn_where_the_solve_puts_them(server, run, frame, int(view),
+                                                         png.content)
+    assert hands >= 1, "no frame shown had a solved hand to check"
     page.screenshot(path=str(output_dir / "admin-overlay.png"), full_page=True)
+
+
+def _meshes_drawn_where_the_solve_puts_them(server: LiveServer, run: dict, frame: int,
+                                            view: int, overlay: bytes) -> int:
+    """The overlay's drawn pixels (where it differs from the darkened colour frame) cover the
+    solved hand's joints and each object's origin, projected through the view's own camera
+    (lens distortion included), and not the whole picture; 1 when the frame has a solved hand
+    (a frame the solve left unlabelled has none to draw), else 0."""
+    import cv2
+
+    from worker.overlay import DARKEN
+
+    auth = {"Authorization": f"Bearer {server.admin_token}"}
+    sequence = server.admin("GET", f"/api/sequences/{server.sequence_id}")
+    assert isinstance(sequence, dict)
+    cam = next(c for c in sequence["cameras"] if c["view_index"] == view)
+    raw = httpx.get(f"{server.base}/api/sequences/{server.sequence_id}/views/{cam['serial']}"
+                    f"/frames/{frame}.jpg", headers=auth, timeout=30)
+    assert raw.status_code == 200
+    image = cv2.imdecode(np.frombuffer(raw.content, np.uint8), cv2.IMREAD_COLOR)
+    shown = cv2.imdecode(np.frombuffer(overlay, np.uint8), cv2.IMREAD_COLOR)
+    assert shown.shape == image.shape
+    drawn = np.abs(shown.astype(np.float32) - image.astype(np.float32) * DARKEN).max(axis=2) > 25
+    assert 0.002 < drawn.mean() < 0.6, drawn.mean()
+    near = cv2.dilate(drawn.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0  # within 4 px
+    solved = server.admin("GET", f"/api/solve-runs/{run['id']}/frames/{frame}")
+    assert isinstance(solved, dict)
+    c2w = np.asarray(cam["extrinsics"], dtype=np.float64)
+    K = np.array([[cam["fx"], 0, cam["ppx"]], [0, cam["fy"], cam["ppy"]], [0, 0, 1]])
+
+    def project(world: np.ndarray) -> np.ndarray:
+        in_cam = (world - c2w[:, 3]) @ c2w[:, :3]  # world -> camera (inverse of c2w)
+        uv, _ = cv2.projectPoints(in_cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K,
+                                  np.asarray(cam["distortion"], dtype=np.float64))
+        return uv.reshape(-1, 2)
+
+    def on_drawn(uv: np.ndarray) -> np.ndarray:
+        h, w = drawn.shape
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        px = np.round(uv[inside]).astype(int).clip(0, [w - 1, h - 1])
+        return near[px[:, 1], px[:, 0]]
+
+    for obj in solved["objects"]:
+        assert obj["pose"] is not None, obj
+        origin = on_drawn(project(np.asarray(obj["pose"], dtype=np.float64)[:, 3][None]))
+        assert origin.all(), obj
+    if solved["hand_joints"] is None:
+        assert solved["reason"], solved
+        return 0
+    joints = on_drawn(project(np.asarray(solved["hand_joints"], dtype=np.float64)))
+    assert len(joints) >= 10 and joints.mean() >= 0.8, joints
+    return 1
 
 
 def test_sequence_and_worker_listings_page_through_the_api(
