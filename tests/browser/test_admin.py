@@ -142,9 +142,15 @@ def test_reports_table_shows_each_outcome_waiting_work_first(
     ours = {r["assignment_id"]: r for r in reports if r["assignment_id"] in qc_work.values()}
     assert len(ours) == len(CROWD)
     spammer, careful = ours[qc_work["ADMIN-W3"]], ours[qc_work["ADMIN-W1"]]
-    # Random points are hundreds of px off the careful view's hand; careful work passes.
-    assert spammer["metrics"]["median_error_px"] > 50
+    # Two views: no point has the three views a consensus needs, so every verdict is
+    # provisional and says so; the spammer's random points are still caught by their own
+    # track (they jump about), and careful work passes.
+    for report in ours.values():
+        assert report["provisional"], report
+        assert "provisional: fewer than 3 camera views to compare with" in report["reasons"]
+        assert report["metrics"]["median_error_px"] is None
     assert spammer["outcome"] in ("review", "reject") and careful["outcome"] == "approve"
+    assert any(r.startswith("track_jitter_px") for r in spammer["reasons"]), spammer
 
     page.locator(f'#sequence-rows tr[data-sequence="{server.sequence_id}"] a').click()
     expect(page.locator("#sequence-view")).to_be_visible()
@@ -196,12 +202,16 @@ def test_report_detail_draws_per_joint_errors_and_shows_a_refused_decision(
     assert labels[0] == "wrist" and labels[1] == "thumb_mcp" and labels[20] == "little_tip"
     heights = bars.evaluate_all("rs => rs.map(r => Number(r.getAttribute('height')))")
     known = [(h, v) for h, v in zip(heights, detail["per_joint"], strict=True) if v is not None]
-    tallest = max(known, key=lambda hv: hv[1])
-    assert tallest[0] == pytest.approx(140.0) and all(h <= 140.0 for h, _ in known)
+    if known:  # the tallest bar is the largest error, the others in proportion
+        tallest = max(known, key=lambda hv: hv[1])
+        assert tallest[0] == pytest.approx(140.0) and all(h <= 140.0 for h, _ in known)
+    else:  # two views: no joint has a consensus to be measured against, every bar a stub
+        assert len(set(heights)) == 1 and heights[0] < 5, heights
     expect(page.locator('#frame-chart svg[data-chart="per-frame"] rect')) \
         .to_have_count(len(detail["per_frame"]))
+    median = detail["metrics"]["median_error_px"]
     expect(page.locator('[data-fact="median_error_px"]')) \
-        .to_have_text(f"{detail['metrics']['median_error_px']:.1f} px")
+        .to_have_text("\u2013" if median is None else f"{median:.1f} px")
     expect(page.locator("#decision-feedback")).to_have_value(detail["feedback"])
     page.screenshot(path=str(output_dir / "admin-report.png"))
 
@@ -442,8 +452,14 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
     expect(image).to_have_attribute("src", re.compile(r"^blob:"))
     expect(page.locator("#overlay-view option")).to_have_count(run["num_views"])
 
+    # A frame with a solved hand when there is one (how many depends on the work the other
+    # admin tests accepted or rejected), and the last frame in the last view.
+    frames = [server.admin("GET", f"/api/solve-runs/{run['id']}/frames/{f}")
+              for f in range(run["num_frames"])]
+    with_hand = [f["frame"] for f in frames if isinstance(f, dict) and f["hand_joints"]]
     hands = 0
-    for frame, view in ((0, "0"), (run["num_frames"] - 1, str(run["num_views"] - 1))):
+    for frame, view in ((with_hand[0] if with_hand else 0, "0"),
+                        (run["num_frames"] - 1, str(run["num_views"] - 1))):
         page.locator("#overlay-frame").fill(str(frame))
         page.locator("#overlay-frame").dispatch_event("change")
         page.locator("#overlay-view").select_option(view)
@@ -459,7 +475,7 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
         assert page.evaluate(SHOWN_PNG) == want
         hands += _meshes_drawn_where_the_solve_puts_them(server, run, frame, int(view),
                                                          png.content)
-    assert hands >= 1, "no frame shown had a solved hand to check"
+    assert hands >= 1 or not with_hand, "the frame with a solved hand was not checked"
     page.screenshot(path=str(output_dir / "admin-overlay.png"), full_page=True)
 
 
