@@ -145,34 +145,12 @@ def _run_qc(sequence_id: int, target_key: str) -> tuple[float, dict[str, float]]
 def _store_true_solve(capture: Path, sequence_id: int) -> None:
     """A finished solve run of the sequence whose object poses are the capture's ground truth
     (the landmark check after the solve then judges the workers, not the solver)."""
-    from backend.captures.models import Sequence
     from backend.crowd.simulate import CaptureTruth
-    from backend.db import session_scope, utcnow
-    from backend.solve.models import SolveRun
-    from backend.solve.results import encode_result, result_key
-    from backend.storage import get_storage
-    from worker.solver.types import SolveResult
+    from backend.db import session_scope
+    from backend.solve.service import store_object_poses
 
-    poses = CaptureTruth(capture).object_poses()
-    objects, frames = poses.shape[:2]
-    result = SolveResult(
-        hand_pose_m=np.full((frames, 51), np.nan), hand_joints=np.full((frames, 21, 3), np.nan),
-        object_poses=poses, labelled=np.zeros(frames, bool), reasons=[None] * frames,
-        kpt_error_px=np.full((frames, 0, 21), np.nan), depth_rms_mm=np.full(frames, np.nan),
-        landmark_vertices=[[] for _ in range(objects)], timings={},
-        object_confidence=np.ones((objects, frames)),
-        object_flags=[[None] * frames for _ in range(objects)])
     with session_scope() as session:
-        sequence = session.get_one(Sequence, sequence_id)
-        run = SolveRun(sequence_id=sequence_id, optimiser="default", params={}, status="done",
-                       timings={}, num_frames=frames, num_views=len(sequence.cameras),
-                       finished_at=utcnow())
-        session.add(run)
-        session.flush()
-        run.result_key = result_key(sequence.storage_uid, run.id)
-        get_storage().put_bytes(run.result_key, encode_result(
-            result, [c.serial for c in sequence.cameras], [o.name for o in sequence.objects],
-            None), "application/octet-stream")
+        store_object_poses(session, sequence_id, CaptureTruth(capture).object_poses())
 
 
 def _swap_check(swaps: list[dict], frames: int) -> tuple[bool, float]:

@@ -80,30 +80,7 @@ def submit_direct(task_id: int, worker: str, tracks: list) -> int:
 def store_solve(sequence_id: int, object_poses: np.ndarray) -> int:
     """A finished solve run of the sequence whose stored result holds these object poses
     (O, F, 3, 4) object-to-world, and nothing about the hand; its id."""
-    from backend.captures.models import Sequence
-    from backend.db import utcnow
-    from backend.solve.models import SolveRun
-    from backend.solve.results import encode_result, result_key
-    from backend.storage import get_storage
-    from worker.solver.types import SolveResult
+    from backend.solve.service import store_object_poses
 
-    objects, frames = object_poses.shape[:2]
-    result = SolveResult(
-        hand_pose_m=np.full((frames, 51), np.nan), hand_joints=np.full((frames, 21, 3), np.nan),
-        object_poses=object_poses, labelled=np.zeros(frames, bool), reasons=[None] * frames,
-        kpt_error_px=np.full((frames, 0, 21), np.nan), depth_rms_mm=np.full(frames, np.nan),
-        landmark_vertices=[[] for _ in range(objects)], timings={},
-        object_confidence=np.ones((objects, frames)),
-        object_flags=[[None] * frames for _ in range(objects)])
     with session_scope() as session:
-        sequence = session.get_one(Sequence, sequence_id)
-        run = SolveRun(sequence_id=sequence_id, optimiser="default", params={}, status="done",
-                       timings={}, num_frames=frames, num_views=len(sequence.cameras),
-                       finished_at=utcnow())
-        session.add(run)
-        session.flush()
-        run.result_key = result_key(sequence.storage_uid, run.id)
-        get_storage().put_bytes(run.result_key, encode_result(
-            result, [c.serial for c in sequence.cameras], [o.name for o in sequence.objects],
-            None), "application/octet-stream")
-        return run.id
+        return store_object_poses(session, sequence_id, object_poses).id
