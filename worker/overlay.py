@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -30,6 +31,14 @@ FLAGGED_COLOUR = np.array([40, 40, 240], dtype=np.float64)
 DARKEN = 0.45  # the image keeps 45 % of its brightness behind the meshes
 MESH_ALPHA = 0.85  # a little of the image shows through, so edges stay readable
 AMBIENT = 0.35  # shading floor: surfaces seen edge-on stay coloured, not black
+
+# How the meshes are drawn: "solid" shaded surfaces; "blend" the same, half transparent, so
+# the image's edges show under them; "wireframe" only the visible triangle edges, 1 px wide, in
+# the mesh's colour, the image untouched in between.
+OverlayStyle = Literal["solid", "blend", "wireframe"]
+OVERLAY_STYLES: tuple[OverlayStyle, ...] = ("solid", "blend", "wireframe")
+# Opacity of the drawn surface or line per style when none is given.
+STYLE_ALPHA: dict[str, float] = {"solid": MESH_ALPHA, "blend": 0.5, "wireframe": 1.0}
 
 
 @dataclass(frozen=True)
@@ -87,13 +96,40 @@ def _lens_camera_points(world: np.ndarray, camera: CameraModel) -> np.ndarray:
     return np.concatenate([xy * z, z], axis=1)
 
 
+def _edge_pixels(tri: np.ndarray) -> np.ndarray:
+    """(H, W) bool: drawn pixels on a visible triangle's edge or the silhouette, 1 px wide.
+
+    tri: (H, W) winning triangle per pixel, -1 where nothing is drawn. Between two triangles
+    the pixel left of or above the change is marked (one line, not two); at the silhouette the
+    drawn pixel next to the background is, on every side.
+    """
+    drawn = tri >= 0
+    edge = np.zeros_like(drawn)
+    edge[:, :-1] |= tri[:, :-1] != tri[:, 1:]
+    edge[:-1, :] |= tri[:-1, :] != tri[1:, :]
+    edge[:, 1:] |= tri[:, :-1] < 0
+    edge[1:, :] |= tri[:-1, :] < 0
+    edge[:, [0, -1]] = True
+    edge[[0, -1], :] = True
+    return edge & drawn
+
+
 def render_overlay(image: np.ndarray, camera: CameraModel, meshes: Sequence[OverlayMesh],
-                   darken: float = DARKEN) -> np.ndarray:
-    """The meshes drawn over the darkened image (H, W, 3) BGR uint8 -> (H, W, 3) BGR uint8."""
+                   darken: float = DARKEN, style: OverlayStyle = "solid",
+                   alpha: float | None = None) -> np.ndarray:
+    """The meshes drawn over the darkened image (H, W, 3) BGR uint8 -> (H, W, 3) BGR uint8.
+
+    style: see OverlayStyle; alpha: opacity 0..1 of what is drawn (None: STYLE_ALPHA[style]).
+    """
     image = np.asarray(image)
     if image.shape != (camera.height, camera.width, 3) or image.dtype != np.uint8:
         raise ValueError(f"image must be ({camera.height}, {camera.width}, 3) uint8, got "
                          f"{image.shape} {image.dtype}")
+    if style not in OVERLAY_STYLES:
+        raise ValueError(f"style must be one of {', '.join(OVERLAY_STYLES)}, got {style!r}")
+    opacity = STYLE_ALPHA[style] if alpha is None else float(alpha)
+    if not 0.0 <= opacity <= 1.0:
+        raise ValueError(f"alpha must be within 0..1, got {alpha}")
     out = image.astype(np.float32) * darken
     meshes = [m for m in meshes if len(m.faces)]
     if not meshes:
@@ -106,6 +142,12 @@ def render_overlay(image: np.ndarray, camera: CameraModel, meshes: Sequence[Over
     frags = rasterize(cam, faces, camera.K, camera.width, camera.height)
     if not len(frags.pixels):
         return out.astype(np.uint8)
+    flat = out.reshape(-1, 3)
+    if style == "wireframe":
+        pixels = np.flatnonzero(_edge_pixels(frags.tri))
+        lines = colours[frags.tri.reshape(-1)[pixels]]
+        flat[pixels] = opacity * lines + (1.0 - opacity) * flat[pixels]
+        return np.clip(out, 0, 255).astype(np.uint8)
     tri = frags.tri.reshape(-1)[frags.pixels]
     a, b, c = (cam[faces[tri, k]] for k in range(3))
     normal = np.cross(b - a, c - a)
@@ -114,9 +156,8 @@ def render_overlay(image: np.ndarray, camera: CameraModel, meshes: Sequence[Over
     cosine = np.abs(np.einsum("pc,pc->p", normal, centre)) / np.maximum(
         np.linalg.norm(normal, axis=1) * np.linalg.norm(centre, axis=1), 1e-12)
     shade = (AMBIENT + (1.0 - AMBIENT) * cosine).astype(np.float32)
-    flat = out.reshape(-1, 3)
     drawn = colours[tri] * shade[:, None]
-    flat[frags.pixels] = MESH_ALPHA * drawn + (1.0 - MESH_ALPHA) * flat[frags.pixels]
+    flat[frags.pixels] = opacity * drawn + (1.0 - opacity) * flat[frags.pixels]
     return np.clip(out, 0, 255).astype(np.uint8)
 
 

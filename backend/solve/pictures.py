@@ -21,6 +21,7 @@ from backend.storage import get_storage
 from worker.hand import HandLayer
 from worker.hand.joints import JOINT_NAMES
 from worker.overlay import (
+    OverlayStyle,
     caption,
     hand_mesh,
     hand_part_of_vertices,
@@ -81,8 +82,10 @@ def _colour_frame(session: Session, camera: Camera, frame: int) -> np.ndarray:
     return image
 
 
-def overlay_png(session: Session, run: SolveRun, frame: int, view: str) -> bytes:
-    """The solved meshes over the darkened colour frame of one view, as PNG bytes."""
+def overlay_png(session: Session, run: SolveRun, frame: int, view: str,
+                style: OverlayStyle = "solid", alpha: float | None = None) -> bytes:
+    """The solved meshes over the darkened colour frame of one view, as PNG bytes, drawn in
+    ``style`` at opacity ``alpha`` (see worker.overlay.render_overlay)."""
     check_frame(run, frame)
     arrays = run_arrays(run)
     v = resolve_view(run, view, [str(s) for s in arrays["serials"]])
@@ -100,7 +103,8 @@ def overlay_png(session: Session, run: SolveRun, frame: int, view: str) -> bytes
     hand = solved_hand(arrays, frame)
     if hand is not None:
         meshes.append(hand_mesh(*hand))
-    picture = render_overlay(_colour_frame(session, camera, frame), camera_model(camera), meshes)
+    picture = render_overlay(_colour_frame(session, camera, frame), camera_model(camera), meshes,
+                             style=style, alpha=alpha)
     # A flagged pose is drawn in the flag colour, and why it is not trusted is written on top.
     reasons = [f"not trusted: {flags[o, frame]}" for o in range(flags.shape[0])
                if flags[o, frame]]

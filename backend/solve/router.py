@@ -2,20 +2,34 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
 
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
-from backend.solve import pictures, service
+from backend.solve import pictures, review, service
 from backend.solve.models import SolveRun
-from backend.solve.schemas import InitialPoseUpdate, SolveFrameRead, SolveRequest, SolveRunRead
+from backend.solve.schemas import (
+    InitialPoseUpdate,
+    Optimiser,
+    RunComparison,
+    RunTimeline,
+    SolveFrameRead,
+    SolveRequest,
+    SolveRunRead,
+    SolveSettingsRead,
+)
 from backend.validation import Id, Index, Key
+from worker.overlay import OverlayStyle
 
 router = APIRouter(prefix="/api", tags=["solve"])
 
 _PNG: dict[int | str, dict[str, Any]] = {200: {"content": {"image/png": {}}}}
+StyleQuery = Annotated[OverlayStyle, Query(description=(
+    "solid: shaded meshes; blend: half transparent; wireframe: the visible triangle edges "
+    "only"))]
+OptimiserQuery = Annotated[Optimiser, Query(description="paper or default")]
 
 
 def _read(run: SolveRun, current: SolveRun | None) -> SolveRunRead:
@@ -61,10 +75,14 @@ def read_frame(run_id: Id, frame: Index, session: SessionDep, _: CurrentAdmin,
 
 @router.get("/solve-runs/{run_id}/frames/{frame}/views/{view}.png", responses=_PNG,
             response_class=Response)
-def view_overlay(run_id: Id, frame: Index, view: Key, session: SessionDep,
-                 _: CurrentAdmin) -> Response:
+def view_overlay(run_id: Id, frame: Index, view: Key, session: SessionDep, _: CurrentAdmin,
+                 style: StyleQuery = "solid",
+                 alpha: float | None = Query(None, ge=0.0, le=1.0, description=(
+                     "opacity of the meshes or lines, 0..1 (default by style: solid 0.85, "
+                     "blend 0.5, wireframe 1)"))) -> Response:
     run = service.finished_run_or_raise(session, run_id)
-    return Response(pictures.overlay_png(session, run, frame, view), media_type="image/png")
+    png = pictures.overlay_png(session, run, frame, view, style, alpha)
+    return Response(png, media_type="image/png")
 
 
 @router.get("/solve-runs/{run_id}/frames/{frame}/residuals.png", responses=_PNG,
@@ -72,3 +90,23 @@ def view_overlay(run_id: Id, frame: Index, view: Key, session: SessionDep,
 def residuals(run_id: Id, frame: Index, session: SessionDep, _: CurrentAdmin) -> Response:
     run = service.finished_run_or_raise(session, run_id)
     return Response(pictures.residuals_png(run, frame), media_type="image/png")
+
+
+@router.get("/solve-runs/{run_id}/timeline", response_model=RunTimeline)
+def timeline(run_id: Id, session: SessionDep, _: CurrentAdmin) -> dict:
+    """Every frame at a glance, and the frames that need a look with their reasons."""
+    return review.run_timeline(service.finished_run_or_raise(session, run_id))
+
+
+@router.get("/solve-runs/{run_id}/compare/{other_id}", response_model=RunComparison)
+def compare(run_id: Id, other_id: Id, session: SessionDep, _: CurrentAdmin) -> dict:
+    """How run ``other_id`` differs from run ``run_id`` frame by frame (both finished, one
+    sequence): hand joints (mm), each object's pose (mm, degrees), the largest differences."""
+    return review.compare_runs(session, run_id, other_id)
+
+
+@router.get("/solve-settings", response_model=SolveSettingsRead)
+def solve_settings(_: CurrentAdmin, optimiser: OptimiserQuery = "default") -> dict:
+    """The solver settings a new run gets (defaults, then the deployment's); a request's
+    ``params`` may override any of them."""
+    return {"optimiser": optimiser, "params": service.editable_params(optimiser)}

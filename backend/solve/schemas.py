@@ -87,3 +87,74 @@ class InitialPoseUpdate(BaseModel):
         if any(len(row) != 4 for row in pose):
             raise ValueError("pose must be 3 rows of 4 numbers (object-to-world, metres)")
         return pose
+
+
+class FrameState(BaseModel):
+    """One frame of a run at a glance: labelled (hand solved), why not, mean reprojection
+    error (px) over views and joints, the lowest object confidence (0..1)."""
+
+    frame: int
+    labelled: bool
+    reason: str | None
+    kpt_px_mean: float | None
+    min_confidence: float
+
+
+class FlaggedFrame(BaseModel):
+    """A frame that needs a look and why (object flags, low confidence, hand not solved)."""
+
+    frame: int
+    min_confidence: float
+    reasons: list[str]
+
+
+class RunTimeline(BaseModel):
+    run_id: int
+    num_frames: int
+    frames: list[FrameState]
+    flagged: list[FlaggedFrame]
+
+
+class ObjectDifference(BaseModel):
+    """Per frame, how far one object's pose differs between two runs: mean mesh-vertex
+    distance (ADD, mm), origin distance (mm), relative rotation (degrees); None where either
+    run has no pose."""
+
+    index: int
+    name: str
+    add_mm: list[float | None]
+    translation_mm: list[float | None]
+    rotation_deg: list[float | None]
+
+
+class LargestDifference(BaseModel):
+    """One of the largest differences: the hand's mean joint distance or an object's ADD (mm)
+    at a frame; deg is the object's relative rotation (None for the hand)."""
+
+    frame: int
+    target: str
+    object_index: int | None
+    mm: float
+    deg: float | None
+
+
+class RunComparison(BaseModel):
+    """How run_b differs from run_a, per frame (hand joints: mean and largest over the 21
+    joints, mm; objects: see ObjectDifference); the largest differences first in ``largest``."""
+
+    run_a: int
+    run_b: int
+    sequence_id: int
+    num_frames: int
+    hand_mm: list[float | None]
+    hand_max_mm: list[float | None]
+    hand_mean_mm: float | None
+    objects: list[ObjectDifference]
+    largest: list[LargestDifference]
+
+
+class SolveSettingsRead(BaseModel):
+    """The settings a run of ``optimiser`` gets when a request overrides none of them."""
+
+    optimiser: Optimiser
+    params: dict[str, Any]

@@ -91,6 +91,12 @@ def solver_params(optimiser: Optimiser, overrides: dict | None = None) -> dict:
     return settings
 
 
+def editable_params(optimiser: Optimiser) -> dict:
+    """The settings a run of ``optimiser`` gets that a request may override."""
+    return {name: value for name, value in solver_params(optimiser).items()
+            if name not in _FIXED_PARAMS}
+
+
 def _optimiser(name: str) -> Optimiser:
     """``name`` as one of OPTIMISERS; InvalidSolveRequest (422) when it is none of them."""
     for known in OPTIMISERS:
@@ -203,22 +209,33 @@ def store_object_poses(session: Session, sequence_id: int, object_poses: np.ndar
     object-to-world, every pose trusted, and no hand: stands a known answer in for the solver
     (benchmarks and tests of what follows a solve, such as the landmark check)."""
     objects, frames = object_poses.shape[:2]
+    sequence = get_sequence_or_raise(session, sequence_id)
     result = SolveResult(
         hand_pose_m=np.full((frames, 51), np.nan), hand_joints=np.full((frames, 21, 3), np.nan),
         object_poses=object_poses, labelled=np.zeros(frames, bool), reasons=[None] * frames,
-        kpt_error_px=np.full((frames, 0, 21), np.nan), depth_rms_mm=np.full(frames, np.nan),
+        kpt_error_px=np.full((frames, len(sequence.cameras), 21), np.nan),
+        depth_rms_mm=np.full(frames, np.nan),
         landmark_vertices=[[] for _ in range(objects)], timings={},
         object_confidence=np.ones((objects, frames)),
         object_flags=[[None] * frames for _ in range(objects)])
+    return store_result(session, sequence_id, result, None)
+
+
+def store_result(session: Session, sequence_id: int, result: SolveResult,
+                 hand_side: str | None, optimiser: Optimiser = "default",
+                 params: dict | None = None) -> SolveRun:
+    """A finished run of the sequence holding ``result`` as its outputs (a known answer standing
+    in for the solver: benchmarks, tests, a result solved elsewhere). hand_side: "left" or
+    "right" when the result has a hand (its betas in result.betas), else None."""
     sequence = get_sequence_or_raise(session, sequence_id)
-    run = SolveRun(sequence_id=sequence_id, optimiser="default", params={}, status="done",
-                   timings={}, num_frames=frames, num_views=len(sequence.cameras),
-                   finished_at=utcnow())
+    frames = len(result.labelled)
+    run = SolveRun(sequence_id=sequence_id, optimiser=optimiser, params=params or {},
+                   status="done", timings=dict(result.timings), num_frames=frames,
+                   num_views=len(sequence.cameras), finished_at=utcnow())
     session.add(run)
     session.flush()
     run.result_key = result_key(sequence.storage_uid, run.id)
     get_storage().put_bytes(run.result_key, encode_result(
         result, [c.serial for c in sequence.cameras], [o.name for o in sequence.objects],
-        None), "application/octet-stream")
+        hand_side), "application/octet-stream")
     return run
-
