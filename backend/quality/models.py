@@ -38,6 +38,10 @@ class QCReport(TimestampMixin, Base):
     per_joint: Mapped[list[Any]] = mapped_column(JSON, default=list)
     per_frame: Mapped[list[Any]] = mapped_column(JSON, default=list)
     swaps: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    # What the reviewer's replay draws (backend.quality.review): the reference pixels the
+    # label is judged against per frame and point, its error matrix, its issue spans. None on
+    # reports written before it was stored (scoring the target again writes it).
+    replay: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     thresholds: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     outcome: Mapped[str] = mapped_column(String(8))
     reasons: Mapped[list[str]] = mapped_column(JSON, default=list)

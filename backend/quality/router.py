@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
 from backend.jobs.schemas import JobRead
-from backend.quality import gold, service
+from backend.quality import gold, review, service
 from backend.quality.schemas import (
     QCReportDetail,
     QCReportRead,
@@ -21,6 +21,7 @@ from backend.quality.schemas import (
 from backend.validation import Id, Offset, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/qc", tags=["quality"])
+router.include_router(review.router)
 
 Outcome = Literal["approve", "review", "reject"]
 

@@ -21,6 +21,7 @@ import logging
 import time
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
@@ -93,16 +94,59 @@ def thresholds_bounds() -> QCThresholds:
     return QCThresholds(**get_settings().qc_thresholds)
 
 
+def _px(values: np.ndarray) -> list[Any]:
+    """Pixels rounded to 0.1 px as nested lists, None where not finite."""
+    out = np.round(np.asarray(values, np.float64), 1).astype(object)
+    out[~np.isfinite(np.asarray(values, np.float64))] = None
+    return list(out.tolist())
+
+
+def replay_record(source: str, reference: np.ndarray | None, errors: np.ndarray | None,
+                  issues: list[dict], shown: np.ndarray | None = None) -> dict[str, Any]:
+    """What a report's replay draws, as stored: ``source`` "consensus" (the other views'
+    leave-one-out reference) or "anchored" (the solved object's landmark) or "none";
+    reference (F, P, 2) px and errors (F, P) px, 0.1 px, None where absent; shown (F, P)
+    whether the solve sees an anchored landmark."""
+    record: dict[str, Any] = {
+        "source": source, "issues": issues,
+        "reference": None if reference is None else _px(reference),
+        "errors": None if errors is None else _px(errors)}
+    if shown is not None:
+        record["shown"] = np.asarray(shown, bool).astype(int).tolist()
+    return record
+
+
+def _replays(results: dict[str, Any], hand: dict[str, dict[str, np.ndarray]]
+             ) -> dict[str, dict[str, Any]]:
+    """Each result's replay record: the consensus' for hands, the anchored landmarks' for
+    objects after a solve, the issues alone otherwise."""
+    from worker.quality.anchored import AnchoredQC
+
+    out = {}
+    for key, qc in results.items():
+        if key in hand:
+            out[key] = replay_record("consensus", hand[key]["reference"], hand[key]["errors"],
+                                     qc.issues)
+        elif isinstance(qc, AnchoredQC) and qc.reprojection.size:
+            out[key] = replay_record("anchored", qc.reprojection, qc.errors, qc.issues,
+                                     qc.shown)
+        else:
+            out[key] = replay_record("none", None, None, list(getattr(qc, "issues", [])))
+    return out
+
+
 def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
-           ) -> tuple[dict[str, Any], dict[str, str], bool]:
+           ) -> tuple[dict[str, Any], dict[str, str], bool, dict[str, dict[str, Any]]]:
     """Per-assignment QC results and scoring method ("consensus" against the other views,
-    "gold" for training clips) keyed by assignment id (str), and whether provisional."""
+    "gold" for training clips) keyed by assignment id (str), whether provisional, and each
+    result's replay record."""
     from worker.quality.consensus import score_hand
 
     training = set(session.scalars(select(TrainingClip.task_id).where(
         TrainingClip.task_id.in_(inputs.tasks))))
     crowd = [lab for lab in inputs.labels if inputs.who[lab.key].task_id not in training]
     results: dict[str, Any] = {}
+    hand_replay: dict[str, dict[str, np.ndarray]] = {}
     provisional = False
     if inputs.kind == "hand" and crowd:
         started = time.perf_counter()
@@ -112,6 +156,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         report = score_hand(inputs.cameras, crowd, depth=depth)
         timings["score_s"] = round(time.perf_counter() - started, 3)
         results.update(report.assignments)
+        hand_replay = report.replay
         provisional = bool(report.provisional)
     elif crowd:
         results.update(_score_landmarks(session, inputs, crowd, timings))
@@ -121,7 +166,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
             task_id = inputs.who[lab.key].task_id
             results[lab.key] = gold.score_training(session, task_id, lab, inputs.num_frames)
             methods[lab.key] = "gold"
-    return results, methods, provisional
+    return results, methods, provisional, _replays(results, hand_replay)
 
 
 def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
@@ -183,7 +228,7 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     started = time.perf_counter()
     inputs = target_inputs(session, sequence_id, target_key)
     timings["read_tracks_s"] = round(time.perf_counter() - started, 3)
-    results, methods, provisional = _score(session, inputs, timings)
+    results, methods, provisional, replays = _score(session, inputs, timings)
     fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
     thresholds = learn_thresholds(_population(session, inputs.kind, fresh), thresholds_bounds())
     names = point_names(inputs.kind)
@@ -206,6 +251,7 @@ def score_target(session: Session, sequence_id: int, target_key: str,
         row.worker_id, row.method = who.worker_id, method
         row.metrics, row.per_joint = data.get("metrics", {}), data.get("per_joint", [])
         row.per_frame, row.swaps = data.get("per_frame", []), data.get("swaps", [])
+        row.replay = replays[key]
         row.thresholds, row.outcome = thresholds, decision.outcome
         row.reasons, row.feedback = list(decision.reasons), decision.feedback
         row.provisional = is_provisional or bool(decision.provisional)

@@ -20,7 +20,7 @@ Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,6 +68,22 @@ class SolvedObjects:
         """(M, 3, 3) world triangles of object ``index`` at ``frame`` (NaN if unsolved)."""
         pose = self.poses[index, frame]
         return (self.vertices[index] @ pose[:, :3].T + pose[:, 3])[self.faces[index]]
+
+
+@dataclass
+class AnchoredQC(AssignmentQC):
+    """An AssignmentQC with what a reviewer's replay draws: reprojection (F, P, 2) px of each
+    anchored landmark (NaN where it could not be anchored or the pose is unknown), shown (F, P)
+    whether the solve sees it there, errors (F, P) px from the track to it (NaN where not
+    judged). Not part of to_dict (the report's numbers)."""
+
+    reprojection: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
+    shown: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
+    errors: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def to_dict(self) -> dict:
+        return AssignmentQC(self.key, self.view, self.metrics, self.per_joint, self.per_frame,
+                            self.swaps, self.issues, self.provisional).to_dict()
 
 
 def ray_hits(origin: np.ndarray, dirs: np.ndarray,
@@ -188,7 +204,7 @@ def _drift(errors: np.ndarray) -> float | None:
 
 
 def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects, target: int,
-                   depth: DepthMaps | None = None) -> AssignmentQC:
+                   depth: DepthMaps | None = None) -> AnchoredQC:
     """One worker's landmark label of object ``target`` against the solved scene.
 
     Args:
@@ -197,7 +213,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         depth: optional (F, H, W) uint16 mm of the view.
 
     Returns:
-        AssignmentQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
+        AnchoredQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
         frames both call visible), anchored_visible_occluded (share of the point's visible
         frames marked occluded), anchored_hidden_visible (share of its hidden frames marked
         visible), anchored_drift_px, anchored_fraction (landmarks that could be anchored);
@@ -211,6 +227,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         raise ValueError(f"scene poses must have shape (O={len(scene.vertices)}, F={frames}, 3, "
                          f"4) and target be an object index, got {scene.poses.shape}, {target}")
     errors = np.full((frames, points), np.nan)
+    reprojection = np.full((frames, points, 2), np.nan)
     shown = np.zeros((frames, points), bool)
     # Frames without a solved pose of the object judge nothing.
     known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
@@ -223,7 +240,8 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         world = _track_of(camera, point, scene.poses[target])
         shown[:, p] = point_visible(camera, world, scene, depth)
         both = shown[:, p] & visible[:, p] & np.isfinite(xy[:, p]).all(axis=1)
-        errors[both, p] = np.linalg.norm(camera.project(world)[both] - xy[both, p], axis=1)
+        reprojection[:, p] = camera.project(world)
+        errors[both, p] = np.linalg.norm(reprojection[both, p] - xy[both, p], axis=1)
     judged = np.isfinite(errors)
     hidden = ~shown & known[:, None]
     metrics: dict[str, float | None] = {
@@ -238,9 +256,10 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     }
     per_joint, per_frame = per_point_and_frame(errors)
     issues = [dict(i, about="anchored") for i in error_issues(errors, ISSUE_PX)]
-    return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
-                        per_frame=per_frame, issues=issues,
-                        provisional=not known.any())
+    return AnchoredQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
+                      per_frame=per_frame, issues=issues, provisional=not known.any(),
+                      reprojection=np.where(known[:, None, None], reprojection, np.nan),
+                      shown=shown, errors=errors)
 
 
 # What the label's own track says (worker.quality.landmarks) only stands in for the solved
@@ -252,7 +271,7 @@ SUPERSEDED = ("moved_with_object", "jump_fraction", "max_step_ratio", "median_er
               "mean_error_px", "p90_error_px", "outlier_fraction", "motion_ratio")
 
 
-def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) -> AssignmentQC:
+def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) -> AnchoredQC:
     """A landmark label's QC with the solved object's verdict added: the anchored metrics
     join the label's own (replacing the SUPERSEDED motion guesses where the label could be
     judged), its per-landmark and per-frame errors are the anchored ones, and it is
@@ -264,7 +283,9 @@ def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) ->
                                 if i.get("about") not in ("jump", "silhouette")] \
         if anchored.metrics.get("anchored_median_px") is not None \
         else anchored.issues + before.issues
-    return AssignmentQC(key=before.key, view=before.view, metrics=metrics,
-                        per_joint=anchored.per_joint, per_frame=anchored.per_frame,
-                        swaps=before.swaps, issues=issues,
-                        provisional=before.provisional and anchored.provisional)
+    return AnchoredQC(key=before.key, view=before.view, metrics=metrics,
+                      per_joint=anchored.per_joint, per_frame=anchored.per_frame,
+                      swaps=before.swaps, issues=issues,
+                      provisional=before.provisional and anchored.provisional,
+                      **({"reprojection": anchored.reprojection, "shown": anchored.shown,
+                          "errors": anchored.errors} if isinstance(anchored, AnchoredQC) else {}))

@@ -22,7 +22,7 @@ Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; w
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -143,6 +143,10 @@ class HandReport:
     support: np.ndarray
     assignments: dict[str, AssignmentQC]
     provisional: bool
+    # What a reviewer's replay draws, per assignment key: "reference" (F, P, 2) px where the
+    # other views place each point (NaN where they do not fix it), "errors" (F, P) raw px
+    # from the label to it (NaN where not scored).
+    replay: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         pts = np.round(self.consensus, 6).astype(object)
@@ -332,6 +336,14 @@ HAND_MOVES_PX = 20.0
 # A label scored on less than this share of its visible points is provisional: the other
 # views agree too rarely (or too few views are in) to judge it.
 MIN_SCORED_FRACTION = 0.25
+
+
+def _replay(judged: _Judged) -> dict[str, np.ndarray]:
+    """The label's leave-one-out references where two other views fix them (the same rule as
+    its errors), and its raw distances to them, px."""
+    fixed = np.isfinite(judged.spread).all(axis=(-1, -2))
+    return {"reference": np.where(fixed[..., None], judged.reference, np.nan),
+            "errors": np.where(np.isfinite(judged.errors), judged.raw, np.nan)}
 
 
 def _issues(judged: _Judged, outlier_px: float) -> list[dict]:
@@ -587,6 +599,7 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
                 for view, dm in (depth or {}).items() if view in {lab.view for lab in labels}}
     motion = others_motion({lab.key: np.asarray(lab.xy, np.float64) for lab in labels})
     assignments = {}
+    replay = {}
     for col, lab in enumerate(labels):
         own = distinct[:, np.searchsorted(view_ids, lab.view)]
         judged = _Judged(
@@ -602,6 +615,7 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
                      motion[lab.key], opts)
         qc.provisional = qc.provisional or provisional
         assignments[lab.key] = qc
+        replay[lab.key] = _replay(judged)
     report = HandReport(consensus=consensus, support=support.reshape(frames, points),
-                        assignments=assignments, provisional=provisional)
+                        assignments=assignments, provisional=provisional, replay=replay)
     return report, fit
