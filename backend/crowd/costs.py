@@ -19,6 +19,7 @@ from sqlalchemy import ColumnElement, case, exists, func, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
+from backend.captures.models import Sequence, Subject
 from backend.crowd import pricing
 from backend.crowd.models import CrowdHit, CrowdPayment, CrowdSubmission
 from backend.crowd.schemas import CostLine, CostsRead
@@ -127,21 +128,32 @@ def _held(session: Session, decided: dict[_Shape, int], by_sequence: _Totals,
         _add(by_sequence, str(seq), committed_rewards=n * reward, committed_fees=n * fee)
 
 
-def _line(key: str, cents: list[int]) -> CostLine:
+def _line(key: str, cents: list[int], label: str | None = None) -> CostLine:
     money = pricing.cents_to_dollars
     parts = {name: money(value) for name, value in zip(FIELDS, cents, strict=True)}
-    return CostLine(key=key, spent=money(sum(cents[:3])), committed=money(sum(cents[3:])),
-                    **parts)
+    return CostLine(key=key, name=key if label is None else label, spent=money(sum(cents[:3])),
+                    committed=money(sum(cents[3:])), **parts)
+
+
+def _sequence_names(session: Session, keys: list[str]) -> dict[str, str]:
+    """"subject/name" of each sequence id (as a string) of ``keys``."""
+    rows = session.execute(select(Sequence.id, Subject.name, Sequence.name)
+                           .join(Subject, Subject.id == Sequence.subject_id)
+                           .where(Sequence.id.in_([int(k) for k in keys])))
+    return {str(seq): f"{subject}/{name}" for seq, subject, name in rows}
 
 
 def costs(session: Session) -> CostsRead:
-    """Spend and commitments for the project, per sequence (keyed by id) and per worker."""
+    """Spend and commitments for the project, per sequence (keyed by id, named subject/name)
+    and per worker."""
     by_sequence: _Totals = {}
     by_worker: _Totals = {}
     decided = _payments(session, by_sequence, by_worker)
     _held(session, decided, by_sequence, by_worker)
     total = [sum(column) for column in zip(*by_sequence.values(), strict=True)] \
         or [0] * len(FIELDS)
+    names = _sequence_names(session, list(by_sequence))
     return CostsRead(total=_line("project", total),
-                     by_sequence=[_line(k, by_sequence[k]) for k in sorted(by_sequence, key=int)],
+                     by_sequence=[_line(k, by_sequence[k], names.get(k, f"sequence {k}"))
+                                  for k in sorted(by_sequence, key=int)],
                      by_worker=[_line(k, v) for k, v in sorted(by_worker.items())])

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends, Query
 from backend import pipeline
 from backend.accounts.deps import CurrentAdmin
 from backend.config import get_settings
-from backend.crowd import actions, flows, pricing
+from backend.crowd import actions, flows, pricing, workers
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
 from backend.crowd.schemas import (
@@ -27,9 +27,11 @@ from backend.crowd.schemas import (
     QualificationRequest,
     RejectRequest,
     SyncResult,
+    WorkerDetailRead,
+    WorkerStatsRead,
 )
 from backend.db import SessionDep
-from backend.validation import Id, Key, QueryKey
+from backend.validation import Id, Key, Offset, QueryKey
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
@@ -98,6 +100,21 @@ def add_assignments(hit_id: Key, body: AddAssignmentsRequest, session: SessionDe
                     _: CurrentAdmin, client: MTurk) -> dict[str, Any]:
     hit = actions.add_assignments(session, client, hit_id, body.count, body.allow_large_hits)
     return _hit_read(hit)
+
+
+@router.get("/workers", response_model=list[WorkerStatsRead])
+def list_workers(session: SessionDep, _: CurrentAdmin, limit: int = Query(200, ge=1, le=1000),
+                 offset: Offset = 0) -> list[WorkerStatsRead]:
+    """Workers by id, ``limit`` (200, at most 1,000) from ``offset`` on: approval rate, median
+    error, working time, earnings, block, and their newest QC reports by date."""
+    return workers.list_workers(session, limit, offset)
+
+
+@router.get("/workers/{worker_id}", response_model=WorkerDetailRead)
+def read_worker(worker_id: Key, session: SessionDep, _: CurrentAdmin) -> WorkerDetailRead:
+    """One worker's stats, every QC report by date and their newest assignments (404 for a
+    worker with no work and no block here)."""
+    return workers.get_worker_or_raise(session, worker_id)
 
 
 @router.post("/workers/{worker_id}/qualifications")

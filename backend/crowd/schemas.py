@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from decimal import Decimal
 from typing import Annotated
 
@@ -126,6 +127,8 @@ class CostLine(BaseModel):
     """
 
     key: str
+    # What people call it: a sequence's "subject/name", a worker's id, "project".
+    name: str = ""
     spent: str
     spent_rewards: str
     spent_bonuses: str
@@ -140,3 +143,60 @@ class CostsRead(BaseModel):
     total: CostLine
     by_sequence: list[CostLine]
     by_worker: list[CostLine]
+
+
+class WorkerReportPoint(BaseModel):
+    """One QC report of a worker, for their quality over time."""
+
+    assignment_id: int
+    at: datetime
+    outcome: str
+    provisional: bool
+    # The report's median reprojection error, px; null where no consensus measured it.
+    median_error_px: float | None
+
+
+class WorkerStatsRead(BaseModel):
+    """A worker's record in this project; money in dollars (fees apart), times in seconds."""
+
+    worker_id: str
+    # Assignments submitted (whatever became of them), approved and rejected.
+    submitted: int
+    approved: int
+    rejected: int
+    # approved / (approved + rejected); null before any decision.
+    approval_rate: float | None
+    # Final QC reports and the running QC score over them (as GET /api/qc/workers counts).
+    scored: int
+    score: float | None
+    median_error_px: float | None
+    median_working_time_s: float | None
+    earned_rewards: str
+    earned_bonuses: str
+    earned: str
+    blocked: bool
+    block_reason: str | None
+    # QC reports by date, oldest first (the newest few in a listing).
+    history: list[WorkerReportPoint]
+
+
+class WorkerAssignmentRead(BaseModel):
+    assignment_id: int
+    task_id: int
+    sequence_id: int
+    sequence: str
+    target_key: str
+    status: str
+    submitted_at: datetime | None
+    working_time_s: float
+    # The HIT's reward (null for work from a direct link) and the bonuses paid on it.
+    reward: str | None
+    bonuses: str
+    # Whether the marketplace confirmed the submission: only then can it be paid a bonus.
+    confirmed: bool
+    qc_outcome: str | None
+    median_error_px: float | None
+
+
+class WorkerDetailRead(WorkerStatsRead):
+    assignments: list[WorkerAssignmentRead]

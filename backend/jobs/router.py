@@ -1,4 +1,4 @@
-"""Admin endpoints of the job table: list, read, re-run."""
+"""Admin endpoints of the job table: list, count, read, re-run."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
 from backend.jobs import service
-from backend.jobs.schemas import JobRead
+from backend.jobs.schemas import JobCounts, JobRead
 from backend.validation import Id, QueryKey
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
@@ -21,6 +21,12 @@ Status = Literal["queued", "running", "retrying", "waiting", "done", "failed"]
 def list_jobs(session: SessionDep, _: CurrentAdmin, status: Status | None = None,
               kind: QueryKey = None, limit: int = Query(100, ge=1, le=1000)) -> list[JobRead]:
     return [JobRead.of(j) for j in service.list_jobs(session, status, kind, limit)]
+
+
+@router.get("/counts", response_model=JobCounts)
+def count_jobs(session: SessionDep, _: CurrentAdmin) -> JobCounts:
+    """Jobs per kind and status, for the job table's filters."""
+    return JobCounts(kinds=service.count_jobs(session))
 
 
 @router.get("/{job_id}", response_model=JobRead)

@@ -33,3 +33,8 @@ class JobRead(BaseModel):
     @classmethod
     def of(cls, job: Job) -> JobRead:
         return cls.model_validate(job).model_copy(update={"message": describe(job)})
+
+
+class JobCounts(BaseModel):
+    # kind -> status -> jobs; kinds and statuses without a job are left out.
+    kinds: dict[str, dict[str, int]]

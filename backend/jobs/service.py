@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar, cast
 
-from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
+from sqlalchemy import ColumnElement, CursorResult, Result, func, or_, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
@@ -109,6 +109,16 @@ def list_jobs(session: Session, status: str | None = None, kind: str | None = No
     if kind:
         stmt = stmt.where(Job.kind == kind)
     return list(session.scalars(stmt))
+
+
+def count_jobs(session: Session) -> dict[str, dict[str, int]]:
+    """Jobs per kind and status (kinds and statuses without a job left out)."""
+    out: dict[str, dict[str, int]] = {}
+    for kind, status, n in session.execute(select(Job.kind, Job.status, func.count())
+                                           .group_by(Job.kind, Job.status)
+                                           .order_by(Job.kind, Job.status)):
+        out.setdefault(kind, {})[status] = int(n)
+    return out
 
 
 def enqueue_job(session: Session, kind: str, key: str, args: dict[str, Any] | None = None) -> Job:
