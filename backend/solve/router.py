@@ -109,4 +109,6 @@ def compare(run_id: Id, other_id: Id, session: SessionDep, _: CurrentAdmin) -> d
 def solve_settings(_: CurrentAdmin, optimiser: OptimiserQuery = "default") -> dict:
     """The solver settings a new run gets (defaults, then the deployment's); a request's
     ``params`` may override any of them."""
-    return {"optimiser": optimiser, "params": service.editable_params(optimiser)}
+    params = service.editable_params(optimiser)
+    return {"optimiser": optimiser, "params": params,
+            "kinds": {name: type(value).__name__ for name, value in params.items()}}

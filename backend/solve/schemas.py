@@ -158,3 +158,5 @@ class SolveSettingsRead(BaseModel):
 
     optimiser: Optimiser
     params: dict[str, Any]
+    # Each setting's kind: "bool", "int" or "float" (JSON writes 1.0 as 1).
+    kinds: dict[str, str]

@@ -6,15 +6,23 @@
 
 import { AdminApi, ApiError } from "./api.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
+import { initSolve, showSolveRuns } from "./solve.js";
 import {
-  barChart, renderCosts, renderFacts, renderJobs, renderReports, renderRuns, renderSequences,
+  crowdWorkers, fillSequenceProgress, initProject, openWorker, showJobRows, showProgress,
+} from "./project.js";
+import { createQueue } from "./queue.js";
+import { showReviewIn } from "./review.js";
+import {
+  barChart, renderCosts, renderFacts, renderReports, renderSequences,
   renderSwaps, renderWorkers,
 } from "./views.js";
 
 const api = new AdminApi(window.sessionStorage);
 const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
-  "costs-view"];
+  "costs-view", "queue-view"];
+
+const queue = createQueue(api, fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
 const state = {
@@ -23,9 +31,6 @@ const state = {
   /** @type {number|null} */ assignment: null,
   /** @type {any[]} */ runs: [],
   /** @type {string[]} */ serials: [],
-  /** @type {string|null} */ overlayUrl: null,
-  /** Counts overlay requests: a reply that is no longer the newest is dropped. */
-  overlayRequest: 0,
 };
 
 /** @param {string} id */
@@ -88,6 +93,7 @@ async function showSequences(offset) {
   renderPager("sequence-pager", "#/sequences", "sequences",
     pageOf(offset, SEQUENCE_PAGE, sequences.length, rows.length > SEQUENCE_PAGE));
   $("no-sequences").hidden = sequences.length > 0 || offset > 0;
+  if (sequences.length) await fillSequenceProgress(offset, SEQUENCE_PAGE);
   show("sequences-view");
 }
 
@@ -99,11 +105,10 @@ async function showSequence(sequenceId, assignmentId) {
   const serials = sequence.cameras.map((/** @type {any} */ c) => c.serial);
   Object.assign(state, { sequence: sequenceId, reports, assignment: assignmentId, runs, serials });
   renderReportList();
-  renderRuns(body("run-rows"), runs);
-  $("no-runs").hidden = runs.length > 0;
-  const shown = $("overlay").dataset.run;
-  if (!runs.some((/** @type {any} */ r) => String(r.id) === shown)) hideOverlay();
+  showSolveRuns(sequenceId, runs, serials);
   $("report-detail").hidden = true;
+  $("report-review").hidden = true;
+  await showProgress(sequenceId);
   show("sequence-view");
   if (assignmentId !== null) await showReport(assignmentId);
 }
@@ -135,6 +140,7 @@ async function showReport(assignmentId) {
   $("approve").dataset.assignment = String(report.assignment_id);
   $("decision-result").hidden = true;
   $("report-detail").hidden = false;
+  await showReviewIn($("report-review"), api, report.assignment_id);
 }
 
 /** @param {"approve"|"reject"} kind */
@@ -172,9 +178,9 @@ async function decide(kind) {
 
 /** @param {number} offset */
 async function showWorkers(offset) {
-  const rows = await api.workers(offset, WORKER_PAGE + 1);
+  const rows = await crowdWorkers(offset, WORKER_PAGE + 1);
   const workers = rows.slice(0, WORKER_PAGE);
-  renderWorkers(body("worker-rows"), workers);
+  renderWorkers(body("worker-rows"), workers, openWorker());
   renderPager("worker-pager", "#/workers", "workers",
     pageOf(offset, WORKER_PAGE, workers.length, rows.length > WORKER_PAGE));
   $("no-workers").hidden = workers.length > 0 || offset > 0;
@@ -182,9 +188,7 @@ async function showWorkers(offset) {
 }
 
 async function showJobs() {
-  const jobs = await api.jobs();
-  renderJobs(body("job-rows"), jobs);
-  $("no-jobs").hidden = jobs.length > 0;
+  await showJobRows();
   show("jobs-view");
 }
 
@@ -209,57 +213,18 @@ async function showCosts() {
   show("costs-view");
 }
 
-/** @param {number} runId  a done run of the sequence shown */
-function openOverlay(runId) {
-  const run = state.runs.find((r) => r.id === runId);
-  if (!run) return;
-  const views = run.num_views, serials = state.serials;
-  const overlay = $("overlay");
-  overlay.dataset.run = String(run.id);
-  $("overlay-title").textContent = `Run #${run.id}`;
-  const frame = /** @type {HTMLInputElement} */ ($("overlay-frame"));
-  frame.max = String(Math.max(run.num_frames - 1, 0));
-  frame.value = "0";
-  const select = /** @type {HTMLSelectElement} */ ($("overlay-view"));
-  select.replaceChildren(...Array.from({ length: views }, (_, i) => {
-    const option = document.createElement("option");
-    option.value = String(i);
-    option.textContent = serials.length === views ? `${i} · ${serials[i]}` : String(i);
-    return option;
-  }));
-  overlay.hidden = false;
-  loadOverlay().catch(fail);
-}
-
-async function loadOverlay() {
-  const run = Number($("overlay").dataset.run);
-  const frame = Number(/** @type {HTMLInputElement} */ ($("overlay-frame")).value);
-  const view = /** @type {HTMLSelectElement} */ ($("overlay-view")).value;
-  const request = ++state.overlayRequest;
-  const blob = await api.overlay(run, frame, view);
-  if (request !== state.overlayRequest || $("overlay").hidden) return;
-  if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
-  state.overlayUrl = URL.createObjectURL(blob);
-  /** @type {HTMLImageElement} */ ($("overlay-image")).src = state.overlayUrl;
-}
-
-function hideOverlay() {
-  $("overlay").hidden = true;
-  delete $("overlay").dataset.run;
-  state.overlayRequest += 1;
-  if (state.overlayUrl) URL.revokeObjectURL(state.overlayUrl);
-  state.overlayUrl = null;
-  /** @type {HTMLImageElement} */ ($("overlay-image")).removeAttribute("src");
-}
-
 async function route() {
   if (!api.token) {
     show("login-view");
     return;
   }
   const where = parseRoute(location.hash);
+  queue.leave();
   try {
-    if (where.view === "workers") await showWorkers(where.offset);
+    if (/^#\/queue(\/|$)/.test(location.hash)) {
+      show("queue-view");
+      await queue.show(Number(location.hash.split("/")[2]) || null);
+    } else if (where.view === "workers") await showWorkers(where.offset);
     else if (where.view === "jobs") await showJobs();
     else if (where.view === "costs") await showCosts();
     else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
@@ -341,6 +306,7 @@ async function signOut() {
 function start() {
   $("login").addEventListener("submit", (e) => onLogin(/** @type {SubmitEvent} */ (e)));
   $("sign-out").addEventListener("click", signOut);
+  queue.bind();
   $("outcome-filter").addEventListener("change", renderReportList);
   $("approve").addEventListener("click", () => decide("approve"));
   $("reject").addEventListener("click", () => decide("reject"));
@@ -353,12 +319,8 @@ function start() {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-export]");
     if (button) exportLabels(Number(/** @type {HTMLElement} */ (button).dataset.export)).catch(fail);
   });
-  $("run-rows").addEventListener("click", (e) => {
-    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-show-run]");
-    if (button) openOverlay(Number(/** @type {HTMLElement} */ (button).dataset.showRun));
-  });
-  $("overlay-frame").addEventListener("change", () => loadOverlay().catch(fail));
-  $("overlay-view").addEventListener("change", () => loadOverlay().catch(fail));
+  initSolve(api, fail);
+  initProject(api, fail, route);
   window.addEventListener("hashchange", () => {
     notify("");
     route();

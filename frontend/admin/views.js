@@ -4,6 +4,9 @@ import {
   COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, jobOutcome, metric, percent,
   px, when,
 } from "./format.js";
+import {
+  duration, jobDetail, progressLine, progressSegments, solveLine, sparkline, taskCounts,
+} from "./project-format.js";
 
 const SVG = "http://www.w3.org/2000/svg";
 
@@ -24,7 +27,7 @@ export function el(tag, attrs = {}, children = []) {
  * @param {Record<string, string|number>} [attrs]
  * @param {(Node|string)[]} [children]
  */
-function svg(tag, attrs = {}, children = []) {
+export function svg(tag, attrs = {}, children = []) {
   const node = document.createElementNS(SVG, tag);
   for (const [name, value] of Object.entries(attrs)) node.setAttribute(name, String(value));
   node.append(...children);
@@ -32,15 +35,16 @@ function svg(tag, attrs = {}, children = []) {
 }
 
 /** @param {string} text @param {string} [kind] */
-function badge(text, kind = text) {
+export function badge(text, kind = text) {
   return el("span", { class: `status status-${kind}` }, [text]);
 }
 
 /**
  * @param {HTMLTableSectionElement} body
  * @param {any[]} sequences   GET /api/sequences
+ * @param {Map<number, any>} [progress]  GET /api/progress by sequence id
  */
-export function renderSequences(body, sequences) {
+export function renderSequences(body, sequences, progress = new Map()) {
   body.replaceChildren(...sequences.map((s) => el("tr", { "data-sequence": String(s.id) }, [
     el("td", {}, [el("a", { href: `#/sequences/${s.id}` }, [`${s.subject}/${s.name}`]),
       el("span", { class: "muted" }, [` #${s.id}`])]),
@@ -49,9 +53,55 @@ export function renderSequences(body, sequences) {
     el("td", { class: "num" }, [String(s.cameras.length)]),
     el("td", {}, [s.objects.map((/** @type {any} */ o) => o.name).join(", ") || "–"]),
     el("td", {}, [s.hands.map((/** @type {any} */ h) => h.side).join(", ") || "–"]),
-    el("td", {}, [when(s.created_at)]),
+    el("td", { class: "nowrap" }, [when(s.created_at)]),
+    el("td", { class: "progress-cell" }, progress.has(s.id)
+      ? [progressSummary(progress.get(s.id))] : [el("span", { class: "muted" }, ["–"])]),
     el("td", {}, [el("button", { type: "button", "data-export": String(s.id) }, ["Export"])]),
   ])));
+}
+
+/**
+ * A compact progress summary: the sequence's state, a bar of its tasks per state, one line.
+ * @param {any} p   GET /api/sequences/{id}/progress
+ */
+export function progressSummary(p) {
+  const bar = el("span", { class: "mini-bar", "aria-hidden": "true" },
+    progressSegments(p.counts).map((g) => el("span", {
+      class: `seg state-${g.state.replace(" ", "-")}`, style: `width:${g.percent.toFixed(1)}%`,
+      title: `${g.count} ${g.state}`,
+    })));
+  return el("div", { class: "progress-summary", "data-state": p.state }, [
+    badge(p.state, p.state.replace(" ", "-")), bar,
+    el("div", { class: "muted small" }, [`${progressLine(p)}; ${solveLine(p)}`]),
+  ]);
+}
+
+/**
+ * The view x target grid of a sequence's tasks: one cell per task with its state, HITs and
+ * assignments; views down, targets across.
+ * @param {HTMLTableElement} table
+ * @param {any} p   GET /api/sequences/{id}/progress
+ */
+export function renderProgressGrid(table, p) {
+  const cells = new Map(p.tasks.map((/** @type {any} */ t) => [`${t.serial} ${t.target_key}`, t]));
+  const head = el("thead", {}, [el("tr", {}, [el("th", {}, ["View"]),
+    ...p.targets.map((/** @type {string} */ t) => el("th", {}, [t]))])]);
+  const rows = p.views.map((/** @type {string} */ serial) => el("tr", { "data-serial": serial }, [
+    el("th", { scope: "row" }, [serial]),
+    ...p.targets.map((/** @type {string} */ target) => {
+      const t = cells.get(`${serial} ${target}`);
+      if (!t) return el("td", { class: "cell none" }, ["–"]);
+      const a = t.assignments;
+      return el("td", {
+        class: `cell state-${t.state.replace(" ", "-")}`, "data-task": String(t.task_id),
+        "data-target": target, "data-state": t.state,
+        title: `task ${t.task_id}: ${t.hits} HITs (${t.hits_live} open); ${a.working} working, `
+          + `${a.submitted} submitted, ${a.approved} approved, ${a.rejected} rejected`,
+      }, [el("span", { class: "cell-state" }, [t.state]),
+        el("span", { class: "cell-counts" }, [taskCounts(t)])]);
+    }),
+  ]));
+  table.replaceChildren(head, el("tbody", {}, rows));
 }
 
 /**
@@ -170,32 +220,113 @@ export function renderSwaps(list, swaps) {
 }
 
 /**
- * @param {HTMLTableSectionElement} body
- * @param {any[]} workers   GET /api/qc/workers
+ * A worker's quality over time: one mark per QC report by date, its height the report's
+ * median error (higher is worse), its colour the outcome; unmeasured reports sit on the base.
+ * @param {any[]} history   oldest first
+ * @param {number} [width] @param {number} [height]
  */
-export function renderWorkers(body, workers) {
-  body.replaceChildren(...workers.map((w) => el("tr", { "data-worker": w.worker_id }, [
-    el("td", {}, [w.worker_id]),
-    el("td", { class: "num" }, [String(w.scored)]),
-    el("td", { class: "num" }, [String(w.approved)]),
-    el("td", { class: "num" }, [String(w.review)]),
-    el("td", { class: "num" }, [String(w.rejected)]),
-    el("td", { class: "num" }, [percent(w.score)]),
+export function qualitySparkline(history, width = 120, height = 28) {
+  const { points, max } = sparkline(history, width, height);
+  const root = svg("svg", { class: "spark", viewBox: `0 0 ${width} ${height}`, width, height,
+    role: "img", "data-points": points.length, "data-max": max,
+    "aria-label": `${points.length} QC reports, largest median error ${px(max)}` });
+  const measured = points.filter((p) => p.y !== null);
+  if (measured.length > 1) {
+    root.append(svg("polyline", { class: "spark-line",
+      points: measured.map((p) => `${p.x.toFixed(1)},${(p.y ?? 0).toFixed(1)}`).join(" ") }));
+  }
+  for (const p of points) {
+    root.append(svg("circle", { cx: p.x.toFixed(1), cy: (p.y ?? height - 3).toFixed(1), r: 2.5,
+      class: `spark-dot ${p.outcome}`, "data-error": p.error ?? "", "data-outcome": p.outcome },
+    [svg("title", {}, [`${when(p.at)}: ${p.outcome}, median ${px(p.error)}`])]));
+  }
+  return root;
+}
+
+/**
+ * One row per worker; the row of ``selected`` is marked.
+ * @param {HTMLTableSectionElement} body
+ * @param {any[]} workers   GET /api/crowd/workers
+ * @param {string|null} [selected]
+ */
+export function renderWorkers(body, workers, selected = null) {
+  body.replaceChildren(...workers.map((w) => el("tr", {
+    "data-worker": w.worker_id, class: w.worker_id === selected ? "selected" : "",
+  }, [
+    el("td", { class: "clip", title: w.worker_id }, [el("button", {
+      type: "button", class: "link", "data-open-worker": w.worker_id }, [w.worker_id])]),
+    el("td", {}, [qualitySparkline(w.history)]),
+    el("td", { class: "num" }, [String(w.submitted)]),
+    el("td", { class: "num", title: `${w.approved} approved, ${w.rejected} rejected` },
+      [percent(w.approval_rate)]),
+    el("td", { class: "num", title: `over ${w.scored} final QC reports` }, [percent(w.score)]),
+    el("td", { class: "num" }, [px(w.median_error_px)]),
+    el("td", { class: "num" }, [duration(w.median_working_time_s)]),
+    el("td", { class: "num", title: `rewards ${dollars(w.earned_rewards)}, bonuses `
+      + `${dollars(w.earned_bonuses)}` }, [dollars(w.earned)]),
     el("td", {}, [w.blocked ? badge("blocked", "reject") : "no"]),
   ])));
 }
 
 /**
- * One row per job with its result or error in one line (the whole error in the line's
- * tooltip); failed and waiting ones get a Retry button (data-retry = job id).
+ * A worker's page: their stats, quality over time, and their newest assignments (the ones
+ * the marketplace confirmed can be chosen for a bonus).
+ * @param {{facts: HTMLElement, chart: HTMLElement, assignments: HTMLElement,
+ *          bonusFor: HTMLSelectElement}} at
+ * @param {any} w   GET /api/crowd/workers/{id}
+ */
+export function renderWorkerDetail(at, w) {
+  /** @type {[string, string][]} */
+  const facts = [
+    ["Submitted", `${w.submitted} (${w.approved} approved, ${w.rejected} rejected)`],
+    ["Approval rate", percent(w.approval_rate)],
+    ["QC score", `${percent(w.score)} over ${w.scored} final reports`],
+    ["Median error", px(w.median_error_px)],
+    ["Time per task", `${duration(w.median_working_time_s)} (median working time)`],
+    ["Earned", `${dollars(w.earned)} (rewards ${dollars(w.earned_rewards)}, bonuses `
+      + `${dollars(w.earned_bonuses)})`],
+    ["Blocked", w.blocked ? `yes: ${w.block_reason || "no reason given"}` : "no"],
+  ];
+  at.facts.replaceChildren(...facts.flatMap(([name, value]) => [
+    el("dt", {}, [name]), el("dd", { "data-fact": name }, [value])]));
+  at.chart.replaceChildren(w.history.length ? qualitySparkline(w.history, 420, 70)
+    : el("p", { class: "muted" }, ["No QC reports yet."]));
+  at.assignments.replaceChildren(...w.assignments.map((/** @type {any} */ a) => el("tr", {
+    "data-assignment": String(a.assignment_id) }, [
+    el("td", { class: "num" }, [String(a.assignment_id)]),
+    el("td", {}, [el("a", { href: `#/sequences/${a.sequence_id}` }, [a.sequence]),
+      el("div", { class: "muted" }, [a.target_key])]),
+    el("td", {}, [badge(a.status, a.status === "approved" ? "approve" : a.status === "rejected"
+      ? "reject" : a.status), a.qc_outcome ? el("div", { class: "muted" },
+      [`QC ${a.qc_outcome}, ${px(a.median_error_px)}`]) : ""]),
+    el("td", { class: "num" }, [duration(a.working_time_s)]),
+    el("td", { class: "num" }, [a.reward === null ? "–" : dollars(a.reward),
+      Number(a.bonuses) > 0 ? el("div", { class: "muted" }, [`+ ${dollars(a.bonuses)} bonus`])
+        : ""]),
+  ])));
+  const payable = w.assignments.filter((/** @type {any} */ a) => a.confirmed);
+  at.bonusFor.replaceChildren(...payable.map((/** @type {any} */ a) => el("option", {
+    value: String(a.assignment_id) }, [`#${a.assignment_id} · ${a.sequence} · ${a.target_key}`])));
+}
+
+/**
+ * One row per job with its result or error in one line (the whole of it in the line's
+ * tooltip, and in a row under it once expanded: data-expand = job id); failed and waiting
+ * ones get a Retry button (data-retry = job id).
  * @param {HTMLTableSectionElement} body
  * @param {any[]} jobs   GET /api/jobs
+ * @param {Set<number>} [expanded]  ids of the jobs shown whole
  */
-export function renderJobs(body, jobs) {
-  body.replaceChildren(...jobs.map((j) => {
+export function renderJobs(body, jobs, expanded = new Set()) {
+  body.replaceChildren(...jobs.flatMap((j) => {
     const outcome = jobOutcome(j);
-    return el("tr", { "data-job": String(j.id), "data-kind": j.kind, "data-status": j.status }, [
-      el("td", { class: "num" }, [String(j.id)]),
+    const open = expanded.has(j.id);
+    const row = el("tr", { "data-job": String(j.id), "data-kind": j.kind, "data-status": j.status,
+      class: open ? "expanded" : "" }, [
+      el("td", { class: "num" }, [el("button", { type: "button", class: "link expand",
+        "data-expand": String(j.id), "aria-expanded": String(open),
+        title: open ? "hide the whole result" : "show the whole result" },
+      [`${open ? "▾" : "▸"} ${j.id}`])]),
       el("td", { class: "clip", title: j.key }, [el("code", {}, [j.key])]),
       el("td", {}, [badge(j.status)]),
       el("td", { class: "num" }, [`${j.attempts} / ${j.max_attempts}`]),
@@ -207,6 +338,14 @@ export function renderJobs(body, jobs) {
       el("td", { class: "job-action" }, [canRetry(j)
         ? el("button", { type: "button", "data-retry": String(j.id) }, ["Retry"]) : ""]),
     ]);
+    if (!open) return [row];
+    return [row, el("tr", { class: "job-detail", "data-detail-of": String(j.id) }, [
+      el("td", { colspan: "7" }, [
+        el("div", { class: "muted" }, [`${j.kind} · created ${when(j.created_at)} · started `
+          + `${when(j.started_at)} · finished ${when(j.finished_at)} · arguments `
+          + JSON.stringify(j.args)]),
+        el("pre", { class: `job-text ${j.error ? "error" : ""}`.trim() }, [jobDetail(j)]),
+      ])])];
   }));
 }
 
@@ -231,26 +370,9 @@ export function renderCosts(at, costs) {
   at.sequenceHead.replaceChildren(head("Sequence"));
   at.workerHead.replaceChildren(head("Worker"));
   const rows = (/** @type {any[]} */ lines, /** @type {string} */ attr) => lines.map((line) =>
-    el("tr", { [attr]: line.key }, costCells(line).map((text, i) =>
-      el("td", i ? { class: "num" } : {}, [text]))));
+    el("tr", { [attr]: line.key }, costCells(line).map((text, i) => el("td",
+      i ? { class: "num" } : {}, [i || attr !== "data-sequence" ? text
+        : el("a", { href: `#/sequences/${line.key}`, title: `sequence #${line.key}` }, [text])]))));
   at.sequences.replaceChildren(...rows(costs.by_sequence, "data-sequence"));
   at.workers.replaceChildren(...rows(costs.by_worker, "data-worker"));
-}
-
-/**
- * @param {HTMLTableSectionElement} body
- * @param {any[]} runs   GET /api/sequences/{id}/solve-runs
- */
-export function renderRuns(body, runs) {
-  body.replaceChildren(...runs.map((r) => el("tr", { "data-run": String(r.id) }, [
-    el("td", { class: "num" }, [r.status === "done"
-      ? el("button", { type: "button", "data-show-run": String(r.id) }, [`#${r.id}`])
-      : `#${r.id}`]),
-    el("td", {}, [badge(r.status), r.current ? el("span", { class: "muted" }, [" current"]) : ""]),
-    el("td", {}, [r.optimiser]),
-    el("td", { class: "num" }, [String(r.num_frames)]),
-    el("td", { class: "num" }, [String(r.num_views)]),
-    el("td", {}, [when(r.finished_at)]),
-    el("td", { class: "error-text" }, [r.error || ""]),
-  ])));
 }

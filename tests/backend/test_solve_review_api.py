@@ -226,5 +226,8 @@ def test_solve_settings_are_the_defaults_a_request_may_override(
     assert settings["optimiser"] == "paper"
     assert settings["params"]["w_kpt"] == 1.0 and settings["params"]["use_depth"] is True
     assert "device" not in settings["params"] and "optimiser" not in settings["params"]
+    assert settings["kinds"]["w_kpt"] == "float" and settings["kinds"]["lm_iterations"] == "int"
+    assert settings["kinds"]["use_depth"] == "bool" and set(settings["kinds"]) == set(
+        settings["params"])
     bad = client.get("/api/solve-settings?optimiser=fast", headers=admin_headers)
     assert bad.status_code == 422 and "optimiser" in bad.json()["detail"]
