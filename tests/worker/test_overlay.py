@@ -121,6 +121,47 @@ def test_meshes_behind_the_camera_or_none_leave_just_the_darkened_frame() -> Non
     assert (render_overlay(image, camera, [empty]) == dark).all()
 
 
+def test_wireframe_draws_the_cube_s_outline_and_visible_edges_one_pixel_wide() -> None:
+    image, camera = _image(), _camera()
+    verts, faces = _cube(0.05)
+    mesh = object_mesh(verts, faces, _pose(0, 0, 1.0), 0)
+    dark = (image.astype(np.float32) * DARKEN).astype(np.uint8)
+    solid = np.any(render_overlay(image, camera, [mesh]) != dark, axis=2)
+    out = render_overlay(image, camera, [mesh], style="wireframe")
+    wire = np.any(out != dark, axis=2)
+    # Only the front face shows: a square 8 px either side of (80, 60) split by a diagonal.
+    assert wire.sum() < 0.6 * solid.sum() and (wire <= solid).all()
+    ys, xs = np.nonzero(solid)
+    top, left, bottom, right = ys.min(), xs.min(), ys.max(), xs.max()
+    assert wire[top, left:right + 1].all() and wire[bottom, left:right + 1].all()
+    assert wire[top:bottom + 1, left].all() and wire[top:bottom + 1, right].all()
+    inside = wire[top + 2:bottom - 1, left + 2:right - 1]
+    assert 0 < inside.sum() <= 2 * inside.shape[0]  # the diagonal, about one pixel per row
+    # Lines take the object's own colour at full opacity by default.
+    assert (out[top, left + 4] == OBJECT_COLOURS[0].astype(np.uint8)).all()
+    # Between the lines the frame is untouched.
+    hollow = solid & ~wire
+    assert hollow.sum() > wire.sum() and (out[hollow] == dark[hollow]).all()
+
+
+def test_blend_lets_the_frame_through_by_its_alpha_and_alpha_zero_draws_nothing() -> None:
+    image, camera = _image(), _camera()
+    verts, faces = _cube(0.05)
+    mesh = object_mesh(verts, faces, _pose(0, 0, 1.0), 0)
+    dark = (image.astype(np.float32) * DARKEN).astype(np.uint8)
+    solid = render_overlay(image, camera, [mesh]).astype(float)
+    half = render_overlay(image, camera, [mesh], style="blend").astype(float)
+    assert (render_overlay(image, camera, [mesh], style="blend", alpha=0.0) == dark).all()
+    drawn = np.any(solid != dark, axis=2)
+    # blend = 0.5 shade + 0.5 frame, solid = 0.85 shade + 0.15 frame: same shade from both.
+    shade_solid = (solid[drawn] - 0.15 * dark[drawn]) / 0.85
+    shade_half = (half[drawn] - 0.5 * dark[drawn]) / 0.5
+    assert np.abs(shade_solid - shade_half).max() < 3.0
+    for style, alpha in (("outline", None), ("solid", 1.5)):
+        with pytest.raises(ValueError, match=r"style must be one of|alpha must be within"):
+            render_overlay(image, camera, [mesh], style=style, alpha=alpha)  # type: ignore[arg-type]
+
+
 def test_overlay_refuses_an_image_of_the_wrong_size() -> None:
     with pytest.raises(ValueError, match=r"\(120, 160, 3\) uint8, got \(100, 160, 3\)"):
         render_overlay(np.zeros((100, 160, 3), np.uint8), _camera(), [])
