@@ -460,8 +460,9 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
     hands = 0
     for frame, view in ((with_hand[0] if with_hand else 0, "0"),
                         (run["num_frames"] - 1, str(run["num_views"] - 1))):
-        page.locator("#overlay-frame").fill(str(frame))
-        page.locator("#overlay-frame").dispatch_event("change")
+        page.locator("#overlay-frame").fill(str(frame))  # the frame slider
+        expect(page.locator("#solve-frame-label")).to_have_text(
+            f"Frame {frame} of {run['num_frames'] - 1}")
         page.locator("#overlay-view").select_option(view)
         png = httpx.get(f"{server.base}/api/solve-runs/{run['id']}/frames/{frame}/views/{view}.png",
                         headers={"Authorization": f"Bearer {server.admin_token}"}, timeout=30)
