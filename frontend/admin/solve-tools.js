@@ -16,7 +16,7 @@ const POLL_MS = 2000;
 
 /**
  * @typedef {{ openOverlay: (run: number, frame?: number) => Promise<void>,
- *   reload: () => Promise<void>, frame: () => number }} Hooks
+ *   reload: () => Promise<void> }} Hooks
  */
 const tools = {
   api: /** @type {import("./api.js").AdminApi} */ (/** @type {any} */ (null)),
@@ -182,9 +182,11 @@ export function initTools(api, fail, hooks) {
     fillRerun(run || null).then(() => $("solve-rerun").scrollIntoView({ block: "nearest" }))
       .catch(fail);
   });
-  $("compare-runs").addEventListener("click", () => compare().catch((err) =>
-    say($("compare-error"), err instanceof Error ? err.message : String(err), "error")));
-  $("compare-runs").addEventListener("click", () => say($("compare-error"), ""));
+  $("compare-runs").addEventListener("click", () => {
+    say($("compare-error"), "");
+    compare().catch((err) =>
+      say($("compare-error"), err instanceof Error ? err.message : String(err), "error"));
+  });
   $("compare-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-frame]");
     if (!button) return;

@@ -247,7 +247,7 @@ export function initSolve(api, fail) {
   });
   $("overlay").addEventListener("keydown", onKey);
   $("overlay-close").addEventListener("click", hideOverlay);
-  initTools(api, fail, { openOverlay, reload: reloadRuns, frame: () => state.frame });
+  initTools(api, fail, { openOverlay, reload: reloadRuns });
 }
 
 /** Fetch the runs of the sequence shown again (after a re-run, while runs are busy). */
