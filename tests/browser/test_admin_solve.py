@@ -137,6 +137,17 @@ def test_stepping_through_frames_shows_each_frame_s_overlay_and_residuals(
     _wait_shown(page, _api_png(server, run, 5, 1))
     # Frame 5's largest error, little tip in view 1: 0.5 + 5 + 0.25 * 20 + 1 = 11.5 px; axis 20.
     expect(page.locator("#solve-residuals svg")).to_have_attribute("data-max", "20")
+    # Eight quick steps: the frames stepped over while one is on its way are never asked for.
+    asked: list[int] = []
+    page.on("request", lambda r: asked.extend(
+        int(m) for m in re.findall(r"/frames/(\d+)/views/", r.url)))
+    page.locator("#overlay-frame").focus()
+    for _ in range(8):
+        page.keyboard.press("ArrowLeft")
+    _expect_frame(page, 0)
+    _wait_shown(page, _api_png(server, run, 0, 1))
+    assert asked[-1] == 0 and len(asked) < 8, asked
+    page.locator("#overlay-frame").fill("5")
     page.locator("#solve-play").click()
     expect(page.locator("#solve-play")).to_have_text("Pause")
     expect(page.locator("#solve-frame-label")).to_have_text(re.compile(r"Frame (7|8|9|10)\b"))
