@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Query
 from sqlalchemy import select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, joinedload
 
 from backend.accounts.deps import VIEW_SCOPE, CurrentAdmin
 from backend.annotation.models import Assignment, Task
@@ -46,8 +46,9 @@ ERROR_METRICS = ("raw_median_error_px", "anchored_median_px", "median_error_px")
 UNAVAILABLE = {
     None: "this report was scored before the replay was stored; score the target again "
           "(POST /api/qc/runs) to see the reference",
-    "none": "no reference to compare with: object landmarks are compared with the solved "
-            "object once the sequence is solved",
+    "none": "no reference to compare with: object landmarks get one (the solved object's "
+            "landmark) when the target is scored after a solve; this report was scored "
+            "without one",
     "gold": "a training clip: the worker is judged against its known labels, not the views",
 }
 
@@ -135,7 +136,8 @@ def review_queue(session: Session, limit: int, offset: int) -> QueueRead:
     stmt = (select(QCReport, Sequence)
             .join(Assignment, Assignment.id == QCReport.assignment_id)
             .join(Sequence, Sequence.id == QCReport.sequence_id)
-            .where(QCReport.action.is_(None), Assignment.status == "submitted"))
+            .where(QCReport.action.is_(None), Assignment.status == "submitted")
+            .options(joinedload(Sequence.subject)))
     rows = []
     for report, sequence in session.execute(stmt):
         issues = (report.replay or {}).get("issues", [])

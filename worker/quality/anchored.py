@@ -153,10 +153,14 @@ def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: Solv
     candidates = _candidates(camera, xy, ok, scene, target)
     if not len(candidates):
         return None
-    errors = [np.median(np.linalg.norm(
-        camera.project(_track_of(camera, c, scene.poses[target]))[ok] - xy[ok], axis=1))
-        for c in candidates]
-    return candidates[int(np.nanargmin(errors))]
+    errors = []
+    for c in candidates:
+        dist = np.linalg.norm(
+            camera.project(_track_of(camera, c, scene.poses[target]))[ok] - xy[ok], axis=1)
+        # Frames whose pose the solve left unknown say nothing about the anchor.
+        dist = dist[np.isfinite(dist)]
+        errors.append(float(np.median(dist)) if dist.size else np.inf)
+    return candidates[int(np.argmin(errors))]
 
 
 def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
