@@ -8,7 +8,7 @@ import { AdminApi, ApiError } from "./api.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import {
-  crowdWorkers, fillSequenceProgress, initProject, openWorker, showJobRows, showProgress,
+  crowdWorkers, initProject, openWorker, sequencesProgress, showJobRows, showProgress,
 } from "./project.js";
 import { createQueue } from "./queue.js";
 import { showReviewIn } from "./review.js";
@@ -87,13 +87,13 @@ function renderPager(id, route, noun, page) {
 
 /** @param {number} offset */
 async function showSequences(offset) {
-  const rows = await api.sequences(offset, SEQUENCE_PAGE + 1);
+  const [rows, progress] = await Promise.all([api.sequences(offset, SEQUENCE_PAGE + 1),
+    sequencesProgress(offset, SEQUENCE_PAGE)]);
   const sequences = rows.slice(0, SEQUENCE_PAGE);
-  renderSequences(body("sequence-rows"), sequences);
+  renderSequences(body("sequence-rows"), sequences, progress);
   renderPager("sequence-pager", "#/sequences", "sequences",
     pageOf(offset, SEQUENCE_PAGE, sequences.length, rows.length > SEQUENCE_PAGE));
   $("no-sequences").hidden = sequences.length > 0 || offset > 0;
-  if (sequences.length) await fillSequenceProgress(offset, SEQUENCE_PAGE);
   show("sequences-view");
 }
 

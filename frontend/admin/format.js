@@ -238,12 +238,13 @@ export const COST_COLUMNS = [
 ];
 
 /**
- * A cost line as table cells: its key, then each money column in dollars.
+ * A cost line as table cells: its name (a sequence's subject/name; the key where it has
+ * none), then each money column in dollars.
  * @param {Record<string, string>} line
  * @returns {string[]}
  */
 export function costCells(line) {
-  return [line.key, ...COST_COLUMNS.map(([name]) => dollars(line[name]))];
+  return [line.name || line.key, ...COST_COLUMNS.map(([name]) => dollars(line[name]))];
 }
 
 /** QC metrics that are shares of points (worker/quality/metrics.py, landmarks.py). */

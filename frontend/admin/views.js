@@ -47,13 +47,15 @@ export function badge(text, kind = text) {
 export function renderSequences(body, sequences, progress = new Map()) {
   body.replaceChildren(...sequences.map((s) => el("tr", { "data-sequence": String(s.id) }, [
     el("td", {}, [el("a", { href: `#/sequences/${s.id}` }, [`${s.subject}/${s.name}`]),
-      el("span", { class: "muted" }, [` #${s.id}`])]),
-    el("td", { class: "num" }, [String(s.num_frames)]),
-    el("td", { class: "num" }, [String(s.fps)]),
+      el("span", { class: "muted" }, [` #${s.id}`]),
+      el("div", { class: "muted small", title: "imported" }, [when(s.created_at)])]),
+    el("td", { class: "num" }, [String(s.num_frames),
+      el("div", { class: "muted small" }, [`${s.fps} fps`])]),
     el("td", { class: "num" }, [String(s.cameras.length)]),
-    el("td", {}, [s.objects.map((/** @type {any} */ o) => o.name).join(", ") || "–"]),
-    el("td", {}, [s.hands.map((/** @type {any} */ h) => h.side).join(", ") || "–"]),
-    el("td", { class: "nowrap" }, [when(s.created_at)]),
+    el("td", { class: "targets" }, [
+      s.hands.map((/** @type {any} */ h) => `${h.side} hand`).join(", ") || "no hand",
+      el("div", { class: "muted small" }, [
+        s.objects.map((/** @type {any} */ o) => o.name).join(", ") || "no object"])]),
     el("td", { class: "progress-cell" }, progress.has(s.id)
       ? [progressSummary(progress.get(s.id))] : [el("span", { class: "muted" }, ["–"])]),
     el("td", {}, [el("button", { type: "button", "data-export": String(s.id) }, ["Export"])]),
@@ -225,11 +227,13 @@ export function renderSwaps(list, swaps) {
  * @param {any[]} history   oldest first
  * @param {number} [width] @param {number} [height]
  */
-export function qualitySparkline(history, width = 120, height = 28) {
+export function qualitySparkline(history, width = 96, height = 28) {
   const { points, max } = sparkline(history, width, height);
   const root = svg("svg", { class: "spark", viewBox: `0 0 ${width} ${height}`, width, height,
     role: "img", "data-points": points.length, "data-max": max,
     "aria-label": `${points.length} QC reports, largest median error ${px(max)}` });
+  root.append(svg("line", { class: "spark-base", x1: 0, x2: width, y1: height - 0.5,
+    y2: height - 0.5 }));
   const measured = points.filter((p) => p.y !== null);
   if (measured.length > 1) {
     root.append(svg("polyline", { class: "spark-line",

@@ -1,0 +1,405 @@
+/**
+ * Project control on the admin page: import a capture, each sequence's progress (a summary
+ * per listed sequence, the view x target grid on its page), create its tasks, publish them
+ * with the count and cost shown first; each worker's record with block, unblock and bonus
+ * (each confirmed first); the job table's filters and whole results.
+ */
+
+import { ApiError } from "./api.js";
+import { JOB_STATUSES, costLine, jobQuery } from "./project-format.js";
+import { el, progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
+
+/** @typedef {import("./api.js").AdminApi} AdminApi */
+
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
+const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ ($(id));
+
+const state = {
+  /** @type {AdminApi|null} */ api: null,
+  /** @type {(err: unknown) => void} */ fail: () => {},
+  /** The sequence whose page is shown. @type {number|null} */ sequence: null,
+  /** The publish options the shown cost is for (JSON), and its HIT count. */
+  /** @type {string|null} */ planned: null,
+  plannedHits: 0,
+  /** The worker whose record is open. @type {string|null} */ worker: null,
+  /** What the confirmation under a worker's record would do when confirmed. */
+  /** @type {(() => Promise<void>)|null} */ pending: null,
+  /** Jobs shown whole. @type {Set<number>} */ expanded: new Set(),
+  /** Names the bonus the form describes: the same bonus confirmed again (after an error)
+   * pays once; changing the assignment, amount or reason makes it another bonus. */
+  bonusKey: newKey(),
+  /** The listing shown again after an import. @type {() => unknown} */ refresh: () => {},
+};
+
+function newKey() {
+  return `admin-${Date.now().toString(36)}-${Math.random().toString(36).slice(2, 8)}`;
+}
+
+function api() {
+  if (!state.api) throw new Error("initProject was not called");
+  return state.api;
+}
+
+/**
+ * A message in a status line of the page: a reply's detail for an API error.
+ * @param {string} id  @param {string} text  @param {"info"|"error"} [kind]
+ */
+function say(id, text, kind = "info") {
+  const line = $(id);
+  line.textContent = text;
+  line.className = `notice ${kind}`;
+  line.hidden = !text;
+}
+
+/**
+ * Show an error where the action was asked for (a 401 goes to the page, which signs out).
+ * @param {string} id  @param {string} what  the action, e.g. "Publish"  @param {unknown} err
+ */
+function failed(id, what, err) {
+  if (err instanceof ApiError && err.status === 401) {
+    state.fail(err);
+    return;
+  }
+  const why = err instanceof Error ? err.message : String(err);
+  const status = err instanceof ApiError ? ` (${err.status})` : "";
+  say(id, `${what} failed${status}: ${why}`, "error");
+}
+
+// ----- sequences ---------------------------------------------------------------------------
+
+/**
+ * The progress of a page of sequences (GET /api/progress: the page GET /api/sequences gives
+ * for the same offset and limit), by sequence id.
+ * @param {number} offset  @param {number} limit
+ * @returns {Promise<Map<number, any>>}
+ */
+export async function sequencesProgress(offset, limit) {
+  const page = await api().request("GET", `/progress?offset=${offset}&limit=${limit}`);
+  return new Map(page.map((/** @type {any} */ p) => [p.sequence_id, p]));
+}
+
+/** @param {SubmitEvent} event */
+async function importCapture(event) {
+  event.preventDefault();
+  const path = input("import-path").value.trim();
+  const button = /** @type {HTMLButtonElement} */ ($("import-start"));
+  button.disabled = true;
+  say("import-status", `Importing ${path} …`);
+  try {
+    const results = await api().request("POST", "/captures/import", { path });
+    const lines = results.map((/** @type {any} */ r) => `${r.subject}/${r.name} (#${r.sequence_id}`
+      + `, ${r.num_cameras} views, ${r.num_frames} frames): ${r.created ? "imported"
+        : "already imported"}${r.repaired ? `, ${r.repaired} files written again` : ""}`);
+    say("import-status", lines.length ? lines.join("; ") : `No sequence found in ${path}.`,
+      lines.length ? "info" : "error");
+    await state.refresh();
+  } catch (err) {
+    failed("import-status", `Import of ${path}`, err);
+  } finally {
+    button.disabled = false;
+  }
+}
+
+/**
+ * The progress grid of a sequence's page, and its controls set for that sequence.
+ * @param {number} sequenceId
+ */
+export async function showProgress(sequenceId) {
+  if (state.sequence !== sequenceId) {
+    state.sequence = sequenceId;
+    forgetPlan();
+    say("project-status", "");
+  }
+  const p = await api().request("GET", `/sequences/${sequenceId}/progress`);
+  renderProgressGrid(/** @type {HTMLTableElement} */ ($("progress-grid")), p);
+  $("progress-grid").hidden = p.tasks.length === 0;
+  $("no-tasks").hidden = p.tasks.length > 0;
+  $("progress-summary").replaceChildren(progressSummary(p));
+  return p;
+}
+
+async function createTasks() {
+  const id = Number(state.sequence);
+  try {
+    const before = (await showProgress(id)).tasks.length;
+    const tasks = await api().request("POST", `/sequences/${id}/tasks`);
+    const made = tasks.length - before;
+    say("project-status", made > 0 ? `Created ${made} tasks (${tasks.length} in all).`
+      : `Every task already exists (${tasks.length}); nothing created.`);
+    forgetPlan();
+    await showProgress(id);
+  } catch (err) {
+    failed("project-status", "Creating tasks", err);
+  }
+}
+
+/** The publish options of the form, as the API takes them. */
+function publishOptions() {
+  const approval = input("publish-approval").value.trim();
+  return {
+    sequence_id: state.sequence, reward: input("publish-reward").value.trim(),
+    max_assignments: Number(input("publish-assignments").value),
+    min_approval_rate: approval === "" ? null : Number(approval),
+  };
+}
+
+function forgetPlan() {
+  state.planned = null;
+  state.plannedHits = 0;
+  const button = /** @type {HTMLButtonElement} */ ($("publish-confirm"));
+  button.disabled = true;
+  button.textContent = "Publish";
+  $("publish-cost").textContent = "";
+}
+
+/** Ask the API what a publish would cost (a dry run); only then can it be confirmed. */
+async function checkCost() {
+  forgetPlan();
+  const options = publishOptions();
+  try {
+    const plan = await api().request("POST", "/crowd/publish", { ...options, dry_run: true });
+    $("publish-cost").textContent = costLine(plan);
+    $("publish-cost").dataset.hits = String(plan.cost.hits);
+    $("publish-cost").dataset.total = plan.cost.total;
+    say("project-status", "");
+    if (plan.cost.hits > 0) {
+      state.planned = JSON.stringify(options);
+      state.plannedHits = plan.cost.hits;
+      const button = /** @type {HTMLButtonElement} */ ($("publish-confirm"));
+      button.disabled = false;
+      button.textContent = `Publish ${plan.cost.hits} HITs for $${plan.cost.total}`;
+    }
+  } catch (err) {
+    failed("project-status", "Checking the cost", err);
+  }
+}
+
+async function publish() {
+  const options = publishOptions();
+  if (state.planned !== JSON.stringify(options)) {
+    forgetPlan();
+    say("project-status", "The settings changed: check the cost again first.", "error");
+    return;
+  }
+  const button = /** @type {HTMLButtonElement} */ ($("publish-confirm"));
+  button.disabled = true;
+  try {
+    const done = await api().request("POST", "/crowd/publish", options);
+    forgetPlan();
+    const extra = [done.recovered ? `${done.recovered} recovered` : "",
+      done.already_published ? `${done.already_published} already published` : ""]
+      .filter(Boolean).join(", ");
+    say("project-status", `Published ${done.created} HITs${extra ? ` (${extra})` : ""} `
+      + `for $${done.cost.total}.`);
+    $("project-status").dataset.created = String(done.created);
+    await showProgress(Number(state.sequence));
+  } catch (err) {
+    button.disabled = false;
+    failed("project-status", "Publishing", err);
+  }
+}
+
+// ----- workers -----------------------------------------------------------------------------
+
+/**
+ * A page of workers with their stats (GET /api/crowd/workers).
+ * @param {number} offset  @param {number} limit
+ */
+export function crowdWorkers(offset, limit) {
+  return api().request("GET", `/crowd/workers?offset=${offset}&limit=${limit}`);
+}
+
+/** The worker whose record is open, for marking their row. */
+export function openWorker() {
+  return state.worker;
+}
+
+/** @param {string} workerId */
+async function showWorker(workerId) {
+  const w = await api().request("GET", `/crowd/workers/${encodeURIComponent(workerId)}`);
+  state.worker = workerId;
+  $("worker-title").textContent = w.worker_id;
+  renderWorkerDetail({ facts: $("worker-facts"), chart: $("worker-chart"),
+    assignments: $("worker-assignments"),
+    bonusFor: /** @type {HTMLSelectElement} */ ($("bonus-assignment")) }, w);
+  $("block").hidden = w.blocked;
+  $("unblock").hidden = !w.blocked;
+  $("bonus-form").hidden = !w.assignments.some((/** @type {any} */ a) => a.confirmed);
+  $("no-bonus").hidden = !$("bonus-form").hidden;
+  $("worker-detail").hidden = false;
+  for (const row of document.querySelectorAll("#worker-rows tr")) {
+    row.classList.toggle("selected", /** @type {HTMLElement} */ (row).dataset.worker === workerId);
+  }
+  return w;
+}
+
+/**
+ * Ask before an action on a worker: the question and Confirm / Cancel under their record.
+ * @param {string} question  @param {() => Promise<void>} action
+ */
+function confirmFirst(question, action) {
+  state.pending = action;
+  $("worker-confirm-text").textContent = question;
+  $("worker-confirm").hidden = false;
+  say("worker-result", "");
+  $("worker-confirm-yes").focus();
+}
+
+function cancelConfirm() {
+  state.pending = null;
+  $("worker-confirm").hidden = true;
+}
+
+async function confirmed() {
+  const action = state.pending;
+  cancelConfirm();
+  if (action) await action();
+}
+
+/** @param {"block"|"unblock"} kind */
+function askBlock(kind) {
+  const worker = String(state.worker);
+  const reason = input("block-reason").value.trim();
+  if (kind === "block" && !reason) {
+    say("worker-result", "Blocking needs a reason: the worker reads it.", "error");
+    return;
+  }
+  const path = `/crowd/workers/${encodeURIComponent(worker)}/block`;
+  confirmFirst(kind === "block" ? `Block ${worker}? They can take none of our HITs until `
+    + "unblocked." : `Unblock ${worker}? They can take our HITs again.`, async () => {
+    try {
+      if (kind === "block") await api().request("POST", path, { reason });
+      else await api().request("DELETE", reason ? `${path}?reason=${encodeURIComponent(reason)}`
+        : path);
+      await refreshWorker();
+      say("worker-result", `${worker} is ${kind === "block" ? "blocked" : "unblocked"}.`);
+    } catch (err) {
+      failed("worker-result", kind === "block" ? "Blocking" : "Unblocking", err);
+    }
+  });
+}
+
+function askBonus() {
+  const worker = String(state.worker);
+  const assignment = /** @type {HTMLSelectElement} */ ($("bonus-assignment")).value;
+  const amount = input("bonus-amount").value.trim();
+  const reason = input("bonus-reason").value.trim();
+  if (!assignment || !amount || !reason) {
+    say("worker-result", "A bonus needs an assignment, an amount and a reason the worker "
+      + "reads.", "error");
+    return;
+  }
+  const dollarsText = `$${Number(amount).toFixed(2)}`;
+  confirmFirst(`Pay ${worker} a bonus of ${dollarsText} (plus the marketplace's fee) on `
+    + `assignment ${assignment}?`, async () => {
+    try {
+      const key = state.bonusKey;
+      const paid = await api().request("POST", `/crowd/assignments/${assignment}/bonus`,
+        { amount, reason, key });
+      state.bonusKey = newKey();
+      await refreshWorker();
+      say("worker-result", paid.already_done ? `That bonus was already paid (${dollarsText}).`
+        : `Paid ${worker} a ${dollarsText} bonus (fee $${paid.fee}) on assignment `
+          + `${assignment}.`);
+    } catch (err) {
+      failed("worker-result", "The bonus", err);
+    }
+  });
+}
+
+/** The open record and its row again, after an action changed them. */
+async function refreshWorker() {
+  if (!state.worker) return;
+  const w = await showWorker(state.worker);
+  const row = document.querySelector(`#worker-rows tr[data-worker="${CSS.escape(w.worker_id)}"]`);
+  const cell = row?.lastElementChild;
+  if (cell) {
+    cell.replaceChildren(w.blocked ? el("span", { class: "status status-reject" }, ["blocked"])
+      : "no");
+  }
+}
+
+function closeWorker() {
+  state.worker = null;
+  cancelConfirm();
+  $("worker-detail").hidden = true;
+  for (const row of document.querySelectorAll("#worker-rows tr.selected")) {
+    row.classList.remove("selected");
+  }
+}
+
+// ----- jobs --------------------------------------------------------------------------------
+
+/** The job table under the chosen filters, its kinds listed with their counts. */
+export async function showJobRows() {
+  const status = /** @type {HTMLSelectElement} */ ($("job-status")).value;
+  const kindSelect = /** @type {HTMLSelectElement} */ ($("job-kind"));
+  const [jobs, counts] = await Promise.all([
+    api().request("GET", `/jobs${jobQuery(status, kindSelect.value)}`),
+    api().request("GET", "/jobs/counts")]);
+  const kind = kindSelect.value;
+  const total = (/** @type {Record<string, number>} */ c) =>
+    Object.values(c).reduce((a, b) => a + b, 0);
+  kindSelect.replaceChildren(el("option", { value: "" }, ["all"]),
+    ...Object.entries(counts.kinds).map(([k, c]) => el("option", { value: k },
+      [`${k} (${total(/** @type {Record<string, number>} */ (c))})`])));
+  kindSelect.value = kind in counts.kinds ? kind : "";
+  renderJobs(/** @type {HTMLTableSectionElement} */ ($("job-rows")), jobs, state.expanded);
+  $("no-jobs").hidden = jobs.length > 0;
+  $("no-jobs").textContent = status || kind ? "No jobs match these filters." : "No jobs.";
+  return jobs;
+}
+
+/** @param {number} jobId */
+function toggleJob(jobId) {
+  if (state.expanded.has(jobId)) state.expanded.delete(jobId);
+  else state.expanded.add(jobId);
+  showJobRows().catch(state.fail);
+}
+
+// ----- wiring ------------------------------------------------------------------------------
+
+/**
+ * @param {AdminApi} client
+ * @param {(err: unknown) => void} fail  the page's handler of errors (a 401 signs out)
+ * @param {() => unknown} refresh  shows the current route again
+ */
+export function initProject(client, fail, refresh) {
+  Object.assign(state, { api: client, fail, refresh });
+  $("import-form").addEventListener("submit",
+    (e) => importCapture(/** @type {SubmitEvent} */ (e)));
+  $("create-tasks").addEventListener("click", createTasks);
+  $("publish-check").addEventListener("click", checkCost);
+  $("publish-confirm").addEventListener("click", publish);
+  for (const id of ["publish-reward", "publish-assignments", "publish-approval"]) {
+    $(id).addEventListener("input", forgetPlan);
+  }
+  $("worker-rows").addEventListener("click", (e) => {
+    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-open-worker]");
+    const id = button && /** @type {HTMLElement} */ (button).dataset.openWorker;
+    if (id) {
+      cancelConfirm();
+      say("worker-result", "");
+      showWorker(id).then(() => $("worker-detail").scrollIntoView({ block: "nearest" }))
+        .catch(fail);
+    }
+  });
+  $("worker-close").addEventListener("click", closeWorker);
+  $("block").addEventListener("click", () => askBlock("block"));
+  $("unblock").addEventListener("click", () => askBlock("unblock"));
+  $("bonus").addEventListener("click", askBonus);
+  for (const id of ["bonus-assignment", "bonus-amount", "bonus-reason"]) {
+    $(id).addEventListener("input", () => { state.bonusKey = newKey(); });
+  }
+  $("worker-confirm-yes").addEventListener("click", () => confirmed().catch(fail));
+  $("worker-confirm-no").addEventListener("click", cancelConfirm);
+  $("job-status").replaceChildren(el("option", { value: "" }, ["all"]),
+    ...JOB_STATUSES.map((s) => el("option", { value: s }, [s])));
+  for (const id of ["job-status", "job-kind"]) {
+    $(id).addEventListener("change", () => showJobRows().catch(fail));
+  }
+  $("job-rows").addEventListener("click", (e) => {
+    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-expand]");
+    if (button) toggleJob(Number(/** @type {HTMLElement} */ (button).dataset.expand));
+  });
+}
