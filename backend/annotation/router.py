@@ -2,12 +2,14 @@
 
 Workers are identified only by a signed token (in the page URL, sent as a bearer header):
 an assignment token opens exactly one assignment; a task token opens a read-only preview
-and can be exchanged for an assignment token when the marketplace names the assignment.
+and can be exchanged for an assignment token when the marketplace names the assignment; a
+review token (made by an admin) shows one assignment's saved tracks and can change nothing.
 """
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from datetime import UTC, datetime, timedelta
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy import select
@@ -27,6 +29,7 @@ from backend.annotation.schemas import (
     FramesLinks,
     HighlightUpdate,
     PreviewLink,
+    ReadonlyLink,
     SaveResult,
     StartRequest,
     TaskRead,
@@ -37,10 +40,13 @@ from backend.annotation.schemas import (
 from backend.annotation.tokens import (
     ASSIGNMENT_SCOPE,
     PREVIEW_ASSIGNMENT_ID,
+    REVIEW_SCOPE,
+    REVIEW_TOKEN_TTL_S,
     TASK_SCOPE,
     assignment_token,
     frame_token,
     page_url,
+    review_token,
     task_token,
 )
 from backend.config import get_settings
@@ -60,10 +66,20 @@ def _worker_claims(request: Request) -> dict[str, Any]:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")
-    return verify_token(token, get_settings().signing_key, (ASSIGNMENT_SCOPE, TASK_SCOPE))
+    return verify_token(token, get_settings().signing_key,
+                        (ASSIGNMENT_SCOPE, TASK_SCOPE, REVIEW_SCOPE))
+
+
+def _writer_claims(claims: Annotated[dict[str, Any], Depends(_worker_claims)]
+                   ) -> dict[str, Any]:
+    """The claims of a token that may change labels (checked before the body is read)."""
+    if claims["scope"] == REVIEW_SCOPE:
+        raise Forbidden("a read-only review link cannot save or submit labels")
+    return claims
 
 
 WorkerClaims = Annotated[dict[str, Any], Depends(_worker_claims)]
+WriterClaims = Annotated[dict[str, Any], Depends(_writer_claims)]
 
 
 def _assignment_of(session: SessionDep, claims: dict[str, Any]) -> Assignment:
@@ -136,6 +152,21 @@ def create_preview_token(task_id: Id, session: SessionDep, _: CurrentAdmin) -> P
     token = task_token(task)
     return PreviewLink(token=token,
                        page_url=_page_url(token, assignmentId=PREVIEW_ASSIGNMENT_ID))
+
+
+@router.post("/assignments/{assignment_id}/readonly-link", response_model=ReadonlyLink)
+def create_readonly_link(assignment_id: Id, session: SessionDep,
+                         _: CurrentAdmin) -> ReadonlyLink:
+    """The annotation page showing the assignment's saved tracks read-only, with a "read-only
+    review" banner: its token reads the task, the tracks and the frames, refuses every save
+    and submit (403) and expires in an hour."""
+    assignment = service.get_assignment_or_raise(session, assignment_id)
+    task = service.get_task_or_raise(session, assignment.task_id)
+    token = review_token(task, assignment)
+    expires_at = datetime.now(UTC) + timedelta(seconds=REVIEW_TOKEN_TTL_S)
+    url = page_url("", token, mode="review", assignmentId=assignment.external_id,
+                   workerId=assignment.worker_id)
+    return ReadonlyLink(url=url, expires_at=expires_at)
 
 
 @router.get("/assignments/{assignment_id}/dense")
@@ -212,7 +243,7 @@ def read_task(claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
     if claims["scope"] == TASK_SCOPE:
         return AnnotateTaskRead(mode="preview", task=_task_reads(session, [task])[0], frames=frames,
                                 assignment=None)
-    assignment = _assignment_of(session, claims)
+    assignment = service.get_assignment_or_raise(session, int(claims["assignment_id"]))
     payload = service.tracks_payload(assignment)
     read = AssignmentRead(
         id=assignment.id, external_id=assignment.external_id, worker_id=assignment.worker_id,
@@ -220,20 +251,21 @@ def read_task(claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
         working_time_s=assignment.working_time_s,
         tracks=TracksPayload.model_validate(payload) if payload else None,
     )
-    mode = "edit" if assignment.status == "working" else "submitted"
+    mode: Literal["edit", "submitted", "review"] = "review" if claims["scope"] == REVIEW_SCOPE \
+        else "edit" if assignment.status == "working" else "submitted"
     return AnnotateTaskRead(mode=mode, task=_task_reads(session, [task])[0], frames=frames,
                             assignment=read)
 
 
 @router.put("/annotate/tracks", response_model=SaveResult,
             openapi_extra=body_limit(MAX_SAVE_BYTES))
-def save_tracks(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
+def save_tracks(body: TracksSave, claims: WriterClaims, session: SessionDep) -> SaveResult:
     assignment = service.save_tracks(session, _assignment_of(session, claims), body)
     return SaveResult(version=assignment.version, status=assignment.status)
 
 
 @router.post("/annotate/submit", response_model=SaveResult,
              openapi_extra=body_limit(MAX_SAVE_BYTES))
-def submit(body: TracksSave, claims: WorkerClaims, session: SessionDep) -> SaveResult:
+def submit(body: TracksSave, claims: WriterClaims, session: SessionDep) -> SaveResult:
     assignment = pipeline.submit(session, _assignment_of(session, claims), body)
     return SaveResult(version=assignment.version, status=assignment.status)

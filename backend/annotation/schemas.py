@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -82,7 +83,7 @@ class FramesLinks(BaseModel):
 
 
 class AnnotateTaskRead(BaseModel):
-    mode: Literal["edit", "preview", "submitted"]
+    mode: Literal["edit", "preview", "submitted", "review"]
     task: TaskRead
     frames: FramesLinks
     assignment: AssignmentRead | None
@@ -113,6 +114,14 @@ class AssignmentLink(BaseModel):
 class PreviewLink(BaseModel):
     token: str
     page_url: str
+
+
+class ReadonlyLink(BaseModel):
+    """The annotation page showing an assignment's saved tracks read-only: ``url`` is relative
+    to the server and carries its token in the fragment; the token expires at ``expires_at``."""
+
+    url: str
+    expires_at: datetime
 
 
 class HighlightUpdate(BaseModel):

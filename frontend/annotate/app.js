@@ -2,9 +2,10 @@
  * The annotation page: reads its token from the URL, loads the task, preloads every frame, then
  * wires the editor, point list, timeline, autosave and submit together.
  *
- * Modes: "edit" (an accepted assignment), "preview" (HIT not accepted: look, don't touch) and
- * "submitted" (read-only). window.__dexlabel exposes the live objects and load timings to the
- * browser tests and the benchmark.
+ * Modes: "edit" (an accepted assignment), "preview" (HIT not accepted: look, don't touch),
+ * "submitted" (read-only) and "review" (an admin's read-only link to a worker's saved tracks:
+ * nothing is saved or submitted, and the server refuses it too). window.__dexlabel exposes the
+ * live objects and load timings to the browser tests and the benchmark.
  */
 
 import { AnnotateApi, ApiError, postExternalSubmit, readPageParams } from "./api.js";
@@ -26,6 +27,24 @@ const $ = (id) => document.getElementById(id);
 const PREVIEW_TEXT = "Preview: accept the HIT to start annotating. You can look at the clip " +
   "and the instructions; editing and submitting are disabled.";
 const SUBMITTED_TEXT = "This assignment has been submitted. Thank you! It is shown read-only.";
+
+/**
+ * The banner of a review link: whose work this is, as saved.
+ * @param {{worker_id: string, external_id: string, status: string, version: number}} assignment
+ */
+function reviewText(assignment) {
+  return `Read-only review: worker ${assignment.worker_id}'s saved labels (assignment ` +
+    `${assignment.external_id}, ${assignment.status}, version ${assignment.version}). ` +
+    "Nothing can be changed, saved or submitted here.";
+}
+
+/** A review link's page: the banner says so and there is no Submit button at all. */
+function showReview(data) {
+  document.body.dataset.mode = "review";
+  $("submit").hidden = true;
+  showSaveStatus($("save-status"), { state: "review", message: "Read-only review" });
+  showBanner($("banner"), "warn", reviewText(data.assignment));
+}
 
 /** Load timings (performance.now(), ms since navigation) for the benchmark. */
 const timings = { taskLoaded: null, firstFrame: null, allFrames: null };
@@ -276,6 +295,7 @@ function enterMode(page) {
   const { data, editor } = page;
   if (data.mode === "preview") showBanner($("banner"), "warn", PREVIEW_TEXT);
   else if (data.mode === "submitted") showBanner($("banner"), "ok", SUBMITTED_TEXT);
+  else if (data.mode === "review") showReview(data);
   else if (!page.stopped) {
     editor.readOnly = false;
     $("submit").disabled = false;
@@ -309,6 +329,7 @@ async function main() {
   renderShortcuts($("shortcut-list"));
   const page = buildPage(data, api, params);
   Object.assign(window.__dexlabel, { page, editor: page.editor, store: page.store });
+  if (data.mode === "review") showReview(data);
   wireInput(page);
   if (data.mode === "edit") startSaver(page);
   window.__dexlabel.saver = page.saver;
