@@ -135,7 +135,7 @@ def _blocks(session: Session, worker_ids: list[str]) -> dict[str, str | None]:
     rows = session.execute(
         select(CrowdWorkerAction.worker_id, CrowdWorkerAction.reason)
         .where(CrowdWorkerAction.worker_id.in_(worker_ids), CrowdWorkerAction.kind == "block"))
-    return {wid: reason for wid, reason in rows}
+    return dict(rows.all())
 
 
 def worker_stats(session: Session, worker_ids: list[str], history: int = HISTORY_ROW

@@ -130,7 +130,8 @@ def project(live_server: LiveServer, capture: Path, queue_worker: None) -> dict:
 
 
 def test_import_create_tasks_and_publish_with_the_cost_shown_first(
-    admin_page: Page, live_server: LiveServer, capture: Path, project: dict, output_dir: Path,
+    admin_page: Page, live_server: LiveServer,  # noqa: F811
+    capture: Path, project: dict, output_dir: Path,
 ) -> None:
     page, server = admin_page, live_server
     # A folder outside the capture roots: refused, and the page says why.
@@ -177,7 +178,7 @@ def test_import_create_tasks_and_publish_with_the_cost_shown_first(
     total = plan["cost"]["total"]
     assert float(total) == pytest.approx(HITS * (float(REWARD) + float(FEE)))
     cost = page.locator("#publish-cost")
-    expect(cost).to_have_text(f"{HITS} HITs × 1 assignment at ${REWARD} + ${FEE} fee: rewards "
+    expect(cost).to_have_text(f"{HITS} HITs \u00d7 1 assignment at ${REWARD} + ${FEE} fee: rewards "
                               f"${plan['cost']['rewards']} + fees ${plan['cost']['fees']} = "
                               f"${total}")
     confirm = page.locator("#publish-confirm")
@@ -196,7 +197,8 @@ def test_import_create_tasks_and_publish_with_the_cost_shown_first(
 
 
 def test_worked_tasks_show_in_the_grid_and_a_worker_is_blocked_then_unblocked(
-    admin_page: Page, live_server: LiveServer, capture: Path, project: dict, output_dir: Path,
+    admin_page: Page, live_server: LiveServer,  # noqa: F811
+    capture: Path, project: dict, output_dir: Path,
 ) -> None:
     page, server = admin_page, live_server
     sid = project["sequence"]["id"]
@@ -208,7 +210,7 @@ def test_worked_tasks_show_in_the_grid_and_a_worker_is_blocked_then_unblocked(
     server.admin("POST", "/api/crowd/sync")
     _settle(server)
     project["worker"] = worker = done.worker_id
-    [ours] = [a for a in server.admin("GET", f"/api/crowd/workers/{worker}")["assignments"]]  # type: ignore[call-overload]
+    [ours] = server.admin("GET", f"/api/crowd/workers/{worker}")["assignments"]  # type: ignore[call-overload]
     project["assignment"] = ours["assignment_id"]
 
     page.goto(f"{server.base}/admin/#/sequences/{sid}")
@@ -259,7 +261,8 @@ def test_worked_tasks_show_in_the_grid_and_a_worker_is_blocked_then_unblocked(
 
 
 def test_a_bonus_paid_shows_in_costs_under_the_sequence_name(
-    admin_page: Page, live_server: LiveServer, project: dict, output_dir: Path,
+    admin_page: Page, live_server: LiveServer,  # noqa: F811
+    project: dict, output_dir: Path,
 ) -> None:
     page, server = admin_page, live_server
     sequence, worker, aid = project["sequence"], project["worker"], project["assignment"]
@@ -291,7 +294,8 @@ def test_a_bonus_paid_shows_in_costs_under_the_sequence_name(
 
 
 def test_jobs_filter_by_status_and_kind_and_show_whole_results(
-    admin_page: Page, live_server: LiveServer, project: dict, output_dir: Path,
+    admin_page: Page, live_server: LiveServer,  # noqa: F811
+    project: dict, output_dir: Path,
 ) -> None:
     page, server = admin_page, live_server
     done = server.admin("GET", "/api/jobs?status=done&kind=qc&limit=1000")
@@ -317,7 +321,8 @@ def test_jobs_filter_by_status_and_kind_and_show_whole_results(
 
 
 def test_no_page_overflows_at_1024_and_no_column_is_clipped_at_1280x720(
-    admin_page: Page, live_server: LiveServer, project: dict, output_dir: Path,
+    admin_page: Page, live_server: LiveServer,  # noqa: F811
+    project: dict, output_dir: Path,
 ) -> None:
     page, server = admin_page, live_server
     sid, worker = project["sequence"]["id"], project["worker"]
@@ -363,7 +368,8 @@ def _action_column_in_view(page: Page) -> None:
     box = action.bounding_box()
     holder = page.locator("#reports").evaluate(
         "t => { const b = t.parentElement.getBoundingClientRect(); "
-        "return {right: b.right, scroll: t.parentElement.scrollWidth - t.parentElement.clientWidth}; }")
+        "return {right: b.right, "
+        "scroll: t.parentElement.scrollWidth - t.parentElement.clientWidth}; }")
     width = page.viewport_size["width"] if page.viewport_size else 0
     assert box is not None and box["x"] + box["width"] <= min(holder["right"], width) + 1, \
         (box, holder)
