@@ -47,12 +47,16 @@ async function defaultsOf(optimiser) {
     tools.defaults.get(optimiser));
 }
 
-/** Fill the re-run form from ``run``'s settings (null: the defaults). @param {any} run */
-async function fillRerun(run) {
+/**
+ * Fill the re-run form from ``run``'s settings (null: the defaults) for ``optimiser`` (by
+ * default the run's own).
+ * @param {any} run @param {string} [optimiser]
+ */
+async function fillRerun(run, optimiser) {
   tools.base = run;
-  const optimiser = run ? run.optimiser : select("rerun-optimiser").value;
-  select("rerun-optimiser").value = optimiser;
-  const { params, kinds } = await defaultsOf(optimiser);
+  const chosen = optimiser || (run ? run.optimiser : select("rerun-optimiser").value);
+  select("rerun-optimiser").value = chosen;
+  const { params, kinds } = await defaultsOf(chosen);
   const own = run ? run.params || {} : {};
   $("rerun-base").textContent = run ? `starting from run #${run.id}'s settings` : "defaults";
   $("rerun-settings").replaceChildren(...Object.keys(params).map((name) => {
@@ -169,10 +173,14 @@ export function showTools(sequenceId, runs, changed) {
 export function initTools(api, fail, hooks) {
   Object.assign(tools, { api, fail, hooks });
   $("rerun-form").addEventListener("submit", (e) => submitRerun(/** @type {SubmitEvent} */ (e)));
-  $("rerun-optimiser").addEventListener("change", () => {
-    const base = tools.base && tools.base.optimiser === select("rerun-optimiser").value
-      ? tools.base : null;
-    fillRerun(base).catch(fail);
+  $("rerun-optimiser").addEventListener("change", () =>
+    fillRerun(tools.base, select("rerun-optimiser").value).catch(fail));
+  // A setting that differs from the default is marked as it is edited.
+  $("rerun-settings").addEventListener("input", async (e) => {
+    const field = /** @type {HTMLInputElement} */ (e.target);
+    const { params } = await defaultsOf(select("rerun-optimiser").value);
+    const value = field.type === "checkbox" ? field.checked : Number(field.value);
+    field.parentElement?.classList.toggle("changed", value !== params[field.name]);
   });
   $("run-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-rerun]");

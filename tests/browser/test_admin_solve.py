@@ -293,7 +293,7 @@ def test_two_runs_compare_frame_by_frame_and_a_run_with_itself_not_at_all(
 
 
 def test_a_re_run_with_other_settings_is_queued_with_them(
-    solve_page: Page, live_server: LiveServer, truth_runs: dict[str, int]
+    solve_page: Page, live_server: LiveServer, truth_runs: dict[str, int], output_dir: Path
 ) -> None:
     page, server = solve_page, live_server
     page.locator(f'#run-rows tr[data-run="{truth_runs["a"]}"] button[data-rerun]').click()
@@ -307,6 +307,8 @@ def test_a_re_run_with_other_settings_is_queued_with_them(
     expect(status).to_contain_text('paper_iterations must be a whole number, got "2.5"')
     field.fill("7")
     page.locator('#rerun-settings input[name="use_depth"]').uncheck()
+    page.locator("#solve-rerun").scroll_into_view_if_needed()
+    page.screenshot(path=str(output_dir / "admin-solve-rerun.png"))
     added = None
     if _accepted(server) == 0:
         # The API's refusal is shown as it words it; then one accepted assignment is enough.
