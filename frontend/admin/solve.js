@@ -185,6 +185,10 @@ async function play() {
   $("solve-play").textContent = "Pause";
   $("solve-play").setAttribute("aria-pressed", "true");
   while (state.playing && state.run) {
+    if ($("sequence-view").hidden) {  // the page moved on: stop fetching frames nobody sees
+      pause();
+      break;
+    }
     await setFrame(stepFrame(state.frame, 1, state.run.num_frames, true));
     await new Promise((resolve) => setTimeout(resolve, PLAY_MS));
   }

@@ -210,6 +210,8 @@ def test_comparing_runs_of_different_sequences_or_unfinished_runs_is_refused(
     resp = client.get(f"/api/solve-runs/{runs['truth']}/compare/{runs['moved']}",
                       headers=admin_headers)
     assert resp.status_code == 409 and "running" in resp.json()["detail"]
+    resp = client.get(f"/api/solve-runs/{runs['moved']}/timeline", headers=admin_headers)
+    assert resp.status_code == 409 and "running" in resp.json()["detail"]
     resp = client.get(f"/api/solve-runs/{runs['truth']}/compare/999", headers=admin_headers)
     assert resp.status_code == 404 and "999" in resp.json()["detail"]
     resp = client.get(f"/api/solve-runs/{runs['truth']}/compare/x", headers=admin_headers)
