@@ -293,8 +293,15 @@ export function renderWorkerDetail(at, w) {
   ];
   at.facts.replaceChildren(...facts.flatMap(([name, value]) => [
     el("dt", {}, [name]), el("dd", { "data-fact": name }, [value])]));
-  at.chart.replaceChildren(w.history.length ? qualitySparkline(w.history, 420, 70)
-    : el("p", { class: "muted" }, ["No QC reports yet."]));
+  const errors = w.history.map((/** @type {any} */ p) => p.median_error_px)
+    .filter((/** @type {unknown} */ e) => typeof e === "number");
+  const reports = `${w.history.length} QC report${w.history.length === 1 ? "" : "s"}`;
+  at.chart.replaceChildren(...(w.history.length ? [qualitySparkline(w.history, 420, 60),
+    el("p", { class: "muted small", "data-caption": "quality" }, [errors.length
+      ? `${reports} from ${when(w.history[0].at)} to ${when(w.history.at(-1).at)}; median `
+        + `error ${px(Math.min(...errors))} to ${px(Math.max(...errors))} (higher is worse)`
+      : `${reports}, none with a measured error yet (too few views to compare with)`])]
+    : [el("p", { class: "muted" }, ["No QC reports yet."])]));
   at.assignments.replaceChildren(...w.assignments.map((/** @type {any} */ a) => el("tr", {
     "data-assignment": String(a.assignment_id) }, [
     el("td", { class: "num" }, [String(a.assignment_id)]),
