@@ -59,6 +59,11 @@ def _list(values: np.ndarray, digits: int = 1) -> list[Any]:
     return list(out.tolist())
 
 
+def _any_point(reference: list[Any]) -> bool:
+    """Whether a stored (F, P, 2) reference places any point."""
+    return any(p is not None and p[0] is not None for frame in reference for p in frame)
+
+
 def _track(assignment: Assignment, num_frames: int, num_points: int) -> dict[str, Any]:
     """The worker's dense track: xy (F, P, 2) px (None = no position), visible (F, P) 0/1,
     and the keyframes (frame indices) the worker set per point."""
@@ -96,6 +101,10 @@ def review_of(session: Session, assignment_id: int) -> ReviewRead:
     replay = report.replay or {}
     source = "gold" if report.method == "gold" else replay.get("source")
     reference = replay.get("reference") if source in ("consensus", "anchored") else None
+    note = None if reference is not None else UNAVAILABLE.get(source, UNAVAILABLE[None])
+    if reference is not None and not _any_point(reference):
+        note = (f"no point of this view is fixed by two other views ({report.views} view(s) "
+                "labelled so far): judge the track by the frames")
     return ReviewRead(
         assignment_id=assignment_id, task_id=task.id, sequence_id=sequence.id,
         sequence=f"{sequence.subject.name}/{sequence.name}", serial=camera.serial,
@@ -107,8 +116,7 @@ def review_of(session: Session, assignment_id: int) -> ReviewRead:
         reference_source=source if reference is not None else None,
         reference=reference, errors=replay.get("errors") if reference is not None else None,
         reference_shown=replay.get("shown") if reference is not None else None,
-        reference_note=None if reference is not None else UNAVAILABLE.get(source,
-                                                                           UNAVAILABLE[None]),
+        reference_note=note,
         swaps=report.swaps, issues=replay.get("issues", []), reasons=report.reasons,
         feedback=report.feedback, outcome=report.outcome, provisional=report.provisional,
         views=report.views, method=report.method, metrics=report.metrics,

@@ -98,8 +98,9 @@ export function spansOf(swaps, issues, names) {
     if (!Array.isArray(i.frames)) continue;
     const name = (names[i.point] ?? `point ${i.point}`).replace(/_/g, " ");
     const px = i.error_px === null || i.error_px === undefined ? "" : ` ${Number(i.error_px).toFixed(0)} px`;
+    const about = i.about && i.about !== "error" ? ` ${i.about}` : "";
     spans.push({ kind: "issue", frames: [i.frames[0], i.frames[1]], points: [i.point],
-      label: `${name}${px}`,
+      label: `${name}${about}${px}`,
       detail: `${name} off by${px || " too much"} in ${frameText(i.frames)}` +
         (i.about && i.about !== "error" ? ` (${i.about})` : "") });
   }

@@ -30,12 +30,17 @@ async function renderMetrics(list, review) {
     const rows = /** @type {any[]} */ (metricRows(review));
     list.replaceChildren(...rows.flatMap((r) => [
       el("dt", { title: r.explain || r.name }, [r.label || r.name]),
-      el("dd", { "data-fact": r.name, title: r.explain || "",
+      el("dd", { "data-review-metric": r.name, title: r.explain || "",
         class: r.over ? "over" : r.value === "–" ? "muted" : "" },
       [String(r.value), r.threshold ? el("span", { class: "muted" }, [` (${r.threshold})`]) : ""]),
     ]));
   } catch {
     renderFacts(list, review);
+    // The report's own facts beside this panel keep their data-fact names to themselves.
+    for (const dd of list.querySelectorAll("[data-fact]")) {
+      dd.setAttribute("data-review-metric", dd.getAttribute("data-fact") || "");
+      dd.removeAttribute("data-fact");
+    }
   }
 }
 
@@ -67,6 +72,8 @@ export class ReviewPanel {
       "data-act": "readonly" }, ["Open in the annotation page (read-only)"]));
     this.heat = /** @type {HTMLCanvasElement} */ (el("canvas", { class: "heatmap",
       "aria-label": "error per point and frame" }));
+    this.heatNote = el("p", { class: "muted heat-note", hidden: "" },
+      ["No errors per frame without a reference: the cells stay grey."]);
     this.timeline = svg("svg", { class: "timeline", role: "img",
       "aria-label": "swap and issue spans" });
     this.reasons = el("ul", { class: "reasons" });
@@ -91,7 +98,7 @@ export class ReviewPanel {
       el("span", { class: "key refhidden" }, ["◇ reference, hidden"]),
     ]);
     this.root.append(this.title, this.note, el("div", { class: "replay-stage" }, [this.canvas]),
-      controls, legend, el("h3", {}, ["Error per point and frame"]), this.heat,
+      controls, legend, el("h3", {}, ["Error per point and frame"]), this.heatNote, this.heat,
       el("h3", {}, ["Swaps and issues"]), this.timeline, el("h3", {}, ["Reasons"]),
       this.reasons, el("h3", {}, ["Metrics"]), this.facts);
     host.replaceChildren(this.root);
@@ -162,6 +169,7 @@ export class ReviewPanel {
       ? review.reasons.map((/** @type {string} */ r) => el("li", {}, [r]))
       : [el("li", { class: "muted" }, ["none: QC found nothing wrong"])]));
     renderMetrics(this.facts, review);
+    this.heatNote.hidden = Boolean(review.errors);
     this.layout();
   }
 
@@ -246,8 +254,11 @@ export class ReviewPanel {
   /** The view that follows the worker's points and the reference at the current frame. */
   pointsView() {
     const review = this.review;
+    // An object's outline stays in view beside its landmarks.
+    const outline = review.highlight?.polygon?.length
+      ? Array(review.num_frames).fill(review.highlight.polygon) : null;
     return followView({ width: review.width, height: review.height },
-      [review.track.xy, review.reference], this.frame, review.num_frames);
+      [review.track.xy, review.reference, outline], this.frame, review.num_frames);
   }
 
   /** @param {HTMLCanvasElement} canvas */

@@ -50,9 +50,9 @@ def _hex(colour: str) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def review_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFactory
-                   ) -> tuple[Path, int, list[str]]:
-    """The four-view capture imported into the live server; its path, sequence id and the HITs
-    of its hand tasks, published."""
+                   ) -> tuple[Path, int]:
+    """The four-view capture imported into the live server, its hand tasks published; its path
+    and sequence id."""
     from backend.annotation.models import Task
     from backend.captures.flows import import_path
     from backend.config import get_settings
@@ -83,7 +83,8 @@ def review_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFac
                                          options, [])[:1]
         finally:
             reset_caches()
-    return capture, sequence_id, hits
+    assert len(hits) == len(PROFILES), hits
+    return capture, sequence_id
 
 
 @pytest.fixture(scope="module")
@@ -103,12 +104,12 @@ def review_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def reviewed(live_server: LiveServer, review_capture: tuple[Path, int, list[str]],
+def reviewed(live_server: LiveServer, review_capture: tuple[Path, int],
              review_worker: None) -> dict[str, int]:
     """The simulated crowd's work on the capture, scored; profile -> an assignment id."""
     from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
 
-    capture, sequence_id, hits = review_capture
+    capture, sequence_id = review_capture
     rng = np.random.default_rng(4)
     truth = CaptureTruth(capture)
     with httpx.Client(timeout=30.0) as http:
@@ -182,6 +183,11 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
 
     review = _open(page, server, swapper)
     assert review["swaps"], review["reasons"]
+    median = review["metrics"]["median_error_px"]
+    expect(page.locator('#queue-review [data-review-metric="median_error_px"]')) \
+        .to_contain_text(f"{median:.1f} px")
+    for reason in review["reasons"]:
+        expect(page.locator("#queue-review .reasons")).to_contain_text(reason)
     swap = review["swaps"][0]
     assert sorted(swap["fingers"]) == ["little", "ring"]
     page.screenshot(path=str(output_dir / "admin-review-queue-1280.png"))
