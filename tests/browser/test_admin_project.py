@@ -331,7 +331,7 @@ def test_no_page_overflows_at_1024_and_no_column_is_clipped_at_1280x720(
     pages = {
         "sequences": "#/sequences", "sequence": f"#/sequences/{sid}",
         "report": f"#/sequences/{sid}/reports/{reports[0]['assignment_id']}",
-        "workers": "#/workers", "jobs": "#/jobs", "costs": "#/costs",
+        "workers": "#/workers", "jobs": "#/jobs", "costs": "#/costs", "queue": "#/queue",
     }
     for size in SIZES:
         page.set_viewport_size(size)
