@@ -24,11 +24,12 @@ from worker.hand.joints import JOINT_PARENTS
 SURFACE_MARGIN_M = 0.025
 HIDDEN_MARGIN_M = 0.05
 # A hand covers its own joints (a finger curled in front of another, the back of the hand in
-# front of the palm side): the reading then lies on the hand itself, which hides nothing a
-# worker is asked to mark (a joint is occluded only where something other than the hand covers
-# it). Synthetic capture seed 7, 8 views: such readings lie 7-18 mm from the hand's skeleton
-# (bones and palm; 99th percentile), up to 23 mm at the palm's edge; an object's surface in
-# front of a joint 15-64 mm (median 29 mm). Nearer than this the reading is taken for the hand's
+# front of the palm side): the reading then lies on the hand itself, and whether a worker marks
+# such a joint occluded is left open (the synthetic ground truth calls it visible, the page's
+# instructions occluded); only something other than the hand makes it hidden. Synthetic
+# capture seed 7, 8 views: such readings lie 7-18 mm from the hand's skeleton (bones and palm;
+# 99th percentile), up to 23 mm at the palm's edge; an object's surface in front of a joint
+# 15-64 mm (median 29 mm). Nearer than this the reading is taken for the hand's
 # own surface and judges nothing. At the true joints of seeds 5 (320x240), 7 and 23: 0.4-7 % of
 # the joints judged hidden are visible in truth (at an object's outline), against 33-71 % with
 # the hand's own surface counted; 66-78 % of the truly occluded joints are judged hidden
