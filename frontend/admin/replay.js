@@ -133,8 +133,14 @@ export function evidenceFeedback(review) {
   const spans = spansOf(review.swaps || [], review.issues || [], review.point_names || []);
   const swaps = spans.filter((s) => s.kind === "swap");
   // An issue inside a swap of its finger is that swap, told once.
-  const told = (/** @type {Span} */ s) => s.kind === "issue" && swaps.some((w) =>
-    w.points.includes(s.points[0]) && s.frames[0] <= w.frames[1] && w.frames[0] <= s.frames[1]);
+  // QC's own feedback that already names the point tells its issues.
+  const qc = (review.feedback || "").toLowerCase();
+  const named = (/** @type {Span} */ s) => {
+    const name = (review.point_names?.[s.points[0]] || "").replace(/_/g, " ").toLowerCase();
+    return Boolean(name) && qc.includes(name);
+  };
+  const told = (/** @type {Span} */ s) => s.kind === "issue" && (named(s) || swaps.some((w) =>
+    w.points.includes(s.points[0]) && s.frames[0] <= w.frames[1] && w.frames[0] <= s.frames[1]));
   for (const span of spans.filter((s) => !told(s))) {
     const sentence = `${span.detail[0].toUpperCase()}${span.detail.slice(1)}.`;
     if (!lines.some((l) => l.includes(span.detail))) lines.push(sentence);

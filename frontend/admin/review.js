@@ -475,8 +475,9 @@ export class ReviewPanel {
     try {
       const reply = await this.api.request("POST",
         `/assignments/${this.review.assignment_id}/readonly-link`);
-      if (tab) tab.location.href = reply.url;
-      else window.open(reply.url, "_blank");
+      const url = new URL(reply.url, location.href).href;
+      if (tab) tab.location.href = url;
+      else window.open(url, "_blank");
     } catch (err) {
       tab?.close();
       const status = /** @type {any} */ (err)?.status;

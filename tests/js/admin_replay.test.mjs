@@ -111,3 +111,16 @@ test("the followed view zooms to the largest frame's points and centres on this 
   assert.equal(wide.zoom, 1);
   assert.deepEqual(followView(image, [null], 0, 1), { zoom: 1, cx: 320, cy: 240 });
 });
+
+test("issues of points QC's feedback already names are not told twice", () => {
+  const text = evidenceFeedback({
+    feedback: "Check these frames: the landmark 1 jumped 14 px between frames 8 and 9.",
+    issues: [{ point: 0, frames: [8, 9], error_px: 14, about: "jump" },
+      { point: 1, frames: [3, 4], error_px: 20 }],
+    point_names: ["landmark_1", "landmark_2"],
+  });
+  assert.deepEqual(text.split("\n"), [
+    "Check these frames: the landmark 1 jumped 14 px between frames 8 and 9.",
+    "Landmark 2 off by 20 px in frames 3–4.",
+  ]);
+});
