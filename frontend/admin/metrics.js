@@ -81,8 +81,8 @@ const METRICS = {
     "Of the frames where the object turns a landmark's point away or something covers it, "
     + "the share marked visible." },
   visibility_disagreement: { label: "Visibility disagreement", unit: "%", explain: {
-    any: "Share of the points the depth camera can judge whose visible/occluded flag it "
-      + "contradicts.",
+    any: "Share of the points the depth camera can judge (on the visible surface, or behind "
+      + "an object) whose visible/occluded flag it contradicts.",
     gold: "Share of the points whose visible/occluded flag differs from the gold labels'.",
   } },
   occluded_on_surface: { label: "Seen points marked occluded", unit: "%", explain: {
@@ -91,8 +91,8 @@ const METRICS = {
     gold: "Of the points visible in the gold labels, the share marked occluded.",
   } },
   visible_behind_surface: { label: "Covered points marked visible", unit: "%", explain: {
-    any: "Of the points the depth camera sees covered by something nearer, the share marked "
-      + "visible.",
+    any: "Of the points the depth camera sees covered by something other than the hand "
+      + "itself, the share marked visible.",
     gold: "Of the points occluded in the gold labels, the share marked visible.",
   } },
   motion_ratio: { label: "Motion ratio", unit: "×", explain: {
