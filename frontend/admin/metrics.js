@@ -244,8 +244,10 @@ export function metricRows(report) {
 
 /**
  * Write a report's metric rows into a <dl>: per metric a <dt> with its name (the explanation
- * as its tooltip) and a <dd> with the value, the threshold in brackets, data-metric = the key
- * and data-over = "true" where the value crossed it.
+ * as its tooltip) and a <dd> with the value, the threshold in brackets, the explanation below,
+ * data-metric = the key and data-over = "true" (and a "⚠" before the value, "crossed:" before
+ * the threshold) where the value crossed it. Classes for a style sheet: dd.metric(.over),
+ * .metric-threshold, .metric-explain.
  * @param {HTMLElement} dl
  * @param {Parameters<typeof metricRows>[0]} report
  * @returns {MetricRow[]} the rows written
@@ -263,12 +265,13 @@ export function renderMetricList(dl, report) {
     dd.setAttribute("data-over", String(row.over));
     dd.className = row.over ? "metric over" : "metric";
     const value = doc.createElement("strong");
-    value.textContent = row.value;
+    // Marked in the text too, so a crossed limit shows without any style sheet.
+    value.textContent = row.over ? `⚠ ${row.value}` : row.value;
     dd.append(value);
     if (row.threshold) {
       const limit = doc.createElement("span");
       limit.className = "metric-threshold";
-      limit.textContent = ` (${row.threshold})`;
+      limit.textContent = ` (${row.over ? "crossed: " : ""}${row.threshold})`;
       dd.append(limit);
     }
     if (row.explain) {

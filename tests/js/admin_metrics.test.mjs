@@ -153,7 +153,11 @@ test("renderMetricList writes a name, value, threshold and over flag per metric"
   assert.match(dt.title, /other camera views/);
   assert.equal(dd.attributes["data-metric"], "median_error_px");
   assert.equal(dd.attributes["data-over"], "true");
-  assert.match(dd.text, /^4\.3 px \(review above 3\.2 px; reject above 12\.0 px\)/);
+  assert.match(dd.text,
+    /^⚠ 4\.3 px \(crossed: review above 3\.2 px; reject above 12\.0 px\)/);
+  const p90 = dl.children[3];
+  assert.equal(p90.attributes["data-over"], "false");
+  assert.match(p90.text, /^6\.1 px \(review above 6\.5 px; reject above 30\.0 px\)/);
   const time = dl.children[rows.findIndex((r) => r.name === "working_time_s") * 2 + 1];
   assert.equal(time.attributes["data-over"], "false");
   assert.match(time.text, /^151 s(?! \()/);
