@@ -205,13 +205,15 @@ export function thresholdOf(name, value, unit, thresholds) {
   const parts = [];
   let over = false;
   for (const level of ["review", "reject"]) {
-    for (const side of ["above", "below"]) {
+    const sides = [];
+    for (const side of ["below", "above"]) {
       const limit = thresholds[`${name}.${level}_${side}`];
       if (typeof limit !== "number" || !Number.isFinite(limit)) continue;
-      parts.push(`${level} ${side} ${formatted(limit, unit)}`);
+      sides.push(`${side} ${formatted(limit, unit)}`);
       if (typeof value === "number" && Number.isFinite(value)
         && (side === "above" ? value > limit : value < limit)) over = true;
     }
+    if (sides.length) parts.push(`${level} ${sides.join(" or ")}`);
   }
   return { threshold: parts.length ? parts.join("; ") : null, over };
 }

@@ -64,8 +64,7 @@ test("the threshold held to is written and a crossed one marks the row over", ()
   assert.equal(rows.median_error_px.threshold, "review above 3.2 px; reject above 12.0 px");
   assert.equal(rows.median_error_px.over, true);
   assert.equal(rows.p90_error_px.over, false);  // 6.1 within 6.5
-  assert.equal(rows.motion_ratio.threshold,
-    "review above 3.00×; review below 0.40×; reject below 0.10×");
+  assert.equal(rows.motion_ratio.threshold, "review below 0.40× or above 3.00×; reject below 0.10×");
   assert.equal(rows.motion_ratio.over, true);  // 0.35 < 0.4
   assert.equal(rows.occluded_on_surface.threshold, "review above 10.0%; reject above 30.0%");
   assert.equal(rows.occluded_on_surface.over, true);
