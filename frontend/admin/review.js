@@ -11,6 +11,8 @@ import {
   stepFrame, viewport, zoomAt,
 } from "./replay.js";
 
+/** A heat map cell without an error where the worker marked the point occluded. */
+const MARKED_OCCLUDED = "#7d8793";
 /** Replay speed, frames per second. */
 const PLAY_FPS = 8;
 /** Radius of a drawn point, canvas px. */
@@ -98,7 +100,11 @@ export class ReviewPanel {
       el("span", { class: "key refhidden" }, ["◇ reference, hidden"]),
     ]);
     this.root.append(this.title, this.note, el("div", { class: "replay-stage" }, [this.canvas]),
-      controls, legend, el("h3", {}, ["Error per point and frame"]), this.heatNote, this.heat,
+      controls, legend, el("h3", {}, ["Error per point and frame"]), this.heatNote,
+      el("p", { class: "heat-key muted" }, [
+        el("span", { class: "swatch", style: `background:${NO_ERROR}` }), " no error measured ",
+        el("span", { class: "swatch", style: `background:${MARKED_OCCLUDED}` }),
+        " marked occluded by the worker; click a cell for its frame"]), this.heat,
       el("h3", {}, ["Swaps and issues"]), this.timeline, el("h3", {}, ["Reasons"]),
       this.reasons, el("h3", {}, ["Metrics"]), this.facts);
     host.replaceChildren(this.root);
@@ -411,7 +417,9 @@ export class ReviewPanel {
         layout.left - 4);
       for (let f = 0; f < frames; f += 1) {
         const error = review.errors?.[f]?.[p];
-        ctx.fillStyle = error === null || error === undefined ? NO_ERROR : errorColour(error);
+        const hidden = !review.track.visible[f]?.[p];
+        ctx.fillStyle = error !== null && error !== undefined ? errorColour(error)
+          : hidden ? MARKED_OCCLUDED : NO_ERROR;
         ctx.fillRect(layout.left + f * layout.cell, layout.top + p * layout.row,
           Math.max(layout.cell - 0.5, 0.5), layout.row - 0.5);
       }
