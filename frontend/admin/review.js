@@ -7,18 +7,12 @@
 
 import { el, renderFacts, svg } from "./views.js";
 import {
-  NO_ERROR, cellAt, errorColour, followView, heatLayout, legendStops, pointAt, spanRows, spansOf,
-  stepFrame, viewport, zoomAt,
+  NO_ERROR, cellAt, followView, heatLayout, legendStops, stepFrame, zoomAt,
 } from "./replay.js";
+import { MARKED_OCCLUDED, drawFrame, drawHeat, drawTimeline, moveCursor } from "./review-draw.js";
 
-/** A heat map cell without an error where the worker marked the point occluded. */
-const MARKED_OCCLUDED = "#7d8793";
 /** Replay speed, frames per second. */
 const PLAY_FPS = 8;
-/** Radius of a drawn point, canvas px. */
-const DOT = 4;
-/** Height of one timeline row, px. */
-const SPAN_ROW = 18;
 
 /**
  * The metric rows of the panel: metrics.js's readable rows when the page has them, the plain
@@ -194,8 +188,9 @@ export class ReviewPanel {
       canvas.width = Math.round(w * ratio);
       canvas.height = Math.round(h * ratio);
     }
-    this.drawHeat();
-    this.drawTimeline(width);
+    drawHeat(this.heat, this.review, this.heatLayout(width));
+    drawTimeline(/** @type {SVGSVGElement} */ (this.timeline), this.review,
+      this.heatLayout(width), width);
     this.show(this.frame);
   }
 
@@ -214,7 +209,7 @@ export class ReviewPanel {
     this.root.dataset.frame = String(this.frame);
     if (this.follow) this.view = this.pointsView();
     this.draw();
-    this.drawCursor();
+    moveCursor(/** @type {SVGSVGElement} */ (this.timeline), this.heatLayout(), this.frame);
   }
 
   /** @param {number} by */
@@ -273,207 +268,13 @@ export class ReviewPanel {
       height: parseFloat(canvas.style.height) || canvas.height };
   }
 
-  /** The frame, the worker's points, the references and the lines between them. */
+  /** The current frame: picture, points, references and the lines between them. */
   draw() {
-    const review = this.review;
-    if (!review) return;
-    const ctx = /** @type {CanvasRenderingContext2D} */ (this.canvas.getContext("2d"));
-    const size = this.cssSize(this.canvas);
-    const ratio = this.canvas.width / size.width;
-    ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
-    ctx.fillStyle = "#1d232b";
-    ctx.fillRect(0, 0, size.width, size.height);
-    const vp = viewport({ width: review.width, height: review.height }, size, this.view);
-    const img = this.images[this.frame];
-    if (img && img.complete && img.naturalWidth) {
-      const [x0, y0] = vp.toCanvas(0, 0);
-      ctx.drawImage(img, x0, y0, review.width * vp.scale, review.height * vp.scale);
-      this.root.dataset.imageFrame = String(this.frame);
-    } else {
-      delete this.root.dataset.imageFrame;
-    }
-    if (review.highlight?.polygon?.length) this.drawOutline(ctx, vp, review.highlight.polygon);
-    const points = review.point_names.length;
-    const at = Array.from({ length: points }, (_, p) => pointAt(review, this.frame, p));
-    this.drawSkeleton(ctx, vp, at);
-    for (const q of at) {
-      const ref = q.reference ? vp.toCanvas(...q.reference) : null;
-      const own = q.xy ? vp.toCanvas(...q.xy) : null;
-      if (ref && own) {
-        ctx.strokeStyle = errorColour(q.error);
-        ctx.lineWidth = 2.5;
-        ctx.beginPath();
-        ctx.moveTo(own[0], own[1]);
-        ctx.lineTo(ref[0], ref[1]);
-        ctx.stroke();
-      }
-      if (ref) this.drawReference(ctx, ref, q.referenceShown);
-    }
-    // The worker's points over every line, in point order.
-    for (const [p, q] of at.entries()) {
-      if (q.xy) this.drawWorker(ctx, vp.toCanvas(...q.xy), q.visible, review.point_colours[p] || "#fff");
-    }
-  }
-
-  /**
-   * @param {CanvasRenderingContext2D} ctx @param {ReturnType<typeof viewport>} vp
-   * @param {number[][]} polygon  image px
-   */
-  drawOutline(ctx, vp, polygon) {
-    ctx.save();
-    ctx.setLineDash([6, 4]);
-    ctx.strokeStyle = "#ffd33d";
-    ctx.lineWidth = 2;
-    ctx.beginPath();
-    for (const [i, [x, y]] of polygon.entries()) {
-      const [cx, cy] = vp.toCanvas(x, y);
-      if (i === 0) ctx.moveTo(cx, cy);
-      else ctx.lineTo(cx, cy);
-    }
-    ctx.closePath();
-    ctx.stroke();
-    ctx.restore();
-  }
-
-  /**
-   * The worker's skeleton, faint, between the points it placed.
-   * @param {CanvasRenderingContext2D} ctx @param {ReturnType<typeof viewport>} vp
-   * @param {ReturnType<typeof pointAt>[]} at
-   */
-  drawSkeleton(ctx, vp, at) {
-    ctx.strokeStyle = "rgba(255, 255, 255, 0.35)";
-    ctx.lineWidth = 1;
-    for (const [a, b] of this.review.skeleton || []) {
-      const p = at[a]?.xy, q = at[b]?.xy;
-      if (!p || !q) continue;
-      const [x1, y1] = vp.toCanvas(...p), [x2, y2] = vp.toCanvas(...q);
-      ctx.beginPath();
-      ctx.moveTo(x1, y1);
-      ctx.lineTo(x2, y2);
-      ctx.stroke();
-    }
-  }
-
-  /**
-   * A filled dot where the worker calls the point visible, a dashed ring where the worker
-   * marked it occluded.
-   * @param {CanvasRenderingContext2D} ctx @param {number[]} at @param {boolean} visible
-   * @param {string} colour
-   */
-  drawWorker(ctx, at, visible, colour) {
-    ctx.save();
-    ctx.beginPath();
-    ctx.arc(at[0], at[1], DOT, 0, 2 * Math.PI);
-    if (visible) {
-      ctx.fillStyle = colour;
-      ctx.fill();
-      ctx.strokeStyle = "#000";
-      ctx.lineWidth = 1;
-    } else {
-      ctx.setLineDash([2, 2]);
-      ctx.strokeStyle = colour;
-      ctx.lineWidth = 1.5;
-    }
-    ctx.stroke();
-    ctx.restore();
-  }
-
-  /**
-   * A white diamond at the reference; hollow where the solve calls an anchored landmark
-   * hidden.
-   * @param {CanvasRenderingContext2D} ctx @param {number[]} at @param {boolean} shown
-   */
-  drawReference(ctx, at, shown) {
-    const r = DOT + 1;
-    ctx.save();
-    ctx.beginPath();
-    ctx.moveTo(at[0], at[1] - r);
-    ctx.lineTo(at[0] + r, at[1]);
-    ctx.lineTo(at[0], at[1] + r);
-    ctx.lineTo(at[0] - r, at[1]);
-    ctx.closePath();
-    ctx.lineWidth = 1.5;
-    ctx.strokeStyle = shown ? "#fff" : "#aab";
-    if (!shown) ctx.setLineDash([2, 2]);
-    ctx.stroke();
-    ctx.restore();
-  }
-
-  /** The heat map: one cell per point and frame, coloured by the error; names at the left. */
-  drawHeat() {
-    const review = this.review;
-    const ctx = /** @type {CanvasRenderingContext2D} */ (this.heat.getContext("2d"));
-    const size = this.cssSize(this.heat);
-    const ratio = this.heat.width / size.width;
-    const layout = this.heatLayout();
-    ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
-    ctx.clearRect(0, 0, size.width, size.height);
-    ctx.font = `${Math.min(layout.row, 11)}px system-ui, sans-serif`;
-    ctx.textBaseline = "middle";
-    const frames = review.num_frames, points = review.point_names.length;
-    for (let p = 0; p < points; p += 1) {
-      ctx.fillStyle = "#4a5561";
-      ctx.fillText(review.point_names[p], 0, layout.top + (p + 0.5) * layout.row,
-        layout.left - 4);
-      for (let f = 0; f < frames; f += 1) {
-        const error = review.errors?.[f]?.[p];
-        const hidden = !review.track.visible[f]?.[p];
-        ctx.fillStyle = error !== null && error !== undefined ? errorColour(error)
-          : hidden ? MARKED_OCCLUDED : NO_ERROR;
-        ctx.fillRect(layout.left + f * layout.cell, layout.top + p * layout.row,
-          Math.max(layout.cell - 0.5, 0.5), layout.row - 0.5);
-      }
-    }
-    Object.assign(this.heat.dataset, { left: layout.left, top: layout.top,
-      cell: layout.cell.toFixed(3), row: layout.row });
-  }
-
-  /** The current frame marked on the heat map's and the timeline's cursor. */
-  drawCursor() {
-    const cursor = this.timeline.querySelector(".cursor");
-    if (!cursor || !this.review) return;
-    const layout = this.heatLayout();
-    cursor.setAttribute("x", String(layout.left + this.frame * layout.cell));
-    cursor.setAttribute("width", String(Math.max(layout.cell, 2)));
-  }
-
-  /**
-   * The timeline: a ruler of frames and a bar per swap or issue span, under the heat map's
-   * columns; clicking a span shows its first frame.
-   * @param {number} width
-   */
-  drawTimeline(width) {
-    const review = this.review;
-    const layout = this.heatLayout(width);
-    const spans = spansOf(review.swaps, review.issues, review.point_names);
-    const rows = spanRows(spans);
-    const height = 16 + SPAN_ROW * Math.max(Math.max(-1, ...rows) + 1, 1);
-    this.timeline.setAttribute("viewBox", `0 0 ${width} ${height}`);
-    this.timeline.setAttribute("width", String(width));
-    this.timeline.setAttribute("height", String(height));
-    const x = (/** @type {number} */ f) => layout.left + f * layout.cell;
-    const nodes = [svg("rect", { class: "cursor", x: x(0), y: 0, width: layout.cell,
-      height })];
-    const ticks = Math.max(1, Math.ceil(review.num_frames / 12));
-    for (let f = 0; f < review.num_frames; f += ticks) {
-      nodes.push(svg("text", { x: x(f) + 1, y: 11, class: "tick" }, [String(f)]));
-    }
-    spans.forEach((s, i) => {
-      const y = 16 + rows[i] * SPAN_ROW;
-      const w = x(s.frames[1] + 1) - x(s.frames[0]);
-      nodes.push(svg("g", { class: `span ${s.kind}`, "data-kind": s.kind,
-        "data-first": s.frames[0], "data-last": s.frames[1] }, [
-        svg("title", {}, [s.detail]),
-        svg("rect", { x: x(s.frames[0]), y, width: Math.max(w, 2), height: SPAN_ROW - 3,
-          rx: 3 }),
-        svg("text", { x: x(s.frames[0]) + 3, y: y + SPAN_ROW / 2 + 2 }, [s.label]),
-      ]));
-    });
-    if (!spans.length) {
-      nodes.push(svg("text", { x: layout.left, y: 28, class: "none" },
-        ["no swaps or issue spans found"]));
-    }
-    this.timeline.replaceChildren(...nodes);
+    if (!this.review) return;
+    const drawn = drawFrame(this.canvas, this.review, this.frame, this.view,
+      this.images[this.frame]);
+    if (drawn) this.root.dataset.imageFrame = String(this.frame);
+    else delete this.root.dataset.imageFrame;
   }
 
   /** Ask for a read-only link to the worker's annotation page and open it in a new tab. */
