@@ -20,6 +20,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
@@ -105,7 +106,7 @@ def review_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
 
 @pytest.fixture(scope="module")
 def reviewed(live_server: LiveServer, review_capture: tuple[Path, int],
-             review_worker: None) -> dict[str, int]:
+             review_worker: None) -> dict[str, Any]:
     """The simulated crowd's work on the capture, scored; profile -> an assignment id."""
     from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
 
@@ -131,7 +132,20 @@ def reviewed(live_server: LiveServer, review_capture: tuple[Path, int],
     by_worker = {r["worker_id"]: r["assignment_id"] for r in reports}
     ids = {"swapper": by_worker[outcomes[0].worker_id]}
     ids.update({f"careful{i}": by_worker[o.worker_id] for i, o in enumerate(outcomes[1:])})
+    # The marketplace's own assignment ids, to read what it recorded.
+    ids.update({f"market:{by_worker[o.worker_id]}": o.assignment_id for o in outcomes})
     return ids
+
+
+def _market_record(server: LiveServer, market_id: str) -> tuple[dict, list[dict]]:
+    """The marketplace's record of an assignment and its bonus payments, through boto3."""
+    from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
+    from tests.market.helpers import make_client
+
+    mturk = make_client(server.base, (DEV_MARKET_ACCESS_KEY,
+                                      DEV_MARKET_REQUESTERS.split(":")[1]))
+    return (mturk.get_assignment(AssignmentId=market_id)["Assignment"],
+            mturk.list_bonus_payments(AssignmentId=market_id)["BonusPayments"])
 
 
 def _sign_in(page: Page, server: LiveServer, size: tuple[int, int]) -> None:
@@ -164,7 +178,7 @@ def _pixel(page: Page, selector: str, x: float, y: float) -> np.ndarray:
 
 
 def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
-        page: Page, live_server: LiveServer, reviewed: dict[str, int], output_dir: Path) -> None:
+        page: Page, live_server: LiveServer, reviewed: dict[str, Any], output_dir: Path) -> None:
     server = live_server
     _sign_in(page, server, (1280, 720))
     page.locator("#nav-queue").click()
@@ -273,7 +287,9 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
     assert report["action"] == "rejected", report
     assert swapper not in [r["assignment_id"] for r in
                            server.admin("GET", "/api/qc/queue?limit=500")["items"]]
-    assert sent.strip()
+    record, _ = _market_record(server, str(reviewed[f"market:{swapper}"]))
+    assert record["AssignmentStatus"] == "Rejected"
+    assert record["RequesterFeedback"] == sent.strip()
 
     # A careful worker: a bonus (B, $0.10), then approval (A).
     careful_id = reviewed["careful0"]
@@ -284,11 +300,14 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
     page.keyboard.press("a")
     expect(page.locator("#queue-result")).to_contain_text(f"Approved assignment {careful_id}")
     assert server.admin("GET", f"/api/qc/reports/{careful_id}")["action"] == "approved"
+    record, bonuses = _market_record(server, str(reviewed[f"market:{careful_id}"]))
+    assert record["AssignmentStatus"] == "Approved"
+    assert [b["BonusAmount"] for b in bonuses] == ["0.10"], bonuses
     page.screenshot(path=str(output_dir / "admin-review-decided-1280.png"))
 
 
 def test_review_panel_fits_narrow_windows_and_the_sequence_view(
-        page: Page, live_server: LiveServer, reviewed: dict[str, int], output_dir: Path) -> None:
+        page: Page, live_server: LiveServer, reviewed: dict[str, Any], output_dir: Path) -> None:
     server = live_server
     _sign_in(page, server, (1024, 700))
     careful_id = reviewed["careful1"]
