@@ -124,12 +124,15 @@ export class ReviewPanel {
       const box = this.canvas.getBoundingClientRect();
       this.zoom(e.deltaY < 0 ? 1.25 : 0.8, e.clientX - box.left, e.clientY - box.top);
     }, { passive: false });
+    this.heat.addEventListener("mousemove", (e) => {
+      const cell = this.cellOf(e);
+      const error = cell ? this.review.errors?.[cell.frame]?.[cell.point] : null;
+      this.heat.title = !cell ? "" : `${this.review.point_names[cell.point]}, frame ${cell.frame}: `
+        + (error === null || error === undefined ? "no error measured" : `${error.toFixed(1)} px`)
+        + (this.review.track.visible[cell.frame]?.[cell.point] ? "" : ", marked occluded");
+    });
     this.heat.addEventListener("click", (e) => {
-      if (!this.review) return;
-      const box = this.heat.getBoundingClientRect();
-      const layout = this.heatLayout();
-      const cell = cellAt(layout, e.clientX - box.left, e.clientY - box.top,
-        this.review.num_frames, this.review.point_names.length);
+      const cell = this.cellOf(e);
       if (cell) this.show(cell.frame);
     });
     this.timeline.addEventListener("click", (e) => {
@@ -137,6 +140,17 @@ export class ReviewPanel {
         ?.getAttribute("data-first");
       if (frame !== null && frame !== undefined) this.show(Number(frame));
     });
+  }
+
+  /**
+   * The heat map cell under the mouse, or null.
+   * @param {MouseEvent} e
+   */
+  cellOf(e) {
+    if (!this.review) return null;
+    const box = this.heat.getBoundingClientRect();
+    return cellAt(this.heatLayout(), e.clientX - box.left, e.clientY - box.top,
+      this.review.num_frames, this.review.point_names.length);
   }
 
   /**

@@ -269,6 +269,17 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
     expect(panel).not_to_have_attribute("data-playing", "true")
     page.locator('#queue-review button[data-act="zoom-in"]').click()
     expect(panel).to_have_attribute("data-zoom", "1.50")
+    canvas.scroll_into_view_if_needed()
+    middle = canvas.bounding_box()
+    assert middle is not None
+    page.mouse.move(middle["x"] + middle["width"] / 2, middle["y"] + middle["height"] / 2)
+    page.mouse.wheel(0, -100)
+    expect(panel).to_have_attribute("data-zoom", "1.88")
+    # The heat map names the cell under the mouse.
+    heat.scroll_into_view_if_needed()
+    heat.hover(position={"x": left + (frame + 0.5) * cell, "y": top + (swapped + 0.5) * row})
+    expect(heat).to_have_attribute("title", re.compile(
+        rf"^{review['point_names'][swapped]}, frame {frame}: {errors[frame, swapped]:.1f} px"))
     page.locator('#queue-review button[data-act="points"]').click()
 
     # The rejection's feedback is prefilled from the evidence; typing a key into it decides
