@@ -247,21 +247,3 @@ export function costCells(line) {
   return [line.name || line.key, ...COST_COLUMNS.map(([name]) => dollars(line[name]))];
 }
 
-/** QC metrics that are shares of points (worker/quality/metrics.py, landmarks.py). */
-const FRACTION_METRICS = new Set(["visibility_disagreement", "occluded_on_surface",
-  "visible_behind_surface", "completeness", "moved_with_object"]);
-
-/**
- * One QC metric for people, by its name: "_px" in pixels, shares of points as percentages,
- * "_s" in seconds, ratios with two decimals.
- * @param {string} name
- * @param {unknown} value
- */
-export function metric(name, value) {
-  if (value === null || value === undefined) return NONE;
-  if (typeof value !== "number") return String(value);
-  if (name.endsWith("_px")) return px(value);
-  if (name.endsWith("_fraction") || FRACTION_METRICS.has(name)) return percent(value);
-  if (name.endsWith("_s")) return `${Math.round(value)} s`;
-  return Number.isInteger(value) ? String(value) : value.toFixed(2);
-}

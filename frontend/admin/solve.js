@@ -29,14 +29,15 @@ const state = {
 };
 
 /**
- * One row per run; a done run's number opens its overlays, "Re-run…" fills the re-run form.
+ * One row per run; a done run's "Review #N" opens its overlays, "Re-run…" fills the re-run form.
  * @param {HTMLTableSectionElement} body
  * @param {any[]} runs  GET /api/sequences/{id}/solve-runs
  */
 export function renderRuns(body, runs) {
   body.replaceChildren(...runs.map((r) => el("tr", { "data-run": String(r.id) }, [
     el("td", { class: "num" }, [r.status === "done"
-      ? el("button", { type: "button", "data-show-run": String(r.id) }, [`#${r.id}`])
+      ? el("button", { type: "button", "data-show-run": String(r.id),
+        title: "review this run's overlays frame by frame" }, [`Review #${r.id}`])
       : `#${r.id}`]),
     el("td", {}, [el("span", { class: `status status-${r.status}` }, [r.status]),
       r.current ? el("span", { class: "muted" }, [" current"]) : ""]),

@@ -1,7 +1,8 @@
 /** Thin renderers of the review page: they build DOM from API replies, nothing more. */
 
+import { metricRows } from "./metrics.js";
 import {
-  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, jobOutcome, metric, percent,
+  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, jobOutcome, percent,
   px, when,
 } from "./format.js";
 import {
@@ -129,8 +130,10 @@ export function renderReports(body, reports, sequenceId, selected) {
       el("td", {}, [badge(r.outcome), r.provisional ? el("span", { class: "muted" },
         [" provisional"]) : ""]),
       el("td", { class: "num" }, [String(r.views)]),
-      el("td", { class: "num" }, [px(r.metrics.median_error_px)]),
-      el("td", { class: "num" }, [px(r.metrics.p90_error_px)]),
+      // Object landmarks are measured on the solved object (anchored) where there is no
+      // consensus of views.
+      el("td", { class: "num" }, [px(r.metrics.median_error_px ?? r.metrics.anchored_median_px)]),
+      el("td", { class: "num" }, [px(r.metrics.p90_error_px ?? r.metrics.anchored_p90_px)]),
       el("td", { class: "num" }, [percent(r.metrics.outlier_fraction)]),
       el("td", { class: "action-cell" }, [actionBadge(r),
         r.action_detail ? el("div", { class: "muted" }, [r.action_detail]) : ""]),
@@ -163,11 +166,18 @@ export function renderFacts(list, report) {
     ["Action", report.action ? `${report.action}${report.action_detail
       ? ` (${report.action_detail})` : ""}` : (report.action_detail || "none yet")],
   ];
-  for (const [name, value] of Object.entries(report.metrics)) {
-    facts.push([name, metric(name, value)]);
-  }
-  list.replaceChildren(...facts.flatMap(([name, value]) => [
-    el("dt", {}, [name]), el("dd", { "data-fact": name }, [value])]));
+  const plain = facts.flatMap(([name, value]) => [
+    el("dt", {}, [name]), el("dd", { "data-fact": name }, [value])]);
+  // Metrics under readable names, each with its unit, the limits it was held to and what it
+  // measures (the key stays in data-fact; the explanation is the row's tooltip).
+  const measured = metricRows(report).flatMap((row) => [
+    el("dt", { title: row.explain || row.name }, [row.label]),
+    el("dd", { "data-fact": row.name, title: row.explain || "",
+      class: row.over ? "over" : "" }, [
+      el("span", { class: "value" }, [row.over ? `\u26a0 ${row.value}` : row.value]),
+      row.threshold ? el("span", { class: "muted" }, [` (${row.threshold})`]) : ""]),
+  ]);
+  list.replaceChildren(...plain, ...measured);
 }
 
 /**

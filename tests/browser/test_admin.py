@@ -210,8 +210,10 @@ def test_report_detail_draws_per_joint_errors_and_shows_a_refused_decision(
     expect(page.locator('#frame-chart svg[data-chart="per-frame"] rect')) \
         .to_have_count(len(detail["per_frame"]))
     median = detail["metrics"]["median_error_px"]
-    expect(page.locator('[data-fact="median_error_px"]')) \
-        .to_have_text("\u2013" if median is None else f"{median:.1f} px")
+    expect(page.locator('[data-fact="median_error_px"] .value')) \
+        .to_have_text(re.compile(("\u2013" if median is None else rf"{median:.1f} px") + "$"))
+    # Under its readable name, with what it measures as the tooltip.
+    expect(page.locator('#detail-facts dt[title]').filter(has_text="Median error")).to_have_count(1)
     expect(page.locator("#decision-feedback")).to_have_value(detail["feedback"])
     page.screenshot(path=str(output_dir / "admin-report.png"))
 

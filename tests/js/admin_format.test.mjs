@@ -4,7 +4,7 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import {
-  HAND_JOINTS, barLayout, canRetry, costCells, dollars, jobOutcome, metric, orderReports,
+  HAND_JOINTS, barLayout, canRetry, costCells, dollars, jobOutcome, orderReports,
   pageOf, parseRoute, percent, pointNames, px, tallyReports, when,
 } from "../../frontend/admin/format.js";
 
@@ -192,13 +192,3 @@ test("pageOf says which rows a page shows and where the pages around it start", 
   assert.deepEqual(pageOf(30, 50, 0, false), { first: 0, last: 30, previous: 0, next: null });
 });
 
-test("metric writes each QC metric in its unit by name", () => {
-  assert.equal(metric("median_error_px", 3.14), "3.1 px");
-  assert.equal(metric("outlier_fraction", 0.25), "25.0%");
-  assert.equal(metric("visibility_disagreement", 0.4931), "49.3%");
-  assert.equal(metric("completeness", 1), "100.0%");
-  assert.equal(metric("working_time_s", 119.6), "120 s");
-  assert.equal(metric("motion_ratio", 0.987), "0.99");
-  assert.equal(metric("views", 3), "3");
-  assert.equal(metric("jitter_px", null), "–");
-});
