@@ -384,7 +384,8 @@ def crowd_costs() -> None:
                                                            "total") * 2))
     typer.echo(_cost_row("project", report.total))
     for line in report.by_sequence:
-        typer.echo(_cost_row(f"sequence {line.key}", line))
+        named = f" {line.name}" if line.name and line.name != f"sequence {line.key}" else ""
+        typer.echo(_cost_row(f"sequence {line.key}{named}", line))
     for line in report.by_worker:
         typer.echo(_cost_row(f"worker {line.key}", line))
 

@@ -84,5 +84,9 @@ def test_costs_endpoint_and_cli_report_the_same_numbers(
             for line in out.output.splitlines()[2:]}
     assert rows["project"] == PROJECT
     assert rows[f"sequence {reviewed[1]}"][-1] == "0.60"
+    # Each sequence is named (subject/name) after its id.
+    named = [line.split()[2] for line in out.output.splitlines()
+             if line.startswith(f"sequence {reviewed[1]} ")]
+    assert len(named) == 1 and "/" in named[0], out.output
     assert rows[f"worker {WORKER_3}"] == ("0.00", "0.00", "0.00", "0.00",
                                           "0.50", "0.00", "0.10", "0.60")
