@@ -1,0 +1,1 @@
+"""Tracking between keyframes: proposals for the frames a worker did not key (see lk)."""
