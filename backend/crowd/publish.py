@@ -22,6 +22,7 @@ from backend.crowd import pricing
 from backend.crowd.client import MarketplaceError, MTurkClient, call
 from backend.crowd.models import CrowdHit, CrowdQualification
 from backend.crowd.schemas import PublishOptions
+from backend.crowd.titles import hit_title, task_facts
 from backend.errors import Conflict, DexlabelError
 
 EXTERNAL_QUESTION_NS = ("http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/"
@@ -33,13 +34,12 @@ TRAINING_QUALIFICATION = "dexlabel: passed training"
 PERCENT_APPROVED = "000000000000000000L0"
 LOCALE = "00000000000000000071"
 _HIT_ID_IN_MESSAGE = re.compile(r"HIT\s?Id\W*([A-Za-z0-9]+)", re.IGNORECASE)
-_TITLES = {
-    "hand": ("Track the 21 joints of a hand through a short video",
-             ("Click each hand joint on a few frames of a short grasp video; the tool "
-              "interpolates between them. Mark joints you cannot see as occluded.")),
-    "object": ("Track 2 points on an object through a short video",
-               ("Pick two points on the highlighted object and follow them through a short "
-                "grasp video; mark them occluded when hidden.")),
+# The description of each kind of task; the title names the task itself (titles.hit_title).
+_DESCRIPTIONS = {
+    "hand": ("Click each hand joint on a few frames of a short grasp video; the tool "
+             "interpolates between them. Mark joints you cannot see as occluded."),
+    "object": ("Pick two points on the highlighted object and follow them through a short "
+               "grasp video; mark them occluded when hidden."),
 }
 
 
@@ -114,10 +114,12 @@ def published_hit(session: Session, task_id: int, round_: int) -> CrowdHit | Non
         CrowdHit.task_id == task_id, CrowdHit.round == round_))
 
 
-def _hit_params(task: Task, options: PublishOptions, reqs: list[dict], token: str) -> dict:
-    title, description = _TITLES.get(task.kind, _TITLES["hand"])
+def _hit_params(session: Session, task: Task, options: PublishOptions, reqs: list[dict],
+                token: str) -> dict:
+    description = _DESCRIPTIONS.get(task.kind, _DESCRIPTIONS["hand"])
     return {
-        "Title": title, "Description": description, "Keywords": options.keywords,
+        "Title": hit_title(task_facts(session, task)), "Description": description,
+        "Keywords": options.keywords,
         "Reward": pricing.cents_to_dollars(pricing.dollars_to_cents(options.reward)),
         "MaxAssignments": options.max_assignments, "LifetimeInSeconds": options.lifetime_s,
         "AssignmentDurationInSeconds": options.assignment_duration_s,
@@ -161,7 +163,7 @@ def publish_task(
         return row.hit_id, "existing"
     token = request_token(task.id, options.round)
     try:
-        reply = call(client, "create_hit", **_hit_params(task, options, reqs, token))
+        reply = call(client, "create_hit", **_hit_params(session, task, options, reqs, token))
         hit_id, outcome = reply["HIT"]["HITId"], "created"
     except MarketplaceError as exc:
         if exc.turk_code != HIT_ALREADY_EXISTS:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Query, Request, Response
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend.accounts.deps import CurrentAdmin
@@ -15,7 +16,7 @@ from backend.market import clock
 from backend.market.models import MarketAssignment
 from backend.market.money import format_amount
 from backend.market.workers import WorkerHit
-from backend.portal import accounts, service
+from backend.portal import accounts, service, tasks
 from backend.portal.deps import PORTAL_TOKEN_TTL_S, CurrentWorker, portal_token
 from backend.portal.models import PortalAccount
 from backend.portal.schemas import (
@@ -24,8 +25,10 @@ from backend.portal.schemas import (
     AssignmentRead,
     AssignmentsRead,
     EarningsRead,
+    HitMineRead,
     HitPreview,
     HitRead,
+    HitTaskRead,
     InviteCreate,
     InviteRead,
     Login,
@@ -48,13 +51,20 @@ def _account_read(account: PortalAccount) -> AccountRead:
     return AccountRead(id=account.id, email=account.email, worker_id=account.worker_id)
 
 
-def _hit_read(view: WorkerHit) -> HitRead:
+def _hit_read(session: Session, view: WorkerHit,
+              mine: MarketAssignment | None = None) -> HitRead:
     hit_type = view.hit.hit_type
+    facts = tasks.hit_facts(session, view.hit)
+    task = None if facts is None else HitTaskRead(
+        kind=facts.kind, target=facts.target, view=facts.serial, frames=facts.num_frames)
     return HitRead(hit_id=view.hit.hit_id, title=hit_type.title, description=hit_type.description,
                    keywords=hit_type.keywords, reward=format_amount(hit_type.reward_cents),
                    assignment_duration_s=hit_type.assignment_duration_s,
                    available=view.state.available, expiration=view.hit.expiration,
-                   can_accept=view.can_accept)
+                   can_accept=view.can_accept and mine is None, task=task,
+                   thumbnail_url=None if facts is None else tasks.thumbnail_url(view.hit.hit_id),
+                   mine=None if mine is None else HitMineRead(
+                       assignment_id=mine.assignment_id, status=mine.status))
 
 
 def _assignment_read(assignment: MarketAssignment, bonus_cents: int) -> AssignmentRead:
@@ -125,16 +135,39 @@ def me(worker: CurrentWorker) -> AccountRead:
 
 
 @router.get("/hits", response_model=list[HitRead])
-def list_hits(session: SessionDep, worker: CurrentWorker) -> list[HitRead]:
-    """Assignable HITs this worker qualifies for and has not worked on."""
-    return [_hit_read(v) for v in service.list_hits(session, worker.worker_id, clock.now())
-            if v.can_accept]
+def list_hits(
+    session: SessionDep, worker: CurrentWorker,
+    mine: bool = Query(False, description="also list the HITs this worker holds (first, "
+                                          "marked Accepted) or submitted (last, marked Submitted)"),
+) -> list[HitRead]:
+    """Assignable HITs this worker qualifies for and has not worked on; each names its task
+    (target, view, frames) and links a thumbnail of the view's first frame."""
+    if mine:
+        return [_hit_read(session, listed.view, listed.mine)
+                for listed in service.worklist(session, worker.worker_id, clock.now())]
+    return [_hit_read(session, v)
+            for v in service.list_hits(session, worker.worker_id, clock.now()) if v.can_accept]
+
+
+@router.get("/hits/{hit_id}/thumbnail.jpg", response_class=Response,
+            responses={200: {"content": {"image/jpeg": {}}}})
+def hit_thumbnail(
+    hit_id: Key, session: SessionDep,
+    token: str = Query(min_length=1, max_length=4096,
+                       description="the thumbnail token of this HIT, from the HIT list"),
+) -> Response:
+    """The first frame of the HIT's view, 160 px wide. Read with the token from the HIT list
+    (an <img> sends no bearer header); that token opens this one picture and nothing else."""
+    tasks.check_thumbnail_token(token, hit_id)
+    return Response(tasks.thumbnail_jpeg(session, hit_id), media_type="image/jpeg",
+                    headers={"Cache-Control": f"private, max-age={tasks.THUMBNAIL_TTL_S}"})
 
 
 @router.get("/hits/{hit_id}", response_model=HitPreview)
 def preview_hit(hit_id: Key, session: SessionDep, worker: CurrentWorker) -> HitPreview:
     view = service.preview(session, worker.worker_id, hit_id, clock.now())
-    return HitPreview(**_hit_read(view).model_dump(), preview_url=service.preview_url(view),
+    return HitPreview(**_hit_read(session, view).model_dump(),
+                      preview_url=service.preview_url(view),
                       frame_height=service.frame_height(view.hit))
 
 

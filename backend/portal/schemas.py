@@ -50,9 +50,29 @@ class TokenRead(BaseModel):
     worker_id: str
 
 
+class HitTaskRead(BaseModel):
+    """The dexlabel task a HIT is for."""
+
+    kind: str  # "hand" | "object"
+    target: str  # "right hand", "mustard bottle"
+    view: str  # the camera serial
+    frames: int
+
+
+class HitMineRead(BaseModel):
+    """This worker's assignment on the HIT: "Accepted" (still to finish) or "Submitted"."""
+
+    assignment_id: str
+    status: str
+
+
 class HitRead(BaseModel):
     hit_id: str
     title: str
+    task: HitTaskRead | None = None  # None: not a dexlabel task
+    # The view's first frame, small; the URL works without a bearer header for 15 minutes.
+    thumbnail_url: str | None = None
+    mine: HitMineRead | None = None
     description: str
     keywords: str | None
     reward: str

@@ -81,6 +81,45 @@ def list_hits(session: Session, worker_id: str, now: datetime) -> list[WorkerHit
     raise Busy("the HITs changed while they were listed; please try again")
 
 
+@dataclass(frozen=True)
+class ListedHit:
+    view: WorkerHit
+    mine: MarketAssignment | None  # the worker's Accepted or Submitted assignment on it
+
+
+def worklist(session: Session, worker_id: str, now: datetime) -> list[ListedHit]:
+    """The worker's HIT list: the HITs they hold (Accepted, to continue) first, then those
+    they can take, then those they submitted while the HIT is still up. Retried like
+    ``list_hits``.
+
+    Raises:
+        Busy: the HITs kept changing under the listing (503; asking again works).
+    """
+    for _ in range(LISTING_ATTEMPTS):
+        try:
+            return _worklist(session, worker_id, now)
+        except StaleDataError:
+            session.rollback()
+    raise Busy("the HITs changed while they were listed; please try again")
+
+
+def _worklist(session: Session, worker_id: str, now: datetime) -> list[ListedHit]:
+    available = [ListedHit(v, None) for v in workers.list_available_hits(session, worker_id, now)
+                 if v.can_accept]
+    held: list[ListedHit] = []
+    submitted: list[ListedHit] = []
+    for assignment in my_assignments(session, worker_id, now):
+        hit = assignment.hit
+        if assignment.status not in ("Accepted", "Submitted") or hit.disposed_at is not None:
+            continue
+        if assignment.status == "Submitted" and hit.expiration <= now:
+            continue
+        view = workers.preview(session, worker_id, hit.hit_id, now)
+        (held if assignment.status == "Accepted" else submitted).append(
+            ListedHit(view, assignment))
+    return [*held, *available, *submitted]
+
+
 def preview(session: Session, worker_id: str, hit_id: str, now: datetime) -> WorkerHit:
     view = workers.preview(session, worker_id, hit_id, now)
     if not view.can_discover:

@@ -36,7 +36,8 @@ export class PortalApi extends BearerClient {
   }
 
   me() { return this.request("GET", "/me"); }
-  hits() { return this.request("GET", "/hits"); }
+  /** The HITs to take, with the ones this worker accepted or submitted marked. */
+  hits() { return this.request("GET", "/hits?mine=true"); }
   /** @param {string} hitId */
   preview(hitId) { return this.request("GET", `/hits/${encodeURIComponent(hitId)}`); }
   /** @param {string} hitId */

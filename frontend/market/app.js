@@ -16,6 +16,8 @@ let keepNotice = false;
 /** @param {string} id */
 function show(id) {
   for (const view of VIEWS) $(view).hidden = view !== id;
+  // The HIT pages keep their chrome compact so the framed page gets the window.
+  document.body.dataset.view = id;
   $("nav").hidden = id === "login-view";
 }
 
@@ -58,7 +60,7 @@ async function showPreview(hitId) {
   accept.dataset.hit = hit.hit_id;
   accept.disabled = !hit.can_accept;
   $("preview-frame").replaceChildren(hit.preview_url
-    ? taskFrame(hit.preview_url, hit.frame_height)
+    ? taskFrame(hit.preview_url)
     : document.createTextNode("This HIT has no page to preview here."));
   show("preview-view");
 }
@@ -73,7 +75,7 @@ async function showWork(assignmentId) {
   $("work-title").textContent = assignment.title;
   $("work-deadline").textContent = new Date(assignment.deadline).toLocaleTimeString();
   $("return").dataset.assignment = assignmentId;
-  const frame = taskFrame(assignment.work_url, assignment.frame_height);
+  const frame = taskFrame(assignment.work_url);
   // The page inside posts its form to /mturk/externalSubmit and the frame navigates; each load
   // asks the marketplace whether the assignment is still open.
   frame.addEventListener("load", () => checkSubmitted(assignmentId).catch(fail));

@@ -15,18 +15,58 @@ export function el(tag, attrs = {}, children = []) {
 }
 
 /**
- * The HIT list: title, reward, time allotted, assignments available, and a preview link.
+ * What a HIT's row says about its task: "right hand · view 800007060125 · 72 frames".
+ * @param {{target: string, view: string, frames: number} | null} task
+ */
+export function taskFacts(task) {
+  return task ? `${task.target} · view ${task.view} · ${task.frames} frames` : "";
+}
+
+/**
+ * The worker's own mark on a HIT: a link back to an accepted assignment, or "submitted".
+ * @param {{assignment_id: string, status: string} | null} mine
+ * @returns {HTMLElement | null}
+ */
+export function mineMark(mine) {
+  if (!mine) return null;
+  if (mine.status === "Accepted") {
+    return el("a", { class: "mark mark-accepted",
+      href: `#/work/${encodeURIComponent(mine.assignment_id)}` }, ["accepted · continue"]);
+  }
+  return el("span", { class: `mark mark-${mine.status.toLowerCase()}` },
+    [mine.status.toLowerCase()]);
+}
+
+/**
+ * The HIT list: a thumbnail of the view, the title, the task (target, view, frames), the
+ * worker's mark, reward, time allotted, assignments available.
  * @param {HTMLTableSectionElement} body
- * @param {any[]} hits   GET /api/portal/hits
+ * @param {any[]} hits   GET /api/portal/hits?mine=true
  */
 export function renderHits(body, hits) {
-  body.replaceChildren(...hits.map((hit) => el("tr", { "data-hit": hit.hit_id }, [
-    el("td", {}, [el("a", { href: `#/hits/${encodeURIComponent(hit.hit_id)}`, class: "hit-title" },
-      [hit.title]), el("div", { class: "muted" }, [hit.description])]),
-    el("td", { class: "num" }, [money(hit.reward)]),
-    el("td", { class: "num" }, [duration(hit.assignment_duration_s)]),
-    el("td", { class: "num" }, [String(hit.available)]),
-  ])));
+  body.replaceChildren(...hits.map((hit) => {
+    const link = hit.mine?.status === "Accepted"
+      ? `#/work/${encodeURIComponent(hit.mine.assignment_id)}`
+      : `#/hits/${encodeURIComponent(hit.hit_id)}`;
+    const thumb = hit.thumbnail_url
+      ? el("img", { class: "thumb", src: hit.thumbnail_url, width: "96",
+        alt: `first frame of view ${hit.task.view}` })
+      : el("div", { class: "thumb thumb-none" });
+    const mark = mineMark(hit.mine);
+    const row = el("tr", { "data-hit": hit.hit_id }, [
+      el("td", { class: "thumb-cell" }, [thumb]),
+      el("td", {}, [
+        el("a", { href: link, class: "hit-title" }, [hit.title]),
+        el("div", { class: "facts" }, [taskFacts(hit.task), ...(mark ? [" ", mark] : [])]),
+        el("div", { class: "muted" }, [hit.description]),
+      ]),
+      el("td", { class: "num" }, [money(hit.reward)]),
+      el("td", { class: "num" }, [duration(hit.assignment_duration_s)]),
+      el("td", { class: "num" }, [String(hit.available)]),
+    ]);
+    if (hit.mine) row.dataset.mine = hit.mine.status;
+    return row;
+  }));
 }
 
 /**
@@ -56,16 +96,41 @@ export function renderEarnings(summary, body, data) {
   ])));
 }
 
+/** Room kept under the framed page (px): its border and a little air. */
+const FRAME_MARGIN_PX = 6;
+const MIN_FRAME_PX = 320;
+
 /**
- * An iframe that frames the annotation page as MTurk does.
- * @param {string} src
- * @param {number} height  FrameHeight of the HIT (px)
+ * The frame's height that fills the window below its top edge.
+ * @param {number} viewportHeight  window.innerHeight (px)
+ * @param {number} top             the frame's top edge in the viewport (px)
  */
-export function taskFrame(src, height) {
-  const frame = el("iframe", {
+export function fittedHeight(viewportHeight, top) {
+  return Math.max(MIN_FRAME_PX, Math.floor(viewportHeight - top - FRAME_MARGIN_PX));
+}
+
+/**
+ * An iframe that frames the annotation page as MTurk does, as tall as the window leaves room
+ * for (the page lays itself out to its frame, so its timeline stays in view); it follows the
+ * window as it is resized.
+ * @param {string} src
+ */
+export function taskFrame(src) {
+  const frame = /** @type {HTMLIFrameElement} */ (el("iframe", {
     src, title: "HIT", class: "task-frame",
     sandbox: "allow-scripts allow-forms allow-same-origin allow-top-navigation-by-user-activation",
-  });
-  frame.style.height = `${Math.max(height, 400)}px`;
+  }));
+  const fit = () => {
+    if (!frame.isConnected) {
+      window.removeEventListener("resize", fit);
+      return;
+    }
+    const top = frame.getBoundingClientRect().top + window.scrollY;
+    frame.style.height = `${fittedHeight(window.innerHeight, top)}px`;
+  };
+  frame.style.height = `${MIN_FRAME_PX}px`;
+  window.addEventListener("resize", fit);
+  requestAnimationFrame(fit);
+  frame.addEventListener("load", fit);
   return frame;
 }

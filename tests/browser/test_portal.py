@@ -117,7 +117,9 @@ def test_worker_accepts_annotates_submits_and_sees_the_payment(
     _annotate_two_keyframes(frame, first, last)
     page.screenshot(path=str(output_dir / "portal-work.png"))
     _submit(page, frame)
-    expect(page.locator(f'tr[data-hit="{hit_id}"]')).to_have_count(0)
+    submitted = page.locator(f'tr[data-hit="{hit_id}"]')
+    expect(submitted).to_have_attribute("data-mine", "Submitted")
+    expect(submitted.locator(".mark")).to_have_text("submitted")
 
     found = mturk.list_assignments_for_hit(HITId=hit_id)["Assignments"]
     assert [a["AssignmentStatus"] for a in found] == ["Submitted"]
