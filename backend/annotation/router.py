@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 
 from backend import pipeline
 from backend.accounts.deps import CurrentAdmin, bearer_token
-from backend.annotation import service
+from backend.annotation import proposals, service
 from backend.annotation.models import Assignment, Task
 from backend.annotation.points import point_colours, point_names, skeleton
 from backend.annotation.schemas import (
@@ -255,6 +255,17 @@ def read_task(claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
         else "edit" if assignment.status == "working" else "submitted"
     return AnnotateTaskRead(mode=mode, task=_task_reads(session, [task])[0], frames=frames,
                             assignment=read)
+
+
+@router.post("/annotate/proposals", response_model=proposals.ProposalsRead,
+             openapi_extra=body_limit(MAX_SAVE_BYTES))
+def tracking_proposals(body: proposals.ProposalsRequest, claims: WriterClaims,
+                       session: SessionDep) -> proposals.ProposalsRead:
+    """Positions between the keyframes sent, tracked in the view's frames (Lucas-Kanade from
+    both keyframes of each span, stopped where a forward-backward check fails): per point and
+    frame of the range, a position, whether it holds (ok) and its error. Nothing is stored;
+    an accepted proposal is saved as a keyframe. 422 names bad keyframes or frame ranges."""
+    return proposals.proposals(session, get_storage(), _assignment_of(session, claims), body)
 
 
 @router.put("/annotate/tracks", response_model=SaveResult,
