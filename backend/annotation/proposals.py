@@ -25,6 +25,7 @@ from backend.annotation.schemas import MAX_POINTS, TrackIn, TracksSave
 from backend.captures.models import Frame
 from backend.errors import DexlabelError, StorageError
 from backend.storage import Storage
+from backend.validation import MAX_INT32
 from worker.tracking.lk import FB_THRESHOLD_PX, propose, tracked_spans
 
 # Frames decoded for one request at most: 300 grey 640x480 frames are 92 MB in memory and
@@ -46,8 +47,8 @@ class ProposalsRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     tracks: list[TrackIn] = Field(max_length=MAX_POINTS)
-    first_frame: int | None = Field(default=None, ge=0)
-    last_frame: int | None = Field(default=None, ge=0)
+    first_frame: int | None = Field(default=None, ge=0, le=MAX_INT32)
+    last_frame: int | None = Field(default=None, ge=0, le=MAX_INT32)
 
 
 class PointProposals(BaseModel):
