@@ -18,9 +18,10 @@ one); where only one direction still holds, it alone is the proposal; where neit
 there is none (ok false) and the stored keyframes' linear interpolation stays the answer.
 
 Pure: arrays in, arrays out. OpenCV's Python binding takes images, not prebuilt pyramids, so
-each LK call builds the pyramids of its two frames; the calls are few (one per frame pair and
-direction, one per frame pair and direction for the checks) and the checks of different
-frame pairs run in parallel threads (OpenCV releases the GIL).
+each LK call builds the pyramids of its two frames, cut to the box around the points it
+tracks; the calls are few (one per frame pair and direction, one per frame pair and direction
+for the checks), the two directions run side by side and the checks of different frame pairs
+in parallel threads (OpenCV releases the GIL).
 """
 
 from __future__ import annotations
@@ -47,6 +48,9 @@ FB_THRESHOLD_PX = 1.0
 # own residual) is something else moving over the point: a point covered by another textured
 # surface can come back through the forward-backward check, but never with its own look.
 RESIDUAL_LIMIT = 12.0
+# Room around the points' box for the motion between two frames and the LK window: a fast
+# hand moves up to about 40 px between frames (24-frame clips), the window reaches 10 px.
+CROP_MARGIN_PX = 64
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
 _THREADS = 4
 
@@ -120,12 +124,25 @@ def _as_spans(found: list[tuple[int, int, int, tuple[float, float], tuple[float,
 def _lk(a: np.ndarray, b: np.ndarray, pts: np.ndarray
         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """LK from image a to image b: (N, 2) float32 tracked positions, (N,) bool status and (N,)
-    residual (mean absolute difference of the two windows, grey levels)."""
-    start = np.ascontiguousarray(pts, dtype=np.float32).reshape(-1, 1, 2)
+    residual (mean absolute difference of the two windows, grey levels).
+
+    Both images are cut to the points' box with CROP_MARGIN_PX around it first, so that the
+    pyramids and gradients OpenCV makes for each call cover the points, not the whole frame.
+    """
+    start = np.ascontiguousarray(pts, dtype=np.float32).reshape(-1, 2)
+    height, width = a.shape
+    low = np.floor(start.min(axis=0)).astype(int) - CROP_MARGIN_PX
+    high = np.ceil(start.max(axis=0)).astype(int) + CROP_MARGIN_PX + 1
+    x0, y0 = max(int(low[0]), 0), max(int(low[1]), 0)
+    x1, y1 = min(int(high[0]), width), min(int(high[1]), height)
+    offset = np.array([x0, y0], dtype=np.float32)
+    local = (start - offset).reshape(-1, 1, 2)
     moved, status, residual = cv2.calcOpticalFlowPyrLK(
-        a, b, start, start.copy(), winSize=(WINDOW_PX, WINDOW_PX),
-        maxLevel=PYRAMID_LEVELS, criteria=_CRITERIA)
-    return moved.reshape(-1, 2), status.reshape(-1).astype(bool), residual.reshape(-1)
+        np.ascontiguousarray(a[y0:y1, x0:x1]), np.ascontiguousarray(b[y0:y1, x0:x1]), local,
+        local.copy(), winSize=(WINDOW_PX, WINDOW_PX), maxLevel=PYRAMID_LEVELS,
+        criteria=_CRITERIA)
+    return (moved.reshape(-1, 2) + offset, status.reshape(-1).astype(bool),
+            residual.reshape(-1))
 
 
 def _chain(frames: np.ndarray, spans: _Spans, forward: bool
