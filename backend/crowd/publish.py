@@ -1,15 +1,16 @@
 """Publishing tasks as HITs: one HIT per task and round, never two.
 
-Every CreateHIT carries a UniqueRequestToken derived from (task, round) and the deployment's
-secret, and the HIT is remembered in ``crowd_hits``. A publish interrupted anywhere and run
-again either finds the row or gets HitAlreadyExists from the marketplace and recovers the HIT id
-from it; the row outlives the marketplace's 24-hour token memory.
+Every CreateHIT carries a UniqueRequestToken derived from (task, its creation time, round) and
+the deployment's secret, and the HIT is remembered in ``crowd_hits``. A publish interrupted
+anywhere and run again either finds the row or gets HitAlreadyExists from the marketplace and
+recovers the HIT id from it; the row outlives the marketplace's 24-hour token memory.
 """
 
 from __future__ import annotations
 
 import hashlib
 import re
+from datetime import UTC
 from xml.sax.saxutils import escape
 
 from sqlalchemy import select
@@ -57,10 +58,13 @@ def check_assignments(count: int, allow_large_hits: bool) -> None:
             field="max_assignments")
 
 
-def request_token(task_id: int, round_: int) -> str:
-    """Deterministic per (task, round) and per deployment (keyed by the secret)."""
-    seed = f"{get_settings().signing_key}|hit|{task_id}|{round_}".encode()
-    return f"dxhit-{task_id}-{round_}-{hashlib.sha256(seed).hexdigest()[:24]}"
+def request_token(task: Task, round_: int) -> str:
+    """Deterministic per (task, round) and per deployment (keyed by the secret). The task's
+    creation time is part of it: a database may give a deleted task's id to a new one (SQLite
+    does), and the new task must not be handed the old task's HIT."""
+    created = task.created_at.astimezone(UTC).isoformat()
+    seed = f"{get_settings().signing_key}|hit|{task.id}|{created}|{round_}".encode()
+    return f"dxhit-{task.id}-{round_}-{hashlib.sha256(seed).hexdigest()[:24]}"
 
 
 def external_question(task: Task, frame_height: int) -> str:
@@ -161,7 +165,7 @@ def publish_task(
     row = published_hit(session, task.id, options.round)
     if row is not None and row.hit_id is not None:
         return row.hit_id, "existing"
-    token = request_token(task.id, options.round)
+    token = request_token(task, options.round)
     try:
         reply = call(client, "create_hit", **_hit_params(session, task, options, reqs, token))
         hit_id, outcome = reply["HIT"]["HITId"], "created"

@@ -11,6 +11,7 @@ worker's profile (worker.synth.annotators).
 from __future__ import annotations
 
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -187,12 +188,15 @@ class WorkerClient:
                          f"log in {email}")
         return reply["access_token"], reply["worker_id"]
 
-    def accept_first(self, token: str) -> dict | None:
-        """Accept the first HIT on offer; the portal's assignment reply, or None."""
+    def accept_first(self, token: str, only: Collection[str] | None = None) -> dict | None:
+        """Accept the first HIT on offer (of ``only``'s HIT ids, if given); the portal's
+        assignment reply, or None."""
         auth = {"Authorization": f"Bearer {token}"}
         hits = _checked(self._again("GET", f"{self.base}/api/portal/hits", headers=auth),
                         "list HITs")
         for hit in hits:
+            if only is not None and hit["hit_id"] not in only:
+                continue
             # Only HITs that open our annotation page with a task token can be worked here.
             preview = self._again("GET", f"{self.base}/api/portal/hits/{hit['hit_id']}",
                                   headers=auth)
@@ -244,12 +248,12 @@ def admin_token(http: httpx.Client, base: str, email: str, password: str) -> str
 
 
 def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth: CaptureTruth,
-              rng: np.random.Generator) -> WorkerOutcome:
+              rng: np.random.Generator, only: Collection[str] | None = None) -> WorkerOutcome:
     email = WORKER_EMAIL.format(index=index)
     token, worker_id = client.sign_in(admin, email, WORKER_PASSWORD.format(index=index))
     outcome = WorkerOutcome(email=email, worker_id=worker_id, profile=profile,
                             status="no HIT available")
-    accepted = client.accept_first(token)
+    accepted = client.accept_first(token, only)
     if accepted is None or not accepted.get("work_url"):
         return outcome
     params, page_token, reply = client.open_page(accepted["work_url"])

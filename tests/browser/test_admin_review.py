@@ -51,9 +51,9 @@ def _hex(colour: str) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def review_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFactory
-                   ) -> tuple[Path, int]:
-    """The four-view capture imported into the live server, its hand tasks published; its path
-    and sequence id."""
+                   ) -> tuple[Path, int, list[str]]:
+    """The four-view capture imported into the live server, its hand tasks published; its path,
+    sequence id and HIT ids."""
     from backend.annotation.models import Task
     from backend.captures.flows import import_path
     from backend.config import get_settings
@@ -76,16 +76,16 @@ def review_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFac
             with session_scope() as session:
                 task_ids = list(session.scalars(Task.__table__.select().with_only_columns(
                     Task.id).where(Task.sequence_id == sequence_id, Task.kind == "hand")))
-            client, hits = make_client(get_settings()), []
+            client, hits = make_client(get_settings()), list[str]()
             options = PublishOptions(min_approval_rate=None, max_assignments=1)
             for task_id in task_ids:
                 with session_scope() as session, session.no_autoflush:
-                    hits += publish_task(session, client, session.get_one(Task, task_id),
-                                         options, [])[:1]
+                    hits.append(publish_task(session, client, session.get_one(Task, task_id),
+                                             options, [])[0])
         finally:
             reset_caches()
     assert len(hits) == len(PROFILES), hits
-    return capture, sequence_id
+    return capture, sequence_id, hits
 
 
 @pytest.fixture(scope="module")
@@ -105,19 +105,20 @@ def review_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def reviewed(live_server: LiveServer, review_capture: tuple[Path, int],
+def reviewed(live_server: LiveServer, review_capture: tuple[Path, int, list[str]],
              review_worker: None) -> dict[str, Any]:
     """The simulated crowd's work on the capture, scored; profile -> an assignment id."""
     from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
 
-    capture, sequence_id = review_capture
+    # Only this capture's HITs: others left open by earlier tests in the session are not ours.
+    capture, sequence_id, hit_ids = review_capture
     rng = np.random.default_rng(4)
     truth = CaptureTruth(capture)
     with httpx.Client(timeout=30.0) as http:
         admin = admin_token(http, live_server.base, ADMIN_EMAIL, ADMIN_PASSWORD)
         worker = WorkerClient(http, live_server.base)
-        outcomes = [_work_one(worker, admin, FIRST_WORKER + i, profile, truth, rng)
-                    for i, profile in enumerate(PROFILES)]
+        outcomes = [_work_one(worker, admin, FIRST_WORKER + i, profile, truth, rng,
+                              set(hit_ids)) for i, profile in enumerate(PROFILES)]
     assert [o.status for o in outcomes] == ["submitted"] * len(PROFILES), outcomes
     deadline = time.monotonic() + QC_TIMEOUT_S
     reports: list[dict] = []

@@ -154,3 +154,33 @@ def test_publish_endpoint_needs_an_admin_and_names_the_assignment_rule(
         resp = api.post("/api/crowd/publish", json={"min_approval_rate": None}, headers=headers)
         assert resp.status_code == 200, resp.text
         assert resp.json()["created"] == 5 and resp.json()["cost"]["total"] == "3.00"
+
+
+def test_a_new_task_given_a_deleted_tasks_id_gets_its_own_hit(
+    crowd_url: str, tasks: list[int],
+) -> None:
+    """SQLite hands a deleted task's id to the next task made; publishing that new task must
+    create its own HIT, not recover the deleted task's (expired) one from the marketplace."""
+    from datetime import timedelta
+
+    from sqlalchemy import delete
+
+    from backend.annotation.models import Task
+
+    client = make_client(get_settings())
+    first = _publish(client)
+    assert first.created == len(tasks)
+    # What deleting the sequence and importing another leaves: the same ids, new tasks.
+    with session_scope() as session:
+        session.execute(delete(CrowdHit))
+        for task in session.scalars(select(Task)):
+            task.created_at = task.created_at + timedelta(seconds=1)
+    again = _publish(client)
+    assert (again.created, again.recovered) == (len(tasks), 0)
+    assert not set(again.hit_ids) & set(first.hit_ids)
+    # The same task published again is still found, never duplicated.
+    with session_scope() as session:
+        session.execute(delete(CrowdHit))
+    rerun = _publish(client)
+    assert (rerun.created, rerun.recovered) == (0, len(tasks))
+    assert sorted(rerun.hit_ids) == sorted(again.hit_ids)
