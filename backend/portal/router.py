@@ -12,6 +12,7 @@ from backend.accounts.deps import CurrentAdmin
 from backend.accounts.login import password_check, password_login
 from backend.config import get_settings
 from backend.db import SessionDep
+from backend.errors import Unauthorized
 from backend.market import clock
 from backend.market.models import MarketAssignment
 from backend.market.money import format_amount
@@ -153,11 +154,14 @@ def list_hits(
             responses={200: {"content": {"image/jpeg": {}}}})
 def hit_thumbnail(
     hit_id: Key, session: SessionDep,
-    token: str = Query(min_length=1, max_length=4096,
-                       description="the thumbnail token of this HIT, from the HIT list"),
+    token: str | None = Query(default=None, min_length=1, max_length=4096,
+                              description="the thumbnail token of this HIT, from the HIT list"),
 ) -> Response:
     """The first frame of the HIT's view, 160 px wide. Read with the token from the HIT list
-    (an <img> sends no bearer header); that token opens this one picture and nothing else."""
+    (an <img> sends no bearer header); that token opens this one picture and nothing else.
+    Without a token: 401, like every route that needs one."""
+    if token is None:
+        raise Unauthorized("a thumbnail needs its token (?token= from the HIT list)")
     tasks.check_thumbnail_token(token, hit_id)
     return Response(tasks.thumbnail_jpeg(session, hit_id), media_type="image/jpeg",
                     headers={"Cache-Control": f"private, max-age={tasks.THUMBNAIL_TTL_S}"})

@@ -172,7 +172,7 @@ def test_a_thumbnail_opens_only_with_its_own_hits_token(
         return httpx.get(url, params={} if token is None else {"token": token}, timeout=10)
 
     missing = get(path, None)
-    assert missing.status_code == 422 and "token" in missing.text
+    assert missing.status_code == 401 and "token" in missing.text
     assert get(path, good).status_code == 200
     wrong_hit = get(f"{portal.base}/api/portal/hits/{other}/thumbnail.jpg", good)
     assert wrong_hit.status_code == 403 and "another HIT" in wrong_hit.text
