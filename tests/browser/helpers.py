@@ -7,6 +7,8 @@ framed (as the worker portal frames it, like MTurk): positions are then offset b
 
 from __future__ import annotations
 
+import hashlib
+import time
 from typing import Any
 
 from playwright.sync_api import Frame, Page, expect
@@ -135,3 +137,30 @@ def assert_rows_close(got: list[list], want: list[list], tol: float = 1.0) -> No
     for g, w in zip(got, want, strict=True):
         assert g[0] == w[0] and g[3] == w[3], (got, want)
         assert abs(g[1] - w[1]) <= tol and abs(g[2] - w[2]) <= tol, (got, want)
+
+
+# The admin page's overlay <img>: [SHA-256 of its blob, natural width, height], or null while
+# it loads.
+_SHOWN_PNG = """async () => {
+  const img = document.getElementById("overlay-image");
+  if (!img.src.startsWith("blob:") || !img.complete || !img.naturalWidth) return null;
+  let bytes;
+  try {  // the page revokes a picture's URL when the next one arrives
+    bytes = await (await fetch(img.src)).arrayBuffer();
+  } catch {
+    return null;
+  }
+  const digest = new Uint8Array(await crypto.subtle.digest("SHA-256", bytes));
+  const hex = Array.from(digest, (b) => b.toString(16).padStart(2, "0")).join("");
+  return [hex, img.naturalWidth, img.naturalHeight];
+}"""
+
+
+def wait_overlay_shows(page: Page, png: bytes, timeout_s: float = 30.0) -> None:
+    """Until the admin page's overlay shows exactly ``png`` (byte for byte, at its size)."""
+    want = [hashlib.sha256(png).hexdigest(), int.from_bytes(png[16:20], "big"),
+            int.from_bytes(png[20:24], "big")]
+    deadline = time.monotonic() + timeout_s
+    while page.evaluate(_SHOWN_PNG) != want and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert page.evaluate(_SHOWN_PNG) == want

@@ -12,7 +12,6 @@ database and queue) runs.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 import subprocess
@@ -28,6 +27,7 @@ from playwright.sync_api import Page, expect
 
 from backend.crowd.simulate import WORKER_PASSWORD, CaptureTruth, simulate
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
+from tests.browser.helpers import wait_overlay_shows
 from worker.synth.annotators import annotate
 
 QC_TIMEOUT_S = 120.0
@@ -37,20 +37,6 @@ CROWD = (("ADMIN-W1", 0, "careful"), ("ADMIN-W2", 1, "careful"), ("ADMIN-W3", 0,
 # One simulated marketplace worker per task of the capture (a hand and an object in 2 views).
 MARKET_WORKERS = 4
 REWARD, FEE = 0.40, 0.08  # the HITs' reward and MTurk's 20% fee on it (dollars)
-# The overlay <img>'s picture: [SHA-256 of its blob, natural width, height], or null.
-SHOWN_PNG = """async () => {
-  const img = document.getElementById("overlay-image");
-  if (!img.src.startsWith("blob:") || !img.complete || !img.naturalWidth) return null;
-  let bytes;
-  try {  // the page revokes a picture's URL when the next one arrives
-    bytes = await (await fetch(img.src)).arrayBuffer();
-  } catch {
-    return null;
-  }
-  const digest = new Uint8Array(await crypto.subtle.digest("SHA-256", bytes));
-  const hex = Array.from(digest, (b) => b.toString(16).padStart(2, "0")).join("");
-  return [hex, img.naturalWidth, img.naturalHeight];
-}"""
 
 
 @pytest.fixture(scope="module")
@@ -421,12 +407,6 @@ def _portal_feedback(server: LiveServer, email: str) -> list[str | None]:
     return [a["feedback"] for a in mine.json()["assignments"]]
 
 
-def _png_size(data: bytes) -> tuple[int, int]:
-    """(width, height) from a PNG's IHDR chunk."""
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
-
-
 def _solved_run(server: LiveServer, market_work: dict[str, str]) -> dict:
     """Every marketplace submission approved (admin decisions), then a finished solve run."""
     for report in server.admin("GET", f"/api/qc/reports?sequence_id={server.sequence_id}"):
@@ -469,13 +449,8 @@ def test_a_finished_solve_run_shows_its_overlay_per_frame_and_view(
         png = httpx.get(f"{server.base}/api/solve-runs/{run['id']}/frames/{frame}/views/{view}.png",
                         headers={"Authorization": f"Bearer {server.admin_token}"}, timeout=30)
         assert png.status_code == 200
-        width, height = _png_size(png.content)
         # The picture shown is the API's PNG of this frame and view, byte for byte.
-        want = [hashlib.sha256(png.content).hexdigest(), width, height]
-        deadline = time.monotonic() + 30
-        while page.evaluate(SHOWN_PNG) != want and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert page.evaluate(SHOWN_PNG) == want
+        wait_overlay_shows(page, png.content)
         hands += _meshes_drawn_where_the_solve_puts_them(server, run, frame, int(view),
                                                          png.content)
     assert hands >= 1 or not with_hand, "the frame with a solved hand was not checked"

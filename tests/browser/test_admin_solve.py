@@ -9,9 +9,7 @@ off and the object turned 3 degrees; run A flags FLAGGED frames.
 
 from __future__ import annotations
 
-import hashlib
 import re
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,25 +22,13 @@ from playwright.sync_api import Page, expect
 from sqlalchemy import select
 
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, CLIP_FRAMES, LiveServer
+from tests.browser.helpers import wait_overlay_shows
 from tests.conftest import reset_caches
 from tests.solve_truth import FLAG_REASON, store_truth_run
 
 FLAGGED = (3, 8)
 SHIFT_M = (0.003, 0.0, 0.004)  # 5 mm
 TURN_DEG = 3.0
-# The overlay <img>'s picture as [SHA-256 of its blob, natural width], or null while loading.
-SHOWN_PNG = """async () => {
-  const img = document.getElementById("overlay-image");
-  if (!img.src.startsWith("blob:") || !img.complete || !img.naturalWidth) return null;
-  let bytes;
-  try {  // the page revokes a picture's URL when the next one arrives
-    bytes = await (await fetch(img.src)).arrayBuffer();
-  } catch {
-    return null;
-  }
-  const digest = new Uint8Array(await crypto.subtle.digest("SHA-256", bytes));
-  return [Array.from(digest, (b) => b.toString(16).padStart(2, "0")).join(""), img.naturalWidth];
-}"""
 
 
 @contextmanager
@@ -91,11 +77,7 @@ def _api_png(server: LiveServer, run: int, frame: int, view: int, query: str = "
 
 def _wait_shown(page: Page, png: bytes) -> None:
     """Until the overlay shows exactly ``png`` (the API's picture)."""
-    want = [hashlib.sha256(png).hexdigest(), int.from_bytes(png[16:20], "big")]
-    deadline = time.monotonic() + 20
-    while page.evaluate(SHOWN_PNG) != want and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert page.evaluate(SHOWN_PNG) == want
+    wait_overlay_shows(page, png, 20.0)
 
 
 def _chart(page: Page, frame: int) -> str:
@@ -292,6 +274,11 @@ def test_two_runs_compare_frame_by_frame_and_a_run_with_itself_not_at_all(
     expect(page.locator("#compare-rows tr td:nth-child(3)").first).to_have_text("0.00")
 
 
+# How long the page may take to show what the server answered to a request it sent (the
+# server may be busy with a whole test suite beside it).
+SLOW_MS = 30_000
+
+
 def test_a_re_run_with_other_settings_is_queued_with_them(
     solve_page: Page, live_server: LiveServer, truth_runs: dict[str, int], output_dir: Path
 ) -> None:
@@ -304,7 +291,8 @@ def test_a_re_run_with_other_settings_is_queued_with_them(
     field.fill("2.5")
     page.locator("#rerun-start").click()
     status = page.locator("#rerun-status")
-    expect(status).to_contain_text('paper_iterations must be a whole number, got "2.5"')
+    expect(status).to_contain_text('paper_iterations must be a whole number, got "2.5"',
+                                   timeout=SLOW_MS)
     field.fill("7")
     page.locator('#rerun-settings input[name="use_depth"]').uncheck()
     page.locator("#solve-rerun").scroll_into_view_if_needed()
@@ -313,14 +301,15 @@ def test_a_re_run_with_other_settings_is_queued_with_them(
     if _accepted(server) == 0:
         # The API's refusal is shown as it words it; then one accepted assignment is enough.
         page.locator("#rerun-start").click()
-        expect(status).to_contain_text("no accepted (approved) tracks")
+        expect(status).to_contain_text("no accepted (approved) tracks", timeout=SLOW_MS)
         added = _approve_one(server)
     page.locator("#rerun-start").click()
-    expect(status).to_contain_text(re.compile(r"Run #\d+ is queued \(paper; "))
+    expect(status).to_contain_text(re.compile(r"Run #\d+ is queued \(paper; "), timeout=SLOW_MS)
     expect(status).to_contain_text("paper_iterations 7")
     run_id = int(re.findall(r"#(\d+)", status.inner_text())[0])
     try:
-        expect(page.locator(f'#run-rows tr[data-run="{run_id}"]')).to_contain_text("queued")
+        expect(page.locator(f'#run-rows tr[data-run="{run_id}"]')).to_contain_text(
+            "queued", timeout=SLOW_MS)
         run = server.admin("GET", f"/api/solve-runs/{run_id}")
         assert isinstance(run, dict) and run["optimiser"] == "paper"
         assert run["params"]["paper_iterations"] == 7 and run["params"]["use_depth"] is False
