@@ -16,10 +16,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from fastapi import APIRouter, Query
 from sqlalchemy import select
-from sqlalchemy.orm import Session, joinedload
+from sqlalchemy.orm import Session, defer, joinedload
 
 from backend.accounts.deps import VIEW_SCOPE, CurrentAdmin
 from backend.annotation.models import Assignment, Task
@@ -30,6 +29,7 @@ from backend.db import SessionDep
 from backend.errors import NotFound
 from backend.quality.models import QCReport
 from backend.quality.schemas import QueueItem, QueueRead, ReviewFrames, ReviewRead
+from backend.quality.service import px_lists
 from backend.security import sign_token
 from backend.validation import Id, Offset
 from worker.tracks import dense_points
@@ -53,12 +53,6 @@ UNAVAILABLE = {
 }
 
 
-def _list(values: np.ndarray, digits: int = 1) -> list[Any]:
-    out = np.round(values, digits).astype(object)
-    out[~np.isfinite(values)] = None
-    return list(out.tolist())
-
-
 def _any_point(reference: list[Any]) -> bool:
     """Whether a stored (F, P, 2) reference places any point."""
     return any(p is not None and p[0] is not None for frame in reference for p in frame)
@@ -74,7 +68,7 @@ def _track(assignment: Assignment, num_frames: int, num_points: int) -> dict[str
     for t in tracks:
         if 0 <= t.point_index < num_points:
             keyframes[t.point_index] = sorted({int(row[0]) for row in t.keyframes})
-    return {"xy": _list(xy), "visible": visible.astype(int).tolist(), "keyframes": keyframes}
+    return {"xy": px_lists(xy), "visible": visible.astype(int).tolist(), "keyframes": keyframes}
 
 
 def _frames(sequence_id: int, serial: str, num_frames: int) -> ReviewFrames:
@@ -141,25 +135,31 @@ def _rank(row: QueueItem) -> tuple[int, int, float, int]:
 
 def review_queue(session: Session, limit: int, offset: int) -> QueueRead:
     """Every report waiting for an admin, worst first; ``limit`` of them from ``offset``."""
+    # Every waiting report is ranked, but only the page's replays (tens of kB each) are read,
+    # for their issue counts.
     stmt = (select(QCReport, Sequence)
             .join(Assignment, Assignment.id == QCReport.assignment_id)
             .join(Sequence, Sequence.id == QCReport.sequence_id)
             .where(QCReport.action.is_(None), Assignment.status == "submitted")
-            .options(joinedload(Sequence.subject)))
+            .options(defer(QCReport.replay), joinedload(Sequence.subject)))
     rows = []
     for report, sequence in session.execute(stmt):
-        issues = (report.replay or {}).get("issues", [])
         rows.append(QueueItem(
             assignment_id=report.assignment_id, sequence_id=report.sequence_id,
             sequence=f"{sequence.subject.name}/{sequence.name}", target_key=report.target_key,
             worker_id=report.worker_id, method=report.method, outcome=report.outcome,
             provisional=report.provisional, views=report.views,
-            error_px=error_of(report.metrics), swaps=len(report.swaps), issues=len(issues),
+            error_px=error_of(report.metrics), swaps=len(report.swaps), issues=0,
             reasons=report.reasons, action_detail=report.action_detail,
             updated_at=report.updated_at))
     rows.sort(key=_rank)
-    return QueueRead(total=len(rows), offset=offset, limit=limit,
-                     items=rows[offset:offset + limit])
+    page = rows[offset:offset + limit]
+    replays: dict[int, dict[str, Any] | None] = dict(session.execute(
+        select(QCReport.assignment_id, QCReport.replay)
+        .where(QCReport.assignment_id.in_([row.assignment_id for row in page]))).all())
+    for row in page:
+        row.issues = len((replays.get(row.assignment_id) or {}).get("issues", []))
+    return QueueRead(total=len(rows), offset=offset, limit=limit, items=page)
 
 
 @router.get("/reports/{assignment_id}/review", response_model=ReviewRead)

@@ -94,7 +94,7 @@ def thresholds_bounds() -> QCThresholds:
     return QCThresholds(**get_settings().qc_thresholds)
 
 
-def _px(values: np.ndarray) -> list[Any]:
+def px_lists(values: np.ndarray) -> list[Any]:
     """Pixels rounded to 0.1 px as nested lists, None where not finite."""
     out = np.round(np.asarray(values, np.float64), 1).astype(object)
     out[~np.isfinite(np.asarray(values, np.float64))] = None
@@ -109,8 +109,8 @@ def replay_record(source: str, reference: np.ndarray | None, errors: np.ndarray 
     whether the solve sees an anchored landmark."""
     record: dict[str, Any] = {
         "source": source, "issues": issues,
-        "reference": None if reference is None else _px(reference),
-        "errors": None if errors is None else _px(errors)}
+        "reference": None if reference is None else px_lists(reference),
+        "errors": None if errors is None else px_lists(errors)}
     if shown is not None:
         record["shown"] = np.asarray(shown, bool).astype(int).tolist()
     return record
