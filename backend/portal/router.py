@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 from backend.accounts.deps import CurrentAdmin
 from backend.accounts.login import password_check, password_login
 from backend.config import get_settings
+from backend.crowd.titles import TaskFacts
 from backend.db import SessionDep
 from backend.errors import Unauthorized
 from backend.market import clock
@@ -52,10 +53,17 @@ def _account_read(account: PortalAccount) -> AccountRead:
     return AccountRead(id=account.id, email=account.email, worker_id=account.worker_id)
 
 
-def _hit_read(session: Session, view: WorkerHit,
+def _hit_reads(session: Session, listed: list[tuple[WorkerHit, MarketAssignment | None]]
+               ) -> list[HitRead]:
+    """Rows of a HIT list: each HIT with what it is about and the worker's own assignment on
+    it (if any)."""
+    facts = tasks.hit_facts(session, [view.hit for view, _ in listed])
+    return [_hit_read(view, facts[view.hit.hit_id], mine) for view, mine in listed]
+
+
+def _hit_read(view: WorkerHit, facts: TaskFacts | None,
               mine: MarketAssignment | None = None) -> HitRead:
     hit_type = view.hit.hit_type
-    facts = tasks.hit_facts(session, view.hit)
     task = None if facts is None else HitTaskRead(
         kind=facts.kind, target=facts.target, view=facts.serial, frames=facts.num_frames)
     return HitRead(hit_id=view.hit.hit_id, title=hit_type.title, description=hit_type.description,
@@ -144,10 +152,11 @@ def list_hits(
     """Assignable HITs this worker qualifies for and has not worked on; each names its task
     (target, view, frames) and links a thumbnail of the view's first frame."""
     if mine:
-        return [_hit_read(session, listed.view, listed.mine)
-                for listed in service.worklist(session, worker.worker_id, clock.now())]
-    return [_hit_read(session, v)
-            for v in service.list_hits(session, worker.worker_id, clock.now()) if v.can_accept]
+        return _hit_reads(session, [(listed.view, listed.mine) for listed
+                                    in service.worklist(session, worker.worker_id, clock.now())])
+    return _hit_reads(session, [(v, None) for v
+                                in service.list_hits(session, worker.worker_id, clock.now())
+                                if v.can_accept])
 
 
 @router.get("/hits/{hit_id}/thumbnail.jpg", response_class=Response,
@@ -170,7 +179,7 @@ def hit_thumbnail(
 @router.get("/hits/{hit_id}", response_model=HitPreview)
 def preview_hit(hit_id: Key, session: SessionDep, worker: CurrentWorker) -> HitPreview:
     view = service.preview(session, worker.worker_id, hit_id, clock.now())
-    return HitPreview(**_hit_read(session, view).model_dump(),
+    return HitPreview(**_hit_reads(session, [(view, None)])[0].model_dump(),
                       preview_url=service.preview_url(view),
                       frame_height=service.frame_height(view.hit))
 

@@ -17,7 +17,7 @@ from urllib.parse import parse_qs, urlsplit
 import cv2
 import numpy as np
 from sqlalchemy import select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Task
 from backend.annotation.tokens import TASK_SCOPE
@@ -38,11 +38,18 @@ THUMBNAIL_WIDTH_PX = 160
 THUMBNAIL_JPEG_QUALITY = 80
 
 
+def _task_ids(session: Session, hits: list[Hit]) -> dict[str, int | None]:
+    """The task id behind each HIT (None: not one of ours): the crowd module's record of what
+    it published (one query for all), else the task token in the HIT's ExternalURL."""
+    published = dict(session.execute(select(CrowdHit.hit_id, CrowdHit.task_id).where(
+        CrowdHit.hit_id.in_([hit.hit_id for hit in hits]))).all())
+    return {hit.hit_id: published.get(hit.hit_id) or _task_id_in_url(hit.question)
+            for hit in hits}
+
+
 def hit_task(session: Session, hit: Hit) -> Task | None:
     """The task behind the HIT, or None when the HIT is not one of ours."""
-    task_id = session.scalar(select(CrowdHit.task_id).where(CrowdHit.hit_id == hit.hit_id))
-    if task_id is None:
-        task_id = _task_id_in_url(hit.question)
+    task_id = _task_ids(session, [hit])[hit.hit_id]
     return session.get(Task, task_id) if task_id is not None else None
 
 
@@ -61,9 +68,17 @@ def _task_id_in_url(question: str) -> int | None:
     return task_id if isinstance(task_id, int) else None
 
 
-def hit_facts(session: Session, hit: Hit) -> TaskFacts | None:
-    task = hit_task(session, hit)
-    return task_facts(session, task) if task is not None else None
+def hit_facts(session: Session, hits: list[Hit]) -> dict[str, TaskFacts | None]:
+    """What each HIT of a listing is about, by HIT id (None: not one of ours). The tasks are
+    found with one query for all the HITs the crowd module published and read with their
+    views and sequences in one more, not a few queries per HIT."""
+    task_ids = _task_ids(session, hits)
+    found = {task.id: task for task in session.scalars(
+        select(Task).where(Task.id.in_({t for t in task_ids.values() if t is not None}))
+        .options(selectinload(Task.camera), selectinload(Task.sequence)))}
+    return {hit_id: task_facts(session, found[task_id])
+            if task_id is not None and task_id in found else None
+            for hit_id, task_id in task_ids.items()}
 
 
 def thumbnail_url(hit_id: str) -> str:
