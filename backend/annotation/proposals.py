@@ -134,8 +134,8 @@ def proposals(session: Session, storage: Storage, assignment: Assignment,
     task = service.get_task_or_raise(session, assignment.task_id)
     num_frames, size = task.sequence.num_frames, (task.camera.width, task.camera.height)
     # The same checks as a save, so that what the page can save it can also ask about.
-    rows = service._check_tracks(service._clip_of(session, task.id),
-                                 TracksSave(version=0, tracks=body.tracks))
+    rows = service.check_tracks(service.clip_of(session, task.id),
+                                TracksSave(version=0, tracks=body.tracks))
     first, last = _frame_range(body, num_frames)
     count, wanted = last - first + 1, sorted({t.point for t in body.tracks})
     xy = np.full((count, len(rows), 2), np.nan)

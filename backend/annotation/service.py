@@ -147,7 +147,7 @@ class _Clip(NamedTuple):
     height: int
 
 
-def _clip_of(session: Session, task_id: int) -> _Clip:
+def clip_of(session: Session, task_id: int) -> _Clip:
     """The task's clip facts in one query (a save needs nothing else of the task)."""
     row = session.execute(
         select(Task.kind, Task.num_points, Sequence.num_frames, Camera.width, Camera.height)
@@ -159,7 +159,7 @@ def _clip_of(session: Session, task_id: int) -> _Clip:
     return _Clip(*row)
 
 
-def _check_tracks(clip: _Clip, body: TracksSave) -> list[list[list[Any]]]:
+def check_tracks(clip: _Clip, body: TracksSave) -> list[list[list[Any]]]:
     """Per point keyframe rows, validated against the task's clip and image; 422 otherwise."""
     problems, by_point = [], {}
     names = point_names(clip.kind)
@@ -189,7 +189,7 @@ def save_tracks(session: Session, assignment: Assignment, body: TracksSave) -> A
     """
     if assignment.status != "working":
         raise Conflict(f"assignment is {assignment.status}; its labels can no longer change")
-    rows = _check_tracks(_clip_of(session, assignment.task_id), body)
+    rows = check_tracks(clip_of(session, assignment.task_id), body)
     # Compare-and-set on the version: of two tabs saving from one version, one wins.
     saved_at = utcnow()
     version = session.execute(
