@@ -30,6 +30,7 @@ from backend.crowd.schemas import (
 )
 from backend.errors import NotFound
 from backend.quality.models import QCReport
+from backend.quality.service import qc_score
 
 # Reports a listing row carries for its sparkline (the newest ones); a worker's own page
 # carries up to HISTORY_DETAIL, and their newest ASSIGNMENTS_DETAIL assignments.
@@ -92,14 +93,8 @@ def _scores(session: Session, worker_ids: list[str]) -> dict[str, tuple[int, flo
             .where(QCReport.worker_id.in_(worker_ids), QCReport.provisional.is_(False))
             .group_by(QCReport.worker_id, QCReport.outcome)):
         tally[wid][outcome] = int(n)
-    out: dict[str, tuple[int, float | None]] = {}
-    for wid in worker_ids:
-        t = tally.get(wid, {})
-        total = sum(t.values())
-        score = round((t.get("approve", 0) + 0.5 * t.get("review", 0)) / total, 4) \
-            if total else None
-        out[wid] = (total, score)
-    return out
+    return {wid: (sum(tally.get(wid, {}).values()), qc_score(tally.get(wid, {})))
+            for wid in worker_ids}
 
 
 def _work(session: Session, worker_ids: list[str]

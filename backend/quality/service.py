@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -289,6 +290,15 @@ def list_reports(session: Session, sequence_id: int | None = None, outcome: str 
     return list(session.scalars(stmt))
 
 
+def qc_score(outcomes: Mapping[str, int]) -> float | None:
+    """A worker's running QC score from their final reports counted by outcome: approvals
+    and half the reviews over every report (None without a final report)."""
+    total = sum(outcomes.values())
+    if not total:
+        return None
+    return round((outcomes.get("approve", 0) + 0.5 * outcomes.get("review", 0)) / total, 4)
+
+
 def worker_quality(session: Session, worker_id: str | None = None, limit: int | None = None,
                    offset: int = 0) -> list[dict[str, Any]]:
     """Each worker's running quality: share of final (non-provisional) reports that passed;
@@ -309,7 +319,7 @@ def worker_quality(session: Session, worker_id: str | None = None, limit: int | 
         total = sum(t.values())
         out.append({"worker_id": wid, "scored": total, "approved": t["approve"],
                     "review": t["review"], "rejected": t["reject"],
-                    "score": round((t["approve"] + 0.5 * t["review"]) / total, 4),
+                    "score": qc_score(t),
                     "blocked": wid in blocked})
     return out
 
