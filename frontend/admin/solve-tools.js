@@ -37,6 +37,9 @@ function say(node, text, kind = "info") {
   node.hidden = !text;
 }
 
+/** Counts re-run form fills: a fill that is no longer the newest draws nothing. */
+let fills = 0;
+
 /** @param {string} optimiser */
 async function defaultsOf(optimiser) {
   if (!tools.defaults.has(optimiser)) {
@@ -56,7 +59,11 @@ async function fillRerun(run, optimiser) {
   tools.base = run;
   const chosen = optimiser || (run ? run.optimiser : select("rerun-optimiser").value);
   select("rerun-optimiser").value = chosen;
+  // Only the newest fill draws the form: an older one whose settings arrive later would
+  // replace what the admin has typed since.
+  const request = ++fills;
   const { params, kinds } = await defaultsOf(chosen);
+  if (request !== fills) return;
   const own = run ? run.params || {} : {};
   $("rerun-base").textContent = run ? `starting from run #${run.id}'s settings` : "defaults";
   $("rerun-settings").replaceChildren(...Object.keys(params).map((name) => {
@@ -68,6 +75,7 @@ async function fillRerun(run, optimiser) {
     const changed = value !== params[name];
     return el("label", { class: changed ? "changed" : "" }, [name, field]);
   }));
+  $("rerun-settings").dataset.optimiser = chosen;
 }
 
 /** @param {SubmitEvent} event */

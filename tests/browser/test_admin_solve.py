@@ -286,6 +286,8 @@ def test_a_re_run_with_other_settings_is_queued_with_them(
     page.locator(f'#run-rows tr[data-run="{truth_runs["a"]}"] button[data-rerun]').click()
     expect(page.locator("#solve-rerun")).to_have_attribute("open", "")
     page.locator("#rerun-optimiser").select_option("paper")
+    # The form is drawn again for the chosen optimiser: type into that one.
+    expect(page.locator("#rerun-settings")).to_have_attribute("data-optimiser", "paper")
     field = page.locator('#rerun-settings input[name="paper_iterations"]')
     expect(field).to_be_visible()
     field.fill("2.5")
