@@ -128,9 +128,11 @@ test("edits of one drag gesture merge into a single undo step", () => {
   const before = store.toJSON();
   for (let i = 0; i < 10; i++) store.placePoint(2, 8, 100 + i, 100, { gesture: "drag-1" });
   store.placePoint(2, 8, 200, 200, { gesture: "drag-2" });
-  assert.deepEqual(store.keyframeAt(2, 8), { frame: 8, x: 200, y: 200, visible: true });
+  assert.deepEqual(store.keyframeAt(2, 8),
+    { frame: 8, x: 200, y: 200, visible: true, source: "placed" });
   store.undo();
-  assert.deepEqual(store.keyframeAt(2, 8), { frame: 8, x: 109, y: 100, visible: true });
+  assert.deepEqual(store.keyframeAt(2, 8),
+    { frame: 8, x: 109, y: 100, visible: true, source: "placed" });
   store.undo();
   assert.deepEqual(store.toJSON(), before);
 });

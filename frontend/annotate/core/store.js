@@ -3,8 +3,15 @@
  *
  * Every mutation is a command run through the undo stack, so each edit can be undone and redone.
  * Subscribers get a change description per applied change:
- *   {cause: "edit"|"undo"|"redo"|"saved", label, point, created, updated, deleted, editCount}
- * where created/updated/deleted list the keyframe frames touched (point is null for "saved").
+ *   {cause: "edit"|"undo"|"redo"|"saved", label, point, points, created, updated, deleted,
+ *    editCount}
+ * where points lists the points touched, point is the one touched point (null for "saved" and
+ * for an edit of several points, such as setPose) and created/updated/deleted list the keyframe
+ * frames touched (over all points touched).
+ *
+ * Every keyframe carries its source (provenance, see edits.js): "placed", "tracked",
+ * "prefilled" or "edited". Moving an unchanged suggestion ("tracked"/"prefilled") or changing its
+ * visibility makes it "edited" unless the edit names a source; moving a keyframe in time keeps it.
  *
  * Stored positions are rounded to 0.01 px (the precision of the autosave payload, so toJSON and
  * fromJSON round-trip exactly) and clamped into the image, 0 <= x < width, 0 <= y < height.
@@ -12,6 +19,11 @@
 
 import { denseTrack, valueAt } from "./interpolate.js";
 import { UndoStack } from "./undo.js";
+import {
+  KeyframeEdit, checkSource, indexOfFrame, sourceAfterEdit, writeTrack,
+} from "./edits.js";
+
+export { KEYFRAME_SOURCES } from "./edits.js";
 
 /** Stored coordinate precision, image px. */
 export const POSITION_STEP_PX = 0.01;
@@ -22,50 +34,15 @@ function quantize(v) {
 }
 
 /**
- * @typedef {import("./interpolate.js").Keyframe} Keyframe
- * @typedef {{x: number|null, y: number|null, visible: boolean}} KeyframeValue
- * @typedef {{frame: number, before: Keyframe|null, after: Keyframe|null}} FrameChange
+ * @typedef {import("./edits.js").KeyframeSource} KeyframeSource
+ * @typedef {import("./interpolate.js").Keyframe & {source: KeyframeSource}} Keyframe
+ * @typedef {{x: number|null, y: number|null, visible: boolean, source?: KeyframeSource}}
+ *   KeyframeValue  without source: see sourceAfterEdit in edits.js
+ * @typedef {{frame: number, x?: number|null, y?: number|null, visible?: boolean,
+ *   source?: KeyframeSource, remove?: boolean}} FrameEntry  remove: true deletes the keyframe
+ * @typedef {{point: number, x?: number|null, y?: number|null, visible?: boolean,
+ *   source?: KeyframeSource, remove?: boolean}} PointEntry  remove: true deletes the keyframe
  */
-
-/** One undoable edit of one point's keyframes: for each touched frame, before and after. */
-class KeyframeEdit {
-  /**
-   * @param {AnnotationStore} store
-   * @param {string} label
-   * @param {number} point
-   * @param {FrameChange[]} changes
-   * @param {any} gesture  edits with the same non-null gesture on the same point merge
-   */
-  constructor(store, label, point, changes, gesture) {
-    this.store = store;
-    this.label = label;
-    this.point = point;
-    this.changes = changes;
-    this.gesture = gesture ?? null;
-  }
-
-  apply() {
-    const writes = this.changes.map((c) => [c.frame, c.before, c.after]);
-    return this.store._write(this.label, this.point, writes);
-  }
-
-  revert() {
-    const writes = this.changes.map((c) => [c.frame, c.after, c.before]);
-    return this.store._write(this.label, this.point, writes);
-  }
-
-  /** @param {any} next */
-  mergeWith(next) {
-    if (!(next instanceof KeyframeEdit) || this.gesture === null) return false;
-    if (next.gesture !== this.gesture || next.point !== this.point) return false;
-    for (const change of next.changes) {
-      const mine = this.changes.find((c) => c.frame === change.frame);
-      if (mine) mine.after = change.after;
-      else this.changes.push({ ...change });
-    }
-    return true;
-  }
-}
 
 export class AnnotationStore {
   /**
@@ -111,7 +88,9 @@ export class AnnotationStore {
   /** @param {number} point @param {number} frame @returns {Keyframe|null} */
   keyframeAt(point, frame) {
     this._checkPoint(point);
-    return this._tracks[point].find((k) => k.frame === frame) ?? null;
+    const track = this._tracks[point];
+    const i = indexOfFrame(track, frame);
+    return i >= 0 ? track[i] : null;
   }
 
   /** @param {number} point @param {number} frame */
@@ -153,26 +132,53 @@ export class AnnotationStore {
   }
 
   /**
-   * Creates or replaces the keyframe at `frame`. Returns false when nothing changed.
+   * Creates or replaces the keyframe at `frame`. Returns false when nothing changed. Without
+   * `value.source`, a new keyframe is "placed" and a changed "tracked"/"prefilled" one "edited".
    * @param {number} point @param {number} frame @param {KeyframeValue} value
    * @param {{gesture?: any}} [options] edits sharing a gesture id merge into one undo step
    */
   setKeyframe(point, frame, value, options = {}) {
-    this._checkPoint(point);
-    this._checkFrame(frame);
-    const after = this._makeKeyframe(frame, value);
-    const before = this.keyframeAt(point, frame);
-    if (before && sameKeyframe(before, after)) return false;
-    return this._execute("set keyframe", point, [{ frame, before, after }], options.gesture);
+    return this.setKeyframes(point, [{ ...value, frame }], { ...options, label: "set keyframe" });
   }
 
   /**
    * Puts the point at (x, y) image px, visible, at `frame` (creating or updating its keyframe).
    * @param {number} point @param {number} frame @param {number} x @param {number} y
-   * @param {{gesture?: any}} [options]
+   * @param {{gesture?: any, source?: KeyframeSource}} [options]
    */
   placePoint(point, frame, x, y, options = {}) {
-    return this.setKeyframe(point, frame, { x, y, visible: true }, options);
+    const { source, ...rest } = options;
+    return this.setKeyframe(point, frame, { x, y, visible: true, source }, rest);
+  }
+
+  /**
+   * Writes many keyframes of one point as ONE undo step with ONE change notification (accepting
+   * a tracked span of a long clip). Each entry is {frame, x, y, visible, source?} as in
+   * setKeyframe, or {frame, remove: true} to delete the keyframe there. Entries that change
+   * nothing are skipped; returns false when none changed anything. Frames must be unique.
+   * @param {number} point @param {FrameEntry[]} entries
+   * @param {{gesture?: any, label?: string}} [options]
+   */
+  setKeyframes(point, entries, options = {}) {
+    this._checkPoint(point);
+    if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
+    const changes = this._changesFor(entries.map((e) => ({ ...e, point })));
+    return this._execute(options.label ?? "set keyframes", changes, options.gesture);
+  }
+
+  /**
+   * Writes several points at one frame as ONE undo step with ONE change notification (copying
+   * the previous pose, dragging a whole skeleton or a finger chain). Each entry is
+   * {point, x, y, visible, source?} as in setKeyframe, or {point, remove: true}. Points must be
+   * unique. Returns false when nothing changed.
+   * @param {number} frame @param {PointEntry[]} entries
+   * @param {{gesture?: any, label?: string}} [options] a drag passes one gesture id throughout
+   */
+  setPose(frame, entries, options = {}) {
+    this._checkFrame(frame);
+    if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
+    const changes = this._changesFor(entries.map((e) => ({ ...e, frame })));
+    return this._execute(options.label ?? "set pose", changes, options.gesture);
   }
 
   /**
@@ -187,9 +193,9 @@ export class AnnotationStore {
     const moving = this.keyframeAt(point, fromFrame);
     if (!moving || fromFrame === toFrame || this.keyframeAt(point, toFrame)) return false;
     const moved = Object.freeze({ ...moving, frame: toFrame });
-    return this._execute("move keyframe", point, [
-      { frame: fromFrame, before: moving, after: null },
-      { frame: toFrame, before: null, after: moved },
+    return this._execute("move keyframe", [
+      { point, frame: fromFrame, before: moving, after: null },
+      { point, frame: toFrame, before: null, after: moved },
     ]);
   }
 
@@ -199,14 +205,15 @@ export class AnnotationStore {
     this._checkFrame(frame);
     const before = this.keyframeAt(point, frame);
     if (!before) return false;
-    return this._execute("delete keyframe", point, [{ frame, before, after: null }]);
+    return this._execute("delete keyframe", [{ point, frame, before, after: null }]);
   }
 
   /**
    * Flips visibility at `frame`. At a keyframe, flips it in place; elsewhere, creates a keyframe
    * with the interpolated position and the flipped visibility. Before the first keyframe
    * ("unplaced") it marks the point occluded. Returns false where the point would become visible
-   * without a position (it has to be placed instead).
+   * without a position (it has to be placed instead). A flipped "tracked"/"prefilled" keyframe
+   * becomes "edited"; a new one is "placed".
    * @param {number} point @param {number} frame
    */
   toggleVisibility(point, frame) {
@@ -241,7 +248,7 @@ export class AnnotationStore {
   markSaved(version, editCount = this.editCount) {
     this.version = version;
     this.savedEditCount = editCount;
-    const nothing = { point: null, created: [], updated: [], deleted: [] };
+    const nothing = { point: null, points: [], created: [], updated: [], deleted: [] };
     this._emit({ cause: "saved", label: "save", ...nothing });
   }
 
@@ -253,13 +260,21 @@ export class AnnotationStore {
     return () => this._listeners.delete(fn);
   }
 
-  /** Autosave payload: {version, tracks: [{point, keyframes: [[frame, x, y, visible01], ...]}]}. */
+  /**
+   * Autosave payload: {version, tracks: [{point, keyframes: [row, ...]}]} where a row is
+   * [frame, x, y, visible01] for a "placed" keyframe and [frame, x, y, visible01, source]
+   * otherwise (so payloads without suggestions are as before).
+   */
   toJSON() {
     return {
       version: this.version,
       tracks: this._tracks.map((keyframes, point) => ({
         point,
-        keyframes: keyframes.map((k) => [k.frame, k.x, k.y, k.visible ? 1 : 0]),
+        keyframes: keyframes.map((k) => {
+          const row = [k.frame, k.x, k.y, k.visible ? 1 : 0];
+          if (k.source !== "placed") row.push(k.source);
+          return row;
+        }),
       })),
     };
   }
@@ -294,62 +309,115 @@ export class AnnotationStore {
 
   // ---- internals --------------------------------------------------------------------------
 
-  /** @param {number} point @param {any[]} row [frame, x, y, visible01] */
+  /**
+   * @param {number} point
+   * @param {any[]} row [frame, x, y, visible01] or [frame, x, y, visible01, source]
+   */
   _keyframeFromRow(point, row) {
-    if (!Array.isArray(row) || row.length !== 4) {
+    if (!Array.isArray(row) || (row.length !== 4 && row.length !== 5)) {
       const got = JSON.stringify(row);
-      throw new TypeError(`point ${point}: keyframe must be [frame, x, y, visible01], got ${got}`);
+      const shape = "[frame, x, y, visible01] or [frame, x, y, visible01, source]";
+      throw new TypeError(`point ${point}: keyframe must be ${shape}, got ${got}`);
     }
-    const [frame, x, y, visible] = row;
+    const [frame, x, y, visible, source = "placed"] = row;
     this._checkFrame(frame);
     if (visible !== 0 && visible !== 1 && visible !== true && visible !== false) {
       throw new TypeError(`point ${point}, frame ${frame}: visible must be 0 or 1, got ${visible}`);
     }
-    return this._makeKeyframe(frame, { x, y, visible: Boolean(visible) });
+    checkSource(source, `point ${point}, frame ${frame}`);
+    return this._makeKeyframe(frame, { x, y, visible: Boolean(visible) }, source);
   }
 
-  /** @param {number} frame @param {KeyframeValue} value @returns {Keyframe} */
-  _makeKeyframe(frame, { x, y, visible }) {
+  /**
+   * @param {number} frame @param {{x: any, y: any, visible: any}} value
+   * @param {KeyframeSource} source @returns {Keyframe}
+   */
+  _makeKeyframe(frame, { x, y, visible }, source) {
     if (typeof visible !== "boolean") {
       throw new TypeError(`visible must be a boolean, got ${visible}`);
     }
     if (x === null && y === null) {
       if (visible) throw new TypeError(`frame ${frame}: a visible keyframe needs a position`);
-      return Object.freeze({ frame, x: null, y: null, visible });
+      return Object.freeze({ frame, x: null, y: null, visible, source });
     }
     if (!Number.isFinite(x) || !Number.isFinite(y)) {
       const got = `${x}, ${y}`;
       const rule = "x and y must be finite numbers or both null";
       throw new TypeError(`frame ${frame}: ${rule}, got ${got}`);
     }
-    return Object.freeze({ frame, ...this.clampToImage(x, y), visible });
+    return Object.freeze({ frame, ...this.clampToImage(x, y), visible, source });
   }
 
-  /** Runs a new edit through the undo stack. */
-  _execute(label, point, changes, gesture) {
-    const command = new KeyframeEdit(this, label, point, changes, gesture);
+  /**
+   * The changes that entries {point, frame, x, y, visible, source?} or {point, frame, remove}
+   * make, skipping those that change nothing. Validates everything before anything is written.
+   * O(n) in the touched tracks' lengths plus the entries (no search per entry).
+   * @param {Array<(FrameEntry & PointEntry)>} entries
+   */
+  _changesFor(entries) {
+    /** @type {Map<number, Map<number, Keyframe>>} */
+    const tracks = new Map();
+    const seen = new Set();
+    const changes = [];
+    for (const entry of entries) {
+      const { point, frame } = entry;
+      this._checkPoint(point);
+      this._checkFrame(frame);
+      const cell = point * this.numFrames + frame;
+      if (seen.has(cell)) throw new RangeError(`point ${point}, frame ${frame}: given twice`);
+      seen.add(cell);
+      if (!tracks.has(point)) {
+        tracks.set(point, new Map(this._tracks[point].map((k) => [k.frame, k])));
+      }
+      const before = tracks.get(point).get(frame) ?? null;
+      if (entry.remove === true) {
+        if (before) changes.push({ point, frame, before, after: null });
+        continue;
+      }
+      const where = `point ${point}, frame ${frame}`;
+      const explicit = entry.source !== undefined;
+      const source = explicit ? checkSource(entry.source, where) : sourceAfterEdit(before);
+      const after = this._makeKeyframe(frame, entry, source);
+      // Writing a suggestion's own value again, without a source, is no edit of it.
+      if (before && samePlace(before, after) && (!explicit || before.source === source)) continue;
+      changes.push({ point, frame, before, after });
+    }
+    return changes;
+  }
+
+  /** Runs a new edit through the undo stack; false when `changes` is empty. */
+  _execute(label, changes, gesture) {
+    if (changes.length === 0) return false;
+    const command = new KeyframeEdit(this, label, changes, gesture);
     return this._notify("edit", this._history.execute(command));
   }
 
   /**
    * Writes keyframes; called by commands only.
-   * @param {string} label @param {number} point
-   * @param {Array<[number, Keyframe|null, Keyframe|null]>} writes  [frame, from, to]
+   * @param {string} label
+   * @param {Array<[number, number, Keyframe|null, Keyframe|null]>} writes  [point, frame, from, to]
    * @returns {object} the change description
    */
-  _write(label, point, writes) {
-    const track = this._tracks[point];
-    const change = { label, point, created: [], updated: [], deleted: [] };
-    for (const [frame, from, to] of writes) {
-      const i = track.findIndex((k) => k.frame === frame);
-      if (i >= 0) track.splice(i, 1);
-      if (to) track.push(to);
-      if (!from && to) change.created.push(frame);
-      else if (from && to) change.updated.push(frame);
-      else if (from && !to) change.deleted.push(frame);
+  _write(label, writes) {
+    /** @type {Map<number, Array<[number, Keyframe|null]>>} */
+    const byPoint = new Map();
+    const created = new Set();
+    const updated = new Set();
+    const deleted = new Set();
+    for (const [point, frame, from, to] of writes) {
+      if (!byPoint.has(point)) byPoint.set(point, []);
+      byPoint.get(point).push([frame, to]);
+      if (!from && to) created.add(frame);
+      else if (from && to) updated.add(frame);
+      else if (from && !to) deleted.add(frame);
     }
-    track.sort((a, b) => a.frame - b.frame);
-    return change;
+    for (const [point, pointWrites] of byPoint) writeTrack(this._tracks[point], pointWrites);
+    const points = [...byPoint.keys()].sort((a, b) => a - b);
+    const frames = (set) => [...set].sort((a, b) => a - b);
+    return {
+      label, point: points.length === 1 ? points[0] : null, points,
+      created: frames(created), updated: frames(updated), deleted: frames(deleted),
+    };
   }
 
   /** @param {string} cause @param {object|undefined} change */
@@ -378,7 +446,10 @@ export class AnnotationStore {
   }
 }
 
-/** @param {Keyframe} a @param {Keyframe} b */
-function sameKeyframe(a, b) {
+/**
+ * Same frame, position and visibility (the source aside).
+ * @param {Keyframe} a @param {Keyframe} b
+ */
+function samePlace(a, b) {
   return a.frame === b.frame && a.x === b.x && a.y === b.y && a.visible === b.visible;
 }
