@@ -13,6 +13,15 @@ Dense value at frame f:
     between keyframes k0 < f < k1: interpolated; visibility of k0; linear position when both have
         one, k0's position when only k0 has one, else none;
     after the last keyframe: the last keyframe's position and visibility, interpolated.
+
+Provenance: a keyframe's source says where its position came from (SOURCES):
+    "placed"     the worker put it there (the default; what a 4-element row means);
+    "tracked"    an accepted tracking proposal, unchanged;
+    "prefilled"  an accepted pre-fill suggestion (other views' consensus), unchanged;
+    "edited"     came from a suggestion and the worker then changed it.
+Stored rows are [frame, x, y, visible01], with a 5th element source only when it is not "placed",
+so data without suggestions (and the golden vectors) keep their form. The page's store.js
+writes the same rows.
 """
 
 from __future__ import annotations
@@ -21,7 +30,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from numbers import Real
-from typing import Any, Literal, TypedDict
+from typing import Any, Literal, TypedDict, get_args
 
 import numpy as np
 
@@ -38,23 +47,53 @@ STATIC_DISPLACEMENT_PX = 1.0
 # tasks), so that two fingertips touching in a pinch do not trigger it.
 COLLAPSE_MIN_POINTS = 3
 
+KeyframeSource = Literal["placed", "tracked", "prefilled", "edited"]
+# Every keyframe source, in the order messages list them.
+SOURCES: tuple[KeyframeSource, ...] = get_args(KeyframeSource)
+# Sources written as a 5th element of a stored row (all but the default).
+_ROW_SOURCES = frozenset(SOURCES) - {"placed"}
+
+# Per-frame source codes of keyframe_sources(); SOURCE_NAMES[code] is the name.
+SOURCE_NONE = 0
+SOURCE_PLACED = 1
+SOURCE_TRACKED = 2
+SOURCE_PREFILLED = 3
+SOURCE_EDITED = 4
+SOURCE_NAMES: tuple[str, ...] = ("none", "placed", "tracked", "prefilled", "edited")
+# How much of the worker's own decision a source carries, for frames between two keyframes:
+# placed > edited > tracked (a proposal between the worker's keyframes) > prefilled (from other
+# views only). Between keyframes a frame takes the end carrying more of the worker's decision.
+_DECISION_RANK = {
+    SOURCE_PREFILLED: 0, SOURCE_TRACKED: 1, SOURCE_EDITED: 2, SOURCE_PLACED: 3,
+}
+
 
 class KeyframeError(ValueError):
-    """A keyframe that is not {frame, x, y, visible} / [frame, x, y, visible01] with valid types."""
+    """A keyframe that is not {frame, x, y, visible[, source]} / [frame, x, y, visible01[, source]]
+    with valid types."""
 
 
 @dataclass(frozen=True)
 class Keyframe:
-    """One keyframe: frame index, position in image px (None when occluded without a guess)."""
+    """One keyframe: frame index, position in image px (None when occluded without a guess),
+    visibility and source (see the module docstring)."""
 
     frame: int
     x: float | None
     y: float | None
     visible: bool
+    source: KeyframeSource = "placed"
 
     @property
     def has_position(self) -> bool:
         return self.x is not None and self.y is not None
+
+    def row(self) -> list[Any]:
+        """The stored form: [frame, x, y, visible01], plus source when it is not "placed"."""
+        row: list[Any] = [self.frame, self.x, self.y, 1 if self.visible else 0]
+        if self.source != "placed":
+            row.append(self.source)
+        return row
 
 
 @dataclass(frozen=True)
@@ -113,24 +152,36 @@ def _number_or_none(value: Any, field: str) -> float | None:
         raise KeyframeError(f"{field} is too large for a position") from None
 
 
+def _source(value: Any) -> KeyframeSource:
+    if type(value) is not str or value not in SOURCES:
+        raise KeyframeError(f"source must be one of {', '.join(SOURCES)}, got {value!r}")
+    return value  # one of SOURCES: a KeyframeSource
+
+
 def parse_keyframe(raw: Any) -> Keyframe:
-    """A keyframe from a dict {frame, x, y, visible} or a compact [frame, x, y, visible01] list.
+    """A keyframe from a dict {frame, x, y, visible[, source]} or a compact
+    [frame, x, y, visible01[, source]] list; without a source it is "placed".
 
     Raises:
         KeyframeError: naming the malformed field.
     """
     if isinstance(raw, Keyframe):
         return raw
+    source: Any = "placed"
     if isinstance(raw, dict):
         missing = [k for k in ("frame", "visible") if k not in raw]
         if missing:
             raise KeyframeError(f"missing {', '.join(missing)}")
         # An occluded keyframe without a guess may leave out x and y.
         frame, x, y, visible = raw["frame"], raw.get("x"), raw.get("y"), raw["visible"]
+        source = raw.get("source", "placed")
     elif isinstance(raw, (list, tuple)) and len(raw) == 4:
         frame, x, y, visible = raw
+    elif isinstance(raw, (list, tuple)) and len(raw) == 5:
+        frame, x, y, visible, source = raw
     else:
-        expected = "{frame, x, y, visible} or [frame, x, y, visible01]"
+        expected = ("{frame, x, y, visible[, source]} or [frame, x, y, visible01] or "
+                    "[frame, x, y, visible01, source]")
         raise KeyframeError(f"expected {expected}, got {raw!r}")
     if type(frame) is not int and (isinstance(frame, bool)
                                    or not isinstance(frame, (int, np.integer))):
@@ -140,7 +191,7 @@ def parse_keyframe(raw: Any) -> Keyframe:
     x_value, y_value = _number_or_none(x, "x"), _number_or_none(y, "y")
     if (x_value is None) != (y_value is None):
         raise KeyframeError("x and y must both be numbers or both be null")
-    return Keyframe(int(frame), x_value, y_value, bool(visible))
+    return Keyframe(int(frame), x_value, y_value, bool(visible), _source(source))
 
 
 def as_keyframes(raw: Iterable[Any]) -> list[Keyframe]:
@@ -349,16 +400,28 @@ def _position_problems(kf: Keyframe, width: int, height: int) -> list[str]:
 def _plain_rows(
     keyframes: Sequence[Any], num_frames: int, width: int, height: int
 ) -> list[list[Any]] | None:
-    """The keyframes as stored ([frame, x, y, visible01] with float x, y) when every one is a
-    list of plain JSON values that passes every check of :func:`validate_keyframes` (what the
-    annotation page sends, in one quick pass); None sends them through the full check, which
-    names each problem."""
+    """The keyframes as stored ([frame, x, y, visible01] with float x, y, plus a source other
+    than "placed") when every one is a list of plain JSON values that passes every check of
+    :func:`validate_keyframes` (what the annotation page sends, in one quick pass); None sends
+    them through the full check, which names each problem."""
     rows: list[list[Any]] = []
     previous = -1
     for row in keyframes:
-        if type(row) is not list or len(row) != 4:
+        if type(row) is not list:
             return None
-        frame, x, y, visible = row
+        if len(row) == 4:
+            frame, x, y, visible = row
+            source = None
+        elif len(row) == 5:
+            frame, x, y, visible, source = row
+            if type(source) is not str:
+                return None
+            if source not in _ROW_SOURCES:
+                if source != "placed":
+                    return None
+                source = None
+        else:
+            return None
         if type(frame) is not int or not previous < frame < num_frames:
             return None
         previous = frame
@@ -371,14 +434,16 @@ def _plain_rows(
         if x is None and y is None:
             if seen:
                 return None
-            rows.append([frame, None, None, 0])
+            rows.append([frame, None, None, 0] if source is None else
+                        [frame, None, None, 0, source])
             continue
         if (type(x) is not float and type(x) is not int) or (
                 type(y) is not float and type(y) is not int):
             return None
         if not (0 <= x < width and 0 <= y < height):  # NaN fails here too
             return None
-        rows.append([frame, float(x), float(y), seen])
+        rows.append([frame, float(x), float(y), seen] if source is None else
+                    [frame, float(x), float(y), seen, source])
     return rows
 
 
@@ -390,18 +455,15 @@ def checked_rows(
     keyframes: Sequence[Any], num_frames: int, width: int, height: int
 ) -> tuple[list[list[Any]], list[str]]:
     """(the keyframes as stored, []) when they pass :func:`validate_keyframes`, else ([], its
-    problems). Stored form: sorted [frame, x, y, visible01] rows, x and y float px or None."""
+    problems). Stored form: sorted [frame, x, y, visible01] rows, x and y float px or None, with
+    a 5th element source when it is not "placed" (see :meth:`Keyframe.row`)."""
     rows = _plain_rows(keyframes, num_frames, width, height)
     if rows is not None:
         return rows, []
     problems = validate_keyframes(keyframes, num_frames, width, height)
     if problems:
         return [], problems
-    stored = []
-    for raw in keyframes:
-        kf = parse_keyframe(raw)
-        stored.append([kf.frame, kf.x, kf.y, 1 if kf.visible else 0])
-    return stored, []
+    return [parse_keyframe(raw).row() for raw in keyframes], []
 
 
 def validate_keyframes(
@@ -409,8 +471,9 @@ def validate_keyframes(
 ) -> list[str]:
     """Problems with one track's keyframes, each naming the offending keyframe; [] when valid.
 
-    Checks: well-formed entries, frames in 0..num_frames-1, unique and sorted frames, finite
-    positions inside the width x height image (px), and a position on every visible keyframe.
+    Checks: well-formed entries (a known source, if any), frames in 0..num_frames-1, unique and
+    sorted frames, finite positions inside the width x height image (px), and a position on every
+    visible keyframe.
     """
     if _plainly_valid(keyframes, num_frames, width, height):
         return []
@@ -437,3 +500,52 @@ def validate_keyframes(
             label = _keyframe_label(index, raw)
             problems.extend(f"{label}: {p}" for p in found)
     return problems
+
+
+def _source_codes(kfs: Sequence[Keyframe]) -> np.ndarray:
+    codes = {name: code for code, name in enumerate(SOURCE_NAMES)}
+    return np.array([codes[k.source] for k in kfs], dtype=np.int8)
+
+
+def keyframe_sources(keyframes: Iterable[Any], num_frames: int) -> np.ndarray:
+    """(F,) int8 source code (SOURCE_NAMES[code]) of the dense track at every frame.
+
+    At a keyframe: its source. Between keyframes k0 < f < k1: of the two, the source carrying
+    more of the worker's own decision (placed > edited > tracked > prefilled), so a span is
+    "prefilled" only when both ends are, since the worker decided at least one end otherwise.
+    After the last keyframe: its source (the position is held from it). Before the first
+    keyframe, or with no keyframes: SOURCE_NONE.
+
+    Args:
+        keyframes: one track's keyframes, as :func:`parse_keyframe` accepts them.
+        num_frames: F, the clip length.
+    """
+    kfs = as_keyframes(keyframes)
+    out = np.full(max(num_frames, 0), SOURCE_NONE, dtype=np.int8)
+    if not kfs or num_frames <= 0:
+        return out
+    k_frame = np.array([k.frame for k in kfs])
+    k_code = _source_codes(kfs)
+    rank = np.array([_DECISION_RANK[int(c)] for c in k_code])
+    frames = np.arange(num_frames)
+    i0 = np.searchsorted(k_frame, frames, side="right") - 1
+    placed = i0 >= 0
+    i0c = np.clip(i0, 0, len(kfs) - 1)
+    i1c = np.clip(i0 + 1, 0, len(kfs) - 1)
+    has_next = placed & (k_frame[i0c] != frames) & (i0 + 1 < len(kfs))
+    take_next = has_next & (rank[i1c] > rank[i0c])
+    out[placed] = np.where(take_next, k_code[i1c], k_code[i0c])[placed]
+    return out
+
+
+def decided_mask(keyframes: Iterable[Any], num_frames: int) -> np.ndarray:
+    """(F,) bool: True where the track's value is the worker's own decision, i.e. not derived
+    only from unedited pre-filled keyframes (and not unplaced). Tracked keyframes count as
+    decided: tracking proposals run between the worker's own keyframes. QC scores these frames.
+
+    Args:
+        keyframes: one track's keyframes, as :func:`parse_keyframe` accepts them.
+        num_frames: F, the clip length.
+    """
+    sources = keyframe_sources(keyframes, num_frames)
+    return (sources != SOURCE_NONE) & (sources != SOURCE_PREFILLED)

@@ -11,12 +11,17 @@ import numpy as np
 import pytest
 
 from worker.tracks import (
+    SOURCE_NAMES,
     STATE_INTERPOLATED,
     STATE_KEYFRAME,
     STATE_UNPLACED,
     DenseTrack,
+    Keyframe,
+    checked_rows,
     completeness,
+    decided_mask,
     dense_track,
+    keyframe_sources,
     parse_keyframe,
     suspicious,
     validate_keyframes,
@@ -54,6 +59,12 @@ class TestDenseTrackGolden:
     def test_compact_keyframes_give_the_same_track(self, case):
         compact = dense_track(to_compact(case["keyframes"]), case["num_frames"])
         assert as_golden(compact) == case["dense"]
+
+    @pytest.mark.parametrize("case", GOLDEN["dense_cases"], ids=lambda c: c["name"])
+    def test_sources_do_not_change_the_track(self, case):
+        sources = ["tracked", "prefilled", "edited", "placed"]
+        rows = [row + [sources[i % 4]] for i, row in enumerate(to_compact(case["keyframes"]))]
+        assert as_golden(dense_track(rows, case["num_frames"])) == case["dense"]
 
     def test_golden_covers_the_required_cases(self):
         names = {c["name"] for c in GOLDEN["dense_cases"]}
@@ -193,3 +204,91 @@ class TestValidateKeyframes:
     def test_occluded_guess_must_still_be_inside_the_image(self):
         problems = validate_keyframes([[0, 10, 500, 0]], 4, 640, 480)
         assert problems == ["keyframe 0 (frame 0): y = 500 outside the image (0 <= y < 480)"]
+
+
+ALLOWED = "source must be one of placed, tracked, prefilled, edited, got"
+
+
+def source_names(codes: np.ndarray) -> list[str]:
+    return [SOURCE_NAMES[c] for c in codes]
+
+
+class TestKeyframeSource:
+    def test_default_source_is_placed_in_every_form(self):
+        assert parse_keyframe([3, 1, 2, 1]).source == "placed"
+        assert parse_keyframe({"frame": 3, "x": 1, "y": 2, "visible": True}).source == "placed"
+        assert parse_keyframe([3, 1, 2, 1, "placed"]) == parse_keyframe([3, 1, 2, 1])
+
+    def test_list_and_dict_forms_carry_the_source(self):
+        assert parse_keyframe([3, 1, 2, 1, "tracked"]) == Keyframe(3, 1.0, 2.0, True, "tracked")
+        raw = {"frame": 4, "x": None, "y": None, "visible": False, "source": "prefilled"}
+        assert parse_keyframe(raw) == Keyframe(4, None, None, False, "prefilled")
+
+    def test_unknown_source_is_named_with_its_keyframe(self):
+        rows = [[0, 1, 1, 1], [1, 1, 1, 1], [2, 1, 1, 1, "edited"], [12, 5, 5, 1, "x"]]
+        assert validate_keyframes(rows, 20, 640, 480) == [f"keyframe 3 (frame 12): {ALLOWED} 'x'"]
+        problems = validate_keyframes([[0, 1, 1, 1, None], [1, 1, 1, 1, 2]], 20, 640, 480)
+        assert problems == [f"keyframe 0 (frame 0): {ALLOWED} None",
+                            f"keyframe 1 (frame 1): {ALLOWED} 2"]
+
+    def test_a_six_element_row_is_refused(self):
+        problems = validate_keyframes([[0, 1, 1, 1, "tracked", 0]], 4, 640, 480)
+        assert len(problems) == 1
+        assert problems[0].startswith("keyframe 0 (frame 0): expected")
+
+    def test_stored_rows_write_the_source_only_when_not_placed(self):
+        rows = [[0, 1, 2, 1], [1, 3, 4, 0, "placed"], [2, 5, 6, 1, "tracked"],
+                [3, None, None, 0, "prefilled"], [4, 7, 8, True, "edited"]]
+        expected = [[0, 1.0, 2.0, 1], [1, 3.0, 4.0, 0], [2, 5.0, 6.0, 1, "tracked"],
+                    [3, None, None, 0, "prefilled"], [4, 7.0, 8.0, 1, "edited"]]
+        assert checked_rows(rows, 10, 640, 480) == (expected, [])
+        # The full check (here: dicts and tuples) stores exactly the same rows.
+        slow = [tuple(rows[0]), {"frame": 1, "x": 3, "y": 4, "visible": False},
+                {"frame": 2, "x": 5, "y": 6, "visible": True, "source": "tracked"},
+                tuple(rows[3]), tuple(rows[4])]
+        assert checked_rows(slow, 10, 640, 480) == (expected, [])
+        assert [parse_keyframe(r).row() for r in expected] == expected
+
+    def test_bad_source_in_an_otherwise_plain_save_is_refused(self):
+        stored, problems = checked_rows([[0, 1, 1, 1], [1, 1, 1, 1, "Tracked"]], 4, 640, 480)
+        assert stored == []
+        assert problems == [f"keyframe 1 (frame 1): {ALLOWED} 'Tracked'"]
+
+
+class TestKeyframeSources:
+    def test_keyframes_between_and_after(self):
+        rows = [[2, 1, 1, 1, "prefilled"], [5, 1, 1, 1, "prefilled"], [8, 1, 1, 1],
+                [10, 1, 1, 1, "tracked"], [12, 1, 1, 1, "prefilled"], [14, 1, 1, 0, "edited"]]
+        assert source_names(keyframe_sources(rows, 17)) == [
+            "none", "none",
+            "prefilled", "prefilled", "prefilled", "prefilled",  # 2..5: both ends prefilled
+            "placed", "placed", "placed",  # 6..7 between prefilled and placed, 8 placed
+            "placed",  # 9: placed and tracked
+            "tracked", "tracked", "prefilled",  # 11: tracked and prefilled
+            "edited", "edited",  # 13: prefilled and edited; 14 edited
+            "edited", "edited",  # held after the last keyframe
+        ]
+
+    def test_no_keyframes_is_none_everywhere(self):
+        assert source_names(keyframe_sources([], 3)) == ["none"] * 3
+        assert keyframe_sources([[0, 1, 1, 1]], 0).shape == (0,)
+
+    def test_unsorted_and_dict_keyframes(self):
+        raw = [{"frame": 4, "x": 1, "y": 1, "visible": True, "source": "tracked"},
+               [1, 1, 1, 1, "prefilled"]]
+        codes = keyframe_sources(raw, 6)
+        assert codes.dtype == np.int8 and codes.shape == (6,)
+        assert source_names(codes) == ["none", "prefilled", "tracked", "tracked", "tracked",
+                                       "tracked"]
+
+    def test_decided_mask_leaves_out_unplaced_and_prefilled_only(self):
+        rows = [[1, 1, 1, 1, "prefilled"], [3, 1, 1, 1, "prefilled"], [5, 1, 1, 1, "edited"],
+                [7, None, None, 0, "prefilled"], [9, 1, 1, 1, "tracked"]]
+        mask = decided_mask(rows, 11)
+        assert mask.dtype == bool
+        # 7 is an unedited prefilled keyframe itself; 4, 6 and 8 take their decided neighbour.
+        assert mask.tolist() == [False, False, False, False, True, True, True, False, True,
+                                 True, True]
+        only_prefilled = [[0, 1, 1, 1, "prefilled"], [6, 2, 2, 1, "prefilled"]]
+        assert not decided_mask(only_prefilled, 8).any()
+        assert decided_mask([[0, 1, 1, 1]], 8).all()
