@@ -17,7 +17,6 @@ from tests.worker.test_qc_consensus import camera_ring, moving_hand, truth_pixel
 from tests.worker.test_qc_visibility import CaptureTruth
 from worker.quality.prefill import (
     ViewWork,
-    decided_frames,
     epipolar_guide,
     epipolar_lines,
     fundamental_matrix,
@@ -72,22 +71,6 @@ def _careful(capture: CaptureTruth, views: list[int], seed: int = 0,
     return out
 
 
-class TestDecidedFrames:
-    def test_placed_tracked_and_edited_keyframes_decide_their_frames(self):
-        rows = [[0, 1.0, 1.0, 1], [3, 4.0, 1.0, 1, "tracked"], [6, 7.0, 1.0, 0, "edited"]]
-        assert decided_frames(rows, 9).tolist() == [True] * 9
-
-    def test_a_prefilled_keyframe_leaves_its_frame_and_the_spans_beside_it_undecided(self):
-        rows = [[2, 1.0, 1.0, 1], [5, 4.0, 1.0, 1, "prefilled"], [8, 7.0, 1.0, 1]]
-        expected = [False, False, True, False, False, False, False, False, True, True]
-        assert decided_frames(rows, 10).tolist() == expected
-
-    def test_a_last_prefilled_keyframe_leaves_the_rest_of_the_clip_undecided(self):
-        rows = [{"frame": 0, "x": 1.0, "y": 1.0, "visible": True},
-                {"frame": 2, "x": 1.0, "y": 1.0, "visible": True, "source": "prefilled"}]
-        assert decided_frames(rows, 5).tolist() == [True, False, False, False, False]
-
-
 class TestViewWork:
     def test_rows_with_a_source_interpolate_as_plain_rows(self):
         plain = [[0, 10.0, 20.0, 1], [4, 30.0, 40.0, 1], [8, None, None, 0]]
@@ -96,8 +79,14 @@ class TestViewWork:
         dense = dense_track(plain, 10)
         np.testing.assert_array_equal(work.xy[:, 1], dense.xy)
         np.testing.assert_array_equal(work.visible[:, 1], dense.visible)
-        assert work.decided[:, 1].tolist() == [True] + [False] * 7 + [True] * 2
         assert np.isnan(work.xy[:, [0, 2]]).all() and not work.decided[:, [0, 2]].any()
+
+    def test_only_prefilled_keyframes_and_spans_between_them_are_undecided(self):
+        rows = [[2, 1.0, 1.0, 1], [4, 3.0, 1.0, 1, "prefilled"], [6, 5.0, 1.0, 1, "prefilled"],
+                [8, 7.0, 1.0, 1, "tracked"], [9, 8.0, 1.0, 0, "edited"]]
+        work = view_work(1, [(0, rows)], 11, 1)
+        expected = [False, False, True, True, False, False, False, True, True, True, True]
+        assert work.decided[:, 0].tolist() == expected
 
 
 class TestPrefillGeometry:

@@ -10,9 +10,9 @@ something other than the hand covers the point by more than HIDDEN_MARGIN_M, or 
 point projects outside the image or behind the camera; visible where the depth map reads at its
 pixel and covers nothing; unknown where the map has no reading there (or there is no map).
 
-Only decided positions count: a keyframe the worker took unchanged from a pre-fill suggestion
-(source "prefilled") is the suggestion's own echo, not evidence; nor are frames interpolated
-from one.
+Only decided positions count (worker.tracks.decided_mask): a keyframe the worker took
+unchanged from a pre-fill suggestion (source "prefilled") is the suggestion's own echo, not
+evidence; nor is a span between two such keyframes.
 
 Conventions as in worker.geometry.cameras: pixels x right, y down; world metres; depth maps
 (F, H, W) uint16 millimetres along the camera's z axis, 0 = no reading. F frames, P points,
@@ -33,15 +33,13 @@ import numpy as np
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.geometry.triangulate import triangulate_points
 from worker.quality.metrics import HIDDEN_MARGIN_M, WINDOW_RADIUS_PX, surface_check
-from worker.tracks import dense_points
+from worker.tracks import decided_mask, dense_points
 
 # Fewest other views with decided work on a point before it is suggested: two rays fix it.
 MIN_VIEWS = 2
 # Reprojection error (px) above which a label is an outlier of the triangulation: five times
 # the 2 px per-axis noise of a careful label at 640x480, as QC's consensus (HandOptions).
 OUTLIER_PX = 10.0
-# Source of a keyframe taken unchanged from a pre-fill suggestion (worker.tracks rows).
-PREFILLED = "prefilled"
 # Depth maps decoded at once when the depth is given as a reader.
 _READ_THREADS = 4
 
@@ -82,47 +80,17 @@ class Prefill:
     points: np.ndarray
 
 
-def _source(row: Any) -> str:
-    if isinstance(row, dict):
-        return str(row.get("source") or "placed")
-    return str(row[4]) if len(row) > 4 and row[4] is not None else "placed"
-
-
-def _position_rows(keyframes: Sequence[Any]) -> list[Any]:
-    """Keyframes without their source: what worker.tracks interpolates."""
-    return [row if isinstance(row, dict) else list(row[:4]) for row in keyframes]
-
-
-def decided_frames(keyframes: Sequence[Any], num_frames: int) -> np.ndarray:
-    """(F,) bool: frames whose value comes only from decided keyframes (source other than
-    "prefilled"), with worker.tracks' interpolation rule: at a keyframe, that keyframe; between
-    two, both; after the last, the last; before the first, nothing.
-
-    keyframes: sorted rows ``[frame, x, y, visible01]`` or ``[frame, x, y, visible01,
-    source]`` (or dicts with an optional "source").
-    """
-    out = np.zeros(num_frames, dtype=bool)
-    frames = [int(row["frame"] if isinstance(row, dict) else row[0]) for row in keyframes]
-    decided = [_source(row) != PREFILLED for row in keyframes]
-    for i, (frame, ok) in enumerate(zip(frames, decided, strict=True)):
-        end = frames[i + 1] if i + 1 < len(frames) else num_frames
-        if 0 <= frame < num_frames:
-            out[frame] = ok
-            out[frame + 1:end] = ok and (i + 1 >= len(frames) or decided[i + 1])
-    return out
-
-
 def view_work(view: int, tracks: Iterable[tuple[int, Sequence[Any]]], num_frames: int,
               num_points: int) -> ViewWork:
     """An assignment's stored tracks, given as (point index, keyframe rows) pairs, as dense
-    ViewWork (image px)."""
+    ViewWork (image px); decided as worker.tracks.decided_mask has it (not unplaced, not
+    only from unedited pre-filled keyframes)."""
     tracks = list(tracks)
-    xy, visible = dense_points(((p, _position_rows(rows)) for p, rows in tracks), num_frames,
-                               num_points)
+    xy, visible = dense_points(tracks, num_frames, num_points)
     decided = np.zeros((num_frames, num_points), dtype=bool)
     for point, rows in tracks:
         if 0 <= point < num_points:
-            decided[:, point] = decided_frames(rows, num_frames)
+            decided[:, point] = decided_mask(rows, num_frames)
     return ViewWork(view=view, xy=xy, visible=visible, decided=decided)
 
 
