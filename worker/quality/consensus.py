@@ -45,6 +45,7 @@ from worker.quality.metrics import (
     AssignmentQC,
     DepthMaps,
     SurfaceCheck,
+    completeness,
     depth_visibility,
     error_issues,
     error_summary,
@@ -80,6 +81,12 @@ class ViewLabels:
     key: the assignment's id. view: index into the cameras list.
     xy: (F, P, 2) image px, NaN where there is no position. visible: (F, P) bool.
     working_time_s: the worker's active time, seconds, if known.
+    decided: (F, P) bool, where the position is the worker's own decision (placed, edited or
+        a tracking proposal from this view's images accepted); False where it only comes
+        from suggestions pre-filled from the other views and left unchanged
+        (worker.tracks.decided_mask). None: all of it (work without provenance). Undecided
+        positions never enter the consensus and are never scored, so a view pre-filled from
+        the others cannot agree with them by construction (leave-one-out holds).
     """
 
     key: str
@@ -87,6 +94,7 @@ class ViewLabels:
     xy: np.ndarray
     visible: np.ndarray
     working_time_s: float | None = None
+    decided: np.ndarray | None = None
 
 
 @dataclass
@@ -169,18 +177,33 @@ def check_labels(cameras: list[CameraModel], labels: list[ViewLabels]) -> tuple[
                              f"and visible (F, P), got {xy} and {vis}")
         if not 0 <= lab.view < len(cameras):
             raise ValueError(f"labels {lab.key!r}: view {lab.view} is not in 0..{len(cameras) - 1}")
+        if lab.decided is not None and np.shape(lab.decided) != (frames, points):
+            raise ValueError(f"labels {lab.key!r}: decided must have shape (F={frames}, "
+                             f"P={points}), got {np.shape(lab.decided)}")
         if lab.key in keys:
             raise ValueError(f"labels: key {lab.key!r} appears twice")
         keys.add(lab.key)
     return frames, points
 
 
+def decided_of(lab: ViewLabels) -> np.ndarray:
+    """(F, P) bool: where the label's position is the worker's own decision (everywhere for a
+    label without provenance)."""
+    if lab.decided is None:
+        return np.ones(np.shape(lab.visible), bool)
+    return np.asarray(lab.decided, bool)
+
+
+def _own_xy(lab: ViewLabels) -> np.ndarray:
+    """(F, P, 2) px of the label's own decisions, NaN where it has none or only suggestions."""
+    return np.where(decided_of(lab)[..., None], np.asarray(lab.xy, dtype=np.float64), np.nan)
+
+
 def _observations(labels: list[ViewLabels]) -> np.ndarray:
-    """(F*P, L, 2) px of every label's visible points, NaN elsewhere."""
-    cols = []
-    for lab in labels:
-        xy = np.asarray(lab.xy, dtype=np.float64)
-        cols.append(np.where(np.asarray(lab.visible, bool)[..., None], xy, np.nan))
+    """(F*P, L, 2) px of every label's visible points that the worker decided, NaN elsewhere
+    (pre-filled suggestions are the other views' consensus, not an observation of this one)."""
+    cols = [np.where(np.asarray(lab.visible, bool)[..., None], _own_xy(lab), np.nan)
+            for lab in labels]
     return np.stack(cols, axis=2).reshape(-1, len(labels), 2)
 
 
@@ -363,8 +386,13 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged:
             opts: HandOptions) -> AssignmentQC:
     """Metrics of one label. consensus (F, P, 3) world m; judged: the label against its
     leave-one-out references; surface: the view's depth map looked up at the consensus (None
-    without depth); motion: the hand's motion as the other labels' own tracks show it."""
-    xy = np.asarray(lab.xy, dtype=np.float64)
+    without depth); motion: the hand's motion as the other labels' own tracks show it.
+
+    Every metric of positions or visibility reads only the worker's own decisions
+    (ViewLabels.decided); completeness and visible_fraction read the whole label."""
+    decided = decided_of(lab)
+    sent_xy = np.asarray(lab.xy, dtype=np.float64)
+    xy = _own_xy(lab)
     visible = np.asarray(lab.visible, bool)
     errors = judged.errors
     # Motion and jitter are measured only where two other trusted views fix the point without
@@ -381,15 +409,23 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged:
     vis_metrics = dict.fromkeys(("visibility_disagreement", "occluded_on_surface",
                                  "visible_behind_surface"))
     if surface is not None:
-        vis_metrics = depth_visibility(visible, surface)
+        # A pre-filled visibility was suggested from this very depth map: no evidence.
+        vis_metrics = depth_visibility(visible, SurfaceCheck(surface.on_surface & decided,
+                                                             surface.hidden & decided))
     metrics.update(vis_metrics)
     metrics.update(track_metrics(xy, visible, judged_reference, lab.working_time_s))
+    metrics["completeness"] = completeness(sent_xy, visible)
     metrics["scored_fraction"] = num(scored.mean())
     # Checks of the label's own track, which hold where the views cannot decide.
     shown_xy = np.where(visible[..., None], xy, np.nan)
     metrics["track_jitter_px"] = track_jitter(shown_xy)
-    shown = visible & np.isfinite(xy).all(axis=-1)
-    provisional = bool(scored.sum() / max(int(shown.sum()), 1) < MIN_SCORED_FRACTION)
+    sent = visible & np.isfinite(sent_xy).all(axis=-1)
+    shown = sent & decided
+    metrics["decided_fraction"] = num(shown.sum() / sent.sum()) if sent.any() else None
+    # Too little of the worker's own work scored: the views cannot judge it (yet). A label
+    # whose every shown position is a suggestion has nothing to wait for (decide.py).
+    provisional = bool(scored.sum() / max(int(shown.sum()), 1) < MIN_SCORED_FRACTION) \
+        if shown.any() or not sent.any() else False
     # Where the views cannot decide, the track against the other views' own tracks: the
     # same clip's motion shakes every view's track alike, what is left over is the worker's
     # hand. (Views see the motion at different scales, so where a consensus judges the
@@ -400,8 +436,8 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged:
     metrics["moved_with_hand"] = moved_with(xy, motion, HAND_MOVES_PX) \
         if motion is not None else None
     per_joint, per_frame = per_point_and_frame(errors)
-    swaps = find_swaps(xy, visible, judged.reference, judged.spread, opts.label_sigma_px) \
-        if xy.shape[1] == 21 else []
+    swaps = find_swaps(xy, visible & decided, judged.reference, judged.spread,
+                       opts.label_sigma_px) if xy.shape[1] == 21 else []
     return AssignmentQC(key=lab.key, view=lab.view, metrics=metrics, per_joint=per_joint,
                         per_frame=per_frame, swaps=swaps, issues=_issues(judged, opts.outlier_px),
                         provisional=provisional)
@@ -549,8 +585,11 @@ def _suspects(report: HandReport, labels: list[ViewLabels], corrections: dict[st
 def _undone(lab: ViewLabels, swaps: list[dict]) -> ViewLabels:
     if not swaps:
         return lab
-    xy, visible = undo_swaps(np.asarray(lab.xy, np.float64), np.asarray(lab.visible, bool), swaps)
-    return ViewLabels(lab.key, lab.view, xy, visible, lab.working_time_s)
+    sent_xy = np.asarray(lab.xy, np.float64)
+    xy, visible = undo_swaps(sent_xy, np.asarray(lab.visible, bool), swaps)
+    # The decisions move with the points they belong to.
+    decided = None if lab.decided is None else undo_swaps(sent_xy, decided_of(lab), swaps)[1]
+    return ViewLabels(lab.key, lab.view, xy, visible, lab.working_time_s, decided)
 
 
 def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus: np.ndarray,
@@ -561,7 +600,8 @@ def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus
     changed = (np.asarray(lab.visible) != np.asarray(fitted.visible)) \
         | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1)
     reference = camera.project(consensus)
-    offset = np.where(np.asarray(lab.visible, bool)[..., None], sent_xy - reference, np.nan)
+    own = np.asarray(lab.visible, bool) & decided_of(lab)
+    offset = np.where(own[..., None], sent_xy - reference, np.nan)
     plain = normalised_errors(offset, judged.spread, sigma_px)
     return _Judged(errors=np.where(changed, plain, judged.errors),
                    raw=np.where(changed, np.linalg.norm(offset, axis=-1), judged.raw),
@@ -597,7 +637,10 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
     surfaces = {view: surface_check(cameras[view], consensus, dm, opts.surface_margin_m,
                                     opts.hidden_margin_m)
                 for view, dm in (depth or {}).items() if view in {lab.view for lab in labels}}
-    motion = others_motion({lab.key: np.asarray(lab.xy, np.float64) for lab in labels})
+    # Only the workers' own decisions witness the hand's motion (a label of suggestions alone
+    # is left out: it would count as a hand that stands still).
+    motion = others_motion({lab.key: _own_xy(lab) for lab in labels
+                            if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
     assignments = {}
     replay = {}
     for col, lab in enumerate(labels):
@@ -612,7 +655,7 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
             judged = _as_sent(lab, fit_labels[col], cameras[lab.view], consensus, judged,
                               opts.label_sigma_px)
         qc = _assess(lab, cameras[lab.view], consensus, judged, surfaces.get(lab.view),
-                     motion[lab.key], opts)
+                     motion.get(lab.key), opts)
         qc.provisional = qc.provisional or provisional
         assignments[lab.key] = qc
         replay[lab.key] = _replay(judged)

@@ -19,10 +19,17 @@ from typing import Literal
 import numpy as np
 
 from worker.quality.metrics import AssignmentQC
+from worker.tracking.checks import CHECK_OFFSET_PX
 from worker.tracks import format_spans
 
 # The consistent estimator of a normal distribution's sigma from the MAD.
 MAD_TO_SIGMA = 1.4826
+# Check suggestions (worker.tracking.checks) a worker kept unchanged although each was shown
+# CHECK_OFFSET_PX off the point, plain to anyone who looks: one may be a slip among corrected
+# ones (review); two are suggestions accepted without looking (reject). The metrics
+# checks_accepted and checks_corrected count them; work without suggestions has none.
+CHECKS_REVIEW = 1
+CHECKS_REJECT = 2
 
 
 @dataclass(frozen=True)
@@ -279,10 +286,12 @@ def _issue_sentence(issues: list[dict], names: list[str], limit: int = 3) -> str
 def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str]) -> Decision:
     """The outcome of one assignment.
 
-    reject: a clear fail (a reject threshold crossed, or a swap of fingers); review: a review
-    threshold crossed, or a reject-level fail on a provisional report (never auto-rejected);
-    approve otherwise. reasons are short and technical (for admins); feedback speaks to the
-    worker and names the joints, frames and distances.
+    reject: a clear fail (a reject threshold crossed, a swap of fingers, or CHECKS_REJECT
+    check suggestions kept unchanged); review: a review threshold crossed, one check
+    suggestion kept, nothing decided by the worker (every position a suggestion unchanged),
+    or a reject-level fail on a provisional report (never auto-rejected); approve otherwise.
+    reasons are short and technical (for admins); feedback speaks to the worker and names the
+    joints, frames and distances.
     """
     failures = _failures(qc.metrics, thresholds)
     swaps = [s for s in qc.swaps if s.get("kind") in ("swap", "mirror")]
@@ -294,11 +303,18 @@ def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str
     for level, name, value, limit, worse in worst.values():
         sign = ">" if worse == "above" else "<"
         reasons.append(f"{name} {value:.3g} {sign} {limit:.3g} ({level})")
-    clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values())
+    checks = _checks_level(qc.metrics)
+    if checks is not None:
+        reasons.append(_checks_reason(qc.metrics, checks))
+    undecided = _decided_nothing(qc.metrics)
+    if undecided:
+        reasons.append("decided nothing: every position came from suggestions unchanged")
+    clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values()) \
+        or checks == "reject"
     outcome: Outcome
     if clear_fail and not qc.provisional:
         outcome = "reject"
-    elif clear_fail or worst:
+    elif clear_fail or worst or checks or undecided:
         outcome = "review"
     else:
         outcome = "approve"
@@ -308,9 +324,47 @@ def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str
                     feedback=_feedback(qc, swaps, worst, thresholds, point_names, outcome))
 
 
+def _count(metrics: dict[str, float | None], name: str) -> int:
+    value = metrics.get(name)
+    return int(value) if value is not None else 0
+
+
+def _checks_level(metrics: dict[str, float | None]) -> Literal["review", "reject"] | None:
+    """How the check suggestions kept unchanged weigh (None: none kept)."""
+    accepted = _count(metrics, "checks_accepted")
+    if accepted >= CHECKS_REJECT:
+        return "reject"
+    return "review" if accepted >= CHECKS_REVIEW else None
+
+
+def _checks_reason(metrics: dict[str, float | None], level: str) -> str:
+    accepted = _count(metrics, "checks_accepted")
+    seen = accepted + _count(metrics, "checks_corrected")
+    verdict = "suggestions were accepted without looking" if level == "reject" \
+        else "a suggestion may have been accepted without looking (review)"
+    return (f"accepted {accepted} of {seen} check suggestions unchanged (each shown "
+            f"{CHECK_OFFSET_PX:.0f} px off the point): {verdict}")
+
+
+def _decided_nothing(metrics: dict[str, float | None]) -> bool:
+    """Every shown position is a pre-filled suggestion left unchanged: nothing of the worker's
+    own to judge. Reviewed, not rejected: the suggestions may well be right (a worker who
+    kept check suggestions is rejected by those)."""
+    return metrics.get("decided_fraction") == 0.0
+
+
 def _feedback(qc: AssignmentQC, swaps: list[dict], worst: dict[str, tuple],
               thresholds: dict[str, float], names: list[str], outcome: str) -> str:
     sentences = [_swap_sentence(s) for s in swaps]
+    accepted = _count(qc.metrics, "checks_accepted")
+    if accepted:
+        sentences.append(
+            f"You kept {accepted} suggested position(s) that were shown {CHECK_OFFSET_PX:.0f} px "
+            "off the point on purpose: look at every suggestion on its frame and drag it onto "
+            "the point before you accept it.")
+    if _decided_nothing(qc.metrics):
+        sentences.append("Every position you sent was a suggestion left unchanged: check each "
+                         "one on its frame and correct the ones that are off.")
     if outcome != "approve":
         issues = [i for i in qc.issues if not _explained_by_swap(i, swaps, names)]
         sentences.append(_issue_sentence(issues, names))
