@@ -162,7 +162,7 @@ export class AnnotationStore {
   setKeyframes(point, entries, options = {}) {
     this._checkPoint(point);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor(entries.map((e) => ({ ...e, point })));
+    const changes = this._changesFor(entries, point, null);
     return this._execute(options.label ?? "set keyframes", changes, options.gesture);
   }
 
@@ -177,7 +177,7 @@ export class AnnotationStore {
   setPose(frame, entries, options = {}) {
     this._checkFrame(frame);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor(entries.map((e) => ({ ...e, frame })));
+    const changes = this._changesFor(entries, null, frame);
     return this._execute(options.label ?? "set pose", changes, options.gesture);
   }
 
@@ -349,18 +349,21 @@ export class AnnotationStore {
   }
 
   /**
-   * The changes that entries {point, frame, x, y, visible, source?} or {point, frame, remove}
-   * make, skipping those that change nothing. Validates everything before anything is written.
-   * O(n) in the touched tracks' lengths plus the entries (no search per entry).
-   * @param {Array<(FrameEntry & PointEntry)>} entries
+   * The changes that entries {x, y, visible, source?} or {remove: true} make at their point and
+   * frame (the fixed `point`, else entry.point; the fixed `frame`, else entry.frame), skipping
+   * those that change nothing. Validates everything before anything is written. O(n) in the
+   * touched tracks' lengths plus the entries (no search per entry).
+   * @param {Array<FrameEntry|PointEntry>} entries
+   * @param {number|null} fixedPoint @param {number|null} fixedFrame
    */
-  _changesFor(entries) {
+  _changesFor(entries, fixedPoint, fixedFrame) {
     /** @type {Map<number, Map<number, Keyframe>>} */
     const tracks = new Map();
     const seen = new Set();
     const changes = [];
     for (const entry of entries) {
-      const { point, frame } = entry;
+      const point = fixedPoint ?? /** @type {PointEntry} */ (entry).point;
+      const frame = fixedFrame ?? /** @type {FrameEntry} */ (entry).frame;
       this._checkPoint(point);
       this._checkFrame(frame);
       const cell = point * this.numFrames + frame;
@@ -374,9 +377,10 @@ export class AnnotationStore {
         if (before) changes.push({ point, frame, before, after: null });
         continue;
       }
-      const where = `point ${point}, frame ${frame}`;
       const explicit = entry.source !== undefined;
-      const source = explicit ? checkSource(entry.source, where) : sourceAfterEdit(before);
+      const source = explicit
+        ? checkSource(entry.source, `point ${point}, frame ${frame}`)
+        : sourceAfterEdit(before);
       const after = this._makeKeyframe(frame, entry, source);
       // Writing a suggestion's own value again, without a source, is no edit of it.
       if (before && samePlace(before, after) && (!explicit || before.source === source)) continue;
