@@ -204,6 +204,15 @@ def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
     return sorted(k for k in keys if 0 <= k < frames)
 
 
+def keyframe_actions(tracks: list[list[list[float | None]]]) -> dict[str, int]:
+    """What a keyframe worker did to make ``tracks`` (P lists of [frame, x, y, visible01]
+    rows), counted by worker.synth.assisted's rule: a click per visible keyframe, a key per
+    occluded one (marking it occluded), no drags; navigation is free."""
+    visible = sum(int(bool(row[3])) for rows in tracks for row in rows)
+    placed = sum(len(rows) for rows in tracks)
+    return {"clicks": visible, "drags": 0, "keys": placed - visible, "keyframes_placed": placed}
+
+
 def _position(xy: np.ndarray) -> list[float | None]:
     if not np.isfinite(xy).all():
         return [None, None]

@@ -1,0 +1,365 @@
+"""Simulated assisted annotators: workers who take tracking proposals and pre-fill suggestions.
+
+Conventions as in worker.synth.annotators: one camera view, F frames, P points, positions in
+image px (x right, y down). A worker's output is P tracks of keyframe rows ``[frame, x, y,
+visible01]`` (placed by hand) or ``[frame, x, y, visible01, source]`` with source one of
+
+    tracked    an accepted tracking proposal (worker.tracking.lk), unchanged;
+    prefilled  an accepted pre-fill suggestion (the consensus of other views), unchanged;
+    edited     came from a suggestion and the worker moved it or changed its visibility;
+
+plus the actions it took. Every suggestion the worker is shown passes through the check cells
+of its assignment first (worker.tracking.checks.plant), exactly as the routes show them.
+
+Action counting (the same rule for annotators.keyframe_actions, today's keyframe worker):
+    click   placing a visible point on a frame (a new keyframe);
+    key     one key press: marking a keyframe occluded (a new occluded keyframe), asking for
+            tracking proposals (one per request, all points at once, as the route takes them),
+            accepting the proposals shown (one per request), accepting the pre-fill (one for
+            all points and frames), fixing a suggested visibility (one per keyframe);
+    drag    moving a suggested point to where the worker sees it;
+    navigation (changing frame or point, looking) is free.
+keyframes_placed counts the keyframes made by hand (clicks and occluded keyframes).
+
+Workers:
+    careful   clicks and drags to the truth plus its own Gaussian noise (CAREFUL_SIGMA_PX, one
+              draw per frame and point) and judges a shown marker against where it sees the
+              point: the truth plus a judging noise (JUDGE_SIGMA_PX, drawn apart). Keys by
+              hand only what tracking cannot give (the first and last frame, each visibility
+              change and the last visible frame before an occlusion), asks for proposals,
+              accepts them, then looks at every frame
+              between its keyframes: where the shown position (an accepted proposal, or the
+              interpolation where LK found nothing) is more than TOLERANCE_PX from where it
+              sees the point, it corrects the worst such frame of the span (a drag; a click
+              where there was no proposal) and asks again for the two halves, until every
+              frame is within tolerance or keyed. With a pre-fill it first accepts it, drags
+              what is beyond tolerance, fixes wrong visibility, and tracks only the gaps.
+    blind     keys by hand what the careful worker keys (the first and last frame and the
+              visibility changes, with the same care), accepts every proposal and the whole
+              pre-fill, corrects nothing: the check cells keep their offsets. Its labels are
+              as good as the suggestions, so only the check cells tell it apart.
+
+Pure numpy (and OpenCV through worker.tracking.lk); every random choice comes from ``rng``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from worker.synth.annotators import CAREFUL_SIGMA_PX
+from worker.tracking import checks
+from worker.tracking.lk import propose
+from worker.tracks import dense_track
+
+Source = Literal["placed", "tracked", "prefilled", "edited"]
+AssistedProfile = Literal["careful", "blind"]
+# How far (px) a shown position may be from where the careful worker sees the point before it
+# corrects it: 3 sigma of its click noise (the spread of its own keyframes), while a check cell
+# (15 px off) is always corrected.
+TOLERANCE_PX = 3.0 * CAREFUL_SIGMA_PX
+# Noise (px, per axis) of the careful worker's judgement of where a point is when it compares
+# a shown marker with the image: a comparison in place, without the motor noise of a click,
+# taken as half the click noise. An assumption, not a measurement: bench/assist.py
+# --judge-sigma 2 gives the cost of judging as noisily as clicking (more needless drags).
+JUDGE_SIGMA_PX = 0.5 * CAREFUL_SIGMA_PX
+# Rounds of asking for proposals after which the careful worker stops (each round halves or
+# settles every open span; a 72-frame clip needs at most about log2(72) + a few).
+MAX_ROUNDS = 20
+
+
+@dataclass(frozen=True)
+class Prefill:
+    """Pre-fill suggestions for one view, before its check cells are planted.
+
+    xy: (F, P, 2) image px, NaN where there is no suggestion.
+    visible: (F, P) bool, the suggested visibility (from the view's depth).
+    """
+
+    xy: np.ndarray
+    visible: np.ndarray
+
+
+@dataclass(frozen=True)
+class AssistSetting:
+    """What the page gives one assignment: the view's frames and the check cells' draw.
+
+    grey: (F, H, W) uint8 grey frames of the view (what the proposals route tracks on).
+    key: the check-cell key (worker.tracking.checks.check_key of the instance's signing key).
+    assignment_id: the database id of the assignment (the check cells depend on it).
+    prefill: the view's pre-fill suggestions, None where fewer than two other views are done.
+    """
+
+    grey: np.ndarray
+    key: bytes
+    assignment_id: int
+    prefill: Prefill | None = None
+
+
+@dataclass
+class Actions:
+    """What a worker did for one assignment (see the module docstring for the rule)."""
+
+    clicks: int = 0
+    drags: int = 0
+    keys: int = 0
+    keyframes_placed: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"clicks": self.clicks, "drags": self.drags, "keys": self.keys,
+                "keyframes_placed": self.keyframes_placed}
+
+    @property
+    def total(self) -> int:
+        return self.clicks + self.drags + self.keys
+
+
+@dataclass(frozen=True)
+class AssistedWork:
+    """One simulated assisted worker's annotation of one view.
+
+    tracks: P lists of keyframe rows, sorted by frame; a 5th element only when not "placed".
+    actions: {clicks, drags, keys, keyframes_placed}.
+    seen: (F, P, 2) px, where the worker clicks or drags each point to (truth plus its noise).
+    judged: (F, P, 2) px, where it sees each point when it judges a shown marker.
+    rounds: proposal requests made.
+    """
+
+    profile: str
+    tracks: list[list[list[Any]]]
+    actions: dict[str, int]
+    seen: np.ndarray
+    judged: np.ndarray
+    rounds: int
+
+
+@dataclass
+class _State:
+    """The worker's keyframes while it works: per point {frame: [f, x, y, vis01, source]}."""
+
+    rows: list[dict[int, list[Any]]]
+    actions: Actions = field(default_factory=Actions)
+    rounds: int = 0
+
+    def anchors(self, point: int) -> list[int]:
+        """Frames of the point's keyframes that are not accepted proposals, sorted."""
+        return sorted(f for f, r in self.rows[point].items() if r[4] != "tracked")
+
+    def plain(self, point: int) -> list[list[Any]]:
+        """The point's keyframes as 4-element rows (what interpolation and LK take)."""
+        return [r[:4] for _, r in sorted(self.rows[point].items())]
+
+
+def _position(xy: np.ndarray) -> list[float]:
+    return [round(float(xy[0]), 2), round(float(xy[1]), 2)]
+
+
+def _seen(truth: np.ndarray, size: tuple[int, int], rng: np.random.Generator,
+          sigma: float) -> np.ndarray:
+    """(F, P, 2) where a worker sees the points: truth plus Gaussian noise of ``sigma`` px,
+    inside the image (the page accepts 0 <= x < width)."""
+    width, height = size
+    seen = truth + rng.normal(0.0, sigma, truth.shape)
+    seen[..., 0] = np.clip(seen[..., 0], 0.0, width - 1.0)
+    seen[..., 1] = np.clip(seen[..., 1], 0.0, height - 1.0)
+    return seen
+
+
+def _place(state: _State, point: int, frame: int, seen: np.ndarray, visible: np.ndarray
+           ) -> None:
+    """A hand-made keyframe at the seen position: a click when visible, a key when not."""
+    vis = bool(visible[frame, point])
+    if not np.isfinite(seen[frame, point]).all():
+        state.rows[point][frame] = [frame, None, None, 0, "placed"]
+    else:
+        state.rows[point][frame] = [frame, *_position(seen[frame, point]), int(vis), "placed"]
+    state.actions.clicks += int(vis)
+    state.actions.keys += int(not vis)
+    state.actions.keyframes_placed += 1
+
+
+def _must_frames(visible: np.ndarray, free: np.ndarray) -> list[int]:
+    """Frames one point needs keyed by hand among the ``free`` ones (no keyframe yet): the
+    first and last, and each visibility change: the first frame of the new state, and the
+    last visible frame before an occlusion (it bounds a span that can be tracked).
+    visible, free: (F,) bool."""
+    frames = len(visible)
+    need = {0, frames - 1}
+    for f in np.flatnonzero(visible[1:] != visible[:-1]) + 1:
+        need |= {int(f)} | ({int(f) - 1} if visible[f - 1] else set())
+    return sorted(f for f in need if free[f])
+
+
+def _open_spans(state: _State, point: int) -> list[tuple[int, int]]:
+    """(k0, k1) between consecutive anchors of a point, both visible with a position, with
+    at least one inner frame."""
+    frames = state.anchors(point)
+    rows = state.rows[point]
+    return [(a, b) for a, b in itertools.pairwise(frames)
+            if b - a >= 2 and rows[a][3] and rows[b][3] and rows[a][1] is not None
+            and rows[b][1] is not None]
+
+
+def _shown_proposals(state: _State, setting: AssistSetting, spans: dict[int, list[tuple[int,
+                     int]]], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Proposals for the given points' spans as the route shows them: (F, P, 2) px with the
+    check cells moved off, and (F, P) ok."""
+    frames, points = setting.grey.shape[0], len(state.rows)
+    keyframes = [[state.rows[p][f][:4] for f in state.anchors(p)] if spans.get(p) else []
+                 for p in range(points)]
+    found = propose(setting.grey, keyframes)
+    shown = checks.plant(setting.key, setting.assignment_id, found.xy.transpose(1, 0, 2),
+                         found.ok.T, 0, frames, points, size[0], size[1])
+    return shown.transpose(1, 0, 2), found.ok
+
+
+def _accept(state: _State, point: int, span: tuple[int, int], xy: np.ndarray,
+            ok: np.ndarray) -> bool:
+    """Replace the span's accepted proposals with the new ones; whether any was taken."""
+    k0, k1 = span
+    rows = state.rows[point]
+    for f in range(k0 + 1, k1):
+        if f in rows and rows[f][4] == "tracked":
+            del rows[f]
+        if ok[f, point]:
+            rows[f] = [f, *_position(xy[f, point]), 1, "tracked"]
+    return bool(ok[k0 + 1:k1, point].any())
+
+
+def _worst(state: _State, point: int, span: tuple[int, int], judged: np.ndarray,
+           tolerance: float) -> int | None:
+    """The inner frame of a span whose shown position is furthest beyond tolerance from where
+    the worker sees the point (None when all are within)."""
+    k0, k1 = span
+    shown = dense_track(state.plain(point), judged.shape[0]).xy
+    inner = np.arange(k0 + 1, k1)
+    err = np.linalg.norm(shown[inner] - judged[inner, point], axis=1)
+    err = np.where(np.isfinite(err), err, np.inf)
+    if err.size == 0 or err.max() <= tolerance:
+        return None
+    return int(inner[int(np.argmax(err))])
+
+
+def _correct(state: _State, point: int, frame: int, seen: np.ndarray) -> None:
+    """Move the point to where the worker sees it: a drag of an accepted proposal, else a
+    click (a new keyframe where only the interpolation was shown)."""
+    rows = state.rows[point]
+    if frame in rows and rows[frame][4] == "tracked":
+        rows[frame] = [frame, *_position(seen[frame, point]), 1, "edited"]
+        state.actions.drags += 1
+    else:
+        rows[frame] = [frame, *_position(seen[frame, point]), 1, "placed"]
+        state.actions.clicks += 1
+        state.actions.keyframes_placed += 1
+
+
+def _track(state: _State, setting: AssistSetting, seen: np.ndarray, judged: np.ndarray,
+           size: tuple[int, int], tolerance: float | None) -> None:
+    """Ask for proposals over every open span, accept them, and (tolerance given: the careful
+    worker) correct each span's worst frame and ask again for the halves, until all hold.
+    tolerance None: the blind acceptor, one request, nothing corrected."""
+    spans = {p: _open_spans(state, p) for p in range(len(state.rows))}
+    while any(spans.values()) and state.rounds < MAX_ROUNDS:
+        xy, ok = _shown_proposals(state, setting, spans, size)
+        state.rounds += 1
+        state.actions.keys += 1
+        following: dict[int, list[tuple[int, int]]] = {}
+        taken = False
+        for point, open_spans in spans.items():
+            for span in open_spans:
+                taken |= _accept(state, point, span, xy, ok)
+        state.actions.keys += int(taken)
+        for point, open_spans in spans.items():
+            if tolerance is None:
+                continue
+            for span in open_spans:
+                frame = _worst(state, point, span, judged, tolerance)
+                if frame is None:
+                    continue
+                _correct(state, point, frame, seen)
+                following.setdefault(point, []).extend(
+                    s for s in ((span[0], frame), (frame, span[1])) if s[1] - s[0] >= 2)
+        spans = following
+
+
+def _take_prefill(state: _State, setting: AssistSetting, prefill: Prefill, seen: np.ndarray,
+                  judged: np.ndarray, visible: np.ndarray, size: tuple[int, int],
+                  tolerance: float | None) -> None:
+    """Accept the pre-fill (one key) as the route shows it; the careful worker then fixes
+    wrong visibility (a key each) and drags what is beyond tolerance where it sees the point."""
+    frames, points = visible.shape
+    suggested = np.isfinite(prefill.xy).all(axis=2)
+    shown = checks.plant(setting.key, setting.assignment_id, prefill.xy.transpose(1, 0, 2),
+                         suggested.T, 0, frames, points, size[0], size[1]).transpose(1, 0, 2)
+    for f, p in zip(*np.nonzero(suggested), strict=True):
+        state.rows[p][f] = [int(f), *_position(shown[f, p]), int(prefill.visible[f, p]),
+                            "prefilled"]
+    state.actions.keys += int(suggested.any())
+    if tolerance is None:
+        return
+    for f, p in zip(*np.nonzero(suggested), strict=True):
+        row = state.rows[p][f]
+        if bool(row[3]) != bool(visible[f, p]):
+            row[3], row[4] = int(visible[f, p]), "edited"
+            state.actions.keys += 1
+        off = np.hypot(row[1] - judged[f, p, 0], row[2] - judged[f, p, 1])
+        if visible[f, p] and off > tolerance:
+            row[1], row[2] = _position(seen[f, p])
+            row[4] = "edited"
+            state.actions.drags += 1
+
+
+def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: AssistSetting,
+                      profile: str, rng: np.random.Generator,
+                      tolerance: float = TOLERANCE_PX,
+                      judge_sigma: float = JUDGE_SIGMA_PX) -> AssistedWork:
+    """One simulated assisted worker's tracks for one view.
+
+    truth: (F, P, 2) true positions, image px (NaN where unknown); visible: (F, P) bool, the
+    true visibility; setting: the view's frames, check-cell draw and pre-fill; profile:
+    "careful" or "blind"; tolerance, judge_sigma: px, the careful worker's (TOLERANCE_PX,
+    JUDGE_SIGMA_PX).
+    """
+    truth, visible = np.asarray(truth, np.float64), np.asarray(visible, bool)
+    frames = setting.grey.shape[0] if setting.grey.ndim == 3 else -1
+    if truth.ndim != 3 or truth.shape[2] != 2 or visible.shape != truth.shape[:2] \
+            or truth.shape[0] != frames:
+        raise ValueError(f"expected truth (F, P, 2), visible (F, P) and grey (F, H, W), got "
+                         f"{truth.shape}, {visible.shape} and {setting.grey.shape}")
+    if profile not in ("careful", "blind"):
+        raise ValueError(f"unknown assisted profile {profile!r}; one of careful, blind")
+    size = (setting.grey.shape[2], setting.grey.shape[1])
+    seen = _seen(truth, size, rng, CAREFUL_SIGMA_PX)
+    judged = _seen(truth, size, rng, judge_sigma)
+    state = _State(rows=[{} for _ in range(truth.shape[1])])
+    limit = tolerance if profile == "careful" else None
+    if setting.prefill is not None:
+        _take_prefill(state, setting, setting.prefill, seen, judged, visible, size, limit)
+    for p in range(truth.shape[1]):
+        free = np.array([f not in state.rows[p] for f in range(frames)])
+        for f in _must_frames(visible[:, p], free):
+            _place(state, p, f, seen, visible)
+    _track(state, setting, seen, judged, size, limit)
+    return AssistedWork(profile=profile, tracks=stored_tracks(state.rows),
+                        actions=state.actions.as_dict(), seen=seen, judged=judged,
+                        rounds=state.rounds)
+
+
+def stored_tracks(rows: Sequence[dict[int, list[Any]]]) -> list[list[list[Any]]]:
+    """Keyframe rows as saved: sorted by frame, the source written only when not "placed"."""
+    return [[r if r[4] != "placed" else r[:4] for _, r in sorted(point.items())]
+            for point in rows]
+
+
+def plain_rows(track: Sequence[Sequence[Any]]) -> list[list[Any]]:
+    """A track's keyframe rows without their sources ([frame, x, y, visible01])."""
+    return [list(r[:4]) for r in track]
+
+
+def row_source(row: Sequence[Any]) -> str:
+    """A keyframe row's source ("placed" for a 4-element row)."""
+    return str(row[4]) if len(row) > 4 else "placed"
