@@ -104,7 +104,7 @@ def check_coco(archive: zipfile.ZipFile, tmp: Path, sequence_id: int) -> None:
         anns = gt.loadAnns(gt.getAnnIds(imgIds=[image["id"]], catIds=[HAND_CATEGORY_ID]))
         expected = []
         for point in stored[image["serial"]].keyframes:
-            [(_, x, y, visible)] = [k for k in point if k[0] == image["frame"]]
+            [(_, x, y, visible, *_source)] = [k for k in point if k[0] == image["frame"]]
             inside = x is not None and -0.5 <= x < width - 0.5 and -0.5 <= y < height - 0.5
             expected.append((x, y, (2 if visible else 1) if inside else 0))
         if not any(v for *_, v in expected):

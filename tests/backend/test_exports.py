@@ -151,11 +151,27 @@ def _unlabelled_sequence() -> int:
         return seq.id
 
 
+def _mark_first_hand_keyframe_tracked(sequence_id: int) -> int:
+    """Stores the first keyframe of point 0 of the first approved hand assignment as an accepted
+    tracking proposal; returns that assignment's id."""
+    with session_scope() as s:
+        assignment = s.scalars(
+            select(Assignment).join(Task, Assignment.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, Task.kind == "hand",
+                   Assignment.status == "approved").order_by(Assignment.id)).first()
+        assert assignment is not None
+        track = next(t for t in assignment.tracks if t.point_index == 0)
+        first, *rest = track.keyframes
+        track.keyframes = [list(first[:4]) + ["tracked"], *rest]
+        return assignment.id
+
+
 def test_exports_read_back_in_each_format_s_own_reader_as_the_stored_labels_and_solve(
     client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
 ) -> None:
     _solve(client, admin_headers, approved, {"optimiser": "default"})
     unlabelled = _unlabelled_sequence()
+    tracked_id = _mark_first_hand_keyframe_tracked(approved)
     state = _export(client, admin_headers, {"format": "json", "all": True,
                                             "include": "submitted"})
     # The whole project: the sequence without labels is left out, by name.
@@ -172,7 +188,18 @@ def test_exports_read_back_in_each_format_s_own_reader_as_the_stored_labels_and_
     assert len(hand["points"]) == 21 and len(hand["points"][0]["dense"]) == 6
     stored = next(w for w in export_checks.accepted_work(approved)
                   if w.assignment_id == hand["assignment_id"])
-    assert [p["keyframes"] for p in hand["points"]] == stored.keyframes
+    # Every exported keyframe is the stored row with its source spelled out ("placed" when the
+    # stored row leaves it out).
+    assert [p["keyframes"] for p in hand["points"]] == [
+        [row[:4] + [row[4] if len(row) == 5 else "placed"] for row in point]
+        for point in stored.keyframes]
+    sources = [k[4] for w in document["work"] for p in w["points"] for k in p["keyframes"]]
+    assert sources.count("tracked") == 1 and set(sources) == {"placed", "tracked"}
+    marked = next(w for w in document["work"] if w["assignment_id"] == tracked_id)
+    assert marked["points"][0]["keyframes"][0][4] == "tracked"
+    marked["points"][0]["keyframes"][0][4] = "guessed"
+    with pytest.raises(jsonschema.ValidationError):  # the schema names the allowed sources
+        jsonschema.validate(document, jsonfmt.schema())
 
     state = _export(client, admin_headers, {"format": "coco", "sequences": [approved]})
     export_checks.check_coco(_download(client, admin_headers, state), tmp_path, approved)

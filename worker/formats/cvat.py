@@ -36,14 +36,18 @@ skeleton label is written as CVAT writes one: a ``<label>`` of type skeleton who
 holds an element node (``<circle data-type="element node" data-element-id data-node-id
 data-label-name>``) per point and an edge (``<line data-type="edge" data-node-from
 data-node-to>``) per bone, 1-based, followed by one points ``<label>`` per point with the
-skeleton as ``<parent>`` and one mutable select attribute, ``position`` (placed, none,
-unplaced), that tells a position from a placeholder.
+skeleton as ``<parent>`` and two mutable select attributes: ``position`` (placed, none,
+unplaced), that tells a position from a placeholder, and ``keyframe_source`` (placed, tracked,
+prefilled, edited; default placed), the keyframe's provenance (:data:`worker.tracks.SOURCES`;
+named so as not to be taken for CVAT's own track ``source``, manual or auto).
 
 ``<track id label source>`` holds ``<skeleton frame keyframe="1" outside="0" occluded="0"
 z_order="0">`` shapes at every frame where one of its points has a keyframe, each listing every
 point as ``<points label keyframe outside occluded points="x,y">`` (2 decimals, as CVAT
-writes) with its ``position`` attribute. Points without a keyframe at that frame carry the value
-CVAT interpolates there, with keyframe="0". Our model maps onto CVAT's as follows:
+writes) with its ``position`` and ``keyframe_source`` attributes. Points without a keyframe at
+that frame carry the value CVAT interpolates there, with keyframe="0" (and, as CVAT does for a
+mutable attribute, the attributes of the keyframe before). An unplaced placeholder is "placed",
+the attribute's default. Our model maps onto CVAT's as follows:
 
 - A keyframe with a position: a CVAT keyframe, outside=0, occluded = not visible, position
   placed. CVAT interpolates single points linearly and copies ``occluded`` from the keyframe
@@ -71,9 +75,10 @@ declarations are refused, elements are released track by track) into a :class:`C
 (name, num_frames, width, height, labels, tracks). Like CVAT's importer it takes only element
 shapes with keyframe="1". Each :class:`CvatTrack` gives per point its keyframes and occlusion
 spans (inclusive [start, end] frames where the point is placed but occluded, from CVAT's
-semantics: a keyframe's flags hold until the next). Where the ``position`` attribute is absent
-(a file authored in CVAT), an outside keyframe before the point's first positioned one is
-taken as unplaced and a later one as an occluded keyframe without position. Malformed input
+semantics: a keyframe's flags hold until the next) with their sources. Where the ``position``
+attribute is absent (a file authored in CVAT), an outside keyframe before the point's first
+positioned one is taken as unplaced and a later one as an occluded keyframe without position;
+where ``keyframe_source`` is absent the keyframe is "placed". Malformed input
 raises :class:`CvatFormatError` naming the problem and where it is.
 """
 
@@ -94,13 +99,22 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS
-from worker.tracks import Keyframe, as_keyframes, dense_points, frame_spans, validate_keyframes
+from worker.tracks import (
+    SOURCES,
+    Keyframe,
+    KeyframeSource,
+    as_keyframes,
+    dense_points,
+    frame_spans,
+    validate_keyframes,
+)
 
 VERSION = "1.1"
 POSITION_ATTRIBUTE = "position"
 PLACED, NO_POSITION, UNPLACED = "placed", "none", "unplaced"
 POSITION_VALUES: tuple[str, ...] = (PLACED, NO_POSITION, UNPLACED)
 OBJECT_LANDMARKS: tuple[str, ...] = ("landmark_1", "landmark_2")
+SOURCE_ATTRIBUTE = "keyframe_source"
 
 # Characters XML 1.0 cannot carry, even escaped.
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
@@ -184,12 +198,16 @@ def _svg(label: SkeletonLabel) -> str:
     return "".join(parts)
 
 
+def _select_attribute(name: str, values: Sequence[str]) -> str:
+    """A mutable select attribute of a label, its first value the default."""
+    return (f"<attribute><name>{name}</name><mutable>True</mutable>"
+            f"<input_type>select</input_type><default_value>{values[0]}</default_value>"
+            f"<values>{escape(chr(10).join(values))}</values></attribute>")
+
+
 def _labels_xml(labels: Sequence[SkeletonLabel]) -> str:
-    position = (
-        "<attributes><attribute><name>position</name><mutable>True</mutable>"
-        "<input_type>select</input_type><default_value>placed</default_value>"
-        f"<values>{escape(chr(10).join(POSITION_VALUES))}</values></attribute></attributes>"
-    )
+    position = (f"<attributes>{_select_attribute(POSITION_ATTRIBUTE, POSITION_VALUES)}"
+                f"{_select_attribute(SOURCE_ATTRIBUTE, SOURCES)}</attributes>")
     out = []
     for label in labels:
         out.append(f"<label><name>{escape(label.name)}</name><type>skeleton</type>"
@@ -201,7 +219,8 @@ def _labels_xml(labels: Sequence[SkeletonLabel]) -> str:
 
 @dataclass(frozen=True)
 class _Element:
-    """One point's CVAT keyframe: position (px), flags and the ``position`` attribute."""
+    """One point's CVAT keyframe: position (px), flags and the ``position`` and
+    ``keyframe_source`` attributes."""
 
     frame: int
     x: float
@@ -209,6 +228,7 @@ class _Element:
     outside: bool
     occluded: bool
     position: str
+    source: KeyframeSource = "placed"
 
 
 def _placement(kfs: Sequence[Keyframe], index: int, fallback: tuple[float, float]
@@ -232,12 +252,13 @@ def _point_elements(kfs: Sequence[Keyframe], first_frame: int,
         elements.append(_Element(first_frame, x, y, True, False, UNPLACED))
     for i, k in enumerate(kfs):
         if k.x is not None and k.y is not None:
-            elements.append(_Element(k.frame, k.x, k.y, False, not k.visible, PLACED))
+            elements.append(_Element(k.frame, k.x, k.y, False, not k.visible, PLACED, k.source))
         else:
             x, y = _placement(kfs, i, tuple(fallback[k.frame]))
-            elements.append(_Element(k.frame, x, y, True, True, NO_POSITION))
+            elements.append(_Element(k.frame, x, y, True, True, NO_POSITION, k.source))
     if all(e.outside for e in elements):  # cvat-ai/cvat#8844
-        elements = [_Element(e.frame, e.x, e.y, False, True, e.position) for e in elements]
+        elements = [_Element(e.frame, e.x, e.y, False, True, e.position, e.source)
+                    for e in elements]
     return elements
 
 
@@ -250,13 +271,14 @@ def _cvat_value(elements: Sequence[_Element], frames: Sequence[int], frame: int)
         k1 = elements[i + 1]
         t = (frame - k0.frame) / (k1.frame - k0.frame)
         x, y = x + (k1.x - x) * t, y + (k1.y - y) * t
-    return _Element(frame, x, y, k0.outside, k0.occluded, k0.position)
+    return _Element(frame, x, y, k0.outside, k0.occluded, k0.position, k0.source)
 
 
 def _points_xml(name: str, e: _Element, keyframe: bool) -> str:
     return (f"<points label={_q(name)} keyframe=\"{int(keyframe)}\" outside=\"{int(e.outside)}\" "
             f"occluded=\"{int(e.occluded)}\" points=\"{e.x:.2f},{e.y:.2f}\">"
-            f'<attribute name="position">{e.position}</attribute></points>')
+            f'<attribute name="{POSITION_ATTRIBUTE}">{e.position}</attribute>'
+            f'<attribute name="{SOURCE_ATTRIBUTE}">{e.source}</attribute></points>')
 
 
 class CvatVideoWriter:
@@ -474,15 +496,22 @@ def _parse_meta(meta: ET.Element) -> tuple[str, int, int, int, dict[str, Skeleto
     return task.findtext("name") or "", num_frames, width, height, labels
 
 
-def _position_attribute(points: ET.Element, where: str) -> str | None:
+def _select_value(points: ET.Element, name: str, values: Sequence[str],
+                  where: str) -> str | None:
+    """The value of the select attribute ``name`` of a point shape, None when absent."""
     for attribute in points.iterfind("attribute"):
-        if attribute.get("name") == POSITION_ATTRIBUTE:
+        if attribute.get("name") == name:
             value = (attribute.text or "").strip()
-            if value not in POSITION_VALUES:
-                raise CvatFormatError(f"{where}: position {value!r} is not one of "
-                                      f"{', '.join(POSITION_VALUES)}")
+            if value not in values:
+                raise CvatFormatError(f"{where}: {name} {value!r} is not one of "
+                                      f"{', '.join(values)}")
             return value
     return None
+
+
+def _source_of(value: str) -> KeyframeSource:
+    """A value _select_value checked against SOURCES, typed as a source."""
+    return next(s for s in SOURCES if s == value)
 
 
 def _to_keyframes(elements: list[_Element], num_frames: int
@@ -498,10 +527,10 @@ def _to_keyframes(elements: list[_Element], num_frames: int
         seen_position |= position == PLACED
         end = elements[i + 1].frame if i + 1 < len(elements) else num_frames
         if position == PLACED:
-            keyframes.append(Keyframe(e.frame, e.x, e.y, not e.occluded))
+            keyframes.append(Keyframe(e.frame, e.x, e.y, not e.occluded, e.source))
             occluded[e.frame:end] = e.occluded
         elif position == NO_POSITION:
-            keyframes.append(Keyframe(e.frame, None, None, False))
+            keyframes.append(Keyframe(e.frame, None, None, False, e.source))
             occluded[e.frame:end] = True
     spans = tuple((int(a), int(b)) for a, b in frame_spans(occluded))
     return tuple(keyframes), spans
@@ -535,11 +564,13 @@ def _parse_track(track: ET.Element, labels: dict[str, SkeletonLabel],
             here = f"{at} point {name!r}"
             keyframe, outside = _flag(points, "keyframe", here), _flag(points, "outside", here)
             occluded, (x, y) = _flag(points, "occluded", here), _xy(points, here)
-            position = _position_attribute(points, here) or ""
+            position = _select_value(points, POSITION_ATTRIBUTE, POSITION_VALUES, here) or ""
+            source = _select_value(points, SOURCE_ATTRIBUTE, SOURCES, here) or "placed"
             if keyframe:  # CVAT's importer takes keyframe element shapes only
                 if frame in per_point[name]:
                     raise CvatFormatError(f"{here}: a second keyframe at the same frame")
-                per_point[name][frame] = _Element(frame, x, y, outside, occluded, position)
+                per_point[name][frame] = _Element(frame, x, y, outside, occluded, position,
+                                                  _source_of(source))
     read = [_to_keyframes([shapes[f] for f in sorted(shapes)], num_frames)
             for shapes in per_point.values()]
     return CvatTrack(track_id, label, track.get("source", "manual"),

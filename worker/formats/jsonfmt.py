@@ -2,13 +2,18 @@
 
 Pure: plain values in, one JSON document (bytes) out. A document holds the sequence (cameras
 with K, distortion and camera-to-world extrinsics; objects; hands), the labelled work (one entry
-per assignment: the raw keyframes of every point, the dense per-frame track, who did it, how
-long it took and its QC outcome) and the current solve (per frame: labelled flag and reason,
-MANO pose_m, the 21 joints, object poses, reprojection error per view and joint, depth RMS) with
-its consensus (the solved joints reprojected into each view, with that view's distortion).
+per assignment: the keyframes of every point with their source, the dense per-frame track, who
+did it, how long it took and its QC outcome) and the current solve (per frame: labelled flag and
+reason, MANO pose_m, the 21 joints, object poses, reprojection error per view and joint, depth
+RMS) with its consensus (the solved joints reprojected into each view, with that view's
+distortion).
 
 Units: pixels (x right, y down, as OpenCV projects), metres, world = the capture's master frame.
 JSON has no NaN: a missing number is null.
+
+A keyframe is written [frame, x, y, visible01, source] with its source always spelled out
+("placed", "tracked", "prefilled" or "edited"; see worker.tracks), whereas stored rows leave out
+"placed". Format version 2 added the source; version 1 wrote [frame, x, y, visible01].
 """
 
 from __future__ import annotations
@@ -21,8 +26,10 @@ from typing import Any
 
 import numpy as np
 
+from worker.tracks import parse_keyframe
+
 FORMAT_NAME = "dexlabel-json"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SCHEMA_FILE = "jsonfmt.schema.json"
 
 
@@ -44,6 +51,22 @@ def finite(values: Any) -> Any:
     if isinstance(values, (np.floating, np.integer)):
         return finite(values.item())
     return values
+
+
+def keyframe_row(raw: Any) -> list[Any]:
+    """A keyframe (a stored row, a dict or a :class:`worker.tracks.Keyframe`) as exported:
+    [frame, x px, y px, visible01, source], the source always written."""
+    kf = parse_keyframe(raw)
+    return [kf.frame, kf.x, kf.y, 1 if kf.visible else 0, kf.source]
+
+
+def _work_entry(work: Mapping[str, Any]) -> dict[str, Any]:
+    """One work entry with its points' keyframes in the exported form."""
+    entry = dict(work)
+    if "points" in entry:
+        entry["points"] = [{**point, "keyframes": [keyframe_row(k) for k in point["keyframes"]]}
+                           for point in entry["points"]]
+    return entry
 
 
 def dense_track(xy: np.ndarray, visible: np.ndarray) -> list[list[list[Any]]]:
@@ -75,7 +98,7 @@ def sequence_document(sequence: Mapping[str, Any], cameras: Sequence[Mapping[str
         "format": FORMAT_NAME, "version": FORMAT_VERSION, "include": include,
         "sequence": dict(sequence), "cameras": [dict(c) for c in cameras],
         "objects": [dict(o) for o in objects], "hands": [dict(h) for h in hands],
-        "work": [dict(w) for w in work], "solve": None if solve is None else dict(solve),
+        "work": [_work_entry(w) for w in work], "solve": None if solve is None else dict(solve),
     })
 
 
