@@ -143,6 +143,25 @@ export class AnnotateApi {
   }
 
   /**
+   * Tracking proposals between keyframes (nothing is stored).
+   * @param {{tracks: object[], first_frame?: number, last_frame?: number}} body  saved rows
+   * @returns {Promise<{first_frame: number, last_frame: number, points: Array<{point: number,
+   *   xy: Array<number[]|null>, ok: boolean[], fb_error: Array<number|null>}>}>}
+   */
+  proposals(body) {
+    return this.request("POST", "/api/annotate/proposals", body);
+  }
+
+  /**
+   * Pre-fill from the other views' accepted work, and their epipolar data.
+   * @returns {Promise<{available: boolean, reason: string|null, views: number,
+   *   points: object[], epipolar: object[]}>}
+   */
+  suggestions() {
+    return this.request("GET", "/api/annotate/suggestions");
+  }
+
+  /**
    * Saves and submits (same body as saveTracks).
    * @param {{version: number, tracks: object[], edit_count: number, working_time_s: number}} body
    * @returns {Promise<{status: string, version: number}>}

@@ -9,6 +9,7 @@
  */
 
 import { AnnotateApi, ApiError, postExternalSubmit, readPageParams } from "./api.js";
+import { startAssist } from "./assist-draw.js";
 import { AnnotationStore } from "./core/store.js";
 import { Editor } from "./editor.js";
 import { renderInstructions, renderShortcuts } from "./instructions.js";
@@ -331,7 +332,12 @@ async function main() {
   Object.assign(window.__dexlabel, { page, editor: page.editor, store: page.store });
   if (data.mode === "review") showReview(data);
   wireInput(page);
-  if (data.mode === "edit") startSaver(page);
+  page.assist = startAssist(page, $);
+  window.__dexlabel.assist = page.assist;
+  if (data.mode === "edit") {
+    startSaver(page);
+    page.assist.loadSuggestions();
+  }
   window.__dexlabel.saver = page.saver;
   try {
     await preload(page, loading);

@@ -35,6 +35,19 @@ const OUTLINE = "rgba(0, 0, 0, 0.85)";
  * @property {{polygon?: number[][], box?: number[]}|null} highlight  image px
  */
 
+/** @type {Set<(ctx: CanvasRenderingContext2D, scene: Scene) => void>} */
+const layers = new Set();
+
+/**
+ * Adds a layer drawn over the image and the skeleton, under the points (assistance: ghosts,
+ * epipolar lines). @param {(ctx: CanvasRenderingContext2D, scene: Scene) => void} draw
+ * @returns {() => void} removes it
+ */
+export function addSceneLayer(draw) {
+  layers.add(draw);
+  return () => layers.delete(draw);
+}
+
 /**
  * Renders the whole scene.
  * @param {CanvasRenderingContext2D} ctx
@@ -51,6 +64,7 @@ export function drawScene(ctx, scene) {
   }
   if (scene.highlight) drawHighlight(ctx, scene.transform, scene.highlight);
   drawSkeleton(ctx, scene);
+  for (const draw of layers) draw(ctx, scene);
   scene.points.forEach((value, i) => {
     if (i !== scene.active) drawPoint(ctx, scene.transform, value, scene.colors[i], false);
   });

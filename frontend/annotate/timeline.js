@@ -91,6 +91,7 @@ export class Timeline {
     ctx.clearRect(0, 0, this.width, this.height);
     this._drawHeader(ctx);
     this.tracks.forEach((keyframes, point) => this._drawRow(ctx, point, keyframes));
+    if (this.onRedraw) this.onRedraw(ctx);
   }
 
   _drawHeader(ctx) {

@@ -1,0 +1,222 @@
+/**
+ * The assistance's view: ghosts and epipolar lines on the frame, proposed frames on the
+ * timeline, and the assistance buttons, keys and status line of the points panel.
+ *
+ *   tracking proposal   hollow cyan ring, its path through the span as a thin cyan line
+ *   suggestion          hollow magenta ring (dashed where the other views say occluded)
+ *   epipolar line       thin line across the image, one colour per labelled view, tagged with
+ *                       the last 4 characters of the view's serial
+ *
+ * Positions are image px mapped through the editor's Transform; marker sizes are screen px.
+ */
+
+import { Assist, clipLine } from "./assist.js";
+import { addSceneLayer } from "./render.js";
+
+export const TRACK_GHOST = "#35d0ff";
+export const SUGGEST_GHOST = "#ff5fd2";
+const LINE_COLORS = ["#ffe066", "#8ce99a", "#ffa94d", "#b197fc", "#74c0fc"];
+/** Ghost ring radius, screen px: outside the point's marker (5 px) and halo (10 px). */
+const GHOST_RADIUS_PX = 13;
+const OUTLINE = "rgba(0, 0, 0, 0.8)";
+
+/**
+ * @typedef {import("./core/transform.js").Transform} Transform
+ * @typedef {{ghosts: Array<{point: number, xy: number[]|null, path: number[][]}>,
+ *            suggestion: {point: number, xy: number[], visible: boolean}|null,
+ *            lines: import("./assist.js").EpipolarLine[]}} Layer
+ */
+
+/**
+ * Draws one frame's assistance. Returns what was drawn (lines with their image-px ends), which
+ * the page keeps for tests.
+ * @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {Layer} layer
+ * @param {{width: number, height: number}} image  px
+ */
+export function drawAssistLayer(ctx, tf, layer, image) {
+  const lines = [];
+  layer.lines.forEach((line, i) => {
+    const ends = clipLine(line, image.width, image.height);
+    if (!ends) return;
+    drawEpipolar(ctx, tf, ends, line.serial.slice(-4), LINE_COLORS[i % LINE_COLORS.length]);
+    lines.push({ ...line, ends });
+  });
+  for (const g of layer.ghosts) drawPath(ctx, tf, g.path);
+  for (const g of layer.ghosts) if (g.xy) drawRing(ctx, tf, g.xy, TRACK_GHOST, false);
+  if (layer.suggestion) {
+    drawRing(ctx, tf, layer.suggestion.xy, SUGGEST_GHOST, !layer.suggestion.visible);
+  }
+  return { lines, ghosts: layer.ghosts.filter((g) => g.xy), suggestion: layer.suggestion };
+}
+
+/** @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {number[][]} ends */
+function drawEpipolar(ctx, tf, ends, tag, color) {
+  const [a, b] = ends.map(([x, y]) => tf.toScreen(x, y));
+  ctx.save();
+  ctx.globalAlpha = 0.85;
+  ctx.lineWidth = 1.25;
+  ctx.strokeStyle = color;
+  ctx.beginPath();
+  ctx.moveTo(a.x, a.y);
+  ctx.lineTo(b.x, b.y);
+  ctx.stroke();
+  // The tag sits a little way in from the end nearer the image's top-left.
+  const [from, to] = a.x + a.y <= b.x + b.y ? [a, b] : [b, a];
+  const len = Math.hypot(to.x - from.x, to.y - from.y) || 1;
+  const at = Math.min(40, len / 2);
+  const x = from.x + ((to.x - from.x) * at) / len;
+  const y = from.y + ((to.y - from.y) * at) / len;
+  ctx.globalAlpha = 1;
+  ctx.font = "11px system-ui, sans-serif";
+  const w = ctx.measureText(tag).width + 6;
+  ctx.fillStyle = "rgba(0, 0, 0, 0.7)";
+  ctx.fillRect(x - w / 2, y - 8, w, 15);
+  ctx.fillStyle = color;
+  ctx.fillText(tag, x - w / 2 + 3, y + 3);
+  ctx.restore();
+}
+
+/** A proposal's path through its span, thin. */
+function drawPath(ctx, tf, path) {
+  if (path.length < 2) return;
+  ctx.save();
+  ctx.globalAlpha = 0.7;
+  ctx.lineWidth = 1;
+  ctx.strokeStyle = TRACK_GHOST;
+  ctx.beginPath();
+  path.forEach(([x, y], i) => {
+    const s = tf.toScreen(x, y);
+    if (i === 0) ctx.moveTo(s.x, s.y);
+    else ctx.lineTo(s.x, s.y);
+  });
+  ctx.stroke();
+  ctx.restore();
+}
+
+/** A hollow ring with a dark outline (dashed: suggested occluded). */
+function drawRing(ctx, tf, [x, y], color, dashed) {
+  const s = tf.toScreen(x, y);
+  ctx.save();
+  ctx.beginPath();
+  ctx.arc(s.x, s.y, GHOST_RADIUS_PX, 0, 2 * Math.PI);
+  ctx.lineWidth = 4;
+  ctx.strokeStyle = OUTLINE;
+  ctx.stroke();
+  ctx.setLineDash(dashed ? [3, 3] : []);
+  ctx.lineWidth = 2;
+  ctx.strokeStyle = color;
+  ctx.stroke();
+  ctx.restore();
+}
+
+/**
+ * Proposed frames on the timeline: a cyan bar along the top of each frame's cell.
+ * @param {CanvasRenderingContext2D} ctx
+ * @param {{cellCentre: (point: number, frame: number) => {x: number, y: number},
+ *          cellWidth: number, rowHeight: number}} timeline
+ * @param {Array<{point: number, frames: number[]}>} marks
+ */
+export function drawTimelineMarks(ctx, timeline, marks) {
+  ctx.fillStyle = TRACK_GHOST;
+  const w = Math.max(1, timeline.cellWidth - 1);
+  const h = Math.max(2, Math.floor(timeline.rowHeight / 3));
+  for (const { point, frames } of marks) {
+    for (const f of frames) {
+      const c = timeline.cellCentre(point, f);
+      ctx.fillRect(c.x - w / 2, c.y - timeline.rowHeight / 2 + 1, w, h);
+    }
+  }
+}
+
+/**
+ * The assistance key of a keydown, run; false when the key is not one of ours.
+ *   T / Shift+T  track the active point here / every point     Enter  accept   (Esc: discard)
+ *   U / Shift+U  use suggestions for the active point / all     E      epipolar lines
+ * @param {import("./assist.js").Assist} assist @param {KeyboardEvent} e
+ */
+export function assistKey(assist, e) {
+  if (e.ctrlKey || e.metaKey || e.altKey) return false;
+  const key = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+  switch (key) {
+    case "t": assist.track(e.shiftKey); return true;
+    case "Enter": return assist.accept();
+    case "u": assist.useSuggestions(e.shiftKey); return true;
+    case "e": assist.toggleLines(); return true;
+    default: return false;
+  }
+}
+
+/**
+ * Binds the panel's buttons; returns the function that brings the panel up to date.
+ * @param {import("./assist.js").Assist} assist
+ * @param {(id: string) => HTMLElement} $ @param {() => boolean} editable
+ * @returns {() => void}
+ */
+export function wireAssistPanel(assist, $, editable) {
+  const on = (id, fn) => $(id).addEventListener("click", (e) => {
+    fn(e);
+    if (e.currentTarget instanceof HTMLElement) e.currentTarget.blur();
+  });
+  on("assist-track", () => assist.track(false));
+  on("assist-track-all", () => assist.track(true));
+  on("assist-accept", () => assist.accept());
+  on("assist-discard", () => assist.discard());
+  on("assist-use", (e) => assist.useSuggestions(e.shiftKey));
+  on("assist-lines", () => assist.toggleLines());
+  return () => {
+    const can = editable();
+    $("assist").hidden = !can;
+    for (const id of ["assist-track", "assist-track-all"]) {
+      /** @type {HTMLButtonElement} */ ($(id)).disabled = !can || assist.status.kind === "busy";
+    }
+    for (const id of ["assist-accept", "assist-discard"]) {
+      /** @type {HTMLButtonElement} */ ($(id)).disabled = !can || !assist.proposals;
+    }
+    $("assist-use").hidden = assist.suggestions.size === 0;
+    $("assist-lines").hidden = assist.epipolar.length === 0;
+    $("assist-lines").setAttribute("aria-pressed", String(assist.showLines));
+    const status = $("assist-status");
+    status.textContent = assist.status.text;
+    status.dataset.kind = assist.status.kind;
+    $("suggest-note").textContent = assist.suggestNote;
+  };
+}
+
+/**
+ * Starts the assistance of a page: the canvas layer, the timeline marks, the panel and the
+ * keys. Writes only while `page` is in edit mode and not locked.
+ * @param {any} page  app.js's page object
+ * @param {(id: string) => HTMLElement} $
+ * @returns {Assist}
+ */
+export function startAssist(page, $) {
+  const { editor, timeline, task } = page;
+  const editable = () => page.data.mode === "edit" && !editor.readOnly && !page.stopped;
+  let updatePanel = () => {};
+  const assist = new Assist({
+    store: page.store, api: page.api, editable,
+    where: () => ({ frame: editor.frame, active: editor.active }),
+    onChange: () => {
+      editor.render();
+      timeline.redraw();
+      updatePanel();
+    },
+  });
+  assist.drawn = { lines: [], ghosts: [], suggestion: null };
+  addSceneLayer((ctx, scene) => {
+    const layer = assist.layer(editor.frame, editor.active);
+    assist.drawn = drawAssistLayer(ctx, scene.transform, layer, task);
+  });
+  timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
+  updatePanel = wireAssistPanel(assist, $, editable);
+  page.refreshHooks.push(updatePanel);
+  window.addEventListener("keydown", (e) => {
+    const t = e.target;
+    const typing = t instanceof HTMLElement &&
+      (t.isContentEditable || ["INPUT", "TEXTAREA", "SELECT"].includes(t.tagName));
+    if (typing || document.querySelector("dialog[open]") || !editable()) return;
+    const handled = e.key === "Escape" ? assist.discard() : assistKey(assist, e);
+    if (handled) e.preventDefault();
+  }, true);
+  return assist;
+}

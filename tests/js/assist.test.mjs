@@ -1,0 +1,215 @@
+// Assisted annotation: spans, proposal and pre-fill writes, re-tracks after a correction,
+// epipolar lines.
+import assert from "node:assert/strict";
+import { test } from "node:test";
+
+import {
+  Assist, allSpans, anchorRows, clipLine, countTracked, epipolarLines, prefillEntries,
+  proposalEntries, retrackSpans, spanAround, trackedText,
+} from "../../frontend/annotate/assist.js";
+import { AnnotationStore } from "../../frontend/annotate/core/store.js";
+
+const kf = (frame, x, y, source = "placed", visible = true) => ({ frame, x, y, visible, source });
+
+test("spanAround: between the hand-set keyframes around the frame, tracked ones skipped", () => {
+  const keyframes = [kf(0, 10, 10), kf(4, 14, 10, "tracked"), kf(9, 19, 10), kf(20, 30, 10)];
+  assert.deepEqual(spanAround(keyframes, 4), [[0, 9]]);
+  assert.deepEqual(spanAround(keyframes, 0), [[0, 9]]);
+  assert.deepEqual(spanAround(keyframes, 9), [[9, 20]]);
+  assert.deepEqual(spanAround(keyframes, 20), [[9, 20]]);
+  assert.deepEqual(spanAround(keyframes, 25), []);
+  assert.deepEqual(spanAround([kf(0, 1, 1), kf(1, 2, 2)], 0), [], "adjacent frames: nothing");
+  const occluded = [kf(0, 1, 1), kf(6, 2, 2, "placed", false)];
+  assert.deepEqual(spanAround(occluded, 3), [], "an occluded end is not tracked from");
+});
+
+test("allSpans and anchorRows leave tracked keyframes out", () => {
+  const keyframes = [kf(0, 1, 2), kf(3, 4, 5, "tracked"), kf(6, 7, 8, "edited"),
+    kf(7, 7, 8), kf(12, 9, 9, "prefilled")];
+  assert.deepEqual(allSpans(keyframes), [[0, 6], [7, 12]]);
+  assert.deepEqual(anchorRows(keyframes),
+    [[0, 1, 2, 1], [6, 7, 8, 1], [7, 7, 8, 1], [12, 9, 9, 1]]);
+});
+
+test("proposalEntries: ok proposals become tracked, lost frames drop old tracked keyframes", () => {
+  const keyframes = [kf(2, 0, 0), kf(4, 5, 5, "tracked"), kf(5, 6, 6, "tracked"), kf(6, 9, 9),
+    kf(8, 1, 1)];
+  const proposal = {
+    point: 0, first: 2, last: 8, spans: [[2, 8]],
+    xy: [null, [3, 3], [4, 4], [5.5, 5.5], null, [7, 7], null],
+    ok: [false, true, false, true, false, true, false],
+  };
+  assert.deepEqual(proposalEntries(keyframes, proposal), [
+    { frame: 3, x: 3, y: 3, visible: true, source: "tracked" },
+    { frame: 4, remove: true },
+    { frame: 5, x: 5.5, y: 5.5, visible: true, source: "tracked" },
+    { frame: 7, x: 7, y: 7, visible: true, source: "tracked" },
+  ]);
+  const counts = countTracked([proposal]);
+  assert.deepEqual(counts, { tracked: 3, total: 5 });
+  assert.equal(trackedText({ tracked: 12, total: 14 }),
+    "12 of 14 frames tracked; 2 left to interpolation");
+});
+
+test("retrackSpans: the sides of a correction that hold tracked keyframes", () => {
+  const keyframes = [kf(0, 0, 0), kf(1, 1, 0, "tracked"), kf(2, 2, 0, "tracked"),
+    kf(3, 3, 0, "edited"), kf(4, 4, 0, "tracked"), kf(6, 6, 0), kf(8, 8, 0)];
+  assert.deepEqual(retrackSpans(keyframes, 3), [[0, 3], [3, 6]]);
+  assert.deepEqual(retrackSpans(keyframes, 6), [[3, 6]]);
+  assert.deepEqual(retrackSpans(keyframes, 8), [], "no tracked keyframe beside it");
+  assert.deepEqual(retrackSpans(keyframes, 2), [], "a tracked keyframe is no correction");
+});
+
+test("prefillEntries: every suggested frame except those keyed by hand", () => {
+  const keyframes = [kf(0, 1, 1), kf(1, 2, 2, "tracked"), kf(2, 3, 3, "edited")];
+  const suggestion = { xy: [[5, 5], [6, 6], [7, 7], null, [9, 9]],
+    visible: [true, null, true, true, false] };
+  assert.deepEqual(prefillEntries(keyframes, suggestion), [
+    { frame: 1, x: 6, y: 6, visible: true, source: "prefilled" },
+    { frame: 4, x: 9, y: 9, visible: false, source: "prefilled" },
+  ]);
+});
+
+test("epipolarLines: l = F [x, y, 1], normalised, and clipped to the image", () => {
+  // A pure translation along x between the views: F = [t]x with t = (1, 0, 0) maps (x, y) to
+  // the horizontal line through y.
+  const F = [[0, 0, 0], [0, 0, -1], [0, 1, 0]];
+  const epipolar = [{ serial: "cam-000123", F, xy: [[[30, 40], null]] },
+    { serial: "cam-9", F: [[0, 0, 0], [0, 0, 0], [0, 0, 0]], xy: [[[1, 1], null]] }];
+  const lines = epipolarLines(epipolar, 0, 0);
+  assert.equal(lines.length, 1, "a degenerate F gives no line");
+  const { a, b, c } = lines[0];
+  assert.ok(Math.abs(Math.hypot(a, b) - 1) < 1e-12);
+  assert.ok(Math.abs(a * 100 + b * 40 + c) < 1e-9, "passes through y = 40");
+  assert.deepEqual(epipolarLines(epipolar, 0, 1), []);
+  assert.deepEqual(clipLine(lines[0], 640, 480), [[0, 40], [640, 40]]);
+  const diagonal = { a: Math.SQRT1_2, b: -Math.SQRT1_2, c: 0 };  // y = x
+  assert.deepEqual(clipLine(diagonal, 100, 50), [[0, 0], [50, 50]]);
+  assert.equal(clipLine({ a: 0, b: 1, c: -600 }, 640, 480), null, "y = 600 misses");
+});
+
+/** A page's assistance on a real store; the proposals route answers from `track`. */
+function newAssist(track, { suggestions = null } = {}) {
+  const store = new AnnotationStore({ numPoints: 2, numFrames: 12, width: 640, height: 480 });
+  const calls = [];
+  const api = {
+    async proposals(body) {
+      calls.push(body);
+      const first = body.first_frame;
+      const last = body.last_frame;
+      return {
+        first_frame: first, last_frame: last,
+        points: body.tracks.map(({ point, keyframes }) => {
+          const frames = Array.from({ length: last - first + 1 }, (_, i) => first + i);
+          const keyed = new Set(keyframes.map((r) => r[0]));
+          const xy = frames.map((f) => (keyed.has(f) ? null : track(point, f, keyframes)));
+          return { point, xy, ok: xy.map(Boolean), fb_error: xy.map(() => 0.1) };
+        }),
+      };
+    },
+    async suggestions() {
+      return suggestions || { available: false, reason: "needs 2 other views", views: 0 };
+    },
+  };
+  const where = { frame: 5, active: 0 };
+  const assist = new Assist({ store, api, editable: () => true, where: () => where,
+    onChange: () => {}, retrackDelayMs: 1 });
+  return { store, assist, calls, where };
+}
+
+const settle = async (assist) => {
+  for (let i = 0; i < 100 && assist.pending; i++) await new Promise((r) => setTimeout(r, 5));
+  assert.equal(assist.pending, false);
+};
+
+test("Track then Accept writes tracked keyframes in one undo step; lost frames stay", async () => {
+  // The tracker holds at every frame but 7; positions x = 10 f.
+  const { store, assist, calls } = newAssist((p, f) => (f === 7 ? null : [10 * f, 50]));
+  store.placePoint(0, 0, 0, 50);
+  store.placePoint(0, 11, 110, 50);
+  assert.equal(await assist.track(false), true);
+  assert.deepEqual(calls[0], { tracks: [{ point: 0, keyframes: [[0, 0, 50, 1], [11, 110, 50, 1]] }],
+    first_frame: 0, last_frame: 11 });
+  assert.equal(assist.status.text,
+    "9 of 10 frames tracked; 1 left to interpolation. Enter accepts, Esc discards.");
+  assert.deepEqual(assist.layer(5, 0).ghosts[0].xy, [50, 50]);
+  assert.deepEqual(assist.timelineMarks()[0].frames, [1, 2, 3, 4, 5, 6, 8, 9, 10]);
+  assert.equal(store.keyframes(0).length, 2, "nothing written before Accept");
+  assert.equal(assist.accept(), true);
+  const keyframes = store.keyframes(0);
+  assert.deepEqual(keyframes.map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11]);
+  assert.deepEqual(keyframes.map((k) => k.source),
+    ["placed", ...Array(9).fill("tracked"), "placed"]);
+  assert.equal(assist.proposals, null);
+  store.undo();
+  assert.equal(store.keyframes(0).length, 2, "one undo takes the whole span back");
+});
+
+test("Escape's discard writes nothing; read-only pages never track", async () => {
+  const { store, assist } = newAssist((p, f) => [f, f]);
+  store.placePoint(0, 0, 0, 0);
+  store.placePoint(0, 10, 10, 10);
+  await assist.track(false);
+  assert.equal(assist.discard(), true);
+  assert.equal(assist.accept(), false);
+  assert.equal(store.keyframes(0).length, 2);
+  assist.editable = () => false;
+  assert.equal(await assist.track(false), false);
+});
+
+test("a correction inside a tracked run re-tracks both sides from it, once", async () => {
+  // The tracker interpolates linearly between the anchors it is given.
+  const linear = (p, f, rows) => {
+    const before = rows.filter((r) => r[0] < f).at(-1);
+    const after = rows.find((r) => r[0] > f);
+    if (!before || !after) return null;
+    const t = (f - before[0]) / (after[0] - before[0]);
+    return [before[1] + t * (after[1] - before[1]), before[2] + t * (after[2] - before[2])];
+  };
+  const { store, assist, calls } = newAssist(linear);
+  store.placePoint(0, 0, 0, 100);
+  store.placePoint(0, 10, 100, 100);
+  await assist.track(false);
+  assist.accept();
+  assert.equal(store.keyframeAt(0, 5).x, 50);
+  // The worker drags frame 5 up by 20 px: it becomes "edited", then frames 1-4 and 6-9 follow.
+  store.setKeyframe(0, 5, { x: 50, y: 80, visible: true }, { gesture: 1 });
+  assert.equal(store.keyframeAt(0, 5).source, "edited");
+  await settle(assist);
+  assert.equal(calls.length, 2);
+  assert.deepEqual(calls[1].tracks[0].keyframes, [[0, 0, 100, 1], [5, 50, 80, 1], [10, 100, 100, 1]]);
+  assert.deepEqual([calls[1].first_frame, calls[1].last_frame], [0, 10]);
+  assert.equal(store.keyframeAt(0, 3).y, 88);
+  assert.equal(store.keyframeAt(0, 7).y, 88);
+  assert.equal(store.keyframeAt(0, 3).source, "tracked");
+  store.undo();
+  assert.equal(store.keyframeAt(0, 3).y, 100, "the re-track is its own undo step");
+  assert.equal(store.keyframeAt(0, 5).y, 80);
+  await settle(assist);
+  assert.equal(calls.length, 2, "undo does not re-track");
+});
+
+test("suggestions: a quiet reason, or prefilled keyframes around the hand-set ones", async () => {
+  const none = newAssist(() => null);
+  await none.assist.loadSuggestions();
+  assert.equal(none.assist.suggestNote, "needs 2 other views");
+  assert.equal(none.assist.useSuggestions(true), false);
+
+  const xy = Array.from({ length: 12 }, (_, f) => [100 + f, 200]);
+  const visible = Array.from({ length: 12 }, (_, f) => (f === 6 ? false : null));
+  const { store, assist, where } = newAssist(() => null, { suggestions: {
+    available: true, reason: null, views: 3, min_views: 2,
+    points: [{ point: 0, xy, visible }], epipolar: [] } });
+  await assist.loadSuggestions();
+  assert.equal(assist.suggestNote, "Suggestions from 3 other views");
+  store.placePoint(0, 0, 90, 190);
+  assert.deepEqual(assist.layer(3, 0).suggestion, { point: 0, xy: [103, 200], visible: true });
+  where.active = 0;
+  assert.equal(assist.useSuggestions(false), true);
+  const keyframes = store.keyframes(0);
+  assert.equal(keyframes.length, 12);
+  assert.deepEqual([keyframes[0].x, keyframes[0].source], [90, "placed"]);
+  assert.deepEqual([keyframes[6].visible, keyframes[6].x, keyframes[6].source],
+    [false, 106, "prefilled"]);
+  assert.equal(assist.layer(3, 0).suggestion, null, "a used suggestion is no longer a ghost");
+});
