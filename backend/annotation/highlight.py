@@ -1,4 +1,9 @@
-"""The outline of an object in one view at its initial pose, for object tasks."""
+"""The outline of an object in one view at its initial pose, for object tasks.
+
+The outline is in image px of the view. It holds at the clip's first frame (frame 0: the
+sequence's frames are the clip's, and the initial pose is the object's pose there); the page
+refuses a landmark placed off it on that frame and QC masks frame 0 with it.
+"""
 
 from __future__ import annotations
 
@@ -14,9 +19,22 @@ from backend.storage import Storage
 from worker.geometry.cameras import project_points
 from worker.geometry.mesh_io import read_mesh
 
+# The frame of the clip where the outline holds (the initial pose's frame).
+OUTLINE_FRAME = 0
+
+
+def object_label(name: str) -> str:
+    """The object's name as a worker reads it: "025_mug" -> "mug", "006_mustard_bottle" ->
+    "mustard bottle" (YCB names lead with their number); other names lose only underscores."""
+    head, _, rest = name.partition("_")
+    words = rest if head.isdigit() and rest else name
+    return words.replace("_", " ").strip() or "object"
+
 
 def object_highlight(storage: Storage, obj: SceneObject, camera: Camera) -> dict[str, Any] | None:
-    """{"polygon": [[x, y], ...]} image px: the convex hull of the object's projected mesh.
+    """{"polygon": [[x, y], ...], "frame": 0, "label": "mug"}: the convex hull (image px) of
+    the object's projected mesh at its initial pose, the clip frame it holds for, and the name
+    the page calls the object by.
 
     None when the object has no initial pose or lies entirely outside the image; an admin
     can then draw a box instead.
@@ -41,4 +59,5 @@ def object_highlight(storage: Storage, obj: SceneObject, camera: Camera) -> dict
     hull[:, 1] = np.clip(hull[:, 1], 0, camera.height - 1)
     if cv2.contourArea(hull) < 4.0:
         return None
-    return {"polygon": [[round(float(x), 2), round(float(y), 2)] for x, y in hull]}
+    return {"polygon": [[round(float(x), 2), round(float(y), 2)] for x, y in hull],
+            "frame": OUTLINE_FRAME, "label": object_label(obj.name)}

@@ -135,8 +135,8 @@ function buildPage(data, api, params) {
   const editor = new Editor({ canvas: $("view"), task, store, onUpdate: (u) => refresh(u) });
   const pointList = new PointList($("point-list"), task, (p) => editor.select(p));
   const timeline = new Timeline($("timeline"), {
-    numFrames: task.num_frames, colors: task.point_colors,
-    rowHeight: task.kind === "hand" ? 8 : 16,
+    numFrames: task.num_frames, colors: task.point_colors, names: task.point_names,
+    rowHeight: task.kind === "hand" ? 15 : 22,
     onSeek: (frame, point) => {
       if (point !== null) editor.select(point);
       editor.goto(frame);

@@ -1,7 +1,10 @@
 /**
  * Keyboard shortcuts of the annotation page (listed for workers in instructions.js SHORTCUTS).
- * Space toggles playback on release unless it was held to pan (Space+drag).
+ * Space toggles playback on release unless it was held to pan (Space+drag). Digits pick a point
+ * (core/tools.js pointForKey: 1-9, 0 = 10, Shift adds 10, W = wrist on hands).
  */
+
+import { pointForKey } from "./core/tools.js";
 
 /**
  * @param {import("./editor.js").Editor} editor
@@ -67,6 +70,11 @@ function handleKey(editor, e) {
   if (ctrl && key === "z") return (e.shiftKey ? editor.redo() : editor.undo()) || true;
   if (ctrl && key === "y") return editor.redo() || true;
   if (ctrl || e.altKey) return false;
+  const picked = pointForKey(editor.task.kind, editor.numPoints, e);
+  if (picked !== null) {
+    editor.select(picked);
+    return true;
+  }
   switch (key) {
     case "ArrowLeft": editor.step(e.shiftKey ? -10 : -1); return true;
     case "ArrowRight": editor.step(e.shiftKey ? 10 : 1); return true;
@@ -75,8 +83,20 @@ function handleKey(editor, e) {
     case "o": editor.toggleOccluded(); return true;
     case "n": editor.nextPoint(); return true;
     case "f": editor.fit(); return true;
+    case "c": editor.copyPreviousPose(); return true;
+    case "h": editor.setHidden(editor.active, !editor.hidden.has(editor.active)); return true;
+    case "g": return focusFrameInput();
     case "Delete":
     case "Backspace": editor.deleteKeyframe(); return true;
     default: return false;
   }
+}
+
+/** Puts the cursor in the go-to-frame box (key G). @returns {boolean} whether there is one */
+function focusFrameInput() {
+  const input = document.getElementById("goto-frame");
+  if (!(input instanceof HTMLInputElement)) return false;
+  input.focus();
+  input.select();
+  return true;
 }

@@ -1,8 +1,25 @@
 /**
  * The page's small DOM pieces: the point list, the banner, the save status and the loading bar.
  * They only display what they are told; app.js decides what.
+ *
+ * Each point list row shows the point's key (core/tools.js jointKeys) and two view toggles,
+ * hide and lock, whose clicks go to the `onToggle` callback.
  */
 
+/** Small icons of the hide and lock toggles (16 x 16 SVG, drawn in currentColor). */
+const EYE_ICON = '<svg viewBox="0 0 16 16" aria-hidden="true"><path d="M1 8c2-3.5 4.5-5 7-5s5 ' +
+  '1.5 7 5c-2 3.5-4.5 5-7 5S3 11.5 1 8z" fill="none" stroke="currentColor" stroke-width="1.5"/>' +
+  '<circle cx="8" cy="8" r="2.2" fill="currentColor"/></svg>';
+const LOCK_ICON = '<svg viewBox="0 0 16 16" aria-hidden="true"><rect x="3" y="7" width="10" ' +
+  'height="7" rx="1" fill="currentColor"/><path d="M5 7V5a3 3 0 0 1 6 0v2" fill="none" ' +
+  'stroke="currentColor" stroke-width="1.5"/></svg>';
+
+/** "Shift+3" -> "⇧3" (the list is narrow; the title says it in full). @param {string} key */
+function shortKey(key) {
+  return key.replace("Shift+", "\u21e7");
+}
+
+import { jointKeys } from "./core/tools.js";
 import { displayName, escapeHtml } from "./instructions.js";
 
 /** What the point list says about a point in the current frame. */
@@ -26,25 +43,67 @@ export function pointState(v) {
 export class PointList {
   /**
    * @param {HTMLElement} container
-   * @param {{point_names: string[], point_colors: string[]}} task
+   * @param {{kind: string, point_names: string[], point_colors: string[]}} task
    * @param {(point: number) => void} onSelect
+   * @param {(point: number, what: "hide"|"lock") => void} [onToggle]
    */
-  constructor(container, task, onSelect) {
-    container.innerHTML = task.point_names.map((name, i) =>
-      `<li><button type="button" class="point-row" data-point="${i}" data-state="unplaced">` +
-      `<span class="swatch" style="background:${escapeHtml(task.point_colors[i])}"></span>` +
-      `<span class="point-name">${i} ${escapeHtml(displayName(name))}</span>` +
-      `<span class="point-state">${STATE_TEXT.unplaced}</span></button></li>`).join("");
+  constructor(container, task, onSelect, onToggle = () => {}) {
+    const keys = jointKeys(task.kind, task.point_names.length);
+    container.innerHTML = task.point_names.map((name, i) => {
+      const label = `${i} ${escapeHtml(displayName(name))}`;
+      const key = keys[i] ? `<kbd class="point-key" title="Key ${keys[i]}">` +
+        `${escapeHtml(shortKey(keys[i]))}</kbd>` : "<span></span>";
+      return `<li class="point-item" data-point="${i}">` +
+        `<button type="button" class="point-row" data-point="${i}" data-state="unplaced">` +
+        `<span class="swatch" style="background:${escapeHtml(task.point_colors[i])}"></span>` +
+        `<span class="point-name">${label}</span>${key}` +
+        `<span class="point-state">${STATE_TEXT.unplaced}</span></button>` +
+        `<button type="button" class="point-toggle point-hide" data-toggle="hide" ` +
+        `aria-pressed="false" title="Hide ${label} (H)">${EYE_ICON}</button>` +
+        `<button type="button" class="point-toggle point-lock" data-toggle="lock" ` +
+        `aria-pressed="false" title="Lock ${label}: no click or drag moves it">${LOCK_ICON}` +
+        "</button></li>";
+    }).join("");
     /** @type {HTMLButtonElement[]} */
     this.rows = [...container.querySelectorAll(".point-row")];
+    /** @type {HTMLLIElement[]} */
+    this.items = [...container.querySelectorAll(".point-item")];
     this._states = this.rows.map(() => "");
     this._keyed = this.rows.map(() => false);
     this._active = -1;
+    /** Hide/lock clicks: (point, "hide"|"lock"); wiring.js may set it later. */
+    this.onToggle = onToggle;
     container.addEventListener("click", (e) => {
-      const row = e.target instanceof Element ? e.target.closest(".point-row") : null;
-      if (!(row instanceof HTMLElement)) return;
-      onSelect(Number(row.dataset.point));
-      row.blur();  // keys (Space, arrows) belong to the editor, not to a focused button
+      const target = e.target instanceof Element ? e.target : null;
+      const toggle = target ? target.closest(".point-toggle") : null;
+      const row = target ? target.closest(".point-row") : null;
+      const item = target ? target.closest(".point-item") : null;
+      if (toggle instanceof HTMLElement && item instanceof HTMLElement) {
+        this.onToggle(Number(item.dataset.point), /** @type {"hide"|"lock"} */ (toggle.dataset.toggle));
+        toggle.blur();
+      } else if (row instanceof HTMLElement) {
+        onSelect(Number(row.dataset.point));
+        row.blur();  // keys (Space, arrows) belong to the editor, not to a focused button
+      }
+    });
+  }
+
+  /**
+   * Shows which points are hidden and locked.
+   * @param {ReadonlySet<number>} hidden @param {ReadonlySet<number>} locked
+   */
+  setViewState(hidden, locked) {
+    this.items.forEach((item, p) => {
+      const isHidden = hidden.has(p);
+      const isLocked = locked.has(p);
+      if (item.dataset.hidden === String(isHidden) && item.dataset.locked === String(isLocked)) {
+        return;
+      }
+      item.dataset.hidden = String(isHidden);
+      item.dataset.locked = String(isLocked);
+      const [hide, lock] = item.querySelectorAll(".point-toggle");
+      hide.setAttribute("aria-pressed", String(isHidden));
+      lock.setAttribute("aria-pressed", String(isLocked));
     });
   }
 
@@ -60,7 +119,7 @@ export class PointList {
       const row = this.rows[i];
       row.dataset.state = state;
       row.classList.toggle("keyed", keyed);
-      row.lastElementChild.textContent = STATE_TEXT[state] + (keyed && state === "occluded"
+      row.querySelector(".point-state").textContent = STATE_TEXT[state] + (keyed && state === "occluded"
         ? " (keyframe)" : "");
       this._states[i] = state;
       this._keyed[i] = keyed;

@@ -8,9 +8,14 @@
  *                               into selecting a neighbour)
  *   drag a point                moves the point under the cursor, the nearest one: never a
  *                               neighbour (Transform.hitTest), and it does not jump to the cursor
+ *   Shift+drag a point          moves the whole skeleton (every unlocked placed point)
+ *   Alt+drag or Ctrl+drag       moves the point and the joints after it toward the fingertip
+ *                               (both, as some desktops take Alt+drag for moving windows and
+ *                               macOS takes Ctrl+click for the context menu, refused here)
+ *   hidden points               cannot be grabbed; locked ones are not moved by any drag
  *   right/middle drag, Space+drag   pans; wheel zooms about the cursor
  *
- * A drag is one undo step (a gesture id shared by its edits).
+ * A drag is one undo step (a gesture id shared by its edits), a group drag included.
  */
 
 /** A press within this distance (screen px) of a point grabs it. */
@@ -51,7 +56,10 @@ class CanvasPointer {
     this.canvas = editor.canvas;
     this.gesture = 0;
     /** @type {null|{mode: string, id: number, x: number, y: number, lastX: number,
-     *          lastY: number, point?: number, grabDx?: number, grabDy?: number}} */
+     *          lastY: number, point?: number, grabDx?: number, grabDy?: number,
+     *          group?: "skeleton"|"chain"|null, startX?: number, startY?: number,
+     *          origin?: Array<{point: number, x: number, y: number, visible: boolean}>|null}}
+     *   group drags move from `origin` by the cursor's image px since (startX, startY) */
     this.press = null;
   }
 
@@ -61,10 +69,11 @@ class CanvasPointer {
     return { x: e.clientX - r.left, y: e.clientY - r.top };
   }
 
-  /** The nearest point within reach of a canvas position, or -1. */
+  /** The nearest shown point within reach of a canvas position, or -1. */
   pointUnder(s) {
     const { editor } = this;
-    return editor.transform.hitTest(editor.pointsHere(), s.x, s.y, HIT_RADIUS_PX, editor.active);
+    const shown = editor.pointsHere().map((v, p) => (editor.hidden.has(p) ? null : v));
+    return editor.transform.hitTest(shown, s.x, s.y, HIT_RADIUS_PX, editor.active);
   }
 
   /** @param {PointerEvent} e */
@@ -88,7 +97,10 @@ class CanvasPointer {
     const v = editor.store.valueAt(hit, editor.frame);
     const at = editor.transform.toImage(s.x, s.y);
     this.gesture += 1;
-    this.press = { ...base, mode: "grab", point: hit, grabDx: v.x - at.x, grabDy: v.y - at.y };
+    const group = e.shiftKey ? "skeleton" : (e.altKey || e.ctrlKey) ? "chain" : null;
+    this.press = { ...base, mode: "grab", point: hit, grabDx: v.x - at.x, grabDy: v.y - at.y,
+      group, startX: at.x, startY: at.y };
+    if (group) e.preventDefault();
   }
 
   /** @param {PointerEvent} e */
@@ -105,8 +117,9 @@ class CanvasPointer {
       editor.panBy(s.x - press.lastX, s.y - press.lastY);
       this.hooks.onPan();
     } else if (press.mode === "grab" && moved) {
-      press.mode = "drag";
+      press.mode = press.group ? "group" : "drag";
       editor.select(press.point);
+      if (press.group) this.startGroup(press);
     } else if (press.mode === "click" && moved) {
       press.mode = "none";
     }
@@ -115,9 +128,30 @@ class CanvasPointer {
       editor.movePoint(press.point, at.x + press.grabDx, at.y + press.grabDy,
         `drag-${this.gesture}`);
       this.canvas.style.cursor = "grabbing";
+    } else if (press.mode === "group" && press.origin) {
+      const at = editor.transform.toImage(s.x, s.y);
+      editor.moveGroup(press.origin, at.x - press.startX, at.y - press.startY,
+        `group-${this.gesture}`);
+      this.canvas.style.cursor = "grabbing";
     }
     press.lastX = s.x;
     press.lastY = s.y;
+  }
+
+  /**
+   * A group drag starts: which points move, from where. Nothing moves when the grabbed point
+   * itself is locked (a lock holds against every drag).
+   * @param {any} press
+   */
+  startGroup(press) {
+    const { editor } = this;
+    const refusal = editor.locked.has(press.point) ? editor.refusal(press.point) : null;
+    if (refusal || editor.readOnly) {
+      if (refusal) editor.onMessage(refusal, "error");
+      press.origin = null;
+      return;
+    }
+    press.origin = editor.groupOf(press.point, press.group);
   }
 
   /** @param {PointerEvent} e @param {boolean} cancelled */

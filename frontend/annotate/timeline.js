@@ -1,17 +1,25 @@
 /**
- * The timeline: one row per point across the clip, showing where the point is placed
- * (interpolated: a pale bar), occluded (hatched), and its keyframes (diamonds; hollow when the
- * keyframe says occluded), with a cursor at the current frame. Clicking a keyframe jumps to it
- * and selects its point; clicking elsewhere in a row seeks there; dragging scrubs.
+ * The timeline: one row per point across the clip, labelled with the point's number and name,
+ * showing where the point is placed (interpolated: a pale bar), occluded (red, hatched), and its
+ * keyframes, shaped by their source (a keyframe's `source`, "placed" when absent):
+ *
+ *   placed  diamond     tracked  circle     prefilled  triangle     edited  square
+ *
+ * each filled in the point's colour, hollow when the keyframe says occluded. A cursor marks the
+ * current frame. Clicking a keyframe jumps to it and selects its point; clicking elsewhere in a
+ * row seeks there; clicking a row's label selects the point only; dragging scrubs. When the rows
+ * do not fit, the container scrolls and keeps the active point's row in view.
  *
  * The rows are redrawn only when tracks, the active point or the size change; moving the cursor
  * moves one absolutely positioned element, so a frame step costs no canvas work here.
  */
 
 import { denseTrack } from "./core/interpolate.js";
+import { displayName } from "./instructions.js";
 
 const HEADER_PX = 14;
-const GUTTER_PX = 12;
+/** Width of the row labels ("19 Little DIP" at 11 px), CSS px. */
+const GUTTER_PX = 92;
 /** A click this close (CSS px) to a keyframe counts as a click on it. */
 const KEYFRAME_SNAP_PX = 7;
 
@@ -22,14 +30,16 @@ const KEYFRAME_SNAP_PX = 7;
 export class Timeline {
   /**
    * @param {HTMLElement} container  an empty element; the timeline fills its width
-   * @param {{numFrames: number, colors: string[], rowHeight?: number,
+   * @param {{numFrames: number, colors: string[], names?: string[], rowHeight?: number,
    *          onSeek: (frame: number, point: number|null) => void}} options
-   *   onSeek: point is the row clicked, or null while scrubbing
+   *   names: point names as the task gives them; onSeek: point is the row clicked, or null
+   *   while scrubbing; a click on a row's label seeks to the current frame
    */
-  constructor(container, { numFrames, colors, rowHeight = 8, onSeek }) {
+  constructor(container, { numFrames, colors, names = [], rowHeight = 16, onSeek }) {
     this.container = container;
     this.numFrames = numFrames;
     this.colors = colors;
+    this.labels = colors.map((_, p) => (names[p] ? `${p} ${displayName(names[p])}` : String(p)));
     this.rowHeight = rowHeight;
     this.onSeek = onSeek;
     /** @type {Keyframe[][]} */
@@ -76,6 +86,16 @@ export class Timeline {
     if (point === this.active) return;
     this.active = point;
     this.redraw();
+    this.revealActive();
+  }
+
+  /** Scrolls the container (when it scrolls) so that the active point's row is in view. */
+  revealActive() {
+    const c = this.container;
+    const top = HEADER_PX + this.active * this.rowHeight;
+    const bottom = top + this.rowHeight + 1;  // scrollTop is whole px; keep the row's edge in
+    if (top - HEADER_PX < c.scrollTop) c.scrollTop = Math.max(0, top - HEADER_PX);
+    else if (bottom > c.scrollTop + c.clientHeight) c.scrollTop = bottom - c.clientHeight;
   }
 
   /** Moves the cursor. @param {number} frame */
@@ -112,8 +132,7 @@ export class Timeline {
     ctx.fillStyle = point === this.active ? "rgba(255, 255, 255, 0.16)"
       : "rgba(255, 255, 255, 0.04)";
     ctx.fillRect(0, y, this.width, this.rowHeight - 1);
-    ctx.fillStyle = this.colors[point];
-    ctx.fillRect(2, y + 1, GUTTER_PX - 5, h - 1);
+    this._drawLabel(ctx, point, y, h);
     const dense = denseTrack(keyframes, this.numFrames);
     dense.forEach((v, f) => {
       if (v.state === "unplaced") return;
@@ -133,21 +152,29 @@ export class Timeline {
     for (const k of keyframes) this._drawKeyframe(ctx, point, k, y + h / 2);
   }
 
+  /** The row's colour swatch and its point's number and name, in the gutter. */
+  _drawLabel(ctx, point, y, h) {
+    ctx.fillStyle = this.colors[point];
+    ctx.fillRect(2, y + 2, 5, h - 2);
+    ctx.fillStyle = point === this.active ? "#ffffff" : "#c4ccd4";
+    ctx.font = `${point === this.active ? "600 " : ""}11px system-ui, sans-serif`;
+    ctx.textBaseline = "middle";
+    ctx.fillText(this.labels[point], 10, y + h / 2 + 0.5, GUTTER_PX - 14);
+    ctx.textBaseline = "alphabetic";
+  }
+
   _drawKeyframe(ctx, point, k, cy) {
     const cx = GUTTER_PX + (k.frame + 0.5) * this.cellWidth;
-    const r = Math.max(2.5, Math.min(this.rowHeight / 2 - 0.5, this.cellWidth / 2));
-    ctx.beginPath();
-    ctx.moveTo(cx, cy - r);
-    ctx.lineTo(cx + r, cy);
-    ctx.lineTo(cx, cy + r);
-    ctx.lineTo(cx - r, cy);
-    ctx.closePath();
+    const r = Math.max(3, Math.min(this.rowHeight / 2 - 1, this.cellWidth / 2));
+    keyframePath(ctx, k.source || "placed", cx, cy, r);
     ctx.lineWidth = 1;
     if (k.visible) {
       ctx.fillStyle = this.colors[point];
       ctx.fill();
       ctx.strokeStyle = "#000000";
     } else {
+      ctx.fillStyle = "#15181c";
+      ctx.fill();
       ctx.strokeStyle = "#ffffff";
     }
     ctx.stroke();
@@ -189,9 +216,13 @@ export class Timeline {
     };
     this.canvas.addEventListener("pointerdown", (e) => {
       if (e.button !== 0) return;
+      const { frame, point } = where(e);
+      if (e.clientX - this.canvas.getBoundingClientRect().left < GUTTER_PX) {
+        if (point !== null) this.onSeek(this.frame, point);
+        return;
+      }
       scrubbing = true;
       this.canvas.setPointerCapture(e.pointerId);
-      const { frame, point } = where(e);
       this.onSeek(frame, point);
     });
     this.canvas.addEventListener("pointermove", (e) => {
@@ -201,4 +232,29 @@ export class Timeline {
     this.canvas.addEventListener("pointerup", stop);
     this.canvas.addEventListener("pointercancel", stop);
   }
+}
+
+/**
+ * Traces a keyframe marker of radius r (CSS px) centred at (cx, cy), shaped by its source.
+ * @param {CanvasRenderingContext2D} ctx @param {string} source
+ * @param {number} cx @param {number} cy @param {number} r
+ */
+export function keyframePath(ctx, source, cx, cy, r) {
+  ctx.beginPath();
+  if (source === "tracked") {
+    ctx.arc(cx, cy, r * 0.85, 0, 2 * Math.PI);
+  } else if (source === "prefilled") {
+    ctx.moveTo(cx, cy - r);
+    ctx.lineTo(cx + r, cy + r * 0.8);
+    ctx.lineTo(cx - r, cy + r * 0.8);
+  } else if (source === "edited") {
+    const a = r * 0.75;
+    ctx.rect(cx - a, cy - a, 2 * a, 2 * a);
+  } else {
+    ctx.moveTo(cx, cy - r);
+    ctx.lineTo(cx + r, cy);
+    ctx.lineTo(cx, cy + r);
+    ctx.lineTo(cx - r, cy);
+  }
+  ctx.closePath();
 }

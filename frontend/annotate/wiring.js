@@ -1,10 +1,18 @@
 /**
- * Buttons of the page, and the two steps of an object task:
+ * Buttons of the page, the editing tools' controls (copy pose, go to frame, hide and lock, the
+ * tool message), and the two steps of an object task:
  *   step 1: pick 2 distinctive points on the highlighted object (placed on the current frame);
  *   step 2: track them through the clip (the same editor, 2 points).
+ *
+ * Hidden and locked points are view settings: kept in localStorage per assignment (or task, in
+ * a preview), never sent to the server.
  */
 
+import { parseFrame } from "./core/tools.js";
 import { PLAY_FPS } from "./editor.js";
+
+/** How long a tool message stays up, ms: a refusal longer, as it asks for something. */
+const MESSAGE_MS = { info: 4000, error: 9000 };
 
 /**
  * Binds the toolbar, transport and point buttons.
@@ -30,7 +38,16 @@ export function wireControls(page, { $, requestSubmit }) {
   on("next-point", () => editor.nextPoint());
   on("delete-keyframe", () => editor.deleteKeyframe());
   on("show-shortcuts", () => $("shortcuts").showModal());
-  on("submit", () => requestSubmit());
+  on("submit", () => {
+    if (refuseOffObject(page, $)) return;
+    requestSubmit();
+  });
+  on("copy-pose", () => editor.copyPreviousPose());
+  // Narrow windows open the instructions over the image (style.css): start with them closed.
+  if (window.matchMedia("(max-width: 1279px)").matches) {
+    $("instructions").hidden = true;
+    $("toggle-instructions").setAttribute("aria-pressed", "false");
+  }
   on("toggle-instructions", (e) => {
     const panel = $("instructions");
     panel.hidden = !panel.hidden;
@@ -45,6 +62,113 @@ export function wireControls(page, { $, requestSubmit }) {
     fps.blur();
   });
   window.__dexlabel.imageToClient = (x, y) => imageToClient(editor, x, y);
+  wireTools(page, { $ });
+}
+
+/**
+ * Shows what a tool did or why an edit was refused, over the top of the image.
+ * @param {HTMLElement} box  #tool-message
+ * @param {string|string[]} text  several lines become a list
+ * @param {"info"|"error"} kind
+ */
+export function showToolMessage(box, text, kind) {
+  const lines = Array.isArray(text) ? text : [text];
+  box.dataset.kind = kind;
+  box.replaceChildren(...lines.map((line, i) => {
+    const el = document.createElement(i === 0 ? "p" : "li");
+    el.textContent = line;
+    return el;
+  }));
+  box.hidden = lines.length === 0 || !lines[0];
+  clearTimeout(Number(box.dataset.timer));
+  box.dataset.timer = String(setTimeout(() => { box.hidden = true; }, MESSAGE_MS[kind]));
+}
+
+/**
+ * Refuses to open the submit dialog while a landmark lies off the highlighted object, listing
+ * them. @returns {boolean} whether it refused
+ */
+function refuseOffObject(page, $) {
+  const problems = page.editor.offObjectProblems();
+  if (problems.length === 0) return false;
+  showToolMessage($("tool-message"), [
+    "Cannot submit: move these landmarks onto the highlighted object (or mark them occluded):",
+    ...problems,
+  ], "error");
+  return true;
+}
+
+/** Where the hidden and locked points of this assignment are kept in localStorage. */
+function viewKey(page) {
+  const a = page.data && page.data.assignment;
+  return a ? `dexlabel:view:assignment:${a.id}` : `dexlabel:view:task:${page.task.id}`;
+}
+
+/** Hide/lock toggles, their persistence, go to frame and the tool message. */
+function wireTools(page, { $ }) {
+  const { editor, pointList, storage } = page;
+  const key = viewKey(page);
+  try {
+    const saved = storage ? JSON.parse(storage.getItem(key) || "null") : null;
+    const valid = (p) => Number.isInteger(p) && p >= 0 && p < editor.numPoints;
+    for (const p of (saved && saved.hidden) || []) if (valid(p)) editor.hidden.add(p);
+    for (const p of (saved && saved.locked) || []) if (valid(p)) editor.locked.add(p);
+  } catch {
+    // An unreadable entry is only a view setting: start with every point shown and unlocked.
+  }
+  const keep = () => {
+    if (!storage) return;
+    try {
+      storage.setItem(key, JSON.stringify({ hidden: [...editor.hidden],
+        locked: [...editor.locked] }));
+    } catch {
+      // Storage full or refused: the settings still hold for this page.
+    }
+  };
+  pointList.onToggle = (point, what) => {
+    page.clock.activity();
+    if (what === "hide") editor.setHidden(point, !editor.hidden.has(point));
+    else editor.setLocked(point, !editor.locked.has(point));
+  };
+  page.refreshHooks.push(() => {
+    pointList.setViewState(editor.hidden, editor.locked);
+    $("copy-pose").toggleAttribute("disabled", editor.readOnly);
+    keep();
+  });
+  if (page.task.kind !== "hand") {
+    $("drag-hint").textContent = "Shift+drag a landmark: both move together.";
+  }
+  const box = $("tool-message");
+  editor.onMessage = (text, kind) => showToolMessage(box, text, kind);
+  box.addEventListener("click", () => { box.hidden = true; });
+  wireFrameInput(page, $);
+}
+
+/** The go-to-frame box: Enter goes there, or says why not; Escape gives the keys back. */
+function wireFrameInput(page, $) {
+  const { editor } = page;
+  const input = /** @type {HTMLInputElement} */ ($("goto-frame"));
+  const error = $("goto-error");
+  input.placeholder = `0-${editor.numFrames - 1}`;
+  const go = () => {
+    const { frame, error: why } = parseFrame(input.value, editor.numFrames);
+    error.textContent = why || "";
+    error.hidden = !why;
+    input.setAttribute("aria-invalid", String(Boolean(why)));
+    if (frame === null) return;
+    editor.goto(frame);
+    input.value = "";
+    input.blur();
+  };
+  input.addEventListener("keydown", (e) => {
+    if (e.key === "Enter") go();
+    else if (e.key === "Escape") input.blur();
+    else return;
+    e.preventDefault();
+    e.stopPropagation();
+  });
+  $("goto-go").addEventListener("click", () => go());
+  input.addEventListener("input", () => { error.hidden = true; });
 }
 
 /**
