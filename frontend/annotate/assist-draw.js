@@ -32,13 +32,15 @@ const OUTLINE = "rgba(0, 0, 0, 0.8)";
  * the page keeps for tests.
  * @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {Layer} layer
  * @param {{width: number, height: number}} image  px
+ * @param {{width: number, height: number}} canvas  CSS px
  */
-export function drawAssistLayer(ctx, tf, layer, image) {
+export function drawAssistLayer(ctx, tf, layer, image, canvas) {
   const lines = [];
   layer.lines.forEach((line, i) => {
     const ends = clipLine(line, image.width, image.height);
     if (!ends) return;
-    drawEpipolar(ctx, tf, ends, line.serial.slice(-4), LINE_COLORS[i % LINE_COLORS.length]);
+    const color = LINE_COLORS[i % LINE_COLORS.length];
+    drawEpipolar(ctx, tf, ends, canvas, line.serial.slice(-4), color);
     lines.push({ ...line, ends });
   });
   for (const g of layer.ghosts) drawPath(ctx, tf, g.path);
@@ -49,9 +51,15 @@ export function drawAssistLayer(ctx, tf, layer, image) {
   return { lines, ghosts: layer.ghosts.filter((g) => g.xy), suggestion: layer.suggestion };
 }
 
-/** @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {number[][]} ends */
-function drawEpipolar(ctx, tf, ends, tag, color) {
-  const [a, b] = ends.map(([x, y]) => tf.toScreen(x, y));
+/**
+ * One line, tagged where it enters the visible canvas (zoomed in, its image ends may be off
+ * screen). @param {CanvasRenderingContext2D} ctx @param {Transform} tf
+ * @param {number[][]} ends  image px @param {{width: number, height: number}} canvas  CSS px
+ */
+function drawEpipolar(ctx, tf, ends, canvas, tag, color) {
+  const seen = clipSegment(ends.map(([x, y]) => tf.toScreen(x, y)), canvas.width, canvas.height);
+  if (!seen) return;
+  const [a, b] = seen;
   ctx.save();
   ctx.globalAlpha = 0.85;
   ctx.lineWidth = 1.25;
@@ -74,6 +82,28 @@ function drawEpipolar(ctx, tf, ends, tag, color) {
   ctx.fillStyle = color;
   ctx.fillText(tag, x - w / 2 + 3, y + 3);
   ctx.restore();
+}
+
+/**
+ * The part of a screen segment inside [0, w] x [0, h] (Liang-Barsky), or null.
+ * @param {Array<{x: number, y: number}>} ends @param {number} w @param {number} h
+ */
+function clipSegment([p, q], w, h) {
+  const dx = q.x - p.x;
+  const dy = q.y - p.y;
+  let t0 = 0;
+  let t1 = 1;
+  for (const [den, num] of [[-dx, p.x], [dx, w - p.x], [-dy, p.y], [dy, h - p.y]]) {
+    if (den === 0) {
+      if (num < 0) return null;
+    } else if (den < 0) {
+      t0 = Math.max(t0, num / den);
+    } else {
+      t1 = Math.min(t1, num / den);
+    }
+  }
+  if (t0 >= t1) return null;
+  return [{ x: p.x + t0 * dx, y: p.y + t0 * dy }, { x: p.x + t1 * dx, y: p.y + t1 * dy }];
 }
 
 /** A proposal's path through its span, thin. */
@@ -205,7 +235,8 @@ export function startAssist(page, $) {
   assist.drawn = { lines: [], ghosts: [], suggestion: null };
   addSceneLayer((ctx, scene) => {
     const layer = assist.layer(editor.frame, editor.active);
-    assist.drawn = drawAssistLayer(ctx, scene.transform, layer, task);
+    assist.drawn = drawAssistLayer(ctx, scene.transform, layer, task,
+      { width: scene.cssWidth, height: scene.cssHeight });
   });
   timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
   updatePanel = wireAssistPanel(assist, $, editable);

@@ -314,7 +314,7 @@ export class Assist {
       }));
       const counts = countTracked(shown);
       this.proposals = { points: shown, counts };
-      this._say("info", `${trackedText(counts)}. Enter accepts, Esc discards.`);
+      this._say("info", `${trackedText(counts)} (cyan rings). Enter accepts, Esc discards.`);
       return true;
     } catch (err) {
       this._say("error", `Tracking failed: ${err && err.message ? err.message : err}`);
@@ -419,8 +419,9 @@ export class Assist {
     this.epipolar = Array.isArray(answer.epipolar) ? answer.epipolar : [];
     if (answer.available) {
       for (const s of answer.points || []) this.suggestions.set(s.point, s);
-      const n = answer.views;
-      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"}`;
+      const n = Array.isArray(answer.views) ? answer.views.length : Number(answer.views) || 0;
+      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"} ` +
+        "(magenta ring): U uses them for this point, Shift+U for every point.";
     } else {
       this.suggestNote = answer.reason || "No suggestions for this task yet.";
     }

@@ -129,6 +129,18 @@ function examplesHtml(rows) {
 }
 
 /**
+ * How the page's suggestions work (assist.js): tracking proposals, pre-fill from other views,
+ * epipolar lines; all of them are only ever suggestions the worker checks.
+ */
+const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions between your " +
+  "keyframes around this frame, shown as cyan rings (Shift+T: every point through the clip); " +
+  "Enter accepts them, Esc discards them. Where other views are labelled already, a magenta " +
+  "ring suggests the point's position (U uses the suggestions) and coloured lines show where " +
+  "each labelled view says the point lies (E hides them). Suggestions are often right but not " +
+  "always: step through the frames and drag any that is off; correcting a tracked frame " +
+  "tracks the frames around it again.";
+
+/**
  * Fills the instructions panel for a task.
  * @param {HTMLElement} panel
  * @param {{kind: "hand"|"object", point_names: string[], point_colors: string[]}} task
@@ -151,6 +163,7 @@ export function renderInstructions(panel, task) {
       `start="0">${legend}</ol></div>` : "") +
     `<h3>Examples</h3><div class="examples">` +
     `${examplesHtml(hand ? handExamples() : objectExamples())}</div>` +
+    `<h3>Suggestions</h3><p>${escapeHtml(SUGGESTIONS_TEXT)}</p>` +
     "<p class=\"hint\">Press <kbd>?</kbd> for keyboard shortcuts.</p>";
 }
 
@@ -170,6 +183,10 @@ export const SHORTCUTS = [
   ["Alt + drag or Ctrl + drag", "move one finger: the joint and the joints after it to the tip"],
   ["G", "go to a frame (type its number, Enter)"],
   ["H", "hide / show the active point (view only; not saved)"],
+  ["T / Shift + T", "track the active point between its keyframes / every point"],
+  ["Enter / Esc", "accept / discard the tracking proposals shown"],
+  ["U / Shift + U", "use the suggestions from other views: active point / every point"],
+  ["E", "show / hide the epipolar lines from the labelled views"],
   ["Delete", "remove the active point's keyframe in this frame"],
   ["Ctrl + Z / Ctrl + Shift + Z", "undo / redo"],
   ["F", "fit the image to the window"],

@@ -220,3 +220,127 @@ def test_track_accept_correct_and_reload_keep_sources(
     page.wait_for_function("window.__dexlabel.ready")
     reloaded = page.evaluate(f"window.__dexlabel.store.keyframes({joint})")
     assert {k["frame"]: k["source"] for k in reloaded} == sources
+
+
+# ---- pre-fill from other views and epipolar lines ------------------------------------------
+
+PREFILL_VIEWS = 3
+SUGGEST_GHOST_RGB = (0xFF, 0x5F, 0xD2)
+# Two exact views' labels triangulated and reprojected: well under a px, except at the
+# assignment's check cells (15 px off on purpose).
+SUGGEST_TOL_PX = 2.0
+# The page's epipolar lines pass this close to the joint's true position (undistorted pinhole
+# pixels against this view's slight lens distortion, near the image's centre).
+LINE_TOL_PX = 2.0
+
+
+@pytest.fixture(scope="module")
+def prefill_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFactory
+                    ) -> dict[str, Any]:
+    """A three-view capture imported into the live server, its hand work in views 1 and 2
+    accepted (exact labels on every frame); the hand task of view 0 and its truth."""
+    from backend.annotation.models import Assignment, Track
+    from backend.captures.flows import import_path
+    from backend.crowd.simulate import CaptureTruth
+    from backend.db import session_scope, utcnow
+    from worker.synth import generate_capture
+    from worker.synth.annotators import hand_visibility
+
+    capture = tmp_path_factory.mktemp("prefill") / "capture"
+    generate_capture(capture, seed=9, frames=CLIP_FRAMES, views=PREFILL_VIEWS, objects=1)
+    truth = CaptureTruth(capture)
+    with pytest.MonkeyPatch.context() as mp:
+        for key, value in live_server.env.items():
+            mp.setenv(key, value)
+        reset_caches()
+        try:
+            sequence_id = import_path(capture)[0].sequence_id
+            tasks = live_server.admin("POST", f"/api/sequences/{sequence_id}/tasks")
+            hands = sorted((t for t in tasks if t["kind"] == "hand"), key=lambda t: t["serial"])
+            for view, task in enumerate(hands[1:], start=1):
+                joints, seg = truth.view(task["serial"], CLIP_FRAMES)
+                visible = hand_visibility(joints, seg)
+                rows = [[[f, *joints[f, p].round(2).tolist(), int(visible[f, p])]
+                         for f in range(CLIP_FRAMES)] for p in range(21)]
+                with session_scope() as session:
+                    assignment = Assignment(
+                        task_id=task["id"], worker_id=f"prefill-{view}", status="approved",
+                        external_id=f"direct-prefill-{view}", version=1,
+                        working_time_s=100.0, submitted_at=utcnow())
+                    assignment.tracks = [Track(point_index=p, keyframes=r)
+                                         for p, r in enumerate(rows)]
+                    session.add(assignment)
+        finally:
+            reset_caches()
+    joints, _ = truth.view(hands[0]["serial"], CLIP_FRAMES)
+    return {"task": hands[0], "truth": joints}
+
+
+def _central_joint(joints: np.ndarray, width: int, height: int) -> int:
+    """The joint nearest the image's centre (where lens distortion bends lines least)."""
+    return int(np.argmin(np.hypot(joints[:, 0] - width / 2, joints[:, 1] - height / 2)))
+
+
+def test_suggestions_from_two_accepted_views_are_shown_used_and_lines_cross_the_joint(
+    live_server: LiveServer, prefill_capture: dict[str, Any], page: Page, output_dir: Path
+) -> None:
+    task, truth = prefill_capture["task"], prefill_capture["truth"]
+    link = live_server.assign(task, "W-prefill")
+    checks = _check_cells(live_server, link["assignment_id"])
+    open_task(page, live_server.page_url(link["token"]))
+    expect(page.locator("#suggest-note")).to_contain_text("Suggestions from 2 other views")
+    frame = 6
+    joint = _central_joint(truth[frame], task["width"], task["height"])
+    select_point(page, joint)
+    goto_frame(page, frame)
+    zoom_on_points(page, truth[frame])
+
+    drawn = page.evaluate("window.__dexlabel.assist.drawn")
+    suggestion = drawn["suggestion"]
+    assert suggestion is not None and suggestion["point"] == joint
+    error = np.hypot(*(np.array(suggestion["xy"]) - truth[frame][joint]))
+    assert (14 < error < 16) if (joint, frame) in checks else error < SUGGEST_TOL_PX, error
+    s = page.evaluate("([x, y]) => window.__dexlabel.editor.transform.toScreen(x, y)",
+                      suggestion["xy"])
+    assert _canvas_has_colour(page, s["x"] + 13, s["y"], SUGGEST_GHOST_RGB)
+
+    lines = drawn["lines"]
+    assert len(lines) >= 1, drawn
+    for line in lines:
+        x, y = truth[frame][joint]
+        assert abs(line["a"] * x + line["b"] * y + line["c"]) < LINE_TOL_PX, (line, x, y)
+        # Drawn: the canvas shows the line's colour where it crosses the image, away from the
+        # points (at a quarter of its length).
+        (x0, y0), (x1, y1) = line["ends"]
+        q = page.evaluate("([x, y]) => window.__dexlabel.editor.transform.toScreen(x, y)",
+                          [x0 + (x1 - x0) / 4, y0 + (y1 - y0) / 4])
+        box = page.locator("#view").bounding_box()
+        assert box is not None
+        if 0 < q["x"] < box["width"] and 0 < q["y"] < box["height"]:
+            assert not _canvas_has_colour(page, q["x"], q["y"], (0x1B, 0x1F, 0x24), radius=0)
+    assert {line["serial"][-4:] for line in lines} <= {
+        s[-4:] for s in page.evaluate("window.__dexlabel.assist.epipolar.map((e) => e.serial)")}
+    _screens(page, output_dir, "assist-prefill-lines")
+
+    page.keyboard.press("e")
+    assert page.evaluate("window.__dexlabel.assist.drawn.lines") == []
+    page.keyboard.press("e")
+    assert len(page.evaluate("window.__dexlabel.assist.drawn.lines")) == len(lines)
+
+    # U uses the active joint's suggestions; Shift+U every joint's; one undo takes U back.
+    page.keyboard.press("u")
+    keyframes = page.evaluate(f"window.__dexlabel.store.keyframes({joint})")
+    assert len(keyframes) >= CLIP_FRAMES - 2 and {k["source"] for k in keyframes} == {"prefilled"}
+    assert page.evaluate("window.__dexlabel.assist.drawn.suggestion") is None
+    page.keyboard.press("Control+z")
+    assert page.evaluate(f"window.__dexlabel.store.keyframes({joint})") == []
+    page.keyboard.press("Shift+U")
+    expect(page.locator("#assist-status")).to_contain_text("suggested keyframes for 21 points")
+    wait_saved(page)
+    stored = server_keyframes(live_server.worker_get_task(link["token"])["assignment"])
+    assert sum(len(rows) for rows in stored.values()) >= 21 * (CLIP_FRAMES - 2)
+    assert {r[4] for rows in stored.values() for r in rows} == {"prefilled"}
+    for p, rows in stored.items():
+        for r in rows:
+            if r[3] == 1 and (p, r[0]) not in checks:
+                assert np.hypot(r[1] - truth[r[0]][p][0], r[2] - truth[r[0]][p][1]) < 3.0, (p, r)

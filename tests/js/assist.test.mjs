@@ -108,7 +108,7 @@ function newAssist(track, { suggestions = null } = {}) {
       };
     },
     async suggestions() {
-      return suggestions || { available: false, reason: "needs 2 other views", views: 0 };
+      return suggestions || { available: false, reason: "needs 2 other views", views: [] };
     },
   };
   const where = { frame: 5, active: 0 };
@@ -131,7 +131,7 @@ test("Track then Accept writes tracked keyframes in one undo step; lost frames s
   assert.deepEqual(calls[0], { tracks: [{ point: 0, keyframes: [[0, 0, 50, 1], [11, 110, 50, 1]] }],
     first_frame: 0, last_frame: 11 });
   assert.equal(assist.status.text,
-    "9 of 10 frames tracked; 1 left to interpolation. Enter accepts, Esc discards.");
+    "9 of 10 frames tracked; 1 left to interpolation (cyan rings). Enter accepts, Esc discards.");
   assert.deepEqual(assist.layer(5, 0).ghosts[0].xy, [50, 50]);
   assert.deepEqual(assist.timelineMarks()[0].frames, [1, 2, 3, 4, 5, 6, 8, 9, 10]);
   assert.equal(store.keyframes(0).length, 2, "nothing written before Accept");
@@ -198,10 +198,10 @@ test("suggestions: a quiet reason, or prefilled keyframes around the hand-set on
   const xy = Array.from({ length: 12 }, (_, f) => [100 + f, 200]);
   const visible = Array.from({ length: 12 }, (_, f) => (f === 6 ? false : null));
   const { store, assist, where } = newAssist(() => null, { suggestions: {
-    available: true, reason: null, views: 3, min_views: 2,
+    available: true, reason: null, views: ["cam-a", "cam-b", "cam-c"], min_views: 2,
     points: [{ point: 0, xy, visible }], epipolar: [] } });
   await assist.loadSuggestions();
-  assert.equal(assist.suggestNote, "Suggestions from 3 other views");
+  assert.match(assist.suggestNote, /^Suggestions from 3 other views \(magenta ring\): U uses/);
   store.placePoint(0, 0, 90, 190);
   assert.deepEqual(assist.layer(3, 0).suggestion, { point: 0, xy: [103, 200], visible: true });
   where.active = 0;
