@@ -15,20 +15,13 @@ import cv2
 import numpy as np
 
 from backend.captures.models import Camera, SceneObject
+from backend.crowd.titles import object_label
 from backend.storage import Storage
 from worker.geometry.cameras import project_points
 from worker.geometry.mesh_io import read_mesh
 
 # The frame of the clip where the outline holds (the initial pose's frame).
 OUTLINE_FRAME = 0
-
-
-def object_label(name: str) -> str:
-    """The object's name as a worker reads it: "025_mug" -> "mug", "006_mustard_bottle" ->
-    "mustard bottle" (YCB names lead with their number); other names lose only underscores."""
-    head, _, rest = name.partition("_")
-    words = rest if head.isdigit() and rest else name
-    return words.replace("_", " ").strip() or "object"
 
 
 def object_highlight(storage: Storage, obj: SceneObject, camera: Camera) -> dict[str, Any] | None:

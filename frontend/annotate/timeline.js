@@ -242,13 +242,13 @@ export class Timeline {
 export function keyframePath(ctx, source, cx, cy, r) {
   ctx.beginPath();
   if (source === "tracked") {
-    ctx.arc(cx, cy, r * 0.85, 0, 2 * Math.PI);
+    ctx.arc(cx, cy, r * 0.9, 0, 2 * Math.PI);
   } else if (source === "prefilled") {
     ctx.moveTo(cx, cy - r);
     ctx.lineTo(cx + r, cy + r * 0.8);
     ctx.lineTo(cx - r, cy + r * 0.8);
   } else if (source === "edited") {
-    const a = r * 0.75;
+    const a = r * 0.7;
     ctx.rect(cx - a, cy - a, 2 * a, 2 * a);
   } else {
     ctx.moveTo(cx, cy - r);

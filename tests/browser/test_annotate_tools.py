@@ -362,22 +362,47 @@ def test_every_control_is_within_reach(
 def test_timeline_draws_keyframe_markers_by_source(
     live_server: LiveServer, page: Page, output_dir: Path
 ) -> None:
-    """Each keyframe source has its own marker shape in the row: the pixels at a keyframe's
-    centre and just inside its bounding square's corner tell a diamond from a square."""
-    task, _ = _open_hand(live_server, page, "W-tools-markers")
-    truth = live_server.truth(task["serial"], 0)
-    page.evaluate(SET_POSE, [0, truth.tolist()])
-    corner = page.evaluate("""() => {
+    """A keyframe's source decides its marker in the timeline row: the four markers drawn for
+    one point differ pixel by pixel, the placed one is a diamond (its bounding square's corners
+    empty) and a keyframe without a source is drawn as placed."""
+    task = live_server.task("object", 0)
+    link = live_server.assign(task, "W-tools-markers")
+    open_task(page, live_server.page_url(link["token"], assignmentId=link["external_id"]))
+    x, y = np.mean(task["highlight"]["polygon"], axis=0).tolist()
+    page.evaluate("""([x, y]) => window.__dexlabel.store.setKeyframes(0, [
+      { frame: 0, x, y, visible: true },
+      { frame: 3, x, y, visible: true, source: "tracked" },
+      { frame: 6, x, y, visible: true, source: "prefilled" },
+      { frame: 9, x, y, visible: true, source: "edited" }])""", [x, y])
+    masks = page.evaluate("""() => {
       const t = window.__dexlabel.page.timeline;
       const ctx = t.canvas.getContext("2d");
       const dpr = window.devicePixelRatio || 1;
-      const c = t.cellCentre(0, 0);
       const r = Math.max(3, Math.min(t.rowHeight / 2 - 1, t.cellWidth / 2));
-      const at = (x, y) => [...ctx.getImageData(Math.round(x * dpr), Math.round(y * dpr), 1, 1)
-        .data].slice(0, 3);
-      return { centre: at(c.x, c.y - 0.5), corner: at(c.x - r * 0.6, c.y - r * 0.6) };
+      return [0, 3, 6, 9].map((f) => {
+        const c = t.cellCentre(0, f);
+        const cy = 14 + (t.rowHeight - 2) / 2;  // the marker's centre line in row 0
+        const n = Math.ceil(2 * r * dpr);
+        const data = ctx.getImageData(Math.round((c.x - r) * dpr), Math.round((cy - r) * dpr),
+          n, n).data;
+        const mask = [];
+        for (let i = 0; i < data.length; i += 4) {
+          // Filled in the landmark's orange (#ff7f0e) or not.
+          mask.push(Math.abs(data[i] - 255) + Math.abs(data[i + 1] - 127) +
+            Math.abs(data[i + 2] - 14) < 60 ? 1 : 0);
+        }
+        return { n, mask };
+      });
     }""")
-    grey = [0x9A, 0xA3, 0xAD]  # the wrist's colour: the placed diamond is filled with it
-    assert np.abs(np.array(corner["centre"]) - grey).max() <= 3
-    assert np.abs(np.array(corner["corner"]) - grey).max() > 20, "a diamond leaves the corner"
-    page.screenshot(path=str(output_dir / "tools-timeline.png"))
+    arrays = [np.array(m["mask"]).reshape(m["n"], m["n"]) for m in masks]
+    for a in arrays:
+        assert a.sum() > 0.3 * a.size, "a filled marker"
+    for i in range(4):
+        for j in range(i + 1, 4):
+            assert np.abs(arrays[i] - arrays[j]).sum() >= 12, ("markers alike", i, j)
+    placed = arrays[0]
+    k = max(1, placed.shape[0] // 5)
+    assert placed[:k, :k].sum() == placed[:k, -k:].sum() == placed[-k:, :k].sum() == 0
+    rows = page.evaluate("window.__dexlabel.store.toJSON().tracks[0].keyframes")
+    assert [len(r) for r in rows] == [4, 5, 5, 5], "placed is the default, written as 4 values"
+    page.screenshot(path=str(output_dir / "tools-timeline-sources.png"))
