@@ -18,6 +18,7 @@ from tests.browser.conftest import CLIP_FRAMES, VIEWPORT, LiveServer
 from tests.browser.helpers import (
     goto_frame,
     open_task,
+    pan_to_centre,
     select_point,
     server_keyframes,
     to_client,
@@ -156,6 +157,9 @@ def _track_and_look(page: Page, joint: int, truth: list[np.ndarray], checks: set
     assert _canvas_has_colour(page, cell["x"], cell["y"], TRACK_GHOST_RGB,
                               canvas=".timeline-canvas", radius=1)
     assert len(page.evaluate(f"window.__dexlabel.store.keyframes({joint})")) == 2
+    # The ghost and the interpolated point it would replace, both in the middle of the view.
+    held = value_at(page, joint, look)
+    pan_to_centre(page, (ghost[0] + held["x"]) / 2, (ghost[1] + held["y"]) / 2)
     _screens(page, output_dir, "assist-track-ghosts")
     return look
 
@@ -220,6 +224,20 @@ def test_track_accept_correct_and_reload_keep_sources(
     page.wait_for_function("window.__dexlabel.ready")
     reloaded = page.evaluate(f"window.__dexlabel.store.keyframes({joint})")
     assert {k["frame"]: k["source"] for k in reloaded} == sources
+
+    # A reviewer's read-only link: no assistance shown, its keys ask for and write nothing.
+    readonly = live_server.admin("POST",
+                                 f"/api/assignments/{link['assignment_id']}/readonly-link")
+    open_task(page, live_server.base + readonly["url"])
+    expect(page.locator("#assist")).to_be_hidden()
+    saved = page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON())")
+    asked = len(bodies)
+    goto_frame(page, 5)
+    for key in ("t", "Shift+T", "Enter", "u", "Shift+U"):
+        page.keyboard.press(key)
+    page.wait_for_timeout(300)
+    assert len(bodies) == asked
+    assert page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON())") == saved
 
 
 # ---- pre-fill from other views and epipolar lines ------------------------------------------
