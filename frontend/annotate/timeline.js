@@ -46,11 +46,14 @@ export class Timeline {
     this.tracks = colors.map(() => []);
     this.active = 0;
     this.frame = 0;
+    /** The frame numbers, kept at the top while the rows scroll under them. */
+    this.header = document.createElement("canvas");
+    this.header.className = "timeline-header";
     this.canvas = document.createElement("canvas");
     this.canvas.className = "timeline-canvas";
     this.cursor = document.createElement("div");
     this.cursor.className = "timeline-cursor";
-    container.append(this.canvas, this.cursor);
+    container.append(this.header, this.canvas, this.cursor);
     this._bindPointer();
     this.resize();
   }
@@ -70,6 +73,11 @@ export class Timeline {
     this.canvas.style.width = `${this.width}px`;
     this.canvas.style.height = `${this.height}px`;
     this.cursor.style.height = `${this.height}px`;
+    this.header.width = this.canvas.width;
+    this.header.height = Math.round(HEADER_PX * dpr);
+    this.header.style.width = `${this.width}px`;
+    this.header.style.height = `${HEADER_PX}px`;
+    this.header.style.marginBottom = `${-HEADER_PX}px`;
     this._dpr = dpr;
     this.redraw();
     this.setFrame(this.frame);
@@ -109,12 +117,16 @@ export class Timeline {
     const ctx = this.canvas.getContext("2d");
     ctx.setTransform(this._dpr, 0, 0, this._dpr, 0, 0);
     ctx.clearRect(0, 0, this.width, this.height);
-    this._drawHeader(ctx);
+    this._drawHeader();
     this.tracks.forEach((keyframes, point) => this._drawRow(ctx, point, keyframes));
     if (this.onRedraw) this.onRedraw(ctx);
   }
 
-  _drawHeader(ctx) {
+  _drawHeader() {
+    const ctx = this.header.getContext("2d");
+    ctx.setTransform(this._dpr, 0, 0, this._dpr, 0, 0);
+    ctx.fillStyle = "#1f242a";
+    ctx.fillRect(0, 0, this.width, HEADER_PX);
     ctx.fillStyle = "#8a939d";
     ctx.font = "10px system-ui, sans-serif";
     for (let f = 0; f < this.numFrames; f += 10) {
@@ -231,6 +243,12 @@ export class Timeline {
     const stop = () => { scrubbing = false; };
     this.canvas.addEventListener("pointerup", stop);
     this.canvas.addEventListener("pointercancel", stop);
+    // The header lies over the top of the rows once they scroll: a press on it seeks only.
+    this.header.addEventListener("pointerdown", (e) => {
+      if (e.button !== 0) return;
+      const x = e.clientX - this.canvas.getBoundingClientRect().left;
+      if (x >= GUTTER_PX) this.onSeek(this.locate(x, 0).frame, null);
+    });
   }
 }
 

@@ -13,6 +13,7 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
+    Target,
     click_image,
     drag_image,
     open_task,
@@ -38,7 +39,7 @@ def _open_hand(server: LiveServer, page: Page, worker: str) -> tuple[dict, dict]
     return task, link
 
 
-def _pose(page: Page, frame: int) -> np.ndarray:
+def _pose(page: Target, frame: int) -> np.ndarray:
     """(21, 2) every point's value at ``frame`` as the store gives it."""
     values = page.evaluate("""(f) => Array.from({ length: 21 },
       (_, p) => window.__dexlabel.store.valueAt(p, f))""", frame)
@@ -347,7 +348,8 @@ def test_every_control_is_within_reach(
             timeline = page.locator("#timeline").bounding_box()
             assert canvas is not None and timeline is not None
             y = canvas["y"] + centre["y"]
-            top, bottom = timeline["y"] - 0.5, timeline["y"] + timeline["height"] + 0.5
+            # Below the frame numbers, which stay at the top of the timeline (14 px).
+            top, bottom = timeline["y"] + 14 - 0.5, timeline["y"] + timeline["height"] + 0.5
             assert top <= y - row / 2 <= y + row / 2 <= bottom, (p, y, timeline)
         page.mouse.click(canvas["x"] + centre["x"], y)  # the other row, at frame 3
         assert _active(page) == other and _frame(page) == 3
@@ -406,3 +408,54 @@ def test_timeline_draws_keyframe_markers_by_source(
     rows = page.evaluate("window.__dexlabel.store.toJSON().tracks[0].keyframes")
     assert [len(r) for r in rows] == [4, 5, 5, 5], "placed is the default, written as 4 values"
     page.screenshot(path=str(output_dir / "tools-timeline-sources.png"))
+
+
+# A host page that frames the annotation page as the portal and MTurk do: a bar above, the
+# frame below it filling the rest of the window, with the portal's sandbox.
+HOST = """<!doctype html><html><body style="margin:0;overflow:hidden">
+<div style="height:72px;background:#ddd">HIT: track the hand</div>
+<iframe id="hit" src="{src}" title="HIT" style="display:block;width:calc(100vw - 18px);
+  margin:0 9px;height:calc(100vh - 80px);border:1px solid #999;box-sizing:border-box"
+  sandbox="allow-scripts allow-forms allow-same-origin allow-top-navigation-by-user-activation">
+</iframe></body></html>"""
+
+
+RECT = "e => { const r = e.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom] }"
+
+
+@pytest.mark.parametrize(("width", "height"), [(1024, 700), (1366, 768)])
+def test_framed_page_keeps_controls_in_reach_and_modifier_drags_work(
+    live_server: LiveServer, page: Page, output_dir: Path, width: int, height: int
+) -> None:
+    page.set_viewport_size({"width": width, "height": height})
+    task = live_server.task("hand", VIEW)
+    link = live_server.assign(task, f"W-tools-frame-{width}")
+    src = live_server.page_url(link["token"], assignmentId=link["external_id"])
+    host = f"{live_server.base}/tools-host.html"
+    page.route(host, lambda route: route.fulfill(
+        content_type="text/html", body=HOST.replace("{src}", src)))
+    page.goto(host)
+    frame = page.frame_locator("#hit")
+    inner = page.frame(url=lambda u: "/annotate/" in u)
+    assert inner is not None
+    inner.wait_for_function("window.__dexlabel && window.__dexlabel.ready")
+    size = inner.evaluate("[innerWidth, innerHeight, document.documentElement.scrollWidth]")
+    assert size[2] <= size[0], "no sideways scrolling inside the frame"
+    for selector in CONTROLS:
+        box = inner.locator(selector).evaluate(RECT)
+        inside = box[0] >= 0 and box[1] >= 0 and box[2] <= size[0] + 0.5
+        assert inside and box[3] <= size[1] + 0.5, (selector, box, size)
+    truth = live_server.truth(task["serial"], 0)
+    inner.evaluate(SET_POSE, [0, truth.tolist()])
+    zoom_on_points(inner, truth)
+    before = _pose(inner, 0)
+    for modifier, joint, moved in [("Shift", 9, list(range(21))), ("Alt", INDEX_PIP, [6, 7, 8])]:
+        start = tuple(before[joint])
+        page.keyboard.down(modifier)
+        drag_image(inner, start, (start[0] + 9.0, start[1] + 7.0))
+        page.keyboard.up(modifier)
+        after = _pose(inner, 0)
+        assert [p for p in range(21) if np.abs(after[p] - before[p]).max() > 1e-6] == moved
+        inner.evaluate("window.__dexlabel.store.undo()")
+    expect(frame.locator("#submit")).to_be_visible()
+    page.screenshot(path=str(output_dir / f"tools-framed-{width}x{height}.png"))
