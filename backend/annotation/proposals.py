@@ -4,8 +4,10 @@ forward-backward check).
 
 The page sends the keyframes it holds (the form it saves) and, if it wants, a frame range; the
 answer has, per point and per frame of the range, a proposed position (image px), whether it
-holds (ok) and its forward-backward error (px). Nothing is stored: the stored model stays
-keyframes with linear interpolation, and a proposal the worker accepts is saved as a keyframe.
+holds (ok) and its forward-backward error (px); at the assignment's check cells
+(worker.tracking.checks) an ok proposal is shown CHECK_OFFSET_PX off. Nothing is stored: the
+stored model stays keyframes with linear interpolation, and a proposal the worker accepts is
+saved as a keyframe.
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ from backend.annotation import service
 from backend.annotation.models import Assignment
 from backend.annotation.schemas import MAX_POINTS, TrackIn, TracksSave
 from backend.captures.models import Frame
+from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError
 from backend.storage import Storage
 from backend.validation import MAX_INT32
+from worker.tracking.checks import check_key, plant
 from worker.tracking.lk import FB_THRESHOLD_PX, propose, tracked_spans
 
 # Frames decoded for one request at most: 300 grey 640x480 frames are 92 MB in memory and
@@ -150,6 +154,10 @@ def proposals(session: Session, storage: Storage, assignment: Assignment,
         xy[lo - first:hi - first + 1] = found.xy[lo - start:hi - start + 1]
         ok[lo - first:hi - first + 1] = found.ok[lo - start:hi - start + 1]
         fb[lo - first:hi - first + 1] = found.fb_error[lo - start:hi - start + 1]
+    # The assignment's check cells, as in every suggestion the page shows.
+    xy = np.swapaxes(plant(check_key(get_settings().signing_key), assignment.id,
+                           np.swapaxes(xy, 0, 1), ok.T, first, num_frames, task.num_points,
+                           *size), 0, 1)
     points = [PointProposals(
         point=p,
         xy=[[round(float(v[0]), 3), round(float(v[1]), 3)] if np.isfinite(v).all() else None

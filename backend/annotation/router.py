@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 
 from backend import pipeline
 from backend.accounts.deps import CurrentAdmin, bearer_token
-from backend.annotation import proposals, service
+from backend.annotation import proposals, service, suggestions
 from backend.annotation.models import Assignment, Task
 from backend.annotation.points import point_colours, point_names, skeleton
 from backend.annotation.schemas import (
@@ -58,7 +58,7 @@ from backend.progress.schemas import TaskState
 from backend.progress.service import task_states
 from backend.security import verify_token
 from backend.storage import get_storage
-from backend.validation import Id, Offset, QueryId
+from backend.validation import MAX_INT32, Id, Offset, QueryId
 
 router = APIRouter(prefix="/api", tags=["annotation"])
 
@@ -266,6 +266,22 @@ def tracking_proposals(body: proposals.ProposalsRequest, claims: WriterClaims,
     frame of the range, a position, whether it holds (ok) and its error. Nothing is stored;
     an accepted proposal is saved as a keyframe. 422 names bad keyframes or frame ranges."""
     return proposals.proposals(session, get_storage(), _assignment_of(session, claims), body)
+
+
+@router.get("/annotate/suggestions", response_model=suggestions.SuggestionsRead)
+def prefill_suggestions(claims: WorkerClaims, session: SessionDep,
+                        first_frame: int | None = Query(None, ge=0, le=MAX_INT32),
+                        last_frame: int | None = Query(None, ge=0, le=MAX_INT32)
+                        ) -> suggestions.SuggestionsRead:
+    """Pre-fill suggestions for the assignment's view once its target has accepted work in 2
+    other views: per point and frame (``first_frame``..``last_frame``, default the whole
+    clip) a position triangulated from that work and a visibility from this view's depth,
+    and per labelled view a fundamental matrix and its labels for epipolar lines. Nothing is
+    stored; a review link may read them, a preview link may not (401). 422 names a frame
+    outside the clip."""
+    return suggestions.suggestions(session, get_storage(),
+                                   suggestions.assignment_of(session, claims), first_frame,
+                                   last_frame)
 
 
 @router.put("/annotate/tracks", response_model=SaveResult,

@@ -1,0 +1,208 @@
+"""Pre-fill suggestions for the annotation page: where the target's accepted work in other views
+places each point in this view, and the epipolar lines of those labels.
+
+Once a target (a hand or an object of a sequence) has accepted work (backend.annotation.accepted)
+in at least MIN_VIEWS views other than this one, each point is triangulated per frame from them
+and projected into this view (worker.quality.prefill), with a visibility suggested from this
+view's depth maps. The assignment's check cells (worker.tracking.checks) are planted into the
+suggested positions, as into every suggestion the page shows; the epipolar data is left as it
+is. Nothing is stored: a suggestion the worker accepts is saved as a keyframe with source
+"prefilled".
+
+Positions are image px (x right, y down) of the clip's frames first_frame..last_frame.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import cv2
+import numpy as np
+from pydantic import BaseModel, Field
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.annotation import service
+from backend.annotation.accepted import labelled_work, sequence_tasks
+from backend.annotation.models import Assignment, Task
+from backend.annotation.tokens import TASK_SCOPE
+from backend.captures.models import Camera, Frame
+from backend.captures.service import camera_model, sequence_cameras
+from backend.config import get_settings
+from backend.errors import DexlabelError, StorageError, Unauthorized
+from backend.storage import Storage
+from worker.quality.prefill import (
+    MIN_VIEWS,
+    DepthReader,
+    ViewWork,
+    epipolar_guide,
+    prefill,
+    view_work,
+)
+from worker.tracking.checks import check_key, plant
+
+
+class InvalidSuggestionRequest(DexlabelError):
+    status_code = 422
+    code = "invalid_suggestion_request"
+
+
+class PointSuggestions(BaseModel):
+    """One point over the frame range: per frame a suggested position [x, y] (image px) or
+    null, and a suggested visibility: true, false (occluded: behind a surface or outside the
+    image), or null (the depth map cannot tell, or nothing is suggested)."""
+
+    point: int
+    xy: list[list[float] | None]
+    visible: list[bool | None]
+
+
+class EpipolarView(BaseModel):
+    """One labelled view's guide. ``F`` (3 x 3, rows) maps a pixel [x, y, 1] of ``xy`` to the
+    line (a, b, c), a x + b y + c = 0, in this view; divide it by hypot(a, b) for distances
+    in px. ``xy``: per point, per frame, the view's accepted decided visible label (the mean
+    of its accepted assignments) or null. Both sides are undistorted pinhole pixels: ``xy``
+    has its own lens distortion removed already; this view's distortion bends the true curve
+    off the line by up to a few px near the image's edges (about 2.5 px at 640x480 on the
+    synthetic captures), well under a px near the centre."""
+
+    serial: str
+    F: list[list[float]] = Field(min_length=3, max_length=3)
+    xy: list[list[list[float] | None]]
+
+
+class SuggestionsRead(BaseModel):
+    """Pre-fill suggestions for the assignment's view. ``available`` is false (with the
+    ``reason``, and empty lists) until the target has accepted work in ``min_views`` other
+    views; ``views`` are the serials of the views with accepted work."""
+
+    available: bool
+    reason: str | None
+    views: list[str]
+    min_views: int
+    first_frame: int
+    last_frame: int
+    points: list[PointSuggestions]
+    epipolar: list[EpipolarView]
+
+
+def assignment_of(session: Session, claims: dict[str, Any]) -> Assignment:
+    """The assignment an assignment or review token opens (suggestions write nothing, so a
+    read-only review link may read them); a preview link has none (401)."""
+    if claims["scope"] == TASK_SCOPE:
+        raise Unauthorized("suggestions belong to an assignment: a preview link has none; "
+                           "accept the HIT first")
+    return service.get_assignment_or_raise(session, int(claims["assignment_id"]))
+
+
+def frame_range(first: int | None, last: int | None, num_frames: int) -> tuple[int, int]:
+    """first..last (inclusive), default the whole clip; 422 naming a frame outside it."""
+    first = 0 if first is None else first
+    last = num_frames - 1 if last is None else last
+    problems = [f"{name} {value} is out of range 0-{num_frames - 1}"
+                for name, value in (("first_frame", first), ("last_frame", last))
+                if not 0 <= value < num_frames]
+    if not problems and first > last:
+        problems.append(f"first_frame {first} is after last_frame {last}")
+    if problems:
+        raise InvalidSuggestionRequest("; ".join(problems))
+    return first, last
+
+
+def _target_name(task: Task) -> str:
+    return "hand" if task.kind == "hand" else "object"
+
+
+def _unavailable_reason(task: Task, serials: list[str]) -> str:
+    have = ("there is none" if not serials else
+            f"there is 1 (view {serials[0]})" if len(serials) == 1 else
+            f"there are {len(serials)} (views {', '.join(serials)})")
+    return (f"suggestions need accepted work in {MIN_VIEWS} other views of this "
+            f"{_target_name(task)}; {have}")
+
+
+def _depth_reader(session: Session, storage: Storage, camera: Camera, first: int, last: int
+                  ) -> DepthReader | None:
+    """A reader ``frame -> (H, W) uint16 mm`` of the camera's depth maps, frame counted from
+    ``first``; None when the view has no depth for every frame of the range."""
+    if not camera.has_depth:
+        return None
+    stored = list(session.scalars(select(Frame.depth_key).where(
+        Frame.camera_id == camera.id, Frame.index >= first, Frame.index <= last)
+        .order_by(Frame.index)))
+    keys = [key for key in stored if key]
+    if len(keys) != last - first + 1:
+        return None
+
+    def read(frame: int) -> np.ndarray:
+        key = keys[frame]
+        depth = cv2.imdecode(np.frombuffer(storage.get_bytes(key), np.uint8),
+                             cv2.IMREAD_UNCHANGED)
+        if depth is None or depth.dtype != np.uint16 or depth.shape != (camera.height,
+                                                                         camera.width):
+            raise StorageError(f"{key}: not a {camera.width}x{camera.height} 16-bit depth map")
+        return depth
+
+    return read
+
+
+def _xy_lists(xy: np.ndarray) -> list[list[float] | None]:
+    """(R, 2) px -> per frame [x, y] rounded to 1/1000 px, or None."""
+    finite = np.isfinite(xy).all(axis=-1).tolist()
+    return [v if ok else None
+            for v, ok in zip(np.round(xy, 3).tolist(), finite, strict=True)]
+
+
+def _other_work(session: Session, task: Task, view_of: dict[int, int], first: int, last: int
+                ) -> list[ViewWork]:
+    """The target's accepted work in views other than the task's, frames first..last."""
+    others = {t.id: t for t in sequence_tasks(session, task.sequence_id, task.target_key)
+              if t.camera_id != task.camera_id}
+    work = []
+    for assignment in labelled_work(session, others):
+        other = others[assignment.task_id]
+        dense = view_work(view_of[other.camera_id],
+                          ((t.point_index, t.keyframes) for t in assignment.tracks),
+                          task.sequence.num_frames, task.num_points)
+        work.append(ViewWork(dense.view, dense.xy[first:last + 1],
+                             dense.visible[first:last + 1], dense.decided[first:last + 1]))
+    return work
+
+
+def suggestions(session: Session, storage: Storage, assignment: Assignment,
+                first_frame: int | None = None, last_frame: int | None = None
+                ) -> SuggestionsRead:
+    """Pre-fill suggestions and epipolar data for the assignment's view, frames
+    ``first_frame``..``last_frame`` (default the whole clip); 422 for frames outside it."""
+    task = service.get_task_or_raise(session, assignment.task_id)
+    num_frames, num_points = task.sequence.num_frames, task.num_points
+    first, last = frame_range(first_frame, last_frame, num_frames)
+    camera_rows = sequence_cameras(session, task.sequence_id)
+    view_of = {c.id: i for i, c in enumerate(camera_rows)}
+    work = _other_work(session, task, view_of, first, last)
+    views = sorted({w.view for w in work})
+    serials = [camera_rows[v].serial for v in views]
+    if len(views) < MIN_VIEWS:
+        return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
+                               views=serials, min_views=MIN_VIEWS, first_frame=first,
+                               last_frame=last, points=[], epipolar=[])
+    cameras = [camera_model(c) for c in camera_rows]
+    target = view_of[task.camera_id]
+    found = prefill(cameras, work, target,
+                    _depth_reader(session, storage, task.camera, first, last))
+    shown = np.isfinite(found.xy).all(axis=-1) & found.known & found.visible
+    xy = plant(check_key(get_settings().signing_key), assignment.id,
+               np.swapaxes(found.xy, 0, 1), shown.T, first, num_frames, num_points,
+               task.camera.width, task.camera.height)
+    points = [PointSuggestions(
+        point=p, xy=_xy_lists(xy[p]),
+        visible=[bool(v) if k else None for v, k in zip(found.visible[:, p],
+                                                        found.known[:, p], strict=True)])
+        for p in range(num_points)]
+    epipolar = [EpipolarView(
+        serial=camera_rows[guide.view].serial, F=guide.fundamental.tolist(),
+        xy=[_xy_lists(guide.xy[:, p]) for p in range(num_points)])
+        for guide in epipolar_guide(cameras, work, target)]
+    return SuggestionsRead(available=True, reason=None, views=serials, min_views=MIN_VIEWS,
+                           first_frame=first, last_frame=last, points=points,
+                           epipolar=epipolar)

@@ -1,0 +1,300 @@
+"""GET /api/annotate/suggestions: pre-fill suggestions from the accepted work of a target's
+other views, through the real app on the small synthetic capture (3 views x 6 frames at
+640x480, with depth maps): view 0 is labelled, views 1 and 2 carry careful accepted work.
+
+Also: the tracking proposals carry the same check cells (worker.tracking.checks).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.captures.flows import import_path
+from backend.db import session_scope
+
+URL = "/api/annotate/suggestions"
+
+
+def _bearer(token: str) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"}
+
+
+def _truth(capture: Path, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    from backend.crowd.simulate import CaptureTruth
+    from worker.synth.annotators import hand_visibility
+
+    joint_2d, seg = CaptureTruth(capture).view(serial, frames)
+    return joint_2d, hand_visibility(joint_2d, seg)
+
+
+def _accept(task_id: int, worker: str, tracks: list, status: str = "approved") -> int:
+    """An assignment from a direct link, with QC's verdict ``status`` already given."""
+    from backend.annotation.models import Assignment, Track
+    from backend.db import utcnow
+
+    with session_scope() as session:
+        assignment = Assignment(task_id=task_id, worker_id=worker, external_id=f"direct-{worker}",
+                                status=status, version=1, working_time_s=100.0,
+                                submitted_at=utcnow())
+        assignment.tracks = [Track(point_index=p, keyframes=rows) for p, rows in enumerate(tracks)]
+        session.add(assignment)
+        session.flush()
+        return assignment.id
+
+
+def _careful(capture: Path, task: dict, seed: int) -> list:
+    """A careful simulated worker's tracks of a hand task (a keyframe on every frame)."""
+    from worker.synth.annotators import annotate
+
+    truth, visible = _truth(capture, task["serial"], task["num_frames"])
+    return annotate(truth, visible, (task["width"], task["height"]), "careful",
+                    np.random.default_rng(seed), key_step=1).tracks
+
+
+@pytest.fixture
+def hands(client: TestClient, admin_headers: dict, small_capture: Path) -> dict:
+    """The capture's hand tasks by view, object task 0 of view 0, and two direct links of the
+    view 0 hand task (workers W1, W2)."""
+    seq_id = import_path(small_capture)[0].sequence_id
+    tasks = client.post(f"/api/sequences/{seq_id}/tasks", headers=admin_headers).json()
+    hand = [t for t in tasks if t["kind"] == "hand"]
+    links = [client.post(f"/api/tasks/{hand[0]['id']}/assignments", json={"worker_id": w},
+                         headers=admin_headers).json() for w in ("W1", "W2")]
+    obj = next(t for t in tasks if t["kind"] == "object" and t["serial"] == hand[0]["serial"])
+    return {"tasks": hand, "links": links, "object": obj}
+
+
+def _get(client: TestClient, token: str, **params: int) -> dict:
+    resp = client.get(URL, params=params, headers=_bearer(token))
+    assert resp.status_code == 200, resp.text
+    return resp.json()
+
+
+def _grid(points: list[dict]) -> np.ndarray:
+    """(F, P, 2) of the answer's points, NaN where null."""
+    rows = [[[np.nan, np.nan] if v is None else v for v in p["xy"]] for p in points]
+    return np.swapaxes(np.array(rows, dtype=float), 0, 1)
+
+
+@pytest.fixture
+def accepted(hands: dict, small_capture: Path) -> dict:
+    """Careful accepted work of views 1 and 2."""
+    for view, seed in ((1, 11), (2, 12)):
+        task = hands["tasks"][view]
+        _accept(task["id"], f"A{view}", _careful(small_capture, task, seed))
+    return hands
+
+
+def test_suggestions_wait_for_accepted_work_in_two_other_views(
+    client: TestClient, hands: dict, small_capture: Path
+) -> None:
+    tasks, token = hands["tasks"], hands["links"][0]["token"]
+    answer = _get(client, token)
+    assert answer["available"] is False and answer["min_views"] == 2
+    assert answer["reason"] == ("suggestions need accepted work in 2 other views of this hand; "
+                                "there is none")
+    assert answer["points"] == [] and answer["epipolar"] == [] and answer["views"] == []
+    # Work of the same view, and work QC has not accepted, do not count.
+    _accept(tasks[0]["id"], "same-view", _careful(small_capture, tasks[0], 1))
+    _accept(tasks[2]["id"], "waiting", _careful(small_capture, tasks[2], 2), status="submitted")
+    _accept(tasks[1]["id"], "A1", _careful(small_capture, tasks[1], 3))
+    answer = _get(client, token)
+    assert answer["available"] is False and answer["views"] == [tasks[1]["serial"]]
+    assert answer["reason"] == ("suggestions need accepted work in 2 other views of this hand; "
+                                f"there is 1 (view {tasks[1]['serial']})")
+    # An object task says so.
+    from backend.annotation.models import Assignment
+    from backend.annotation.service import get_task_or_raise
+    from backend.annotation.tokens import assignment_token
+
+    aid = _accept(hands["object"]["id"], "O1", [[], []], status="working")
+    with session_scope() as session:
+        object_token = assignment_token(get_task_or_raise(session, hands["object"]["id"]),
+                                        session.get_one(Assignment, aid))
+    assert "other views of this object; there is none" in _get(client, object_token)["reason"]
+
+
+def test_suggestions_from_two_accepted_views_lie_near_the_truth(
+    client: TestClient, accepted: dict, small_capture: Path
+) -> None:
+    from backend.config import get_settings
+    from worker.quality.prefill import epipolar_lines
+    from worker.tracking.checks import check_cells, check_key
+
+    tasks, link = accepted["tasks"], accepted["links"][0]
+    answer = _get(client, link["token"])
+    assert answer["available"] is True and answer["reason"] is None
+    assert answer["views"] == [tasks[1]["serial"], tasks[2]["serial"]]
+    assert (answer["first_frame"], answer["last_frame"]) == (0, 5)
+    assert [p["point"] for p in answer["points"]] == list(range(21))
+    truth, visible = _truth(small_capture, tasks[0]["serial"], 6)
+    xy = _grid(answer["points"])
+    assert xy.shape == (6, 21, 2)
+    cells = check_cells(check_key(get_settings().signing_key), link["assignment_id"], 21, 6)
+    plain = np.ones((6, 21), bool)
+    for point, frame in cells:
+        plain[frame, point] = False
+    # Suggested where both views see the joint (the object covers it in view 2 half the time).
+    both = _truth(small_capture, tasks[1]["serial"], 6)[1] & \
+        _truth(small_capture, tasks[2]["serial"], 6)[1]
+    has = np.isfinite(xy).all(axis=-1)
+    assert both.sum() > 50 and not (has & ~both).any() and has[both].mean() > 0.95
+    errors = np.linalg.norm(xy - truth, axis=-1)[has & plain]
+    # Two careful views (2 px per axis): measured median 2.1 px, largest 8.4 px.
+    assert np.median(errors) < 4.0 and errors.max() < 15.0
+    suggested = np.array([[np.nan if v is None else float(v) for v in p["visible"]]
+                          for p in answer["points"]]).T
+    known = ~np.isnan(suggested)
+    assert known[has].mean() > 0.9
+    assert (suggested[known] == visible[known]).mean() > 0.9
+    # The epipolar guide: each labelled view's line through the true joint of view 0.
+    assert [e["serial"] for e in answer["epipolar"]] == answer["views"]
+    for entry in answer["epipolar"]:
+        labels = _grid([{"xy": p} for p in entry["xy"]])
+        lines = epipolar_lines(np.array(entry["F"]), labels)
+        distance = np.abs((lines[..., :2] * truth).sum(axis=-1) + lines[..., 2])
+        assert np.nanmedian(distance) < 3.0
+
+
+def test_check_cells_are_shown_15_px_off_and_only_there(
+    client: TestClient, accepted: dict
+) -> None:
+    """Two assignments of one task read the same suggestions but for their own check cells;
+    the epipolar data carries none."""
+    from backend.config import get_settings
+    from worker.tracking.checks import check_cells, check_key
+
+    first, second = (_get(client, link["token"]) for link in accepted["links"])
+    assert first["epipolar"] == second["epipolar"]
+    key = check_key(get_settings().signing_key)
+    mine, theirs = (set(check_cells(key, link["assignment_id"], 21, 6))
+                    for link in accepted["links"])
+    assert len(mine) == 4 and mine != theirs
+    a, b = _grid(first["points"]), _grid(second["points"])
+    moved = np.zeros((6, 21), bool)
+    for point, frame in mine ^ theirs:
+        shown = first["points"][point]["visible"][frame] is True
+        if shown:
+            assert np.linalg.norm(a[frame, point] - b[frame, point]) == pytest.approx(15.0,
+                                                                                    abs=2e-3)
+            moved[frame, point] = True
+    assert moved.any()
+    np.testing.assert_array_equal(a[~moved], b[~moved])
+
+
+@pytest.fixture(scope="module")
+def tracked_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One view of a hand grasping over 24 frames at 640x480, where tracking holds between
+    keyframes 4 frames apart (the 6 frames of the small capture move too far for it)."""
+    from worker.synth import generate_capture
+
+    root = tmp_path_factory.mktemp("tracked-capture")
+    generate_capture(root, seed=7, frames=24, views=1, workers=1)
+    return root
+
+
+def test_tracking_proposals_carry_the_same_check_cells(
+    client: TestClient, admin_headers: dict, tracked_capture: Path
+) -> None:
+    from backend.config import get_settings
+    from worker.tracking.checks import check_cells, check_key
+
+    seq_id = import_path(tracked_capture)[0].sequence_id
+    task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",
+                                       headers=admin_headers).json() if t["kind"] == "hand")
+    links = [client.post(f"/api/tasks/{task['id']}/assignments", json={"worker_id": w},
+                         headers=admin_headers).json() for w in ("T1", "T2")]
+    body = {"tracks": [{"point": p, "keyframes": rows[::4] + rows[-1:]}
+                       for p, rows in enumerate(_careful(tracked_capture, task, 5))]}
+    answers = []
+    for link in links:
+        resp = client.post("/api/annotate/proposals", json=body, headers=_bearer(link["token"]))
+        assert resp.status_code == 200, resp.text
+        answers.append(resp.json())
+    key = check_key(get_settings().signing_key)
+    mine, theirs = (set(check_cells(key, link["assignment_id"], 21, 24)) for link in links)
+    a, b = _grid(answers[0]["points"]), _grid(answers[1]["points"])
+    moved = np.zeros((24, 21), bool)
+    for point, frame in mine ^ theirs:
+        if answers[0]["points"][point]["ok"][frame]:
+            assert np.linalg.norm(a[frame, point] - b[frame, point]) == pytest.approx(15.0,
+                                                                                    abs=2e-3)
+            moved[frame, point] = True
+    assert moved.any()
+    np.testing.assert_array_equal(a[~moved], b[~moved])
+
+
+def test_who_may_read_suggestions(
+    client: TestClient, admin_headers: dict, accepted: dict
+) -> None:
+    link = accepted["links"][0]
+    assert client.get(URL).status_code == 401
+    assert client.get(URL, headers=_bearer("not.a.token")).status_code == 401
+    # An admin's own token is not a worker's: it opens no assignment (as for proposals).
+    assert client.get(URL, headers=admin_headers).status_code == 401
+    preview = client.post(f"/api/tasks/{accepted['tasks'][0]['id']}/preview-token",
+                          headers=admin_headers).json()["token"]
+    resp = client.get(URL, headers=_bearer(preview))
+    assert resp.status_code == 401 and "accept the HIT" in resp.json()["detail"]
+    # A read-only review link reads what its assignment's own token reads.
+    review = client.post(f"/api/assignments/{link['assignment_id']}/readonly-link",
+                         headers=admin_headers).json()["url"].split("#token=")[1]
+    assert _get(client, review) == _get(client, link["token"])
+
+
+def test_another_views_assignment_reads_suggestions_for_its_own_view(
+    client: TestClient, admin_headers: dict, accepted: dict, small_capture: Path
+) -> None:
+    """Work of view 1 needs two OTHER views: view 2 and, once accepted, view 0."""
+    tasks = accepted["tasks"]
+    token = client.post(f"/api/tasks/{tasks[1]['id']}/assignments", json={"worker_id": "W9"},
+                        headers=admin_headers).json()["token"]
+    answer = _get(client, token)
+    assert answer["available"] is False and answer["views"] == [tasks[2]["serial"]]
+    _accept(tasks[0]["id"], "A0", _careful(small_capture, tasks[0], 10))
+    answer = _get(client, token)
+    assert answer["views"] == [tasks[0]["serial"], tasks[2]["serial"]]
+    truth, _ = _truth(small_capture, tasks[1]["serial"], 6)
+    errors = np.linalg.norm(_grid(answer["points"]) - truth, axis=-1)
+    assert np.nanmedian(errors) < 4.0
+
+
+def test_a_frame_range_answers_its_frames_only(client: TestClient, accepted: dict) -> None:
+    token = accepted["links"][0]["token"]
+    whole, part = _get(client, token), _get(client, token, first_frame=2, last_frame=4)
+    assert (part["first_frame"], part["last_frame"]) == (2, 4)
+    assert [p["xy"][2:5] for p in whole["points"]] == [p["xy"] for p in part["points"]]
+    assert [p["visible"][2:5] for p in whole["points"]] == [p["visible"] for p in part["points"]]
+    assert [[xy[2:5] for xy in e["xy"]] for e in whole["epipolar"]] == \
+        [e["xy"] for e in part["epipolar"]]
+
+
+@pytest.mark.parametrize(("params", "problem"), [
+    ({"first_frame": 6}, "first_frame 6 is out of range 0-5"),
+    ({"last_frame": 9}, "last_frame 9 is out of range 0-5"),
+    ({"first_frame": 4, "last_frame": 2}, "first_frame 4 is after last_frame 2"),
+    ({"first_frame": -1}, "first_frame"),
+    ({"last_frame": "end"}, "last_frame"),
+])
+def test_bad_frame_ranges_are_refused_naming_the_problem(
+    client: TestClient, hands: dict, params: dict, problem: str
+) -> None:
+    resp = client.get(URL, params=params, headers=_bearer(hands["links"][0]["token"]))
+    assert resp.status_code == 422, resp.text
+    assert problem in resp.text
+
+
+def test_openapi_documents_the_answer(client: TestClient) -> None:
+    spec = client.get("/openapi.json").json()
+    operation = spec["paths"][URL]["get"]
+    schema = operation["responses"]["200"]["content"]["application/json"]["schema"]
+    assert schema["$ref"].endswith("/SuggestionsRead")
+    fields = spec["components"]["schemas"]["SuggestionsRead"]["properties"]
+    assert set(fields) == {"available", "reason", "views", "min_views", "first_frame",
+                           "last_frame", "points", "epipolar"}
+    assert "hypot(a, b)" in spec["components"]["schemas"]["EpipolarView"]["description"]
+
