@@ -34,7 +34,7 @@ VIEW = 1
 # Tracking proposals hold within about 1-2 px of the truth where they hold at all (BENCHMARKS);
 # clicks land on whole screen px.
 TRACK_TOL_PX = 3.0
-SIZES = [(1024, 700), (1366, 768)]
+SIZES = [(1024, 700), (1366, 768), (1440, 900)]
 TRACK_GHOST_RGB = (0x35, 0xD0, 0xFF)
 
 
