@@ -347,8 +347,10 @@ export class Assist {
 
   /** A keyframe set by hand inside a run of tracked keyframes re-tracks around it. */
   _onStoreChange(change) {
-    if (this._writing || change.cause !== "edit") return;
+    if (this._writing || change.cause === "saved") return;
     const points = change.points || (change.point === null ? [] : [change.point]);
+    this._dropStaleProposals(points);
+    if (change.cause !== "edit") return;
     for (const point of points) {
       for (const frame of [...change.created, ...change.updated]) {
         const k = this.store.keyframeAt(point, frame);
@@ -358,6 +360,16 @@ export class Assist {
         }
       }
     }
+  }
+
+  /** Shown proposals of points whose keyframes changed were tracked from other anchors. */
+  _dropStaleProposals(points) {
+    if (!this.proposals) return;
+    const kept = this.proposals.points.filter((p) => !points.includes(p.point));
+    if (kept.length === this.proposals.points.length) return;
+    this.proposals = kept.length ? { points: kept, counts: countTracked(kept) } : null;
+    this._say("warn", "Proposals dropped for a point whose keyframes changed; press T to " +
+      "track it again.");
   }
 
   /** Waits for the drag to settle (every step of it is an edit). */

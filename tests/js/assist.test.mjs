@@ -157,6 +157,23 @@ test("Escape's discard writes nothing; read-only pages never track", async () =>
   assert.equal(await assist.track(false), false);
 });
 
+test("proposals of a point whose keyframes change are dropped, not written", async () => {
+  const { store, assist } = newAssist((p, f) => [f, f]);
+  for (const p of [0, 1]) {
+    store.placePoint(p, 0, 0, 0);
+    store.placePoint(p, 10, 10, 10);
+  }
+  await assist.track(true);
+  assert.deepEqual(assist.proposals.points.map((p) => p.point), [0, 1]);
+  store.placePoint(1, 10, 20, 20);
+  assert.deepEqual(assist.proposals.points.map((p) => p.point), [0]);
+  assert.match(assist.status.text, /press T to track it again/);
+  store.undo();
+  assist.accept();
+  assert.equal(store.keyframes(0).length, 11);
+  assert.equal(store.keyframes(1).length, 2);
+});
+
 test("a correction inside a tracked run re-tracks both sides from it, once", async () => {
   // The tracker interpolates linearly between the anchors it is given.
   const linear = (p, f, rows) => {
