@@ -127,7 +127,7 @@ export class Editor {
       points: this.points.map((v, p) => (this.hidden.has(p) ? undefined : v)),
       colors: this.task.point_colors,
       names: this.labels, skeleton: this.task.skeleton || [],
-      active: this.active, highlight: this.task.highlight,
+      active: this.active, highlight: this.task.highlight, locked: this.locked,
     });
   }
 

@@ -6,10 +6,15 @@
  * hide and lock, whose clicks go to the `onToggle` callback.
  */
 
-/** Small icons of the hide and lock toggles (16 x 16 SVG, drawn in currentColor). */
+/**
+ * Small icons of the hide and lock toggles (16 x 16 SVG, drawn in currentColor); a hidden
+ * point's eye is struck through (style.css).
+ */
 const EYE_ICON = '<svg viewBox="0 0 16 16" aria-hidden="true"><path d="M1 8c2-3.5 4.5-5 7-5s5 ' +
   '1.5 7 5c-2 3.5-4.5 5-7 5S3 11.5 1 8z" fill="none" stroke="currentColor" stroke-width="1.5"/>' +
-  '<circle cx="8" cy="8" r="2.2" fill="currentColor"/></svg>';
+  '<circle cx="8" cy="8" r="2.2" fill="currentColor"/>' +
+  '<line class="slash" x1="2" y1="14" x2="14" y2="2" stroke="currentColor" stroke-width="1.8"/>' +
+  "</svg>";
 const LOCK_ICON = '<svg viewBox="0 0 16 16" aria-hidden="true"><rect x="3" y="7" width="10" ' +
   'height="7" rx="1" fill="currentColor"/><path d="M5 7V5a3 3 0 0 1 6 0v2" fill="none" ' +
   'stroke="currentColor" stroke-width="1.5"/></svg>';
@@ -49,6 +54,7 @@ export class PointList {
    */
   constructor(container, task, onSelect, onToggle = () => {}) {
     const keys = jointKeys(task.kind, task.point_names.length);
+    this._labels = task.point_names.map((name, i) => `${i} ${displayName(name)}`);
     container.innerHTML = task.point_names.map((name, i) => {
       const label = `${i} ${escapeHtml(displayName(name))}`;
       const key = keys[i] ? `<kbd class="point-key" title="Key ${keys[i]}">` +
@@ -104,6 +110,9 @@ export class PointList {
       const [hide, lock] = item.querySelectorAll(".point-toggle");
       hide.setAttribute("aria-pressed", String(isHidden));
       lock.setAttribute("aria-pressed", String(isLocked));
+      hide.title = `${isHidden ? "Show" : "Hide"} ${this._labels[p]} (H)`;
+      lock.title = isLocked ? `Unlock ${this._labels[p]}`
+        : `Lock ${this._labels[p]}: no click or drag moves it`;
     });
   }
 

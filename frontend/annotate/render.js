@@ -5,9 +5,9 @@
  *   keyframe      filled disc             interpolated   hollow ring
  *   occluded      dashed ring with an x   not placed     not drawn
  *
- * The active point gets a halo and its name. Points are stored in image pixels; everything is
- * mapped through the one Transform. Marker sizes are in screen pixels so they stay clickable at
- * any zoom. Stateless: the caller passes everything in.
+ * The active point gets a halo and its name; a locked point a small padlock. Points are stored
+ * in image pixels; everything is mapped through the one Transform. Marker sizes are in screen
+ * pixels so they stay clickable at any zoom. Stateless: the caller passes everything in.
  */
 
 /** Marker radius, screen px. */
@@ -33,6 +33,7 @@ const OUTLINE = "rgba(0, 0, 0, 0.85)";
  * @property {number[][]} skeleton  [a, b] bones (hand tasks)
  * @property {number} active        active point index, or -1
  * @property {{polygon?: number[][], box?: number[]}|null} highlight  image px
+ * @property {ReadonlySet<number>} [locked]  points the worker locked (drawn with a padlock)
  */
 
 /** @type {Set<(ctx: CanvasRenderingContext2D, scene: Scene) => void>} */
@@ -73,6 +74,7 @@ export function drawScene(ctx, scene) {
     drawPoint(ctx, scene.transform, active, scene.colors[scene.active], true);
     drawLabel(ctx, scene.transform, active, scene.names[scene.active]);
   }
+  for (const i of scene.locked || []) drawLockMark(ctx, scene.transform, scene.points[i]);
 }
 
 /**
@@ -199,4 +201,22 @@ function drawLabel(ctx, tf, value, name) {
   ctx.fillRect(x, y, w, 18);
   ctx.fillStyle = "#ffffff";
   ctx.fillText(name, x + 4, y + 13);
+}
+
+/** A small padlock at the lower right of a locked point's marker: no drag moves it. */
+function drawLockMark(ctx, tf, value) {
+  if (!placed(value)) return;
+  const s = tf.toScreen(value.x, value.y);
+  const x = s.x + POINT_RADIUS_PX;
+  const y = s.y + POINT_RADIUS_PX - 1;
+  ctx.beginPath();
+  ctx.arc(x + 3.5, y, 2.3, Math.PI, 0);
+  ctx.lineWidth = 1.5;
+  ctx.strokeStyle = OUTLINE;
+  ctx.stroke();
+  ctx.fillStyle = "#ffd98a";
+  ctx.strokeStyle = OUTLINE;
+  ctx.lineWidth = 1;
+  ctx.fillRect(x, y, 7, 5.5);
+  ctx.strokeRect(x, y, 7, 5.5);
 }
