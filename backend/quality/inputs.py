@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -18,12 +18,14 @@ from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
+from backend.config import get_settings
 from backend.solve.inputs import load_mesh
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
 from worker.geometry import CameraModel
-from worker.tracks import dense_points
+from worker.tracking.checks import accepted_checks, check_key
+from worker.tracks import SOURCE_PREFILLED, dense_points, keyframe_sources
 
 if TYPE_CHECKING:
     from worker.quality.anchored import SolvedObjects
@@ -35,11 +37,13 @@ DECODE_THREADS = 4
 
 @dataclass
 class ScoredAssignment:
-    """Who and what one label set is, beside its arrays."""
+    """Who and what one label set is, beside its arrays; checks: (accepted, corrected) check
+    suggestions of the assignment (worker.tracking.checks.accepted_checks)."""
 
     assignment_id: int
     task_id: int
     worker_id: str
+    checks: tuple[int, int] = (0, 0)
 
 
 @dataclass
@@ -59,14 +63,33 @@ class TargetInputs:
 
 def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int
                 ) -> ViewLabels:
-    """An assignment's tracks as dense (F, P, 2) px (NaN = no position) and (F, P) visibility,
-    as a worker.quality.consensus.ViewLabels."""
+    """An assignment's tracks as dense (F, P, 2) px (NaN = no position), (F, P) visibility
+    and (F, P) decided, as a worker.quality.consensus.ViewLabels.
+
+    decided is False only where the value comes from pre-filled suggestions the worker kept
+    unchanged (worker.tracks.keyframe_sources); a frame the worker left unplaced is theirs
+    as before, so work without pre-fill is judged exactly as it was."""
     from worker.quality.consensus import ViewLabels
 
     xy, visible = dense_points(((t.point_index, t.keyframes) for t in assignment.tracks),
                                num_frames, num_points)
+    decided = np.ones((num_frames, num_points), bool)
+    for track in assignment.tracks:
+        if 0 <= track.point_index < num_points:
+            decided[:, track.point_index] = \
+                keyframe_sources(track.keyframes, num_frames) != SOURCE_PREFILLED
     return ViewLabels(key=str(assignment.id), view=view, xy=xy, visible=visible,
-                      working_time_s=assignment.working_time_s)
+                      working_time_s=assignment.working_time_s, decided=decided)
+
+
+def check_counts(key: bytes, assignment: Assignment, num_frames: int, num_points: int
+                 ) -> tuple[int, int]:
+    """(accepted, corrected) check suggestions of a saved assignment (its stored rows)."""
+    tracks: list[list[list[Any]]] = [[] for _ in range(num_points)]
+    for track in assignment.tracks:
+        if 0 <= track.point_index < num_points:
+            tracks[track.point_index] = track.keyframes
+    return accepted_checks(key, assignment.id, tracks, num_points, num_frames)
 
 
 def target_inputs(session: Session, sequence_id: int, target_key: str) -> TargetInputs:
@@ -82,13 +105,15 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
                        cameras=[camera_model(c) for c in cameras],
                        tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
+    key = check_key(get_settings().signing_key)
     # Every assignment's tracks in one more query, not one per assignment.
     for assignment in labelled_work(session, out.tasks, SCORED_STATUSES, vouched=True):
         task = out.tasks[assignment.task_id]
         view = view_of[task.camera_id]
         out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))
         out.who[str(assignment.id)] = ScoredAssignment(
-            assignment.id, task.id, assignment.worker_id)
+            assignment.id, task.id, assignment.worker_id,
+            check_counts(key, assignment, out.num_frames, task.num_points))
     return out
 
 

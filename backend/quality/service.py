@@ -230,6 +230,8 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     inputs = target_inputs(session, sequence_id, target_key)
     timings["read_tracks_s"] = round(time.perf_counter() - started, 3)
     results, methods, provisional, replays = _score(session, inputs, timings)
+    for key, qc in results.items():  # check suggestions kept or corrected (decide.py)
+        qc.metrics["checks_accepted"], qc.metrics["checks_corrected"] = inputs.who[key].checks
     fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
     thresholds = learn_thresholds(_population(session, inputs.kind, fresh), thresholds_bounds())
     names = point_names(inputs.kind)

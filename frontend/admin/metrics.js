@@ -129,6 +129,14 @@ const METRICS = {
     "Share of the points the worker marked visible." },
   scored_fraction: { label: "Judged", unit: "%", explain:
     "Share of the points that could be compared (at least two other views fix them)." },
+  decided_fraction: { label: "Worker's own positions", unit: "%", explain:
+    "Share of the shown points the worker placed, edited or tracked; the rest are "
+    + "suggestions from the other views kept unchanged, which are never judged." },
+  checks_accepted: { label: "Check suggestions kept", unit: "", explain:
+    "Suggestions shown 15 px off the point on purpose that the worker accepted unchanged: "
+    + "a worker who looks drags each one back." },
+  checks_corrected: { label: "Check suggestions corrected", unit: "", explain:
+    "Suggestions shown 15 px off the point on purpose that the worker moved back onto it." },
   working_time_s: { label: "Working time", unit: "s", explain:
     "Time the worker spent on the task." },
   solve_run: { label: "Solve run", unit: "", explain:

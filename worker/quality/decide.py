@@ -24,12 +24,6 @@ from worker.tracks import format_spans
 
 # The consistent estimator of a normal distribution's sigma from the MAD.
 MAD_TO_SIGMA = 1.4826
-# Check suggestions (worker.tracking.checks) a worker kept unchanged although each was shown
-# CHECK_OFFSET_PX off the point, plain to anyone who looks: one may be a slip among corrected
-# ones (review); two are suggestions accepted without looking (reject). The metrics
-# checks_accepted and checks_corrected count them; work without suggestions has none.
-CHECKS_REVIEW = 1
-CHECKS_REJECT = 2
 
 
 @dataclass(frozen=True)
@@ -91,6 +85,11 @@ def _bounds() -> dict[str, MetricBound]:
         "track_jitter_px": MetricBound("above", (30.0, 30.0), (60.0, 60.0)),
         "track_jitter_ratio": MetricBound("above", (1.55, 1.6)),
         "moved_with_hand": MetricBound("below", (0.15, 0.25), (0.05, 0.1)),
+        # Check suggestions (worker.tracking.checks) kept unchanged although each was shown
+        # CHECK_OFFSET_PX off the point, plain to anyone who looks: one may be a slip among
+        # corrected ones (review); two are suggestions accepted without looking (reject).
+        # Fixed, whatever the population does: work without suggestions keeps none.
+        "checks_accepted": MetricBound("above", (0.0, 0.0), (1.0, 1.0)),
     }
 
 
@@ -227,6 +226,10 @@ _ADVICE: dict[str, Callable[[float, float], str]] = {
     "moved_with_object": lambda v, t: (
         f"Your landmarks travel only {_pct(v)} as far as the object does in the other camera "
         "views: follow each landmark as the object moves."),
+    "checks_accepted": lambda v, t: (
+        f"You kept {v:.0f} suggested position(s) that were shown {CHECK_OFFSET_PX:.0f} px off "
+        "the point on purpose: look at every suggestion on its frame and drag it onto the "
+        "point before you accept it."),
 }
 
 
@@ -286,10 +289,10 @@ def _issue_sentence(issues: list[dict], names: list[str], limit: int = 3) -> str
 def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str]) -> Decision:
     """The outcome of one assignment.
 
-    reject: a clear fail (a reject threshold crossed, a swap of fingers, or CHECKS_REJECT
-    check suggestions kept unchanged); review: a review threshold crossed, one check
-    suggestion kept, nothing decided by the worker (every position a suggestion unchanged),
-    or a reject-level fail on a provisional report (never auto-rejected); approve otherwise.
+    reject: a clear fail (a reject threshold crossed, among them two check suggestions kept
+    unchanged, or a swap of fingers); review: a review threshold crossed, nothing decided by
+    the worker (every position a suggestion kept unchanged), or a reject-level fail on a
+    provisional report (never auto-rejected); approve otherwise.
     reasons are short and technical (for admins); feedback speaks to the worker and names the
     joints, frames and distances.
     """
@@ -302,19 +305,16 @@ def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str
         worst.setdefault(fail[1], fail)
     for level, name, value, limit, worse in worst.values():
         sign = ">" if worse == "above" else "<"
-        reasons.append(f"{name} {value:.3g} {sign} {limit:.3g} ({level})")
-    checks = _checks_level(qc.metrics)
-    if checks is not None:
-        reasons.append(_checks_reason(qc.metrics, checks))
+        reasons.append(_checks_reason(qc.metrics, level) if name == "checks_accepted"
+                       else f"{name} {value:.3g} {sign} {limit:.3g} ({level})")
     undecided = _decided_nothing(qc.metrics)
     if undecided:
         reasons.append("decided nothing: every position came from suggestions unchanged")
-    clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values()) \
-        or checks == "reject"
+    clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values())
     outcome: Outcome
     if clear_fail and not qc.provisional:
         outcome = "reject"
-    elif clear_fail or worst or checks or undecided:
+    elif clear_fail or worst or undecided:
         outcome = "review"
     else:
         outcome = "approve"
@@ -329,15 +329,8 @@ def _count(metrics: dict[str, float | None], name: str) -> int:
     return int(value) if value is not None else 0
 
 
-def _checks_level(metrics: dict[str, float | None]) -> Literal["review", "reject"] | None:
-    """How the check suggestions kept unchanged weigh (None: none kept)."""
-    accepted = _count(metrics, "checks_accepted")
-    if accepted >= CHECKS_REJECT:
-        return "reject"
-    return "review" if accepted >= CHECKS_REVIEW else None
-
-
 def _checks_reason(metrics: dict[str, float | None], level: str) -> str:
+    """The reason of a crossed checks_accepted threshold, with the counts behind it."""
     accepted = _count(metrics, "checks_accepted")
     seen = accepted + _count(metrics, "checks_corrected")
     verdict = "suggestions were accepted without looking" if level == "reject" \
@@ -356,12 +349,6 @@ def _decided_nothing(metrics: dict[str, float | None]) -> bool:
 def _feedback(qc: AssignmentQC, swaps: list[dict], worst: dict[str, tuple],
               thresholds: dict[str, float], names: list[str], outcome: str) -> str:
     sentences = [_swap_sentence(s) for s in swaps]
-    accepted = _count(qc.metrics, "checks_accepted")
-    if accepted:
-        sentences.append(
-            f"You kept {accepted} suggested position(s) that were shown {CHECK_OFFSET_PX:.0f} px "
-            "off the point on purpose: look at every suggestion on its frame and drag it onto "
-            "the point before you accept it.")
     if _decided_nothing(qc.metrics):
         sentences.append("Every position you sent was a suggestion left unchanged: check each "
                          "one on its frame and correct the ones that are off.")
