@@ -193,3 +193,57 @@ def test_a_blind_acceptor_is_told_why() -> None:
     assert "You kept 4 suggested position(s) that were shown 15 px off" in decision.feedback
     # Never rejected while provisional: an admin looks instead.
     assert decide(_qc(4, 0, provisional=True), thresholds, NAMES).outcome == "review"
+
+
+class TestObjectLandmarks:
+    """The same rule for object landmarks (worker.quality.landmarks): 2 landmarks riding on a
+    disc that moves 3 px per frame, 320x240."""
+
+    @staticmethod
+    def _scene():
+        from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
+
+        frames = 30
+        pose = look_at(np.array([0.0, -0.6, 0.3]), np.zeros(3), np.array([0.0, 0.0, 1.0]))
+        camera = CameraModel(intrinsics_matrix(300.0, 300.0, 160.0, 120.0), None, pose, 320, 240)
+        centres = np.stack([80.0 + 3.0 * np.arange(frames), np.full(frames, 120.0)], axis=1)
+        rows, cols = np.mgrid[0:240, 0:320]
+        masks = {f: (cols - c[0]) ** 2 + (rows - c[1]) ** 2 <= 30 ** 2
+                 for f, c in enumerate(centres)}
+        riding = centres[:, None, :] + np.array([[-12.0, -5.0], [10.0, 8.0]])[None]
+        return camera, masks, riding
+
+    @staticmethod
+    def _label(key: str, xy: np.ndarray, decided: bool | None = None) -> ViewLabels:
+        shape = xy.shape[:2]
+        return ViewLabels(key=key, view=0, xy=xy, visible=np.ones(shape, bool),
+                          working_time_s=40.0,
+                          decided=None if decided is None else np.full(shape, decided))
+
+    def test_landmarks_of_unchanged_suggestions_are_not_judged_against_the_outline(self):
+        from worker.quality.landmarks import score_landmarks
+
+        camera, masks, riding = self._scene()
+        off = riding + np.array([60.0, 0.0])  # a pre-fill 60 px off the object, kept
+        own = score_landmarks(camera, self._label("own", off), masks)
+        assert own.metrics["median_error_px"] > 20.0 and own.issues
+        kept = score_landmarks(camera, self._label("kept", off, decided=False), masks)
+        assert kept.metrics["median_error_px"] is None and kept.metrics["outlier_fraction"] is None
+        assert not [i for i in kept.issues if i["about"] == "silhouette"]
+        assert kept.metrics["decided_fraction"] == 0.0 and not kept.provisional
+        thresholds = learn_thresholds([own.metrics, kept.metrics])
+        assert decide(kept, thresholds, ["a", "b"]).outcome == "review"
+
+    def test_a_label_of_suggestions_alone_does_not_witness_the_objects_motion(self):
+        from worker.quality.landmarks import score_object
+
+        camera, _, riding = self._scene()
+        frozen = np.broadcast_to(riding[5], riding.shape).copy()
+        labels = [self._label("careful", riding), self._label("frozen", frozen),
+                  self._label("pre-filled", riding + 0.5, decided=False)]
+        # Only one worker's own track shows the object moving: too few witnesses to judge.
+        scored = score_object([camera], labels)
+        assert scored["frozen"].metrics["moved_with_object"] is None
+        # Counted as the worker's own, the copy would be the second witness.
+        labels[2] = self._label("pre-filled", riding + 0.5)
+        assert score_object([camera], labels)["frozen"].metrics["moved_with_object"] < 0.1

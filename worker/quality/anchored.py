@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from worker.geometry.cameras import CameraModel, pixels_to_rays
-from worker.quality.consensus import ViewLabels
+from worker.quality.consensus import ViewLabels, decided_of
 from worker.quality.metrics import (
     AssignmentQC,
     DepthMaps,
@@ -225,6 +225,9 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     """
     xy = np.asarray(label.xy, np.float64)
     visible = np.asarray(label.visible, bool)
+    # Only the worker's own decisions are judged (a pre-filled suggestion kept unchanged is
+    # not); the anchor, which object point a landmark marks, reads the whole track.
+    decided = decided_of(label)
     frames, points = visible.shape
     if scene.poses.shape[:2] != (len(scene.vertices), frames) or not 0 <= target < len(
             scene.vertices):
@@ -243,16 +246,17 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         anchored += 1
         world = _track_of(camera, point, scene.poses[target])
         shown[:, p] = point_visible(camera, world, scene, depth)
-        both = shown[:, p] & visible[:, p] & np.isfinite(xy[:, p]).all(axis=1)
+        both = shown[:, p] & visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
         reprojection[:, p] = camera.project(world)
         errors[both, p] = np.linalg.norm(reprojection[both, p] - xy[both, p], axis=1)
     judged = np.isfinite(errors)
-    hidden = ~shown & known[:, None]
+    hidden = ~shown & known[:, None] & decided
+    seen = shown & decided
     metrics: dict[str, float | None] = {
         "anchored_median_px": num(np.median(errors[judged])) if judged.any() else None,
         "anchored_p90_px": num(np.percentile(errors[judged], 90)) if judged.any() else None,
-        "anchored_visible_occluded": num((shown & ~visible).sum() / shown.sum())
-        if anchored and shown.any() else None,
+        "anchored_visible_occluded": num((seen & ~visible).sum() / seen.sum())
+        if anchored and seen.any() else None,
         "anchored_hidden_visible": num((hidden & visible).sum() / hidden.sum())
         if anchored and hidden.sum() >= MIN_HIDDEN_FRAMES else None,
         "anchored_drift_px": _drift(errors),

@@ -16,6 +16,11 @@ swapper in the pool becomes outliers instead of dragging the consensus:
    consensus itself was swapped by a majority of swappers, with theirs undone) and every label
    is judged again, as it was sent.
 
+Only what a worker decided is an observation: a position pre-filled from the other views'
+consensus and kept unchanged (ViewLabels.decided False) enters no fit and is never scored,
+so pre-filled views cannot agree with the work they were made from, nor count among the
+three views a verdict needs.
+
 Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; world metres.
 """
 
@@ -194,7 +199,7 @@ def decided_of(lab: ViewLabels) -> np.ndarray:
     return np.asarray(lab.decided, bool)
 
 
-def _own_xy(lab: ViewLabels) -> np.ndarray:
+def decided_xy(lab: ViewLabels) -> np.ndarray:
     """(F, P, 2) px of the label's own decisions, NaN where it has none or only suggestions."""
     return np.where(decided_of(lab)[..., None], np.asarray(lab.xy, dtype=np.float64), np.nan)
 
@@ -202,7 +207,7 @@ def _own_xy(lab: ViewLabels) -> np.ndarray:
 def _observations(labels: list[ViewLabels]) -> np.ndarray:
     """(F*P, L, 2) px of every label's visible points that the worker decided, NaN elsewhere
     (pre-filled suggestions are the other views' consensus, not an observation of this one)."""
-    cols = [np.where(np.asarray(lab.visible, bool)[..., None], _own_xy(lab), np.nan)
+    cols = [np.where(np.asarray(lab.visible, bool)[..., None], decided_xy(lab), np.nan)
             for lab in labels]
     return np.stack(cols, axis=2).reshape(-1, len(labels), 2)
 
@@ -392,7 +397,7 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged:
     (ViewLabels.decided); completeness and visible_fraction read the whole label."""
     decided = decided_of(lab)
     sent_xy = np.asarray(lab.xy, dtype=np.float64)
-    xy = _own_xy(lab)
+    xy = decided_xy(lab)
     visible = np.asarray(lab.visible, bool)
     errors = judged.errors
     # Motion and jitter are measured only where two other trusted views fix the point without
@@ -639,7 +644,7 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
                 for view, dm in (depth or {}).items() if view in {lab.view for lab in labels}}
     # Only the workers' own decisions witness the hand's motion (a label of suggestions alone
     # is left out: it would count as a hand that stands still).
-    motion = others_motion({lab.key: _own_xy(lab) for lab in labels
+    motion = others_motion({lab.key: decided_xy(lab) for lab in labels
                             if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
     assignments = {}
     replay = {}

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
-from worker.quality.consensus import ViewLabels
+from worker.quality.consensus import ViewLabels, decided_of, decided_xy
 from worker.quality.metrics import (
     AssignmentQC,
     completeness,
@@ -101,8 +101,11 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
 
 def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
     """For each label, the object's motion as the other labels (other views or other workers)
-    show it; None with fewer than two other labels."""
-    return others_motion({lab.key: np.asarray(lab.xy, dtype=np.float64) for lab in labels})
+    show it through their workers' own decisions (ViewLabels.decided: a pre-filled
+    suggestion kept unchanged witnesses nothing); None with fewer than two other labels."""
+    motion = others_motion({lab.key: decided_xy(lab) for lab in labels
+                            if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
+    return {lab.key: motion.get(lab.key) for lab in labels}
 
 
 def moved_with_object(xy: np.ndarray, motion: ObjectMotion) -> float | None:
@@ -142,6 +145,9 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
             (object_motion): steps it explains are not jumps, and a label that stays still
             while it moves scores a low moved_with_object.
 
+    The checks against the silhouette and against the object's motion read only the worker's
+    own decisions (label.decided); jumps, shake and stillness read the track as sent.
+
     Returns:
         AssignmentQC whose metrics hold, against the silhouette (None without masks),
         median/mean/p90_error_px and outlier_fraction (share of judged landmarks farther than
@@ -150,15 +156,18 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
         visible_fraction and working_time_s. per_joint / per_frame: median silhouette distance.
     """
     xy, visible = _check(label, masks, camera)
+    decided = decided_of(label)
+    own_xy = decided_xy(label)
     masks = masks or {}
-    dist = silhouette_distances(xy, visible, masks)
+    dist = silhouette_distances(xy, visible & decided, masks)
     judged = np.isfinite(dist)
     metrics = error_summary(dist)
     metrics["outlier_fraction"] = num((dist[judged] > SILHOUETTE_TOLERANCE_PX).mean()) \
         if judged.any() else None
-    metrics["motion_ratio"] = _mask_motion_ratio(xy, masks)
+    metrics["motion_ratio"] = _mask_motion_ratio(own_xy, masks)
     jump, typical = jumps(xy, motion.step if motion is not None else None)
-    metrics["moved_with_object"] = moved_with_object(xy, motion) if motion is not None else None
+    metrics["moved_with_object"] = moved_with_object(own_xy, motion) \
+        if motion is not None else None
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
     steps = np.isfinite(step)
     metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
@@ -170,6 +179,9 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())
     metrics["working_time_s"] = num(label.working_time_s, 1)
+    sent = visible & np.isfinite(xy).all(axis=-1)
+    own = sent & decided
+    metrics["decided_fraction"] = num(own.sum() / sent.sum()) if sent.any() else None
     per_joint, per_frame = per_point_and_frame(dist)
     issues = [dict(i, about="silhouette")
               for i in error_issues(dist, SILHOUETTE_TOLERANCE_PX, min_frames=1)]
@@ -178,7 +190,9 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
                        "error_px": num(step[f, p], 1), "about": "jump"})
     return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
                         per_frame=per_frame, issues=issues,
-                        provisional=not judged.any() and metrics["moved_with_object"] is None)
+                        # Suggestions alone leave nothing to wait for (decide.py).
+                        provisional=not judged.any() and metrics["moved_with_object"] is None
+                        and (own.any() or not sent.any()))
 
 
 def score_object(cameras: list[CameraModel], labels: list[ViewLabels],
