@@ -264,11 +264,12 @@ export class Editor {
     return false;
   }
 
-  /** After a first placement: the next point (in order) that has no keyframe yet, if any. */
+  /** After a first placement: the next unplaced point in order, not hidden or locked, if any. */
   _advanceToUnplaced() {
     for (let i = 1; i < this.numPoints; i++) {
       const p = (this.active + i) % this.numPoints;
-      if (this.store.keyframes(p).length === 0) {
+      const editable = !this.hidden.has(p) && !this.locked.has(p);
+      if (editable && this.store.keyframes(p).length === 0) {
         this.select(p);
         return;
       }

@@ -85,7 +85,8 @@ export class PointList {
       const row = target ? target.closest(".point-row") : null;
       const item = target ? target.closest(".point-item") : null;
       if (toggle instanceof HTMLElement && item instanceof HTMLElement) {
-        this.onToggle(Number(item.dataset.point), /** @type {"hide"|"lock"} */ (toggle.dataset.toggle));
+        const what = toggle.dataset.toggle === "lock" ? "lock" : "hide";
+        this.onToggle(Number(item.dataset.point), what);
         toggle.blur();
       } else if (row instanceof HTMLElement) {
         onSelect(Number(row.dataset.point));
@@ -128,8 +129,8 @@ export class PointList {
       const row = this.rows[i];
       row.dataset.state = state;
       row.classList.toggle("keyed", keyed);
-      row.querySelector(".point-state").textContent = STATE_TEXT[state] + (keyed && state === "occluded"
-        ? " (keyframe)" : "");
+      const text = STATE_TEXT[state] + (keyed && state === "occluded" ? " (keyframe)" : "");
+      row.querySelector(".point-state").textContent = text;
       this._states[i] = state;
       this._keyed[i] = keyed;
     });

@@ -148,6 +148,11 @@ def test_number_keys_pick_joints_and_the_list_shows_each_key(
     keys_shown = page.eval_on_selector_all(".point-key", "els => els.map((e) => e.textContent)")
     assert keys_shown[:3] == ["W", "1", "2"]
     assert keys_shown[10] == "0" and keys_shown[14] == "\u21e74" and keys_shown[20] == "\u21e70"
+    # A first placement hands over to the next unplaced point that is not hidden.
+    page.keyboard.press("w")
+    page.locator('.point-item[data-point="1"] .point-hide').click()
+    click_image(page, 300, 200)
+    assert _active(page) == 2
     page.locator("#show-shortcuts").click()
     shortcuts = page.locator("#shortcut-list")
     expect(shortcuts).to_contain_text("Shift + drag a point")
