@@ -12,7 +12,7 @@ import { AnnotateApi, ApiError, postExternalSubmit, readPageParams } from "./api
 import { startAssist } from "./assist-draw.js";
 import { AnnotationStore } from "./core/store.js";
 import { Editor } from "./editor.js";
-import { renderInstructions, renderShortcuts } from "./instructions.js";
+import { pointLabels, renderInstructions, renderShortcuts } from "./instructions.js";
 import { bindKeys } from "./keys.js";
 import { loadBundle } from "./loader.js";
 import { PointList, showBanner, showLoadProgress, showSaveStatus } from "./panels.js";
@@ -135,7 +135,7 @@ function buildPage(data, api, params) {
   const editor = new Editor({ canvas: $("view"), task, store, onUpdate: (u) => refresh(u) });
   const pointList = new PointList($("point-list"), task, (p) => editor.select(p));
   const timeline = new Timeline($("timeline"), {
-    numFrames: task.num_frames, colors: task.point_colors, names: task.point_names,
+    numFrames: task.num_frames, colors: task.point_colors, labels: pointLabels(task),
     rowHeight: task.kind === "hand" ? 15 : 22,
     onSeek: (frame, point) => {
       if (point !== null) editor.select(point);

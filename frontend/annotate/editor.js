@@ -9,7 +9,7 @@ import {
   chainFrom, copySummary, offObjectLandmarks, onOutline, outlineOf, previousPose,
 } from "./core/tools.js";
 import { Transform } from "./core/transform.js";
-import { displayName } from "./instructions.js";
+import { pointLabels } from "./instructions.js";
 import { drawScene } from "./render.js";
 
 /** Playback speeds offered, frames per second. */
@@ -44,7 +44,7 @@ export class Editor {
     this.onMessage = onMessage;
     this.numFrames = task.num_frames;
     this.numPoints = task.point_names.length;
-    this.labels = task.point_names.map((name, i) => `${i} ${displayName(name)}`);
+    this.labels = pointLabels(task);
     this.frame = 0;
     this.active = 0;
     /** Editing is refused (preview, submitted, loading, conflict). */

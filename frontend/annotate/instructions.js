@@ -24,6 +24,17 @@ export function displayName(name) {
 }
 
 /**
+ * What the page calls each point: hand joints with their number in the diagram ("8 Index tip"),
+ * object landmarks by name alone ("Landmark 1"; their keys are 1 and 2).
+ * @param {{kind: string, point_names: string[]}} task
+ * @returns {string[]}
+ */
+export function pointLabels(task) {
+  return task.point_names.map((name, i) =>
+    (task.kind === "hand" ? `${i} ${displayName(name)}` : displayName(name)));
+}
+
+/**
  * Diagram positions (SVG units) of the 21 joints of a right hand seen from the back, DexYCB
  * order: wrist, then thumb, index, middle, ring, little, each mcp, pip, dip, tip.
  */

@@ -25,7 +25,7 @@ function shortKey(key) {
 }
 
 import { jointKeys } from "./core/tools.js";
-import { displayName, escapeHtml } from "./instructions.js";
+import { escapeHtml, pointLabels } from "./instructions.js";
 
 /** What the point list says about a point in the current frame. */
 export const STATE_TEXT = {
@@ -54,9 +54,9 @@ export class PointList {
    */
   constructor(container, task, onSelect, onToggle = () => {}) {
     const keys = jointKeys(task.kind, task.point_names.length);
-    this._labels = task.point_names.map((name, i) => `${i} ${displayName(name)}`);
-    container.innerHTML = task.point_names.map((name, i) => {
-      const label = `${i} ${escapeHtml(displayName(name))}`;
+    this._labels = pointLabels(task);
+    container.innerHTML = task.point_names.map((_, i) => {
+      const label = escapeHtml(this._labels[i]);
       const key = keys[i] ? `<kbd class="point-key" title="Key ${keys[i]}">` +
         `${escapeHtml(shortKey(keys[i]))}</kbd>` : "<span></span>";
       return `<li class="point-item" data-point="${i}">` +

@@ -15,7 +15,6 @@
  */
 
 import { denseTrack } from "./core/interpolate.js";
-import { displayName } from "./instructions.js";
 
 const HEADER_PX = 14;
 /** Width of the row labels ("19 Little DIP" at 11 px), CSS px. */
@@ -30,16 +29,16 @@ const KEYFRAME_SNAP_PX = 7;
 export class Timeline {
   /**
    * @param {HTMLElement} container  an empty element; the timeline fills its width
-   * @param {{numFrames: number, colors: string[], names?: string[], rowHeight?: number,
+   * @param {{numFrames: number, colors: string[], labels?: string[], rowHeight?: number,
    *          onSeek: (frame: number, point: number|null) => void}} options
-   *   names: point names as the task gives them; onSeek: point is the row clicked, or null
+   *   labels: what each row is called (instructions.js pointLabels); onSeek: point is the row clicked, or null
    *   while scrubbing; a click on a row's label seeks to the current frame
    */
-  constructor(container, { numFrames, colors, names = [], rowHeight = 16, onSeek }) {
+  constructor(container, { numFrames, colors, labels = [], rowHeight = 16, onSeek }) {
     this.container = container;
     this.numFrames = numFrames;
     this.colors = colors;
-    this.labels = colors.map((_, p) => (names[p] ? `${p} ${displayName(names[p])}` : String(p)));
+    this.labels = colors.map((_, p) => labels[p] ?? String(p));
     this.rowHeight = rowHeight;
     this.onSeek = onSeek;
     /** @type {Keyframe[][]} */

@@ -464,3 +464,23 @@ def test_framed_page_keeps_controls_in_reach_and_modifier_drags_work(
         inner.evaluate("window.__dexlabel.store.undo()")
     expect(frame.locator("#submit")).to_be_visible()
     page.screenshot(path=str(output_dir / f"tools-framed-{width}x{height}.png"))
+
+
+def test_object_task_controls_are_within_reach_at_1024x700(
+    live_server: LiveServer, page: Page, output_dir: Path
+) -> None:
+    page.set_viewport_size({"width": 1024, "height": 700})
+    task = live_server.task("object", VIEW)
+    link = live_server.assign(task, "W-tools-object-layout")
+    open_task(page, live_server.page_url(link["token"], assignmentId=link["external_id"]))
+    expect(page.locator("#step-banner")).to_be_visible()
+    assert page.evaluate("document.documentElement.scrollWidth") <= 1024
+    for selector in [*CONTROLS, "#start-tracking", '.point-item[data-point="1"] .point-lock']:
+        _inside_viewport(page, selector)
+    expect(page.locator("#drag-hint")).to_have_text("Shift+drag a landmark: both move together.")
+    # Landmarks go by name, picked with keys 1 and 2 (no 0-based number beside "Landmark 1").
+    names = page.eval_on_selector_all(".point-name", "els => els.map((e) => e.textContent)")
+    keys = page.eval_on_selector_all(".point-key", "els => els.map((e) => e.textContent)")
+    assert names == ["Landmark 1", "Landmark 2"] and keys == ["1", "2"]
+    assert page.evaluate("window.__dexlabel.page.timeline.rowHeight") >= 14
+    page.screenshot(path=str(output_dir / "tools-object-1024x700.png"))
