@@ -4,7 +4,8 @@ places each point in this view, and the epipolar lines of those labels.
 Once a target (a hand or an object of a sequence) has accepted work (backend.annotation.accepted)
 in at least MIN_VIEWS views other than this one, each point is triangulated per frame from them
 and projected into this view (worker.quality.prefill), with a visibility suggested from this
-view's depth maps. The assignment's check cells (worker.tracking.checks) are planted into the
+view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
+calibration changes. The assignment's check cells (worker.tracking.checks) are planted into the
 suggested positions, as into every suggestion the page shows; the epipolar data is left as it
 is. Nothing is stored: a suggestion the worker accepts is saved as a keyframe with source
 "prefilled".
@@ -14,6 +15,10 @@ Positions are image px (x right, y down) of the clip's frames first_frame..last_
 
 from __future__ import annotations
 
+import json
+import threading
+from collections import OrderedDict
+from collections.abc import Hashable
 from typing import Any
 
 import cv2
@@ -23,7 +28,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation import service
-from backend.annotation.accepted import labelled_work, sequence_tasks
+from backend.annotation.accepted import labelled_work, sequence_tasks, work_query
 from backend.annotation.models import Assignment, Task
 from backend.annotation.tokens import TASK_SCOPE
 from backend.captures.models import Camera, Frame
@@ -34,12 +39,21 @@ from backend.storage import Storage
 from worker.quality.prefill import (
     MIN_VIEWS,
     DepthReader,
+    Prefill,
     ViewWork,
     epipolar_guide,
     prefill,
     view_work,
 )
+from worker.quality.prefill import EpipolarView as EpipolarGuide
 from worker.tracking.checks import check_key, plant
+
+# Views whose suggestions are kept in memory (about 0.3 MB each for 21 points x 72 frames and 7
+# labelled views): every page load of a task reads them, and reading the view's depth maps
+# is most of their cost (72 PNG frames: ~0.15 s).
+CACHE_SIZE = 32
+_CACHE: OrderedDict[Hashable, tuple[Prefill, list[EpipolarGuide]]] = OrderedDict()
+_CACHE_LOCK = threading.Lock()
 
 
 class InvalidSuggestionRequest(DexlabelError):
@@ -153,13 +167,11 @@ def _xy_lists(xy: np.ndarray) -> list[list[float] | None]:
             for v, ok in zip(np.round(xy, 3).tolist(), finite, strict=True)]
 
 
-def _other_work(session: Session, task: Task, view_of: dict[int, int], first: int, last: int
-                ) -> list[ViewWork]:
-    """The target's accepted work in views other than the task's, frames first..last."""
-    others = {t.id: t for t in sequence_tasks(session, task.sequence_id, task.target_key)
-              if t.camera_id != task.camera_id}
+def _dense_work(accepted: list[Assignment], others: dict[int, Task], view_of: dict[int, int],
+                task: Task, first: int, last: int) -> list[ViewWork]:
+    """The accepted assignments (tracks loaded) as ViewWork of frames first..last."""
     work = []
-    for assignment in labelled_work(session, others):
+    for assignment in accepted:
         other = others[assignment.task_id]
         dense = view_work(view_of[other.camera_id],
                           ((t.point_index, t.keyframes) for t in assignment.tracks),
@@ -167,6 +179,48 @@ def _other_work(session: Session, task: Task, view_of: dict[int, int], first: in
         work.append(ViewWork(dense.view, dense.xy[first:last + 1],
                              dense.visible[first:last + 1], dense.decided[first:last + 1]))
     return work
+
+
+def _cache_key(task: Task, first: int, last: int, accepted: list[Assignment],
+               cameras: list[Camera]) -> Hashable:
+    """What a view's suggestions depend on: the frames, the accepted work (an assignment's
+    tracks change only with its version; creation times tell apart rows whose id a deleted
+    one had) and the calibration."""
+    calibration = tuple((c.id, c.fx, c.fy, c.ppx, c.ppy, json.dumps(c.distortion),
+                         json.dumps(c.extrinsics)) for c in cameras)
+    work = tuple((a.id, a.version, a.created_at, a.saved_at, a.submitted_at) for a in accepted)
+    return (task.id, task.created_at, first, last, work, calibration)
+
+
+def _computed(session: Session, storage: Storage, task: Task, cameras: list[Camera],
+              others: dict[int, Task], accepted: list[Assignment], first: int, last: int
+              ) -> tuple[Prefill, list[EpipolarGuide]]:
+    """The view's suggestions and epipolar guide from the accepted work, from the cache when
+    nothing they depend on changed."""
+    key = _cache_key(task, first, last, accepted, cameras)
+    with _CACHE_LOCK:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+    # The tracks, read only now; the work read with them is what the result is stored under.
+    accepted = labelled_work(session, others)
+    view_of = {c.id: i for i, c in enumerate(cameras)}
+    work = _dense_work(accepted, others, view_of, task, first, last)
+    models, target = [camera_model(c) for c in cameras], view_of[task.camera_id]
+    result = (prefill(models, work, target,
+                      _depth_reader(session, storage, task.camera, first, last)),
+              epipolar_guide(models, work, target))
+    with _CACHE_LOCK:
+        _CACHE[_cache_key(task, first, last, accepted, cameras)] = result
+        while len(_CACHE) > CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return result
+
+
+def clear_cache() -> None:
+    """Forget every kept result (the next request of each view computes it again)."""
+    with _CACHE_LOCK:
+        _CACHE.clear()
 
 
 def suggestions(session: Session, storage: Storage, assignment: Assignment,
@@ -179,30 +233,29 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     first, last = frame_range(first_frame, last_frame, num_frames)
     camera_rows = sequence_cameras(session, task.sequence_id)
     view_of = {c.id: i for i, c in enumerate(camera_rows)}
-    work = _other_work(session, task, view_of, first, last)
-    views = sorted({w.view for w in work})
+    others = {t.id: t for t in sequence_tasks(session, task.sequence_id, task.target_key)
+              if t.camera_id != task.camera_id}
+    accepted = list(session.scalars(work_query(others, with_tracks=False)))
+    views = sorted({view_of[others[a.task_id].camera_id] for a in accepted})
     serials = [camera_rows[v].serial for v in views]
     if len(views) < MIN_VIEWS:
         return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
                                views=serials, min_views=MIN_VIEWS, first_frame=first,
                                last_frame=last, points=[], epipolar=[])
-    cameras = [camera_model(c) for c in camera_rows]
-    target = view_of[task.camera_id]
-    found = prefill(cameras, work, target,
-                    _depth_reader(session, storage, task.camera, first, last))
+    found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
+                             last)
     shown = np.isfinite(found.xy).all(axis=-1) & found.known & found.visible
     xy = plant(check_key(get_settings().signing_key), assignment.id,
                np.swapaxes(found.xy, 0, 1), shown.T, first, num_frames, num_points,
                task.camera.width, task.camera.height)
-    points = [PointSuggestions(
-        point=p, xy=_xy_lists(xy[p]),
-        visible=[bool(v) if k else None for v, k in zip(found.visible[:, p],
-                                                        found.known[:, p], strict=True)])
-        for p in range(num_points)]
+    flags = found.visible.astype(object)
+    flags[~found.known] = None
+    visible = flags.T.tolist()
+    points = [PointSuggestions(point=p, xy=_xy_lists(xy[p]), visible=visible[p])
+              for p in range(num_points)]
     epipolar = [EpipolarView(
-        serial=camera_rows[guide.view].serial, F=guide.fundamental.tolist(),
-        xy=[_xy_lists(guide.xy[:, p]) for p in range(num_points)])
-        for guide in epipolar_guide(cameras, work, target)]
+        serial=camera_rows[g.view].serial, F=g.fundamental.tolist(),
+        xy=[_xy_lists(g.xy[:, p]) for p in range(num_points)]) for g in guide]
     return SuggestionsRead(available=True, reason=None, views=serials, min_views=MIN_VIEWS,
                            first_frame=first, last_frame=last, points=points,
                            epipolar=epipolar)

@@ -263,6 +263,27 @@ def test_another_views_assignment_reads_suggestions_for_its_own_view(
     assert np.nanmedian(errors) < 4.0
 
 
+def test_suggestions_follow_changes_of_the_accepted_work(
+    client: TestClient, accepted: dict, small_capture: Path
+) -> None:
+    """The server keeps each view's result until the work it rests on changes."""
+    from backend.annotation.models import Assignment
+
+    token = accepted["links"][0]["token"]
+    before = _get(client, token)
+    assert _get(client, token) == before
+    # A second accepted worker of view 1 who places every joint 8 px to the right.
+    shifted = [[[r[0], r[1] + 8.0 if r[1] is not None and r[1] < 630 else r[1], *r[2:]]
+                for r in rows] for rows in _careful(small_capture, accepted["tasks"][1], 21)]
+    aid = _accept(accepted["tasks"][1]["id"], "shifted", shifted)
+    moved = np.linalg.norm(_grid(_get(client, token)["points"]) - _grid(before["points"]),
+                           axis=-1)
+    assert np.nanmedian(moved) > 1.0
+    with session_scope() as session:
+        session.get_one(Assignment, aid).status = "rejected"
+    assert _get(client, token) == before
+
+
 def test_a_frame_range_answers_its_frames_only(client: TestClient, accepted: dict) -> None:
     token = accepted["links"][0]["token"]
     whole, part = _get(client, token), _get(client, token, first_frame=2, last_frame=4)

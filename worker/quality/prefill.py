@@ -24,7 +24,7 @@ Pure: arrays in, arrays out (a depth reader given as a callable is called from a
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -144,31 +144,46 @@ def triangulate_work(cameras: list[CameraModel], work: list[ViewWork],
 
 class _DepthFrames:
     """(F, H, W) depth maps as surface_check indexes them, from an array or a reader of one
-    frame; each frame is read at most once."""
+    frame; each frame is read at most once. A reader's frames can be started early (a few
+    at once, in threads: decoding releases the GIL) and are waited for when needed."""
 
     ndim = 3
 
     def __init__(self, depth: np.ndarray | DepthReader, shape: tuple[int, int, int]) -> None:
         self.shape = shape
         self._cache: dict[int, np.ndarray] = {}
+        self._pending: dict[int, Future[np.ndarray]] = {}
+        self._reader: DepthReader | None = None
         if callable(depth):
-            self._read: DepthReader = depth
-        else:
-            array = np.asarray(depth)
-            if array.shape != shape:
-                raise ValueError(f"depth must have shape (F, H, W) = {shape}, got {array.shape}")
-            self._read = array.__getitem__
+            self._reader = depth
+            return
+        array = np.asarray(depth)
+        if array.shape != shape:
+            raise ValueError(f"depth must have shape (F, H, W) = {shape}, got {array.shape}")
+        self._cache = dict(enumerate(array))
+
+    def start(self, frames: Iterable[int]) -> None:
+        """Start reading these frames in the background."""
+        if self._reader is None:
+            return
+        todo = sorted({int(f) for f in frames} - set(self._cache) - set(self._pending))
+        if todo:
+            pool = ThreadPoolExecutor(_READ_THREADS)
+            self._pending.update((f, pool.submit(self._reader, f)) for f in todo)
+            pool.shutdown(wait=False)
 
     def read(self, frames: Iterable[int]) -> None:
-        """Read these frames now, a few at once (decoding releases the GIL)."""
-        missing = sorted({int(f) for f in frames} - set(self._cache))
-        with ThreadPoolExecutor(_READ_THREADS) as pool:
-            for frame, depth in zip(missing, pool.map(self._read, missing), strict=True):
-                depth = np.asarray(depth)
-                if depth.shape != self.shape[1:]:
-                    raise ValueError(f"depth of frame {frame} must have shape (H, W) = "
-                                     f"{self.shape[1:]}, got {depth.shape}")
-                self._cache[frame] = depth
+        """Have these frames read (waits for those started)."""
+        frames = [int(f) for f in frames]
+        self.start(frames)
+        for frame in frames:
+            if frame not in self._pending:
+                continue
+            depth = np.asarray(self._pending.pop(frame).result())
+            if depth.shape != self.shape[1:]:
+                raise ValueError(f"depth of frame {frame} must have shape (H, W) = "
+                                 f"{self.shape[1:]}, got {depth.shape}")
+            self._cache[frame] = depth
 
     def __getitem__(self, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
         frames, rows, cols = (np.asarray(i, dtype=np.int64) for i in index)
@@ -200,7 +215,7 @@ def _window_readings(maps: _DepthFrames, pix: np.ndarray, inside: np.ndarray
 
 
 def suggested_visibility(camera: CameraModel, points: np.ndarray,
-                         depth: np.ndarray | DepthReader | None
+                         depth: np.ndarray | DepthReader | _DepthFrames | None
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(inside, visible, known), each (F, P) bool, for world points (F, P, 3) in one view.
 
@@ -221,7 +236,8 @@ def suggested_visibility(camera: CameraModel, points: np.ndarray,
     visible = np.zeros(inside.shape, dtype=bool)
     if depth is None or not inside.any():
         return inside, visible, known
-    maps = _DepthFrames(depth, (frames, camera.height, camera.width))
+    maps = depth if isinstance(depth, _DepthFrames) else \
+        _DepthFrames(depth, (frames, camera.height, camera.width))
     maps.read(np.flatnonzero(inside.any(axis=1)).tolist())
     hidden = surface_check(camera, points, maps).hidden
     centre, farthest = _window_readings(maps, pix, inside)
@@ -245,10 +261,14 @@ def prefill(cameras: list[CameraModel], work: list[ViewWork], target: int,
             reader ``frame -> (H, W)`` of them; None: visibility is known only off the image.
         outlier_px: the triangulation's inlier threshold, px.
     """
-    _check_work(cameras, work, target)
-    world, views = triangulate_work(cameras, work, outlier_px)
+    frames = _check_work(cameras, work, target)[0]
     camera = cameras[target]
-    inside, visible, known = suggested_visibility(camera, world, depth)
+    maps = None if depth is None else \
+        _DepthFrames(depth, (frames, camera.height, camera.width))
+    if maps is not None:
+        maps.start(range(frames))  # read while the points are triangulated
+    world, views = triangulate_work(cameras, work, outlier_px)
+    inside, visible, known = suggested_visibility(camera, world, maps)
     xy = np.where(inside[..., None], camera.project(world), np.nan)
     return Prefill(xy=xy, visible=visible, known=known, views=views, points=world)
 
