@@ -116,11 +116,14 @@ function wireTools(page, { $ }) {
   } catch {
     // An unreadable entry is only a view setting: start with every point shown and unlocked.
   }
+  let kept = "";
+  /** Writes the settings when they changed (the hook runs on every frame step). */
   const keep = () => {
-    if (!storage) return;
+    const now = JSON.stringify({ hidden: [...editor.hidden], locked: [...editor.locked] });
+    if (!storage || now === kept) return;
+    kept = now;
     try {
-      storage.setItem(key, JSON.stringify({ hidden: [...editor.hidden],
-        locked: [...editor.locked] }));
+      storage.setItem(key, now);
     } catch {
       // Storage full or refused: the settings still hold for this page.
     }
