@@ -151,6 +151,21 @@ class TestPrefillGeometry:
         np.testing.assert_array_equal(read.known, found.known)
 
 
+    def test_two_object_landmarks_are_suggested_and_judged_by_depth_alike(self, ring):
+        cams, joints, truth_xy = ring
+        landmarks = truth_xy[:, :, [5, 15]]  # two points, as an object task has
+        cam = cams[TARGET]
+        depth = np.full((12, cam.height, cam.width), 3000, np.uint16)
+        col, row = np.rint(landmarks[TARGET, 6, 1]).astype(int)
+        depth[6, row - 4:row + 5, col - 4:col + 5] = round(
+            (float(cam.depth_of(joints[6, 15])) - 0.08) * 1000)
+        found = prefill(cams, _exact_work(landmarks, [1, 7]), TARGET, depth)
+        np.testing.assert_allclose(found.xy, landmarks[TARGET], atol=1e-6)
+        # A surface 8 cm in front of a landmark (beyond HIDDEN_MARGIN_M) hides it.
+        assert found.known.all() and not found.visible[6, 1]
+        assert found.visible.sum() == 12 * 2 - 1
+
+
 class TestPrefillOnCapture:
     def test_careful_work_in_three_views_suggests_the_fourth_within_3_px(self, capture):
         found = prefill(capture.cameras, _careful(capture, [1, 2, 3]), TARGET,
