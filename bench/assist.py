@@ -9,8 +9,9 @@ the order of the views' serials, by one simulated crowd of each variant (``--cro
               visibility changes, 2 px noise;
     assisted  worker.synth.assisted's careful worker: tracking proposals (worker.tracking.lk,
               what POST /api/annotate/proposals computes) with the check cells planted, and
-              from the third view on the pre-fill (worker.quality.prefill) of the views
-              before it, corrected where off by more than ``--tolerance`` px;
+              from the fourth view on (worker.quality.prefill.MIN_ACCEPTED_VIEWS, as the
+              suggestions route) the pre-fill of the views before it, corrected where off
+              by more than ``--tolerance`` px;
     blind     the blind acceptor on the same pre-fill: accepts everything.
 
 Per variant: actions per task (mean over the views of clicks + drags + keys, the rule in
@@ -270,17 +271,19 @@ def _load(capture: Path) -> _Capture:
 
 def _prefill_for(cap: _Capture, done: list[list[list[list[Any]]]]) -> Any:
     """The pre-fill of the next view from the labels of the views before it (None before
-    two are done), as the simulated worker takes it: unknown visibility suggested visible."""
-    from worker.quality.prefill import MIN_VIEWS, prefill, view_work
+    MIN_ACCEPTED_VIEWS are done, as the route), as the simulated worker takes it: unknown
+    visibility suggested visible (as the page takes it), no check cell there (as the route)."""
+    from worker.quality.prefill import MIN_ACCEPTED_VIEWS, prefill, view_work
     from worker.synth.assisted import Prefill
 
     target = len(done)
-    if target < MIN_VIEWS:
+    if target < MIN_ACCEPTED_VIEWS:
         return None
     work = [view_work(v, enumerate(tracks), cap.frames, 21) for v, tracks in enumerate(done)]
     found = prefill([v.camera for v in cap.views[:target + 1]], work, target,
                     cap.views[target].depth)
-    return Prefill(xy=found.xy, visible=np.where(found.known, found.visible, True))
+    return Prefill(xy=found.xy, visible=np.where(found.known, found.visible, True),
+                   known=found.known)
 
 
 def _work_one(view: _View, variant: str, key: bytes, assignment_id: int, prefill: Any,

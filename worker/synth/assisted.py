@@ -77,11 +77,22 @@ class Prefill:
     """Pre-fill suggestions for one view, before its check cells are planted.
 
     xy: (F, P, 2) image px, NaN where there is no suggestion.
-    visible: (F, P) bool, the suggested visibility (from the view's depth).
+    visible: (F, P) bool, the suggested visibility (from the view's depth); where it is not
+        known the page takes the suggestion as visible, so pass True there.
+    known: (F, P) bool, where the view's depth decided the visibility (None: everywhere).
+        The route plants check cells only where a suggestion has a position and is known
+        and visible (backend.annotation.suggestions), so only there can a cell be 15 px off.
     """
 
     xy: np.ndarray
     visible: np.ndarray
+    known: np.ndarray | None = None
+
+    def shown(self) -> np.ndarray:
+        """(F, P) bool, where the route may plant a check cell: a position, known visible."""
+        has_xy = np.isfinite(self.xy).all(axis=2)
+        known = np.ones_like(has_xy) if self.known is None else np.asarray(self.known, bool)
+        return has_xy & known & np.asarray(self.visible, bool)
 
 
 @dataclass(frozen=True)
@@ -91,7 +102,8 @@ class AssistSetting:
     grey: (F, H, W) uint8 grey frames of the view (what the proposals route tracks on).
     key: the check-cell key (worker.tracking.checks.check_key of the instance's signing key).
     assignment_id: the database id of the assignment (the check cells depend on it).
-    prefill: the view's pre-fill suggestions, None where fewer than two other views are done.
+    prefill: the view's pre-fill suggestions, None before worker.quality.prefill's
+        MIN_ACCEPTED_VIEWS other views are done.
     """
 
     grey: np.ndarray
@@ -294,7 +306,8 @@ def _take_prefill(state: _State, setting: AssistSetting, prefill: Prefill, seen:
     frames, points = visible.shape
     suggested = np.isfinite(prefill.xy).all(axis=2)
     shown = checks.plant(setting.key, setting.assignment_id, prefill.xy.transpose(1, 0, 2),
-                         suggested.T, 0, frames, points, size[0], size[1]).transpose(1, 0, 2)
+                         prefill.shown().T, 0, frames, points, size[0],
+                         size[1]).transpose(1, 0, 2)
     for f, p in zip(*np.nonzero(suggested), strict=True):
         state.rows[p][f] = [int(f), *_position(shown[f, p]), int(prefill.visible[f, p]),
                             "prefilled"]
