@@ -3,8 +3,8 @@
  * from the other views, and epipolar lines from the views already labelled.
  *
  * Positions are image pixels of this view, frames are clip frame indices. Nothing here writes
- * on its own except a re-track after a correction; every write is one store batch
- * (setKeyframes), so one undo step:
+ * on its own except a re-track after a correction; every write, of one point or of every point,
+ * is one store batch (setTracks), so one undo step:
  *
  *   Track   asks POST /api/annotate/proposals for the span between the keyframes the worker set
  *           around the current frame (or every point over the clip) and holds the answer as
@@ -13,6 +13,7 @@
  *   Re-track  a point placed or dragged inside a run of tracked keyframes splits it: the
  *           tracked keyframes between the nearest keyframes the worker set on each side are
  *           proposed again from the new keyframe and replaced (or removed where none holds).
+ *           Points corrected together (a skeleton or finger drag) are re-tracked together.
  *   Use suggestions  writes GET /api/annotate/suggestions' positions as "prefilled"
  *           keyframes, never over a keyframe the worker set by hand.
  *
@@ -264,8 +265,10 @@ export class Assist {
     this._tracking = false;
     this._writing = false;
     this._inFlight = 0;
-    /** @type {Map<number, {frame: number, timer: any}>} re-tracks waiting, per point */
+    /** @type {Map<number, number>} re-tracks waiting: point -> frame of its correction */
     this._retracks = new Map();
+    /** The timer that starts the waiting re-tracks once the edits settle. */
+    this._retrackTimer = null;
     store.subscribe((change) => this._onStoreChange(change));
   }
 
@@ -351,15 +354,15 @@ export class Assist {
     const points = change.points || (change.point === null ? [] : [change.point]);
     this._dropStaleProposals(points);
     if (change.cause !== "edit") return;
+    const corrected = new Map();
     for (const point of points) {
       for (const frame of [...change.created, ...change.updated]) {
         const k = this.store.keyframeAt(point, frame);
         if (!k || !HAND_SOURCES.includes(sourceOf(k))) continue;
-        if (retrackSpans(this.store.keyframes(point), frame).length) {
-          this._scheduleRetrack(point, frame);
-        }
+        if (retrackSpans(this.store.keyframes(point), frame).length) corrected.set(point, frame);
       }
     }
+    if (corrected.size) this._scheduleRetrack(corrected);
   }
 
   /** Shown proposals of points whose keyframes changed were tracked from other anchors. */
@@ -372,29 +375,46 @@ export class Assist {
       "track it again.");
   }
 
-  /** Waits for the drag to settle (every step of it is an edit). */
-  _scheduleRetrack(point, frame) {
-    const waiting = this._retracks.get(point);
-    if (waiting) clearTimeout(waiting.timer);
-    const timer = setTimeout(() => {
-      this._retracks.delete(point);
-      this._retrack(point, frame);
+  /**
+   * Waits for the edits to settle (every step of a drag is an edit), then re-tracks every
+   * point corrected meanwhile in one request and one write.
+   * @param {Map<number, number>} corrected  point -> frame of its correction
+   */
+  _scheduleRetrack(corrected) {
+    for (const [point, frame] of corrected) this._retracks.set(point, frame);
+    clearTimeout(this._retrackTimer);
+    this._retrackTimer = setTimeout(() => {
+      this._retrackTimer = null;
+      const waiting = new Map(this._retracks);
+      this._retracks.clear();
+      this._retrack(waiting);
     }, this.retrackDelayMs);
-    this._retracks.set(point, { frame, timer });
   }
 
-  /** Proposes again on the sides of `frame` that hold tracked keyframes and replaces them. */
-  async _retrack(point, frame) {
-    const keyframes = this.store.keyframes(point);
-    const spans = retrackSpans(keyframes, frame);
-    if (!spans.length || !this.editable()) return;
-    const [first, last] = [spans[0][0], spans[spans.length - 1][1]];
+  /**
+   * Proposes again, for each corrected point, on the sides of its correction that hold tracked
+   * keyframes, and replaces them: one request, one undo step.
+   * @param {Map<number, number>} corrected  point -> frame of its correction
+   */
+  async _retrack(corrected) {
+    if (!this.editable()) return;
+    /** @type {Map<number, {keyframes: SourcedKeyframe[], spans: number[][]}>} */
+    const asked = new Map();
+    for (const [point, frame] of corrected) {
+      const keyframes = this.store.keyframes(point);
+      const spans = retrackSpans(keyframes, frame);
+      if (spans.length) asked.set(point, { keyframes, spans });
+    }
+    if (!asked.size) return;
+    const all = [...asked.values()].flatMap((a) => a.spans);
+    const [first, last] = [Math.min(...all.map((s) => s[0])), Math.max(...all.map((s) => s[1]))];
     const editCount = this.store.editCount;
     this._inFlight += 1;
     let answer;
     try {
       answer = await this.api.proposals({
-        tracks: [{ point, keyframes: anchorRows(keyframes) }], first_frame: first, last_frame: last,
+        tracks: [...asked].map(([point, a]) => ({ point, keyframes: anchorRows(a.keyframes) })),
+        first_frame: first, last_frame: last,
       });
     } catch (err) {
       this._say("error", `Re-tracking failed: ${err && err.message ? err.message : err}`);
@@ -405,15 +425,20 @@ export class Assist {
     if (!this.editable()) return;
     // Edited meanwhile: ask again from what is there now, never write over newer work.
     if (this.store.editCount !== editCount) {
-      if (!this._retracks.has(point)) this._scheduleRetrack(point, frame);
+      const again = new Map([...corrected].filter(([p]) => !this._retracks.has(p)));
+      if (again.size) this._scheduleRetrack(again);
       return;
     }
-    const found = answer.points.find((p) => p.point === point);
-    const proposal = { point, first: answer.first_frame, last: answer.last_frame, spans,
-      xy: found.xy, ok: found.ok };
-    this._write([[point, proposalEntries(keyframes, proposal)]], "re-track");
-    this._say("ok", `Re-tracked frames ${first}-${last} around your correction: ` +
-      `${trackedText(countTracked([proposal]))}.`);
+    const proposals = answer.points.filter((p) => asked.has(p.point)).map((found) => ({
+      point: found.point, first: answer.first_frame, last: answer.last_frame,
+      spans: asked.get(found.point).spans, xy: found.xy, ok: found.ok,
+    }));
+    this._write(proposals.map((p) => [p.point, proposalEntries(asked.get(p.point).keyframes, p)]),
+      "re-track");
+    const around = asked.size === 1
+      ? "your correction" : `your corrections of ${asked.size} points`;
+    this._say("ok", `Re-tracked frames ${first}-${last} around ${around}: ` +
+      `${trackedText(countTracked(proposals))}.`);
   }
 
   // ---- suggestions ------------------------------------------------------------------------
@@ -501,13 +526,17 @@ export class Assist {
 
   // ---- internals --------------------------------------------------------------------------
 
-  /** One store batch per point; the store changes they cause are not corrections. */
+  /**
+   * One store batch over every point written (one undo step); the store changes it causes are
+   * not corrections.
+   * @param {Array<[number, Entry[]]>} writes  [point, entries] @param {string} label
+   */
   _write(writes, label) {
     this._writing = true;
     try {
-      for (const [point, entries] of writes) {
-        if (entries.length) this.store.setKeyframes(point, entries, { label });
-      }
+      const groups = writes.filter(([, entries]) => entries.length)
+        .map(([point, entries]) => ({ point, entries }));
+      this.store.setTracks(groups, { label });
     } finally {
       this._writing = false;
     }

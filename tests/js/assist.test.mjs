@@ -230,3 +230,97 @@ test("suggestions: a quiet reason, or prefilled keyframes around the hand-set on
     [false, 106, "prefilled"]);
   assert.equal(assist.layer(3, 0).suggestion, null, "a used suggestion is no longer a ghost");
 });
+
+test("Track all: Accept writes every point in one undo step and one change", async () => {
+  const { store, assist, calls } = newAssist((p, f) => [10 * f + p, 50 + p]);
+  for (const p of [0, 1]) {
+    store.placePoint(p, 0, p, 50 + p);
+    store.placePoint(p, 11, 110 + p, 50 + p);
+  }
+  const before = store.toJSON();
+  assert.equal(await assist.track(true), true);
+  assert.deepEqual(calls[0].tracks.map((t) => t.point), [0, 1]);
+  const seen = [];
+  store.subscribe((change) => seen.push(change));
+  assert.equal(assist.accept(), true);
+  assert.equal(seen.length, 1);
+  assert.deepEqual([seen[0].label, seen[0].point, seen[0].points],
+    ["accept tracking", null, [0, 1]]);
+  assert.deepEqual(seen[0].created, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+  for (const p of [0, 1]) {
+    assert.deepEqual(store.keyframes(p).map((k) => k.source),
+      ["placed", ...Array(10).fill("tracked"), "placed"]);
+    assert.deepEqual([store.keyframeAt(p, 4).x, store.keyframeAt(p, 4).y], [40 + p, 50 + p]);
+  }
+  const after = store.toJSON();
+  assert.equal(store.undo(), true);
+  assert.deepEqual(store.toJSON(), before, "one undo takes both points' spans back");
+  assert.deepEqual(seen[1].points, [0, 1]);
+  assert.equal(store.redo(), true);
+  assert.deepEqual(store.toJSON(), after);
+  await settle(assist);
+  assert.equal(calls.length, 1, "accepting, undoing and redoing re-track nothing");
+});
+
+test("Shift+U: every point's suggestions in one undo step", async () => {
+  const xy = (p) => Array.from({ length: 12 }, (_, f) => [100 + f, 200 + p]);
+  const visible = Array(12).fill(null);
+  const { store, assist } = newAssist(() => null, { suggestions: {
+    available: true, reason: null, views: ["cam-a", "cam-b", "cam-c"], min_views: 3,
+    points: [0, 1].map((p) => ({ point: p, xy: xy(p), visible })), epipolar: [] } });
+  await assist.loadSuggestions();
+  store.placePoint(1, 3, 5, 5);
+  const before = store.toJSON();
+  const seen = [];
+  store.subscribe((change) => seen.push(change));
+  assert.equal(assist.useSuggestions(true), true);
+  assert.equal(assist.status.text, "Used 23 suggested keyframes for 2 points: step through " +
+    "the frames and drag any that are off.");
+  assert.equal(seen.length, 1);
+  assert.deepEqual([seen[0].label, seen[0].points], ["use suggestions", [0, 1]]);
+  assert.equal(store.keyframes(0).length, 12);
+  assert.deepEqual(store.keyframeAt(1, 3), { frame: 3, x: 5, y: 5, visible: true,
+    source: "placed" }, "a keyframe set by hand is kept");
+  assert.equal(store.keyframeAt(1, 4).source, "prefilled");
+  store.undo();
+  assert.deepEqual(store.toJSON(), before);
+});
+
+test("points corrected together are re-tracked in one request and one undo step", async () => {
+  // The tracker follows the anchors linearly, so a re-track shows where each anchor went.
+  const linear = (p, f, rows) => {
+    const before = rows.filter((r) => r[0] < f).at(-1);
+    const after = rows.find((r) => r[0] > f);
+    if (!before || !after) return null;
+    const t = (f - before[0]) / (after[0] - before[0]);
+    return [before[1] + t * (after[1] - before[1]), before[2] + t * (after[2] - before[2])];
+  };
+  const { store, assist, calls } = newAssist(linear);
+  for (const p of [0, 1]) {
+    store.placePoint(p, 0, 0, 100 + p);
+    store.placePoint(p, 10, 100, 100 + p);
+  }
+  await assist.track(true);
+  assist.accept();
+  // A skeleton drag at frame 5: both points' tracked keyframes there move up 20 px, in steps.
+  for (let step = 1; step <= 4; step++) {
+    store.setPose(5, [0, 1].map((p) => ({ point: p, x: 50, y: 100 + p - 5 * step,
+      visible: true })), { gesture: "skeleton" });
+  }
+  assert.equal(store.keyframeAt(1, 5).source, "edited");
+  await settle(assist);
+  assert.equal(calls.length, 2, "one re-track request for both points");
+  assert.deepEqual(calls[1].tracks.map((t) => t.point), [0, 1]);
+  assert.deepEqual(calls[1].tracks[1].keyframes, [[0, 0, 101, 1], [5, 50, 81, 1],
+    [10, 100, 101, 1]]);
+  assert.match(assist.status.text, /^Re-tracked frames 0-10 around your corrections of 2 points/);
+  assert.deepEqual([store.keyframeAt(0, 3).y, store.keyframeAt(1, 7).y], [88, 89]);
+  const dragged = [0, 1].map((p) => store.keyframeAt(p, 5));
+  store.undo();
+  assert.deepEqual([store.keyframeAt(0, 3).y, store.keyframeAt(1, 7).y], [100, 101],
+    "one undo takes both re-tracks back");
+  assert.deepEqual([0, 1].map((p) => store.keyframeAt(p, 5)), dragged,
+    "and leaves the drag itself");
+  await settle(assist);
+  assert.equal(calls.length, 2);
+});

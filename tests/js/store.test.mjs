@@ -424,3 +424,83 @@ test("fromJSON refuses an unknown source or a row of the wrong length, naming it
   assert.throws(load([[12, 1, 1, 1, "tracked", 0]]),
     /\[frame, x, y, visible01\] or \[frame, x, y, visible01, source\]/);
 });
+
+test("setTracks writes several points over several frames as one undo step", () => {
+  const store = newStore();
+  store.placePoint(0, 0, 10, 10);
+  store.placePoint(0, 20, 30, 10);
+  store.setKeyframe(3, 5, { x: 7, y: 7, visible: true, source: "prefilled" });
+  store.placePoint(3, 9, 1, 2);
+  store.placePoint(8, 4, 50, 60);
+  const before = store.toJSON();
+  const seen = [];
+  store.subscribe((change) => seen.push(change));
+  const tracked = (frames, x) =>
+    frames.map((f) => ({ frame: f, x: x + f, y: 2 * f, visible: true, source: "tracked" }));
+  const groups = [
+    { point: 3, entries: [...tracked([5, 6, 7], 100), { frame: 9, remove: true }] },
+    { point: 0, entries: tracked([1, 2, 19], 10) },
+    { point: 8, entries: [{ frame: 4, x: 50, y: 60, visible: true }] }, // unchanged: skipped
+    { point: 12, entries: [] },
+  ];
+  assert.equal(store.setTracks(groups, { label: "accept tracking" }), true);
+  assert.equal(seen.length, 1);
+  const change = seen[0];
+  assert.deepEqual([change.cause, change.label, change.point, change.points],
+    ["edit", "accept tracking", null, [0, 3]]);
+  assert.deepEqual([change.created, change.updated, change.deleted],
+    [[1, 2, 6, 7, 19], [5], [9]]);
+  assert.deepEqual(store.keyframes(3).map((k) => [k.frame, k.x, k.source]),
+    [[5, 105, "tracked"], [6, 106, "tracked"], [7, 107, "tracked"]]);
+  assert.deepEqual(store.keyframes(0).map((k) => k.frame), [0, 1, 2, 19, 20]);
+  const after = store.toJSON();
+  assert.equal(store.undo(), true);
+  assert.deepEqual(store.toJSON(), before, "one undo restores every point exactly");
+  assert.deepEqual(store.keyframeAt(3, 5), kf(5, 7, 7, true, "prefilled"));
+  assert.deepEqual([seen[1].cause, seen[1].points], ["undo", [0, 3]]);
+  assert.deepEqual(seen[1].deleted, [1, 2, 6, 7, 19]);
+  assert.equal(store.canUndo, true, "the edits before the batch are still there to undo");
+  assert.equal(store.redo(), true);
+  assert.deepEqual(store.toJSON(), after);
+  assert.deepEqual([seen[2].cause, seen[2].points], ["redo", [0, 3]]);
+  assert.equal(store.setTracks(groups), false, "the same batch again changes nothing");
+});
+
+test("setTracks validates every group and entry before writing any", () => {
+  const store = newStore();
+  const good = { point: 0, entries: [{ frame: 1, x: 1, y: 1, visible: true }] };
+  const bad = (groups, pattern) => assert.throws(() => store.setTracks(groups), pattern);
+  bad([good, { point: 0, entries: [] }], /point 0: given twice/);
+  bad([good, { point: 21, entries: [] }], /point must be an integer in 0\.\.20, got 21/);
+  bad([good, { point: 2, entries: {} }], /entriesByPoint\[1\] \(point 2\): entries must be/);
+  bad([good, { point: 2, entries: [{ frame: 3, x: 1, y: 1, visible: true, source: "guess" }] }],
+    /point 2, frame 3: source must be one of/);
+  bad([good, { point: 2, entries: [{ frame: 3, x: 1, y: 1, visible: true },
+    { frame: 3, remove: true }] }], /point 2, frame 3: given twice/);
+  bad({ point: 0 }, /entriesByPoint must be an array/);
+  assert.deepEqual(store.tracks().flat(), []);
+  assert.equal(store.editCount, 0);
+  assert.equal(store.setTracks([]), false);
+});
+
+test("setTracks writes 21 points x 2000 frames quickly, and undoes them as fast", () => {
+  const numFrames = 2000;
+  const store = newStore({ numFrames });
+  const groups = Array.from({ length: 21 }, (_, point) => ({
+    point, entries: Array.from({ length: numFrames }, (_, f) => ({
+      frame: numFrames - 1 - f, x: (f + point) % 640, y: point, visible: true,
+      source: "tracked" })),
+  }));
+  const t0 = performance.now();
+  store.setTracks(groups);
+  const write = performance.now() - t0;
+  const t1 = performance.now();
+  store.undo();
+  store.redo();
+  const rest = performance.now() - t1;
+  assert.equal(store.keyframes(20).length, numFrames);
+  assert.deepEqual(store.keyframes(20).slice(0, 2).map((k) => k.frame), [0, 1]);
+  assert.equal(store.keyframeAt(20, 0).x, (numFrames - 1 + 20) % 640);
+  const took = `write ${write.toFixed(1)} ms, undo + redo ${rest.toFixed(1)} ms`;
+  assert.ok(write < 1000 && rest < 1000, took);
+});

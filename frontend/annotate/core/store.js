@@ -6,8 +6,8 @@
  *   {cause: "edit"|"undo"|"redo"|"saved", label, point, points, created, updated, deleted,
  *    editCount}
  * where points lists the points touched, point is the one touched point (null for "saved" and
- * for an edit of several points, such as setPose) and created/updated/deleted list the keyframe
- * frames touched (over all points touched).
+ * for an edit of several points, such as setPose or setTracks) and created/updated/deleted list
+ * the keyframe frames touched (over all points touched).
  *
  * Every keyframe carries its source (provenance, see edits.js): "placed", "tracked",
  * "prefilled" or "edited". Moving an unchanged suggestion ("tracked"/"prefilled") or changing its
@@ -162,8 +162,34 @@ export class AnnotationStore {
   setKeyframes(point, entries, options = {}) {
     this._checkPoint(point);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor(entries, point, null);
+    const changes = this._changesFor([{ point, frame: null, entries }]);
     return this._execute(options.label ?? "set keyframes", changes, options.gesture);
+  }
+
+  /**
+   * Writes keyframes of several points over several frames as ONE undo step with ONE change
+   * notification, whose `points` lists every point touched (accepting "Track all", using every
+   * point's suggestions). Each group is {point, entries} with entries as in setKeyframes; points
+   * must be unique. Everything is validated before anything is written. Returns false when no
+   * entry changed anything. O(n log n) in the entries and the touched tracks' lengths.
+   * @param {Array<{point: number, entries: FrameEntry[]}>} entriesByPoint
+   * @param {{gesture?: any, label?: string}} [options]
+   */
+  setTracks(entriesByPoint, options = {}) {
+    if (!Array.isArray(entriesByPoint)) throw new TypeError("entriesByPoint must be an array");
+    const points = new Set();
+    const groups = entriesByPoint.map((group, i) => {
+      const { point, entries } = group ?? {};
+      this._checkPoint(point);
+      if (points.has(point)) throw new RangeError(`point ${point}: given twice`);
+      points.add(point);
+      if (!Array.isArray(entries)) {
+        throw new TypeError(`entriesByPoint[${i}] (point ${point}): entries must be an array`);
+      }
+      return { point, frame: null, entries };
+    });
+    const changes = this._changesFor(groups);
+    return this._execute(options.label ?? "set tracks", changes, options.gesture);
   }
 
   /**
@@ -177,7 +203,7 @@ export class AnnotationStore {
   setPose(frame, entries, options = {}) {
     this._checkFrame(frame);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor(entries, null, frame);
+    const changes = this._changesFor([{ point: null, frame, entries }]);
     return this._execute(options.label ?? "set pose", changes, options.gesture);
   }
 
@@ -350,43 +376,55 @@ export class AnnotationStore {
 
   /**
    * The changes that entries {x, y, visible, source?} or {remove: true} make at their point and
-   * frame (the fixed `point`, else entry.point; the fixed `frame`, else entry.frame), skipping
-   * those that change nothing. Validates everything before anything is written. O(n) in the
-   * touched tracks' lengths plus the entries (no search per entry).
-   * @param {Array<FrameEntry|PointEntry>} entries
-   * @param {number|null} fixedPoint @param {number|null} fixedFrame
+   * frame, skipping those that change nothing. A group fixes the point or the frame of its
+   * entries (null: read entry.point or entry.frame). Validates everything before anything is
+   * written. O(n) in the touched tracks' lengths plus the entries (no search per entry).
+   * @param {Array<{point: number|null, frame: number|null, entries: Array<FrameEntry|PointEntry>}>}
+   *   groups
    */
-  _changesFor(entries, fixedPoint, fixedFrame) {
+  _changesFor(groups) {
     /** @type {Map<number, Map<number, Keyframe>>} */
     const tracks = new Map();
     const seen = new Set();
     const changes = [];
-    for (const entry of entries) {
-      const point = fixedPoint ?? /** @type {PointEntry} */ (entry).point;
-      const frame = fixedFrame ?? /** @type {FrameEntry} */ (entry).frame;
-      this._checkPoint(point);
-      this._checkFrame(frame);
-      const cell = point * this.numFrames + frame;
-      if (seen.has(cell)) throw new RangeError(`point ${point}, frame ${frame}: given twice`);
-      seen.add(cell);
-      if (!tracks.has(point)) {
-        tracks.set(point, new Map(this._tracks[point].map((k) => [k.frame, k])));
+    for (const { point: fixedPoint, frame: fixedFrame, entries } of groups) {
+      for (const entry of entries) {
+        const point = fixedPoint ?? /** @type {PointEntry} */ (entry).point;
+        const frame = fixedFrame ?? /** @type {FrameEntry} */ (entry).frame;
+        const change = this._changeAt(point, frame, entry, tracks, seen);
+        if (change) changes.push(change);
       }
-      const before = tracks.get(point).get(frame) ?? null;
-      if (entry.remove === true) {
-        if (before) changes.push({ point, frame, before, after: null });
-        continue;
-      }
-      const explicit = entry.source !== undefined;
-      const source = explicit
-        ? checkSource(entry.source, `point ${point}, frame ${frame}`)
-        : sourceAfterEdit(before);
-      const after = this._makeKeyframe(frame, entry, source);
-      // Writing a suggestion's own value again, without a source, is no edit of it.
-      if (before && samePlace(before, after) && (!explicit || before.source === source)) continue;
-      changes.push({ point, frame, before, after });
     }
     return changes;
+  }
+
+  /**
+   * The change one entry makes at (point, frame), or null when it changes nothing.
+   * @param {number} point @param {number} frame @param {FrameEntry|PointEntry} entry
+   * @param {Map<number, Map<number, Keyframe>>} tracks  keyframes by frame of points seen so far
+   * @param {Set<number>} seen  cells (point * numFrames + frame) written so far
+   */
+  _changeAt(point, frame, entry, tracks, seen) {
+    this._checkPoint(point);
+    this._checkFrame(frame);
+    const cell = point * this.numFrames + frame;
+    if (seen.has(cell)) throw new RangeError(`point ${point}, frame ${frame}: given twice`);
+    seen.add(cell);
+    if (!tracks.has(point)) {
+      tracks.set(point, new Map(this._tracks[point].map((k) => [k.frame, k])));
+    }
+    const before = tracks.get(point).get(frame) ?? null;
+    if (entry.remove === true) return before ? { point, frame, before, after: null } : null;
+    const explicit = entry.source !== undefined;
+    const source = explicit
+      ? checkSource(entry.source, `point ${point}, frame ${frame}`)
+      : sourceAfterEdit(before);
+    const after = this._makeKeyframe(frame, entry, source);
+    // Writing a suggestion's own value again, without a source, is no edit of it.
+    if (before && samePlace(before, after) && (!explicit || before.source === source)) {
+      return null;
+    }
+    return { point, frame, before, after };
   }
 
   /** Runs a new edit through the undo stack; false when `changes` is empty. */
