@@ -2,9 +2,9 @@
 places each point in this view, and the epipolar lines of those labels.
 
 Once a target (a hand or an object of a sequence) has accepted work (backend.annotation.accepted)
-in at least MIN_VIEWS views other than this one, each point is triangulated per frame from them
-and projected into this view (worker.quality.prefill), with a visibility suggested from this
-view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
+in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
+from them and projected into this view (worker.quality.prefill), with a visibility suggested
+from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
 calibration changes. The assignment's check cells (worker.tracking.checks) are planted into the
 suggested positions, as into every suggestion the page shows; the epipolar data is left as it
 is. Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
@@ -37,7 +37,7 @@ from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
 from backend.storage import Storage
 from worker.quality.prefill import (
-    MIN_VIEWS,
+    MIN_ACCEPTED_VIEWS,
     DepthReader,
     Prefill,
     ViewWork,
@@ -131,7 +131,7 @@ def _unavailable_reason(task: Task, serials: list[str]) -> str:
     have = ("there is none" if not serials else
             f"there is 1 (view {serials[0]})" if len(serials) == 1 else
             f"there are {len(serials)} (views {', '.join(serials)})")
-    return (f"suggestions need accepted work in {MIN_VIEWS} other views of this "
+    return (f"suggestions need accepted work in {MIN_ACCEPTED_VIEWS} other views of this "
             f"{_target_name(task)}; {have}")
 
 
@@ -238,9 +238,9 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     accepted = list(session.scalars(work_query(others, with_tracks=False)))
     views = sorted({view_of[others[a.task_id].camera_id] for a in accepted})
     serials = [camera_rows[v].serial for v in views]
-    if len(views) < MIN_VIEWS:
+    if len(views) < MIN_ACCEPTED_VIEWS:
         return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
-                               views=serials, min_views=MIN_VIEWS, first_frame=first,
+                               views=serials, min_views=MIN_ACCEPTED_VIEWS, first_frame=first,
                                last_frame=last, points=[], epipolar=[])
     found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
                              last)
@@ -256,6 +256,7 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     epipolar = [EpipolarView(
         serial=camera_rows[g.view].serial, F=g.fundamental.tolist(),
         xy=[_xy_lists(g.xy[:, p]) for p in range(num_points)]) for g in guide]
-    return SuggestionsRead(available=True, reason=None, views=serials, min_views=MIN_VIEWS,
+    return SuggestionsRead(available=True, reason=None, views=serials,
+                           min_views=MIN_ACCEPTED_VIEWS,
                            first_frame=first, last_frame=last, points=points,
                            epipolar=epipolar)

@@ -1,6 +1,6 @@
 """GET /api/annotate/suggestions: pre-fill suggestions from the accepted work of a target's
-other views, through the real app on the small synthetic capture (3 views x 6 frames at
-640x480, with depth maps): view 0 is labelled, views 1 and 2 carry careful accepted work.
+other views, through the real app on a small synthetic capture (4 views x 6 frames at 640x480,
+with depth maps): view 0 is labelled, views 1, 2 and 3 carry careful accepted work.
 
 Also: the tracking proposals carry the same check cells (worker.tracking.checks).
 """
@@ -55,11 +55,21 @@ def _careful(capture: Path, task: dict, seed: int) -> list:
                     np.random.default_rng(seed), key_step=1).tracks
 
 
+@pytest.fixture(scope="module")
+def capture4(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small synthetic capture with 4 views (suggestions need 3 other views); read-only."""
+    from worker.synth import generate_capture
+
+    root = tmp_path_factory.mktemp("capture-4-views")
+    generate_capture(root, seed=3, frames=6, views=4, objects=2)
+    return root
+
+
 @pytest.fixture
-def hands(client: TestClient, admin_headers: dict, small_capture: Path) -> dict:
+def hands(client: TestClient, admin_headers: dict, capture4: Path) -> dict:
     """The capture's hand tasks by view, object task 0 of view 0, and two direct links of the
     view 0 hand task (workers W1, W2)."""
-    seq_id = import_path(small_capture)[0].sequence_id
+    seq_id = import_path(capture4)[0].sequence_id
     tasks = client.post(f"/api/sequences/{seq_id}/tasks", headers=admin_headers).json()
     hand = [t for t in tasks if t["kind"] == "hand"]
     links = [client.post(f"/api/tasks/{hand[0]['id']}/assignments", json={"worker_id": w},
@@ -81,31 +91,38 @@ def _grid(points: list[dict]) -> np.ndarray:
 
 
 @pytest.fixture
-def accepted(hands: dict, small_capture: Path) -> dict:
-    """Careful accepted work of views 1 and 2."""
-    for view, seed in ((1, 11), (2, 12)):
+def accepted(hands: dict, capture4: Path) -> dict:
+    """Careful accepted work of views 1, 2 and 3."""
+    for view, seed in ((1, 11), (2, 12), (3, 13)):
         task = hands["tasks"][view]
-        _accept(task["id"], f"A{view}", _careful(small_capture, task, seed))
+        _accept(task["id"], f"A{view}", _careful(capture4, task, seed))
     return hands
 
 
-def test_suggestions_wait_for_accepted_work_in_two_other_views(
-    client: TestClient, hands: dict, small_capture: Path
+def test_suggestions_wait_for_accepted_work_in_three_other_views(
+    client: TestClient, hands: dict, capture4: Path
 ) -> None:
     tasks, token = hands["tasks"], hands["links"][0]["token"]
     answer = _get(client, token)
-    assert answer["available"] is False and answer["min_views"] == 2
-    assert answer["reason"] == ("suggestions need accepted work in 2 other views of this hand; "
+    assert answer["available"] is False and answer["min_views"] == 3
+    assert answer["reason"] == ("suggestions need accepted work in 3 other views of this hand; "
                                 "there is none")
     assert answer["points"] == [] and answer["epipolar"] == [] and answer["views"] == []
     # Work of the same view, and work QC has not accepted, do not count.
-    _accept(tasks[0]["id"], "same-view", _careful(small_capture, tasks[0], 1))
-    _accept(tasks[2]["id"], "waiting", _careful(small_capture, tasks[2], 2), status="submitted")
-    _accept(tasks[1]["id"], "A1", _careful(small_capture, tasks[1], 3))
+    _accept(tasks[0]["id"], "same-view", _careful(capture4, tasks[0], 1))
+    _accept(tasks[2]["id"], "waiting", _careful(capture4, tasks[2], 2), status="submitted")
+    _accept(tasks[1]["id"], "A1", _careful(capture4, tasks[1], 3))
     answer = _get(client, token)
     assert answer["available"] is False and answer["views"] == [tasks[1]["serial"]]
-    assert answer["reason"] == ("suggestions need accepted work in 2 other views of this hand; "
+    assert answer["reason"] == ("suggestions need accepted work in 3 other views of this hand; "
                                 f"there is 1 (view {tasks[1]['serial']})")
+    # Two views are enough to triangulate, but not for QC to have judged the work.
+    _accept(tasks[3]["id"], "A3", _careful(capture4, tasks[3], 4))
+    answer = _get(client, token)
+    serials = f"{tasks[1]['serial']}, {tasks[3]['serial']}"
+    assert answer["available"] is False and answer["points"] == []
+    assert answer["reason"] == ("suggestions need accepted work in 3 other views of this hand; "
+                                f"there are 2 (views {serials})")
     # An object task says so.
     from backend.annotation.models import Assignment
     from backend.annotation.service import get_task_or_raise
@@ -118,8 +135,8 @@ def test_suggestions_wait_for_accepted_work_in_two_other_views(
     assert "other views of this object; there is none" in _get(client, object_token)["reason"]
 
 
-def test_suggestions_from_two_accepted_views_lie_near_the_truth(
-    client: TestClient, accepted: dict, small_capture: Path
+def test_suggestions_from_three_accepted_views_lie_near_the_truth(
+    client: TestClient, accepted: dict, capture4: Path
 ) -> None:
     from backend.config import get_settings
     from worker.quality.prefill import epipolar_lines
@@ -128,23 +145,23 @@ def test_suggestions_from_two_accepted_views_lie_near_the_truth(
     tasks, link = accepted["tasks"], accepted["links"][0]
     answer = _get(client, link["token"])
     assert answer["available"] is True and answer["reason"] is None
-    assert answer["views"] == [tasks[1]["serial"], tasks[2]["serial"]]
+    assert answer["views"] == [tasks[1]["serial"], tasks[2]["serial"], tasks[3]["serial"]]
     assert (answer["first_frame"], answer["last_frame"]) == (0, 5)
     assert [p["point"] for p in answer["points"]] == list(range(21))
-    truth, visible = _truth(small_capture, tasks[0]["serial"], 6)
+    truth, visible = _truth(capture4, tasks[0]["serial"], 6)
     xy = _grid(answer["points"])
     assert xy.shape == (6, 21, 2)
     cells = check_cells(check_key(get_settings().signing_key), link["assignment_id"], 21, 6)
     plain = np.ones((6, 21), bool)
     for point, frame in cells:
         plain[frame, point] = False
-    # Suggested where both views see the joint (the object covers it in view 2 half the time).
-    both = _truth(small_capture, tasks[1]["serial"], 6)[1] & \
-        _truth(small_capture, tasks[2]["serial"], 6)[1]
+    # Suggested where at least two of the three views see the joint.
+    seen_in = sum(_truth(capture4, tasks[v]["serial"], 6)[1].astype(int) for v in (1, 2, 3))
+    both = seen_in >= 2
     has = np.isfinite(xy).all(axis=-1)
     assert both.sum() > 50 and not (has & ~both).any() and has[both].mean() > 0.95
     errors = np.linalg.norm(xy - truth, axis=-1)[has & plain]
-    # Two careful views (2 px per axis): measured median 2.1 px, largest 8.4 px.
+    # Careful views (2 px per axis).
     assert np.median(errors) < 4.0 and errors.max() < 15.0
     suggested = np.array([[np.nan if v is None else float(v) for v in p["visible"]]
                           for p in answer["points"]]).T
@@ -247,24 +264,25 @@ def test_who_may_read_suggestions(
 
 
 def test_another_views_assignment_reads_suggestions_for_its_own_view(
-    client: TestClient, admin_headers: dict, accepted: dict, small_capture: Path
+    client: TestClient, admin_headers: dict, accepted: dict, capture4: Path
 ) -> None:
-    """Work of view 1 needs two OTHER views: view 2 and, once accepted, view 0."""
+    """Work of view 1 needs three OTHER views: views 2, 3 and, once accepted, view 0."""
     tasks = accepted["tasks"]
     token = client.post(f"/api/tasks/{tasks[1]['id']}/assignments", json={"worker_id": "W9"},
                         headers=admin_headers).json()["token"]
     answer = _get(client, token)
-    assert answer["available"] is False and answer["views"] == [tasks[2]["serial"]]
-    _accept(tasks[0]["id"], "A0", _careful(small_capture, tasks[0], 10))
+    assert answer["available"] is False
+    assert answer["views"] == [tasks[2]["serial"], tasks[3]["serial"]]
+    _accept(tasks[0]["id"], "A0", _careful(capture4, tasks[0], 10))
     answer = _get(client, token)
-    assert answer["views"] == [tasks[0]["serial"], tasks[2]["serial"]]
-    truth, _ = _truth(small_capture, tasks[1]["serial"], 6)
+    assert answer["views"] == [tasks[0]["serial"], tasks[2]["serial"], tasks[3]["serial"]]
+    truth, _ = _truth(capture4, tasks[1]["serial"], 6)
     errors = np.linalg.norm(_grid(answer["points"]) - truth, axis=-1)
     assert np.nanmedian(errors) < 4.0
 
 
 def test_suggestions_follow_changes_of_the_accepted_work(
-    client: TestClient, accepted: dict, small_capture: Path
+    client: TestClient, accepted: dict, capture4: Path
 ) -> None:
     """The server keeps each view's result until the work it rests on changes."""
     from backend.annotation.models import Assignment
@@ -274,7 +292,7 @@ def test_suggestions_follow_changes_of_the_accepted_work(
     assert _get(client, token) == before
     # A second accepted worker of view 1 who places every joint 8 px to the right.
     shifted = [[[r[0], r[1] + 8.0 if r[1] is not None and r[1] < 630 else r[1], *r[2:]]
-                for r in rows] for rows in _careful(small_capture, accepted["tasks"][1], 21)]
+                for r in rows] for rows in _careful(capture4, accepted["tasks"][1], 21)]
     aid = _accept(accepted["tasks"][1]["id"], "shifted", shifted)
     moved = np.linalg.norm(_grid(_get(client, token)["points"]) - _grid(before["points"]),
                            axis=-1)

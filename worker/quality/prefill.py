@@ -2,13 +2,14 @@
 one more view, and the epipolar lines that guide a worker there.
 
 A target (a hand or an object of a sequence) is labelled in every camera view. Once its work is
-accepted in at least MIN_VIEWS other views, each point is triangulated per frame from the views
-that saw it (robustly, worker.geometry.triangulate) and projected into the target view with its
-lens distortion: a suggested position, image px. Its suggested visibility comes from the target
-view's depth map, with QC's own rule (worker.quality.metrics.surface_check): occluded where
-something other than the hand covers the point by more than HIDDEN_MARGIN_M, or where the
-point projects outside the image or behind the camera; visible where the depth map reads at its
-pixel and covers nothing; unknown where the map has no reading there (or there is no map).
+accepted in at least MIN_ACCEPTED_VIEWS other views, each point is triangulated per frame from
+the views that saw it (at least MIN_VIEWS; robustly, worker.geometry.triangulate) and projected
+into the target view with its lens distortion: a suggested position, image px. Its suggested
+visibility comes from the target view's depth map, with QC's own rule
+(worker.quality.metrics.surface_check): occluded where something other than the hand covers the
+point by more than HIDDEN_MARGIN_M, or where the point projects outside the image or behind the
+camera; visible where the depth map reads at its pixel and covers nothing; unknown where the map
+has no reading there (or there is no map).
 
 Only decided positions count (worker.tracks.decided_mask): a keyframe the worker took
 unchanged from a pre-fill suggestion (source "prefilled") is the suggestion's own echo, not
@@ -37,6 +38,11 @@ from worker.tracks import decided_mask, dense_points
 
 # Fewest other views with decided work on a point before it is suggested: two rays fix it.
 MIN_VIEWS = 2
+# Fewest other views with accepted work before a view is offered suggestions at all. QC judges
+# a point only where three views decide it (each view's labels against the other two), and
+# pre-filled positions are never evidence; so the first three views are labelled without
+# pre-fill, and the work the suggestions come from has been judged.
+MIN_ACCEPTED_VIEWS = 3
 # Reprojection error (px) above which a label is an outlier of the triangulation: five times
 # the 2 px per-axis noise of a careful label at 640x480, as QC's consensus (HandOptions).
 OUTLIER_PX = 10.0
