@@ -9,9 +9,20 @@ from __future__ import annotations
 
 import hashlib
 import time
-from typing import Any
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
+import httpx
+import numpy as np
+import pytest
 from playwright.sync_api import Frame, Page, expect
+
+from tests.conftest import reset_caches
+
+if TYPE_CHECKING:
+    from tests.browser.conftest import LiveServer
 
 Target = Page | Frame
 
@@ -164,3 +175,84 @@ def wait_overlay_shows(page: Page, png: bytes, timeout_s: float = 30.0) -> None:
     while page.evaluate(_SHOWN_PNG) != want and time.monotonic() < deadline:
         time.sleep(0.1)
     assert page.evaluate(_SHOWN_PNG) == want
+
+
+@contextmanager
+def server_settings(server: LiveServer) -> Iterator[None]:
+    """This process reads the live server's settings (database, storage, keys) inside."""
+    with pytest.MonkeyPatch.context() as mp:
+        for key, value in server.env.items():
+            mp.setenv(key, value)
+        reset_caches()
+        try:
+            yield
+        finally:
+            reset_caches()
+
+
+def check_cells(server: LiveServer, assignment_id: int, num_points: int,
+                num_frames: int) -> set[tuple[int, int]]:
+    """The assignment's check cells (point, frame): where any suggestion is shown 15 px off."""
+    from backend.config import get_settings
+    from worker.tracking import checks
+
+    with server_settings(server):
+        key = checks.check_key(get_settings().signing_key)
+    return set(checks.check_cells(key, assignment_id, num_points, num_frames))
+
+
+def best_tracked_joint(server: LiveServer, token: str, truth: list[np.ndarray],
+                       tol_px: float) -> int:
+    """The hand joint the tracker follows best from true keyframes at the clip's ends, asked
+    for one joint at a time as the page's Track does (on a short clip the hand moves fast from
+    frame to frame, and most joints hold at a few frames only): the most proposals within
+    ``tol_px`` of the truth. truth: per frame (21, 2) image px."""
+    last = len(truth) - 1
+
+    def held(p: int) -> int:
+        rows = [[f, *truth[f][p].round(2).tolist(), 1] for f in (0, last)]
+        resp = httpx.post(f"{server.base}/api/annotate/proposals",
+                          json={"tracks": [{"point": p, "keyframes": rows}]},
+                          headers={"Authorization": f"Bearer {token}"}, timeout=60)
+        assert resp.status_code == 200, resp.text
+        found = resp.json()["points"][0]
+        return sum(1 for f, (xy, ok) in enumerate(zip(found["xy"], found["ok"], strict=True))
+                   if ok and np.hypot(*(np.array(xy) - truth[f][p])) < tol_px)
+    counts = [held(p) for p in range(21)]
+    assert max(counts) >= 3, counts
+    return int(np.argmax(counts))
+
+
+def grab_and_drop(page: Page, start: tuple[float, float], end: tuple[float, float]) -> None:
+    """Grabs the point at ``start`` (image px), swings out and drops it at ``end``: a drag
+    however close the two are."""
+    mouse = page.mouse
+    sx, sy = to_client(page, *start)
+    ex, ey = to_client(page, *end)
+    mouse.move(sx, sy)
+    mouse.down()
+    mouse.move(sx + 30, sy + 30, steps=4)
+    mouse.move(ex, ey, steps=4)
+    mouse.up()
+
+
+def modifier_drag(page: Page, modifier: str, start: tuple[float, float],
+                  end: tuple[float, float]) -> None:
+    """A drag from image position ``start`` to ``end`` with ``modifier`` held throughout."""
+    page.keyboard.down(modifier)
+    drag_image(page, start, end)
+    page.keyboard.up(modifier)
+
+
+def screens(page: Page, output_dir: Path, name: str, sizes: list[tuple[int, int]],
+            back_to: dict[str, int]) -> None:
+    """Screenshots ``{name}-{w}x{h}.png`` at each size (instructions folded away, as a worker
+    who knows the task has them), then back to the viewport ``back_to``."""
+    if page.get_attribute("#toggle-instructions", "aria-pressed") == "true":
+        page.click("#toggle-instructions")
+    for width, height in sizes:
+        page.set_viewport_size({"width": width, "height": height})
+        page.wait_for_timeout(150)  # the canvas follows its box on the next resize callback
+        page.screenshot(path=str(output_dir / f"{name}-{width}x{height}.png"))
+    page.set_viewport_size(back_to)
+    page.wait_for_timeout(150)

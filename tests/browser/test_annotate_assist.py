@@ -1,7 +1,7 @@
 """Assisted annotation in the real page: tracking proposals shown as ghosts and accepted as
 "tracked" keyframes, a correction that re-tracks its neighbours, sources that survive a reload;
-suggestions pre-filled from two other views' accepted work, and epipolar lines through the true
-joint."""
+suggestions pre-filled from three other views' accepted work, and epipolar lines through the true
+joint; before three other views are accepted, the reason why not."""
 
 from __future__ import annotations
 
@@ -9,24 +9,27 @@ import json
 from pathlib import Path
 from typing import Any
 
-import httpx
 import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, VIEWPORT, LiveServer
 from tests.browser.helpers import (
+    best_tracked_joint,
+    check_cells,
     goto_frame,
+    grab_and_drop,
     open_task,
     pan_to_centre,
+    screens,
     select_point,
     server_keyframes,
+    server_settings,
     to_client,
     value_at,
     wait_saved,
     zoom_on_points,
 )
-from tests.conftest import reset_caches
 
 LAST = CLIP_FRAMES - 1
 # View 1 of the suite's capture shows the whole hand in the first and the last frame.
@@ -38,52 +41,12 @@ SIZES = [(1024, 700), (1366, 768), (1440, 900)]
 TRACK_GHOST_RGB = (0x35, 0xD0, 0xFF)
 
 
-def _best_tracked_joint(server: LiveServer, token: str, truth: list[np.ndarray]) -> int:
-    """The joint the tracker follows best on this clip from true keyframes at its ends, asked
-    for one joint at a time as the page's Track does (on a 12-frame clip the hand moves fast
-    from frame to frame, and most joints hold at a few frames only): the most proposals within
-    TRACK_TOL_PX of the truth."""
-    def held(p: int) -> int:
-        rows = [[f, *truth[f][p].round(2).tolist(), 1] for f in (0, LAST)]
-        resp = httpx.post(f"{server.base}/api/annotate/proposals",
-                          json={"tracks": [{"point": p, "keyframes": rows}]},
-                          headers={"Authorization": f"Bearer {token}"}, timeout=60)
-        assert resp.status_code == 200, resp.text
-        found = resp.json()["points"][0]
-        return sum(1 for f, (xy, ok) in enumerate(zip(found["xy"], found["ok"], strict=True))
-                   if ok and np.hypot(*(np.array(xy) - truth[f][p])) < TRACK_TOL_PX)
-    counts = [held(p) for p in range(21)]
-    assert max(counts) >= 3, counts
-    return int(np.argmax(counts))
-
-
 def _check_cells(server: LiveServer, assignment_id: int) -> set[tuple[int, int]]:
-    """The assignment's check cells (where any suggestion is shown 15 px off)."""
-    from backend.config import get_settings
-    from worker.tracking.checks import check_cells, check_key
-
-    with pytest.MonkeyPatch.context() as mp:
-        for key, value in server.env.items():
-            mp.setenv(key, value)
-        reset_caches()
-        try:
-            key = check_key(get_settings().signing_key)
-        finally:
-            reset_caches()
-    return set(check_cells(key, assignment_id, 21, CLIP_FRAMES))
+    return check_cells(server, assignment_id, 21, CLIP_FRAMES)
 
 
 def _screens(page: Page, output_dir: Path, name: str) -> None:
-    """Screenshots at the small laptop sizes workers have (instructions folded away, as a
-    worker who knows the task has them), then back to the suite's size."""
-    if page.get_attribute("#toggle-instructions", "aria-pressed") == "true":
-        page.click("#toggle-instructions")
-    for width, height in SIZES:
-        page.set_viewport_size({"width": width, "height": height})
-        page.wait_for_timeout(150)  # the canvas follows its box on the next resize callback
-        page.screenshot(path=str(output_dir / f"{name}-{width}x{height}.png"))
-    page.set_viewport_size(VIEWPORT)
-    page.wait_for_timeout(150)
+    screens(page, output_dir, name, SIZES, VIEWPORT)
 
 
 def _canvas_has_colour(page: Page, x: float, y: float, rgb: tuple[int, int, int],
@@ -103,19 +66,6 @@ def _canvas_has_colour(page: Page, x: float, y: float, rgb: tuple[int, int, int]
       }
       return false;
     }""", [canvas, x, y, list(rgb), radius])
-
-
-def _drag_to(page: Page, start: tuple[float, float], end: tuple[float, float]) -> None:
-    """Grabs the point at ``start`` (image px), swings out and drops it at ``end``: a drag
-    however close the two are."""
-    mouse = page.mouse
-    sx, sy = to_client(page, *start)
-    ex, ey = to_client(page, *end)
-    mouse.move(sx, sy)
-    mouse.down()
-    mouse.move(sx + 30, sy + 30, steps=4)
-    mouse.move(ex, ey, steps=4)
-    mouse.up()
 
 
 def _proposal_bodies(page: Page) -> list[dict[str, Any]]:
@@ -173,13 +123,13 @@ def test_track_accept_correct_and_reload_keep_sources(
     bodies = _proposal_bodies(page)
     open_task(page, live_server.page_url(link["token"]))
     truth = [live_server.truth(task["serial"], f) for f in range(CLIP_FRAMES)]
-    joint = _best_tracked_joint(live_server, link["token"], truth)
+    joint = best_tracked_joint(live_server, link["token"], truth, TRACK_TOL_PX)
     zoom_on_points(page, [truth[0][joint], truth[LAST][joint]])
     select_point(page, joint)
     page.mouse.click(*to_client(page, *truth[0][joint]))
     select_point(page, joint)
     goto_frame(page, LAST)
-    _drag_to(page, tuple(truth[0][joint]), tuple(truth[LAST][joint]))
+    grab_and_drop(page, tuple(truth[0][joint]), tuple(truth[LAST][joint]))
 
     look = _track_and_look(page, joint, truth, checks, output_dir)
     page.keyboard.press("Enter")
@@ -200,7 +150,7 @@ def test_track_accept_correct_and_reload_keep_sources(
     goto_frame(page, fix)
     before = value_at(page, joint, fix)
     asked = len(bodies)
-    _drag_to(page, (before["x"], before["y"]), tuple(truth[fix][joint]))
+    grab_and_drop(page, (before["x"], before["y"]), tuple(truth[fix][joint]))
     _wait_assist_idle(page)
     assert page.evaluate(f"window.__dexlabel.store.keyframeAt({joint}, {fix}).source") == "edited"
     assert len(bodies) == asked + 1
@@ -242,9 +192,11 @@ def test_track_accept_correct_and_reload_keep_sources(
 
 # ---- pre-fill from other views and epipolar lines ------------------------------------------
 
-PREFILL_VIEWS = 3
+# Suggestions need accepted work in 3 other views (worker.quality.prefill.MIN_ACCEPTED_VIEWS):
+# views 1-3 are accepted, view 0 is suggested.
+PREFILL_VIEWS = 4
 SUGGEST_GHOST_RGB = (0xFF, 0x5F, 0xD2)
-# Two exact views' labels triangulated and reprojected: well under a px, except at the
+# Three exact views' labels triangulated and reprojected: well under a px, except at the
 # assignment's check cells (15 px off on purpose).
 SUGGEST_TOL_PX = 2.0
 # The page's epipolar lines pass this close to the joint's true position (undistorted pinhole
@@ -255,8 +207,9 @@ LINE_TOL_PX = 2.0
 @pytest.fixture(scope="module")
 def prefill_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFactory
                     ) -> dict[str, Any]:
-    """A three-view capture imported into the live server, its hand work in views 1 and 2
-    accepted (exact labels on every frame); the hand task of view 0 and its truth."""
+    """A four-view capture imported into the live server, its hand work in views 1 to 3
+    accepted (exact labels on every frame); the hand tasks of every view (sorted by serial)
+    and view 0's truth."""
     from backend.annotation.models import Assignment, Track
     from backend.captures.flows import import_path
     from backend.crowd.simulate import CaptureTruth
@@ -267,31 +220,25 @@ def prefill_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFa
     capture = tmp_path_factory.mktemp("prefill") / "capture"
     generate_capture(capture, seed=9, frames=CLIP_FRAMES, views=PREFILL_VIEWS, objects=1)
     truth = CaptureTruth(capture)
-    with pytest.MonkeyPatch.context() as mp:
-        for key, value in live_server.env.items():
-            mp.setenv(key, value)
-        reset_caches()
-        try:
-            sequence_id = import_path(capture)[0].sequence_id
-            tasks = live_server.admin("POST", f"/api/sequences/{sequence_id}/tasks")
-            hands = sorted((t for t in tasks if t["kind"] == "hand"), key=lambda t: t["serial"])
-            for view, task in enumerate(hands[1:], start=1):
-                joints, seg = truth.view(task["serial"], CLIP_FRAMES)
-                visible = hand_visibility(joints, seg)
-                rows = [[[f, *joints[f, p].round(2).tolist(), int(visible[f, p])]
-                         for f in range(CLIP_FRAMES)] for p in range(21)]
-                with session_scope() as session:
-                    assignment = Assignment(
-                        task_id=task["id"], worker_id=f"prefill-{view}", status="approved",
-                        external_id=f"direct-prefill-{view}", version=1,
-                        working_time_s=100.0, submitted_at=utcnow())
-                    assignment.tracks = [Track(point_index=p, keyframes=r)
-                                         for p, r in enumerate(rows)]
-                    session.add(assignment)
-        finally:
-            reset_caches()
+    with server_settings(live_server):
+        sequence_id = import_path(capture)[0].sequence_id
+        tasks = live_server.admin("POST", f"/api/sequences/{sequence_id}/tasks")
+        hands = sorted((t for t in tasks if t["kind"] == "hand"), key=lambda t: t["serial"])
+        for view, task in enumerate(hands[1:], start=1):
+            joints, seg = truth.view(task["serial"], CLIP_FRAMES)
+            visible = hand_visibility(joints, seg)
+            rows = [[[f, *joints[f, p].round(2).tolist(), int(visible[f, p])]
+                     for f in range(CLIP_FRAMES)] for p in range(21)]
+            with session_scope() as session:
+                assignment = Assignment(
+                    task_id=task["id"], worker_id=f"prefill-{view}", status="approved",
+                    external_id=f"direct-prefill-{view}", version=1,
+                    working_time_s=100.0, submitted_at=utcnow())
+                assignment.tracks = [Track(point_index=p, keyframes=r)
+                                     for p, r in enumerate(rows)]
+                session.add(assignment)
     joints, _ = truth.view(hands[0]["serial"], CLIP_FRAMES)
-    return {"task": hands[0], "truth": joints}
+    return {"task": hands[0], "truth": joints, "hands": hands}
 
 
 def _central_joint(joints: np.ndarray, width: int, height: int) -> int:
@@ -299,14 +246,14 @@ def _central_joint(joints: np.ndarray, width: int, height: int) -> int:
     return int(np.argmin(np.hypot(joints[:, 0] - width / 2, joints[:, 1] - height / 2)))
 
 
-def test_suggestions_from_two_accepted_views_are_shown_used_and_lines_cross_the_joint(
+def test_suggestions_from_three_accepted_views_are_shown_used_and_lines_cross_the_joint(
     live_server: LiveServer, prefill_capture: dict[str, Any], page: Page, output_dir: Path
 ) -> None:
     task, truth = prefill_capture["task"], prefill_capture["truth"]
     link = live_server.assign(task, "W-prefill")
     checks = _check_cells(live_server, link["assignment_id"])
     open_task(page, live_server.page_url(link["token"]))
-    expect(page.locator("#suggest-note")).to_contain_text("Suggestions from 2 other views")
+    expect(page.locator("#suggest-note")).to_contain_text("Suggestions from 3 other views")
     frame = 6
     joint = _central_joint(truth[frame], task["width"], task["height"])
     select_point(page, joint)
@@ -345,7 +292,7 @@ def test_suggestions_from_two_accepted_views_are_shown_used_and_lines_cross_the_
     page.keyboard.press("e")
     assert len(page.evaluate("window.__dexlabel.assist.drawn.lines")) == len(lines)
 
-    # U uses the active joint's suggestions; Shift+U every joint's; one undo takes U back.
+    # U uses the active joint's suggestions; Shift+U every joint's; one undo takes either back.
     page.keyboard.press("u")
     keyframes = page.evaluate(f"window.__dexlabel.store.keyframes({joint})")
     assert len(keyframes) >= CLIP_FRAMES - 2 and {k["source"] for k in keyframes} == {"prefilled"}
@@ -354,6 +301,12 @@ def test_suggestions_from_two_accepted_views_are_shown_used_and_lines_cross_the_
     assert page.evaluate(f"window.__dexlabel.store.keyframes({joint})") == []
     page.keyboard.press("Shift+U")
     expect(page.locator("#assist-status")).to_contain_text("suggested keyframes for 21 points")
+    used = page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)")
+    page.keyboard.press("Control+z")
+    assert page.evaluate("window.__dexlabel.store.tracks().flat().length") == 0, (
+        "one undo takes every joint's suggestions back")
+    page.keyboard.press("Control+Shift+z")
+    assert page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)") == used
     wait_saved(page)
     stored = server_keyframes(live_server.worker_get_task(link["token"])["assignment"])
     assert sum(len(rows) for rows in stored.values()) >= 21 * (CLIP_FRAMES - 2)
@@ -362,3 +315,23 @@ def test_suggestions_from_two_accepted_views_are_shown_used_and_lines_cross_the_
         for r in rows:
             if r[3] == 1 and (p, r[0]) not in checks:
                 assert np.hypot(r[1] - truth[r[0]][p][0], r[2] - truth[r[0]][p][1]) < 3.0, (p, r)
+
+
+def test_suggestions_wait_for_three_accepted_views_and_the_page_says_why(
+    live_server: LiveServer, prefill_capture: dict[str, Any], page: Page
+) -> None:
+    """View 3's other views are 0 (not labelled), 1 and 2 (accepted): two, one short."""
+    task = prefill_capture["hands"][3]
+    link = live_server.assign(task, "W-prefill-short")
+    open_task(page, live_server.page_url(link["token"]))
+    views = ", ".join(t["serial"] for t in prefill_capture["hands"][1:3])
+    expect(page.locator("#suggest-note")).to_have_text(
+        f"suggestions need accepted work in 3 other views of this hand; there are 2 "
+        f"(views {views})")
+    assert page.evaluate("window.__dexlabel.assist.suggestions.size") == 0
+    select_point(page, 0)
+    page.keyboard.press("Shift+U")
+    page.keyboard.press("u")
+    assert page.evaluate("window.__dexlabel.assist.drawn.suggestion") is None
+    assert page.evaluate("window.__dexlabel.store.tracks().flat().length") == 0
+    assert page.evaluate("window.__dexlabel.assist.drawn.lines") == []
