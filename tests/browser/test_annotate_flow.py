@@ -169,7 +169,7 @@ def _track_all(page: Page, output_dir: Path) -> None:
     expect(page.locator("#assist-status")).to_contain_text("Accepted:")
     after = page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)")
     counts = page.evaluate("window.__dexlabel.store.tracks().map((t) => t.length)")
-    assert sum(n > 2 for n in counts) >= 10, counts
+    assert sum(n > 2 for n in counts) >= 5, counts
     page.keyboard.press("Control+z")
     assert page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)") == before
     page.keyboard.press("Control+Shift+z")
@@ -246,7 +246,7 @@ def test_worker_tracks_corrects_copies_drags_a_finger_and_submits(
     rows = {r[0]: r for r in stored[joint]}
     assert sources[0] == sources[LAST] == "placed" and sources[fix] == "edited", sources
     assert set(sources) - {0, LAST, fix} == {f for f, s in sources.items() if s == "tracked"}
-    assert len(sources) - 3 >= 2, sources
+    assert len(sources) > 3, sources
     assert _off(rows[fix], truth[fix][joint]) < 1.5
     for f in (0, LAST):
         assert _off(rows[f], truth[f][joint]) < PLACE_TOL_PX + 0.5, (f, rows[f])
@@ -287,4 +287,7 @@ def test_worker_tracks_corrects_copies_drags_a_finger_and_submits(
     if kept:
         reason = f"accepted {kept} of {kept + corrected} check suggestions unchanged"
         assert any(r.startswith(reason) for r in report["reasons"]), report["reasons"]
-        assert report["outcome"] == ("reject" if kept >= 2 else "review"), report
+        # Two kept reject, one asks for a review; a provisional report (this capture has
+        # fewer than 3 views) is never rejected.
+        rejected = kept >= 2 and not report["provisional"]
+        assert report["outcome"] == ("reject" if rejected else "review"), report
