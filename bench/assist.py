@@ -25,7 +25,10 @@ crowd ``--blind-views`` views (drawn) get a blind acceptor and the others a care
 worker, all with the careful crowd's pre-fill; each assignment created first so that its
 database id draws its check cells with the instance's key, its tracks saved with their
 sources, then the product's QC job (backend.quality.flows.run_qc) scores the target:
-flagged = review or reject, per profile.
+flagged = review or reject, per profile (as bench/qc.py counts them; a provisional report
+counts by its outcome, "provisional" says how many were); "checks_kept_unshown": check cells
+kept unchanged where the pre-fill was shown without an offset (occluded or of unknown
+visibility), which worker.tracking.checks.accepted_checks counts as accepted all the same.
 
 Also on the 72-frame capture: "proposals", the LK proposals accepted where they hold against
 linear interpolation between the keyframe worker's keyframes (``--every``, ``--worker-seed``;
@@ -411,6 +414,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     key = check_key(get_settings().signing_key)
     rng = np.random.default_rng(seed)
     table = {p: {"approve": 0, "review": 0, "reject": 0} for p in ("careful", "blind")}
+    provisional = {"careful": 0, "blind": 0}
+    unshown = {"careful": 0, "blind": 0}
     reasons: list[str] = []
     for draw in range(draws):
         _clear(sequence_id)
@@ -420,7 +425,10 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
         for i, view in enumerate(cap.views):
             profile = "blind" if i in blind else "careful"
             with session_scope() as session:
+                # Ids never reused across draws (SQLite hands a deleted row's id out again),
+                # so that each crowd gets its own check cells.
                 assignment = Assignment(
+                    id=1 + draw * len(cap.views) + i,
                     task_id=task_of[view.serial]["id"], worker_id=f"{profile}-{draw}-{i}",
                     external_id=f"assist-{draw}-{i}", status="submitted", version=1,
                     working_time_s=150.0, submitted_at=utcnow())
@@ -430,6 +438,7 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
                                       judging)
                 assignment.tracks = [Track(point_index=p, keyframes=rows)
                                      for p, rows in enumerate(tracks)]
+                unshown[profile] += _kept_unshown(key, assignment.id, tracks, prefills[i])
                 profile_of[assignment.id], view_of[assignment.id] = profile, i
         _run_qc(sequence_id, tasks[0]["target_key"])
         with session_scope() as session:
@@ -437,6 +446,7 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
                     QCReport.assignment_id.in_(profile_of)):
                 profile = profile_of[report.assignment_id]
                 table[profile][report.outcome] += 1
+                provisional[profile] += int(report.provisional)
                 if (profile == "careful") != (report.outcome == "approve") and len(reasons) < 8:
                     view = view_of[report.assignment_id]
                     given = "pre-filled " if prefills[view] is not None else ""
@@ -447,7 +457,26 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
         return round((row["review"] + row["reject"]) / max(sum(row.values()), 1), 4)
 
     return {"draws": draws, "confusion": table, "blind_flagged_rate": flagged(table["blind"]),
-            "careful_flagged_rate": flagged(table["careful"]), "misses": reasons}
+            "careful_flagged_rate": flagged(table["careful"]), "provisional": provisional,
+            "checks_kept_unshown": unshown, "misses": reasons}
+
+
+def _kept_unshown(key: bytes, assignment_id: int, tracks: list[Any], prefill: Any) -> int:
+    """Check cells of an assignment kept as "prefilled" where the route planted no offset (the
+    suggestion was occluded or of unknown visibility): QC cannot tell them from accepted
+    checks. Tracking proposals are planted wherever they are given, so only pre-fill counts."""
+    from worker.synth.assisted import row_source
+    from worker.tracking.checks import check_cells
+
+    if prefill is None:
+        return 0
+    shown = prefill.shown()
+    kept = 0
+    for point, frame in check_cells(key, assignment_id, len(tracks), shown.shape[0]):
+        row = next((r for r in tracks[point] if r[0] == frame), None)
+        kept += int(row is not None and row_source(row) == "prefilled"
+                    and not shown[frame, point])
+    return kept
 
 
 def _targets(default: dict, fast: dict, qc: dict | None) -> dict[str, bool]:
