@@ -2,7 +2,8 @@
  * The assistance's view: ghosts and epipolar lines on the frame, proposed frames on the
  * timeline, and the assistance buttons, keys and status line of the points panel.
  *
- *   tracking proposal   hollow cyan ring, its path through the span as a thin cyan line
+ *   tracking proposal   hollow cyan ring; the active point's path through the held frames as
+ *                       thin cyan lines
  *   suggestion          hollow magenta ring (dashed where the other views say occluded)
  *   epipolar line       thin line across the image, one colour per labelled view, tagged with
  *                       the last 4 characters of the view's serial
@@ -22,7 +23,7 @@ const OUTLINE = "rgba(0, 0, 0, 0.8)";
 
 /**
  * @typedef {import("./core/transform.js").Transform} Transform
- * @typedef {{ghosts: Array<{point: number, xy: number[]|null, path: number[][]}>,
+ * @typedef {{ghosts: Array<{point: number, xy: number[]|null, path: number[][][]}>,
  *            suggestion: {point: number, xy: number[], visible: boolean}|null,
  *            lines: import("./assist.js").EpipolarLine[]}} Layer
  */
@@ -43,7 +44,7 @@ export function drawAssistLayer(ctx, tf, layer, image, canvas) {
     drawEpipolar(ctx, tf, ends, canvas, line.serial.slice(-4), color);
     lines.push({ ...line, ends });
   });
-  for (const g of layer.ghosts) drawPath(ctx, tf, g.path);
+  for (const g of layer.ghosts) for (const run of g.path) drawPath(ctx, tf, run);
   for (const g of layer.ghosts) if (g.xy) drawRing(ctx, tf, g.xy, TRACK_GHOST, false);
   if (layer.suggestion) {
     drawRing(ctx, tf, layer.suggestion.xy, SUGGEST_GHOST, !layer.suggestion.visible);

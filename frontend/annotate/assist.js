@@ -497,14 +497,16 @@ export class Assist {
   // ---- what to draw -----------------------------------------------------------------------
 
   /**
-   * The assistance at one frame: tracking ghosts (with each proposal's path), the active
-   * point's suggestion while it is not used, and the active point's epipolar lines.
+   * The assistance at one frame: tracking ghosts, the path of the active point's proposals
+   * (of every proposed point's when only one is proposed) in runs of consecutive held frames,
+   * the active point's suggestion while it is not used, and its epipolar lines.
    * @param {number} frame @param {number} active
    */
   layer(frame, active) {
     const ghosts = [];
-    for (const p of this.proposals ? this.proposals.points : []) {
-      const path = okFrames(p).map((f) => p.xy[f - p.first]);
+    const proposed = this.proposals ? this.proposals.points : [];
+    for (const p of proposed) {
+      const path = p.point === active || proposed.length === 1 ? heldRuns(p) : [];
       const i = frame - p.first;
       const here = p.ok[i] && p.spans.some(([a, b]) => frame > a && frame < b) ? p.xy[i] : null;
       ghosts.push({ point: p.point, xy: here, path });
@@ -550,6 +552,18 @@ export class Assist {
 }
 
 /** The frames inside a proposal's spans where it holds. @param {PointProposal} p */
+/** A proposal's held positions in runs of consecutive frames (image px), for its path. */
+function heldRuns(p) {
+  const runs = [];
+  let previous = null;
+  for (const f of okFrames(p)) {
+    if (previous === null || f !== previous + 1) runs.push([]);
+    runs[runs.length - 1].push(p.xy[f - p.first]);
+    previous = f;
+  }
+  return runs;
+}
+
 function okFrames(p) {
   const frames = [];
   for (const [a, b] of p.spans) {
