@@ -16,6 +16,7 @@ from tests.browser.helpers import (
     Target,
     click_image,
     drag_image,
+    modifier_drag,
     open_task,
     value_at,
     wait_saved,
@@ -57,13 +58,6 @@ def _active(page: Page) -> int:
 
 def _frame(page: Page) -> int:
     return page.evaluate("window.__dexlabel.editor.frame")
-
-
-def _modifier_drag(page: Page, modifier: str, start, end) -> None:
-    """A drag from image position ``start`` to ``end`` with ``modifier`` held throughout."""
-    page.keyboard.down(modifier)
-    drag_image(page, start, end)
-    page.keyboard.up(modifier)
 
 
 def _image_delta(page: Page, start, end) -> np.ndarray:
@@ -110,7 +104,7 @@ def test_shift_drag_moves_the_skeleton_and_alt_drag_one_finger(
     start = tuple(before[9])
     end = (start[0] + 14.0, start[1] - 9.0)
     delta = _image_delta(page, start, end)
-    _modifier_drag(page, "Shift", start, end)
+    modifier_drag(page, "Shift", start, end)
     moved = _pose(page, 0)
     np.testing.assert_allclose(moved - before, np.tile(delta, (21, 1)), atol=0.05)
     page.keyboard.press("Control+z")
@@ -120,7 +114,7 @@ def test_shift_drag_moves_the_skeleton_and_alt_drag_one_finger(
     start = tuple(before[INDEX_PIP])
     end = (start[0] - 8.0, start[1] + 6.0)
     delta = _image_delta(page, start, end)
-    _modifier_drag(page, "Alt", start, end)
+    modifier_drag(page, "Alt", start, end)
     after = _pose(page, 0)
     shifted = [p for p in range(21) if np.abs(after[p] - before[p]).max() > 1e-6]
     assert shifted == [6, 7, 8]
@@ -131,7 +125,7 @@ def test_shift_drag_moves_the_skeleton_and_alt_drag_one_finger(
     # Ctrl+drag does the same (for desktops that keep Alt+drag for moving windows): the thumb
     # from its PIP.
     start = tuple(before[2])
-    _modifier_drag(page, "Control", start, (start[0] + 5.0, start[1] + 5.0))
+    modifier_drag(page, "Control", start, (start[0] + 5.0, start[1] + 5.0))
     after = _pose(page, 0)
     assert [p for p in range(21) if np.abs(after[p] - before[p]).max() > 1e-6] == [2, 3, 4]
 
@@ -229,7 +223,7 @@ def test_hidden_points_are_not_drawn_or_grabbed_and_locked_points_do_not_move(
     expect(page.locator("#tool-message")).to_contain_text("12 Middle tip is locked")
     np.testing.assert_array_equal(_pose(page, 0), before)
     start = tuple(before[0])
-    _modifier_drag(page, "Shift", start, (start[0] + 10, start[1] + 4))
+    modifier_drag(page, "Shift", start, (start[0] + 10, start[1] + 4))
     after = _pose(page, 0)
     still = [p for p in range(21) if np.abs(after[p] - before[p]).max() < 1e-6]
     assert still == [12]
