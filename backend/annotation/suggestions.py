@@ -244,7 +244,8 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
                                last_frame=last, points=[], epipolar=[])
     found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
                              last)
-    shown = np.isfinite(found.xy).all(axis=-1) & found.known & found.visible
+    # Check cells go wherever the page shows a suggestion as visible (unknown included).
+    shown = np.isfinite(found.xy).all(axis=-1) & ~(found.known & ~found.visible)
     xy = plant(check_key(get_settings().signing_key), assignment.id,
                np.swapaxes(found.xy, 0, 1), shown.T, first, num_frames, num_points,
                task.camera.width, task.camera.height)

@@ -191,46 +191,43 @@ class TestPrefill:
             off = np.hypot(row[1] - truth[frame, point, 0], row[2] - truth[frame, point, 1])
             assert off > CHECK_OFFSET_PX - 5
 
-    def _hiding(self, truth: np.ndarray, visible: np.ndarray) -> tuple[Prefill, list, list]:
+    def _hiding(self, truth: np.ndarray, visible: np.ndarray
+                ) -> tuple[Prefill, tuple, tuple, list]:
         """Suggestions 0.7 px off the truth where two of the four check cells are suggested
-        as the route would not plant them: one occluded (known), one of unknown visibility
-        (shown as visible); the other two cells are shown visible."""
+        otherwise: one occluded (known; the route plants nothing there) and one of unknown
+        visibility (the page shows it as visible, so the route plants it); the other two cells
+        are shown visible."""
         cells = _inner_cells()
         hidden, unknown = cells[1], cells[0]
         xy = truth + np.random.default_rng(8).normal(0.0, 0.7, truth.shape)
         suggested, known = visible.copy(), np.ones_like(visible)
         suggested[hidden[1], hidden[0]] = False
         known[unknown[1], unknown[0]] = False
-        return (Prefill(xy=xy, visible=suggested, known=known), [hidden, unknown],
-                [c for c in cells if c not in (hidden, unknown)])
+        return (Prefill(xy=xy, visible=suggested, known=known), hidden, unknown,
+                [c for c in cells if c != hidden])
 
-    def test_check_cells_are_planted_only_where_shown_known_and_visible(self, clip) -> None:
+    def test_check_cells_are_planted_wherever_a_suggestion_is_shown_visible(self, clip) -> None:
         _, truth, visible = clip
-        prefill, unplanted, planted = self._hiding(truth, visible)
-        assert all(visible[f, p] for p, f in unplanted)  # the truth is visible at both
+        prefill, hidden, unknown, planted = self._hiding(truth, visible)
+        assert visible[hidden[1], hidden[0]] and unknown in planted
         work = _work(clip, "blind", prefill)
-        for point, frame in unplanted:
-            row = _row_at(work.tracks[point], frame)
-            assert row is not None and row_source(row) == "prefilled"
-            # The suggestion itself, not moved 15 px off.
-            assert np.hypot(row[1] - prefill.xy[frame, point, 0],
-                            row[2] - prefill.xy[frame, point, 1]) < 0.01
+        row = _row_at(work.tracks[hidden[0]], hidden[1])
+        assert row is not None and row_source(row) == "prefilled" and row[3] == 0
+        # The suggestion itself, not moved 15 px off.
+        assert np.hypot(row[1] - prefill.xy[hidden[1], hidden[0], 0],
+                        row[2] - prefill.xy[hidden[1], hidden[0], 1]) < 0.01
         for point, frame in planted:
             row = _row_at(work.tracks[point], frame)
             assert row is not None
             off = np.hypot(row[1] - truth[frame, point, 0], row[2] - truth[frame, point, 1])
             assert CHECK_OFFSET_PX - 5 < off < CHECK_OFFSET_PX + 5
 
-    def test_careful_fixes_a_hidden_cell_and_keeps_an_unknown_one_that_is_right(
-            self, clip) -> None:
+    def test_careful_fixes_the_hidden_cell_and_every_planted_one(self, clip) -> None:
         _, truth, visible = clip
-        prefill, (hidden, unknown), planted = self._hiding(truth, visible)
+        prefill, hidden, _, planted = self._hiding(truth, visible)
         work = _work(clip, "careful", prefill)
         row = _row_at(work.tracks[hidden[0]], hidden[1])
         assert row is not None and row[3] == 1 and row_source(row) == "edited"
-        # Shown where the point is (no offset planted): nothing to correct.
-        row = _row_at(work.tracks[unknown[0]], unknown[1])
-        assert row is not None and row[3] == 1 and row_source(row) == "prefilled"
         for point, frame in planted:
             row = _row_at(work.tracks[point], frame)
             assert row is not None and row_source(row) == "edited"

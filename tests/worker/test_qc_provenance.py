@@ -247,3 +247,43 @@ class TestObjectLandmarks:
         # Counted as the worker's own, the copy would be the second witness.
         labels[2] = self._label("pre-filled", riding + 0.5)
         assert score_object([camera], labels)["frozen"].metrics["moved_with_object"] < 0.1
+
+
+def _prefilled_label(decided: float, **metrics: float) -> AssignmentQC:
+    """A label whose worker decided ``decided`` of its positions, with the metrics measured on
+    those positions alone."""
+    base = {"median_error_px": 2.0, "p90_error_px": 4.0, "outlier_fraction": 0.0,
+            "jitter_px": 1.5, "motion_ratio": 1.0, "occluded_on_surface": 0.0,
+            "moved_with_hand": 0.8, "completeness": 1.0, "working_time_s": 150.0,
+            "decided_fraction": decided, "checks_accepted": 0, "checks_corrected": 4}
+    base.update(metrics)
+    return AssignmentQC(key="a", view=0, metrics=base, per_joint=[], per_frame=[])
+
+
+# What a careful worker's corrections of a mostly right pre-fill measure (bench/assist.py, 8
+# views): the few positions it decided are where the suggestions were off.
+BIASED = {"motion_ratio": 0.3, "jitter_px": 6.3, "occluded_on_surface": 0.9,
+          "moved_with_hand": 0.15, "median_error_px": 2.9}
+
+
+def test_a_mostly_prefilled_label_is_judged_by_its_checks_not_its_corrections() -> None:
+    thresholds = learn_thresholds([], QCThresholds())
+    decision = decide(_prefilled_label(0.08, **BIASED), thresholds, NAMES)
+    assert decision.outcome == "approve", decision.reasons
+    assert decision.reasons == [("mostly pre-filled (8% of positions the worker's own): "
+                                 "judged by its check suggestions, swaps and gross errors")]
+    # The same corrections on a label the worker mostly made are judged as ever.
+    assert decide(_prefilled_label(0.9, **BIASED), thresholds, NAMES).outcome == "reject"
+    # Kept check suggestions and gross errors of its own positions still count.
+    kept = decide(_prefilled_label(0.08, checks_accepted=3, checks_corrected=1, **BIASED),
+                  thresholds, NAMES)
+    assert kept.outcome == "reject"
+    gross = dict(BIASED, median_error_px=40.0)
+    assert decide(_prefilled_label(0.08, **gross), thresholds, NAMES).outcome == "reject"
+
+
+def test_mostly_prefilled_labels_do_not_set_the_thresholds() -> None:
+    careful = [_prefilled_label(1.0, motion_ratio=float(m)).metrics
+               for m in np.linspace(0.9, 1.1, 20)]
+    biased = [_prefilled_label(0.1, **BIASED).metrics for _ in range(40)]
+    assert learn_thresholds(careful + biased) == learn_thresholds(careful)

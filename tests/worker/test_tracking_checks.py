@@ -88,6 +88,10 @@ def test_accepted_and_corrected_cells_are_counted_from_sources() -> None:
             row.append(source)
         tracks[point].append(row)
     assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (2, 1)
+    # A suggestion kept occluded was never shown off the point: it counts as neither.
+    (point, frame) = cells[1]
+    tracks[point][-1] = [frame, 20.0, 20.0, 0, "prefilled"]
+    assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (1, 1)
     # Without keyframes at the cells (keyed by hand elsewhere, interpolated) nothing counts.
     bare: list[list[list[object]]] = [[[0, 10.0, 10.0, 1]] for _ in range(num_points)]
     assert accepted_checks(KEY, 4, bare, num_points, num_frames) == (0, 0)

@@ -24,6 +24,19 @@ from worker.tracks import format_spans
 
 # The consistent estimator of a normal distribution's sigma from the MAD.
 MAD_TO_SIGMA = 1.4826
+# A label whose worker decided less than this share of its shown positions is mostly
+# pre-filled. Its own positions are then the corrections of suggestions, made where the other
+# views' consensus (which the suggestions come from) was off, and its own visibility marks
+# where the depth rule (which suggested them) disagrees: errors, motion and visibility measured
+# on that handful are biased against the worker by selection. Such a label is judged by its
+# check suggestions, its swaps and gross errors of its own positions (reject-level median and
+# 90th-percentile error); the other metrics are reported, not held against it, and are left
+# out of the population the thresholds are learned from.
+MOSTLY_PREFILLED_FRACTION = 0.5
+# Metrics kept for a mostly pre-filled label, at reject level only.
+PREFILLED_GROSS_METRICS = ("median_error_px", "p90_error_px")
+# Metrics that hold whatever the label's provenance.
+PROVENANCE_FREE_METRICS = ("checks_accepted", "completeness", "working_time_s")
 
 
 @dataclass(frozen=True)
@@ -144,6 +157,7 @@ def learn_thresholds(metric_rows: list[dict[str, float | None]],
         learned value clamped into its bounds, plus "motion_ratio.review_above".
     """
     bounds = bounds if bounds is not None else QCThresholds()
+    metric_rows = [r for r in metric_rows if not mostly_prefilled(r)]
     out: dict[str, float] = {}
     for name, rule in bounds.bounds.items():
         values = np.array([r[name] for r in metric_rows if r.get(name) is not None], float)
@@ -160,12 +174,24 @@ def learn_thresholds(metric_rows: list[dict[str, float | None]],
     return out
 
 
+def mostly_prefilled(metrics: dict[str, float | None]) -> bool:
+    """Whether the worker decided less than MOSTLY_PREFILLED_FRACTION of the label's shown
+    positions (the rest are pre-fill suggestions kept unchanged)."""
+    share = metrics.get("decided_fraction")
+    return share is not None and share < MOSTLY_PREFILLED_FRACTION
+
+
 def _failures(metrics: dict[str, float | None], thresholds: dict[str, float]) -> list[tuple]:
-    """(level, metric, value, threshold, worse) of every crossed threshold."""
+    """(level, metric, value, threshold, worse) of every crossed threshold; for a mostly
+    pre-filled label only those that hold for it (MOSTLY_PREFILLED_FRACTION)."""
     found = []
+    prefilled = mostly_prefilled(metrics)
     for key, limit in thresholds.items():
         name, rule = key.split(".", 1)
         level, worse = rule.split("_")
+        if prefilled and name not in PROVENANCE_FREE_METRICS and not (
+                name in PREFILLED_GROSS_METRICS and level == "reject"):
+            continue
         value = metrics.get(name)
         if value is None:
             continue
@@ -310,6 +336,10 @@ def decide(qc: AssignmentQC, thresholds: dict[str, float], point_names: list[str
     undecided = _decided_nothing(qc.metrics)
     if undecided:
         reasons.append("decided nothing: every position came from suggestions unchanged")
+    elif mostly_prefilled(qc.metrics):
+        share = qc.metrics.get("decided_fraction") or 0.0
+        reasons.append(f"mostly pre-filled ({share:.0%} of positions the worker's own): judged "
+                       "by its check suggestions, swaps and gross errors")
     clear_fail = bool(swaps) or any(f[0] == "reject" for f in worst.values())
     outcome: Outcome
     if clear_fail and not qc.provisional:

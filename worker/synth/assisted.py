@@ -80,8 +80,8 @@ class Prefill:
     visible: (F, P) bool, the suggested visibility (from the view's depth); where it is not
         known the page takes the suggestion as visible, so pass True there.
     known: (F, P) bool, where the view's depth decided the visibility (None: everywhere).
-        The route plants check cells only where a suggestion has a position and is known
-        and visible (backend.annotation.suggestions), so only there can a cell be 15 px off.
+        The route plants check cells wherever a suggestion has a position and is not known
+        to be occluded (backend.annotation.suggestions): the page shows those as visible.
     """
 
     xy: np.ndarray
@@ -89,10 +89,9 @@ class Prefill:
     known: np.ndarray | None = None
 
     def shown(self) -> np.ndarray:
-        """(F, P) bool, where the route may plant a check cell: a position, known visible."""
+        """(F, P) bool, where the route may plant a check cell: a position, shown visible."""
         has_xy = np.isfinite(self.xy).all(axis=2)
-        known = np.ones_like(has_xy) if self.known is None else np.asarray(self.known, bool)
-        return has_xy & known & np.asarray(self.visible, bool)
+        return has_xy & np.asarray(self.visible, bool)
 
 
 @dataclass(frozen=True)

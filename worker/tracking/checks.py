@@ -115,8 +115,9 @@ def accepted_checks(key: bytes, assignment_id: int, tracks: list[list[list[Any]]
 
     tracks: per point, keyframe rows ``[frame, x, y, visible01]`` or ``[frame, x, y,
     visible01, source]`` (worker.tracks). A check cell whose keyframe came from a suggestion
-    unchanged (source "tracked" or "prefilled") was accepted; one whose keyframe is "edited"
-    was corrected; cells without such a keyframe (keyed by hand, interpolated, never
+    unchanged (source "tracked" or "prefilled") and is visible was accepted (a suggestion
+    shown occluded is never moved off, so keeping it says nothing); one whose keyframe is
+    "edited" was corrected; cells without such a keyframe (keyed by hand, interpolated, never
     suggested) count as neither.
     """
     accepted = corrected = 0
@@ -127,7 +128,7 @@ def accepted_checks(key: bytes, assignment_id: int, tracks: list[list[list[Any]]
             if row[0] != frame:
                 continue
             source = row[4] if len(row) > 4 else "placed"
-            if source in ACCEPTED_SOURCES:
+            if source in ACCEPTED_SOURCES and row[3]:
                 accepted += 1
             elif source == "edited":
                 corrected += 1
