@@ -397,7 +397,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
         seed: int, judging: tuple[float, float]) -> dict[str, Any]:
     """``draws`` crowds through the product's QC job (backend.quality.flows.run_qc) in a fresh
     embedded setup: in each, ``blind_views`` views (drawn) get a blind acceptor, the others a
-    careful assisted worker, each given the careful crowd's pre-fill; each assignment is
+    careful assisted worker, each given the careful crowd's pre-fill once 3 views before it are
+    careful (a blind acceptor's view is rejected, so it does not count); each assignment is
     created first so that its id draws its check cells (with the instance's key), then its
     tracks are saved with their sources."""
     from qc import _clear, _fresh_setup, _run_qc, _setup
@@ -406,6 +407,7 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     from backend.config import get_settings
     from backend.db import session_scope, utcnow
     from backend.quality.models import QCReport
+    from worker.quality.prefill import MIN_ACCEPTED_VIEWS
     from worker.tracking.checks import check_key
 
     _fresh_setup("assist-qc")
@@ -434,11 +436,14 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
                     working_time_s=150.0, submitted_at=utcnow())
                 session.add(assignment)
                 session.flush()
-                tracks, _ = _work_one(view, profile, key, assignment.id, prefills[i], rng,
-                                      judging)
+                # As the product offers it: once 3 views before this one were accepted (QC
+                # rejects a blind acceptor), made of the careful crowd's earlier views.
+                accepted = sum(1 for j in range(i) if j not in blind)
+                prefill = prefills[i] if accepted >= MIN_ACCEPTED_VIEWS else None
+                tracks, _ = _work_one(view, profile, key, assignment.id, prefill, rng, judging)
                 assignment.tracks = [Track(point_index=p, keyframes=rows)
                                      for p, rows in enumerate(tracks)]
-                unshown[profile] += _kept_unshown(key, assignment.id, tracks, prefills[i])
+                unshown[profile] += _kept_unshown(key, assignment.id, tracks, prefill)
                 profile_of[assignment.id], view_of[assignment.id] = profile, i
         _run_qc(sequence_id, tasks[0]["target_key"])
         with session_scope() as session:
@@ -462,9 +467,10 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
 
 
 def _kept_unshown(key: bytes, assignment_id: int, tracks: list[Any], prefill: Any) -> int:
-    """Check cells of an assignment kept as "prefilled" where the route planted no offset (the
-    suggestion was occluded or of unknown visibility): QC cannot tell them from accepted
-    checks. Tracking proposals are planted wherever they are given, so only pre-fill counts."""
+    """Check cells of an assignment kept visible as "prefilled" where the route planted no
+    offset: QC would count them as accepted checks, so this stays 0 while the route and QC
+    agree on where cells are planted. Tracking proposals are planted wherever they are given,
+    so only pre-fill counts."""
     from worker.synth.assisted import row_source
     from worker.tracking.checks import check_cells
 
@@ -474,7 +480,7 @@ def _kept_unshown(key: bytes, assignment_id: int, tracks: list[Any], prefill: An
     kept = 0
     for point, frame in check_cells(key, assignment_id, len(tracks), shown.shape[0]):
         row = next((r for r in tracks[point] if r[0] == frame), None)
-        kept += int(row is not None and row_source(row) == "prefilled"
+        kept += int(row is not None and row_source(row) == "prefilled" and bool(row[3])
                     and not shown[frame, point])
     return kept
 

@@ -256,3 +256,12 @@ def screens(page: Page, output_dir: Path, name: str, sizes: list[tuple[int, int]
         page.screenshot(path=str(output_dir / f"{name}-{width}x{height}.png"))
     page.set_viewport_size(back_to)
     page.wait_for_timeout(150)
+
+
+def object_pixels(server: LiveServer, serial: str, frame: int) -> np.ndarray:
+    """(N, 2) x, y of the object's pixels in the ground-truth segmentation."""
+    folder = next(server.capture.glob(f"*/*/{serial}"))
+    seg = np.load(folder / f"labels_{frame:06d}.npz")["seg"]
+    labels = [v for v in np.unique(seg) if v not in (0, 255)]  # 0: background, 255: the hand
+    ys, xs = np.nonzero(seg == labels[0])
+    return np.stack([xs, ys], axis=1).astype(float)

@@ -10,8 +10,6 @@ off and the object turned 3 degrees; run A flags FLAGGED frames.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -22,8 +20,7 @@ from playwright.sync_api import Page, expect
 from sqlalchemy import select
 
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, CLIP_FRAMES, LiveServer
-from tests.browser.helpers import wait_overlay_shows
-from tests.conftest import reset_caches
+from tests.browser.helpers import server_settings, wait_overlay_shows
 from tests.solve_truth import FLAG_REASON, store_truth_run
 
 FLAGGED = (3, 8)
@@ -31,22 +28,9 @@ SHIFT_M = (0.003, 0.0, 0.004)  # 5 mm
 TURN_DEG = 3.0
 
 
-@contextmanager
-def _server_database(server: LiveServer) -> Iterator[None]:
-    """This process on the live server's database and storage."""
-    with pytest.MonkeyPatch.context() as mp:
-        for key, value in server.env.items():
-            mp.setenv(key, value)
-        reset_caches()
-        try:
-            yield
-        finally:
-            reset_caches()
-
-
 @pytest.fixture(scope="module")
 def truth_runs(live_server: LiveServer) -> dict[str, int]:
-    with _server_database(live_server):
+    with server_settings(live_server):
         a = store_truth_run(live_server.capture, live_server.sequence_id, flagged=FLAGGED)
         b = store_truth_run(live_server.capture, live_server.sequence_id, hand_shift_m=SHIFT_M,
                             object_turn_deg=TURN_DEG)
@@ -323,7 +307,7 @@ def _accepted(server: LiveServer) -> int:
     from backend.annotation.accepted import count_accepted
     from backend.db import session_scope
 
-    with _server_database(server), session_scope() as session:
+    with server_settings(server), session_scope() as session:
         return count_accepted(session, server.sequence_id)
 
 
@@ -333,7 +317,7 @@ def _approve_one(server: LiveServer) -> int:
     from backend.db import session_scope
 
     link = server.assign(server.task("object", 1), "SOLVE-RERUN")
-    with _server_database(server), session_scope() as session:
+    with server_settings(server), session_scope() as session:
         assignment = session.get_one(Assignment, int(link["assignment_id"]))
         assignment.status = "approved"
     return int(link["assignment_id"])
@@ -348,7 +332,7 @@ def _clean_up(server: LiveServer, run_id: int, assignment_id: int | None) -> Non
     from backend.solve.models import SolveRun
     from backend.solve.service import job_key
 
-    with _server_database(server), session_scope() as session:
+    with server_settings(server), session_scope() as session:
         run = session.get_one(SolveRun, run_id)
         run.status, run.error = "failed", "cancelled by the browser test"
         for job in session.scalars(select(Job).where(Job.key == job_key(run_id))):

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
@@ -13,6 +12,7 @@ from tests.browser.helpers import (
     click_image,
     drag_image,
     goto_frame,
+    object_pixels,
     open_task,
     point_states,
     server_keyframes,
@@ -21,15 +21,6 @@ from tests.browser.helpers import (
 
 LAST = CLIP_FRAMES - 1
 VIEW = 1
-
-
-def _object_pixels(server: LiveServer, serial: str, frame: int) -> np.ndarray:
-    """(N, 2) x, y of the object's pixels in the ground-truth segmentation."""
-    folder = next(server.capture.glob(f"*/*/{serial}"))
-    seg = np.load(folder / f"labels_{frame:06d}.npz")["seg"]
-    labels = [v for v in np.unique(seg) if v not in (0, 255)]  # 0: background, 255: the hand
-    ys, xs = np.nonzero(seg == labels[0])
-    return np.stack([xs, ys], axis=1).astype(float)
 
 
 def _inside(polygon: list[list[float]], x: float, y: float) -> bool:
@@ -53,8 +44,8 @@ def test_object_task_picks_two_landmarks_tracks_them_and_submits(
     start = page.locator("#start-tracking")
     expect(start).to_be_disabled()
 
-    first = _object_pixels(live_server, task["serial"], 0)
-    last = _object_pixels(live_server, task["serial"], LAST)
+    first = object_pixels(live_server, task["serial"], 0)
+    last = object_pixels(live_server, task["serial"], LAST)
     shift = last.mean(axis=0) - first.mean(axis=0)
     centre = first.mean(axis=0)
     top = (centre[0], first[:, 1].min() + 6)

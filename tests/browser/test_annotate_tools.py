@@ -17,6 +17,7 @@ from tests.browser.helpers import (
     click_image,
     drag_image,
     modifier_drag,
+    object_pixels,
     open_task,
     value_at,
     wait_saved,
@@ -239,15 +240,6 @@ def test_hidden_points_are_not_drawn_or_grabbed_and_locked_points_do_not_move(
     assert "hidden" not in str(saved) and "locked" not in str(saved)
 
 
-def _object_pixels(server: LiveServer, serial: str, frame: int) -> np.ndarray:
-    """(N, 2) x, y of the object's pixels in the ground-truth segmentation."""
-    folder = next(server.capture.glob(f"*/*/{serial}"))
-    seg = np.load(folder / f"labels_{frame:06d}.npz")["seg"]
-    labels = [v for v in np.unique(seg) if v not in (0, 255)]  # 0: background, 255: the hand
-    ys, xs = np.nonzero(seg == labels[0])
-    return np.stack([xs, ys], axis=1).astype(float)
-
-
 def test_object_landmark_off_the_highlight_is_refused_and_blocks_submit(
     live_server: LiveServer, page: Page, output_dir: Path
 ) -> None:
@@ -257,7 +249,7 @@ def test_object_landmark_off_the_highlight_is_refused_and_blocks_submit(
     polygon = np.array(highlight["polygon"])
     link = live_server.assign(task, "W-tools-object")
     open_task(page, live_server.page_url(link["token"], assignmentId=link["external_id"]))
-    pixels = _object_pixels(live_server, task["serial"], 0)
+    pixels = object_pixels(live_server, task["serial"], 0)
     centre = pixels.mean(axis=0)
     outside = (polygon[:, 0].max() + 25, centre[1])
     click_image(page, *outside)
