@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,7 +57,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from _server import isolated_workdir
+from _server import isolated_workdir, median_ms
 
 
 def _errors(dense_xy: np.ndarray, truth: np.ndarray, visible: np.ndarray,
@@ -153,15 +152,6 @@ def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, An
     }
 
 
-def _median_ms(fn: Any, runs: int) -> float:
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1000)
-    return round(statistics.median(times), 1)
-
-
 def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]:
     """Median ms of 21-point proposals over the clip: pure function and endpoint."""
     from fastapi.testclient import TestClient
@@ -205,8 +195,8 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
 
     endpoint()  # warm: imports, the first connection
     return {"points": 21, "frames": frames, "size": [grey.shape[2], grey.shape[1]],
-            "runs": runs, "pure": _median_ms(lambda: propose(grey, work.tracks), runs),
-            "endpoint": _median_ms(endpoint, runs)}
+            "runs": runs, "pure": median_ms(lambda: propose(grey, work.tracks), runs),
+            "endpoint": median_ms(endpoint, runs)}
 
 
 @dataclass

@@ -32,24 +32,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
-import time
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-from _server import isolated_workdir
-
-
-def _median_ms(fn: Any, runs: int) -> float:
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1000)
-    return round(statistics.median(times), 1)
+from _server import isolated_workdir, median_ms
 
 
 def _summary(err: np.ndarray) -> dict[str, float | int]:
@@ -171,7 +160,7 @@ def _pure_ms(capture: Path, sequence_id: int, runs: int) -> float:
     view_dir = next(capture.glob(dexycb.META_GLOB)).parent / serial
     depth = np.stack([cv2.imread(str(view_dir / dexycb.depth_file(f)), cv2.IMREAD_UNCHANGED)
                       for f in range(frames)])
-    return _median_ms(lambda: prefill(cameras, work, 0, depth), runs)
+    return median_ms(lambda: prefill(cameras, work, 0, depth), runs)
 
 
 def _timing(client: Any, task: dict, runs: int) -> dict[str, float]:
@@ -193,7 +182,7 @@ def _timing(client: Any, task: dict, runs: int) -> dict[str, float]:
         clear_cache()
         endpoint()
 
-    return {"first": _median_ms(first, runs), "again": _median_ms(endpoint, runs)}
+    return {"first": median_ms(first, runs), "again": median_ms(endpoint, runs)}
 
 
 def main() -> None:
