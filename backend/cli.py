@@ -181,7 +181,10 @@ def serve(
         signal.signal(signum, _exit_cleanly)
     try:
         uvicorn.run("backend.app:create_app", factory=True, host=host, port=port,
-                    workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S)
+                    workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+                    # The client address behind a proxy is DEXLABEL_TRUSTED_PROXIES' business
+                    # (backend.accounts.limits.client_address), not uvicorn's loopback default.
+                    proxy_headers=False)
     finally:
         forget_server(settings)
         if consumer is not None:

@@ -8,6 +8,7 @@ PostgreSQL, Redis and S3 (see docker-compose.yml).
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import json
 import math
 import os
@@ -142,6 +143,11 @@ class Settings(BaseSettings):
     db_max_overflow: int = Field(default=10, ge=0, le=1000)
     db_wait_s: float = Field(default=5.0, gt=0, le=300)
     http_threads: int = Field(default=40, ge=2, le=1000)
+    # Reverse proxies in front of the app (addresses or CIDR blocks; a JSON list or separated
+    # by commas). Only a request whose direct peer is one of them has its client address taken
+    # from X-Forwarded-For (the right-most address there that is not itself a trusted proxy),
+    # for the login limits; empty: the peer is the client and the header is ignored.
+    trusted_proxies: Annotated[list[str], NoDecode] = Field(default_factory=list)
     # Requester accounts of the built-in MTurk-compatible marketplace: comma-separated
     # ACCESS_KEY:SECRET[:STARTING_BALANCE]; each key pair is one requester account.
     market_requesters: str = Field(default=DEV_MARKET_REQUESTERS, repr=False)
@@ -197,6 +203,24 @@ class Settings(BaseSettings):
         if text.startswith("["):
             return json.loads(text)
         return [part.strip() for part in text.split(os.pathsep) if part.strip()]
+
+    @field_validator("trusted_proxies", mode="before")
+    @classmethod
+    def _split_trusted_proxies(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            text = value.strip()
+            value = (json.loads(text) if text.startswith("[")
+                     else [part.strip() for part in text.split(",") if part.strip()])
+        if not isinstance(value, list):
+            raise ValueError("must be a list of addresses or CIDR blocks")
+        checked = []
+        for item in value:
+            try:
+                checked.append(str(ipaddress.ip_network(str(item).strip(), strict=False)))
+            except ValueError:
+                raise ValueError(f"{str(item)[:64]!r} is not an IP address or CIDR block") \
+                    from None
+        return checked
 
     @field_validator("qc_thresholds")
     @classmethod

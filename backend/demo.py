@@ -69,7 +69,7 @@ class DemoServer:
         if settings.inprocess_worker and not settings.redis_url:
             self.consumer = start_inprocess_consumer(settings.worker_threads)
         config = uvicorn.Config(create_app(), host=self.host, port=self.port,
-                                log_level="warning")
+                                log_level="warning", proxy_headers=False)
         self.server = server = uvicorn.Server(config)
         self.thread = thread = threading.Thread(target=server.run, daemon=True)
         thread.start()

@@ -1,19 +1,37 @@
-"""Login limits: failed password logins counted per account and per client address.
+"""Login limits: failed password logins counted per account and client address together, per
+client address, and per account from every address.
 
-``MAX_ACCOUNT_FAILURES`` failures for one account (admin or portal, by email, whether the
-account exists or not) or ``MAX_ADDRESS_FAILURES`` from one client address within
-``WINDOW_S`` lock that account or address out: every login it tries answers 429 with
-Retry-After, the right password included, until enough of those failures are older than the
-window. A successful login clears its account's failures (not its address's).
+The rule is built so that a stranger cannot lock a real user out, while guessing stays slow:
+
+- ``MAX_ACCOUNT_ADDRESS_FAILURES`` (10) failures for one account (admin or portal, by email,
+  whether the account exists or not) from one client address within ``WINDOW_S`` (15 min) lock
+  that account for that address only. A guesser at one address therefore stops itself and
+  never the owner at another address.
+- ``MAX_ADDRESS_FAILURES`` (20) failures from one address within ``WINDOW_S``, whatever the
+  accounts, lock that address out of every login.
+- ``MAX_ACCOUNT_FAILURES`` (50) failures for one account from all addresses together within
+  ``ACCOUNT_WINDOW_S`` (24 h) close the account to every address it has not signed in from
+  within ``KNOWN_ADDRESS_S`` (30 days); addresses it has signed in from keep signing in. A
+  guesser spread over many addresses gets at most 50 guesses a day at one account; one
+  address alone can never close it (its own lock comes first), and the owner at a known
+  address is never turned away by it.
+
+A locked login answers 429 with Retry-After, the right password included, until enough of its
+failures are older than their window. A successful login forgets that account's failures from
+that address and remembers the address as known to the account (its address-wide and
+account-wide failures stay). The checks read the same keys for an account that does not exist,
+so the answer and its time do not tell whether it exists.
 
 The failures are kept in the process (the embedded deployment has one API process), or in
 Redis when ``DEXLABEL_REDIS_URL`` is set, so every API process of a scaled-out deployment
-counts the same failures.
+counts the same failures. The client address is the connection's peer, or behind a proxy listed
+in ``DEXLABEL_TRUSTED_PROXIES`` the address that proxy forwarded (``client_address``).
 """
 
 from __future__ import annotations
 
 import hashlib
+import ipaddress
 import math
 import threading
 import time
@@ -28,8 +46,11 @@ from backend.config import Settings, get_settings
 from backend.errors import DexlabelError
 
 WINDOW_S = 15 * 60
-MAX_ACCOUNT_FAILURES = 10
+MAX_ACCOUNT_ADDRESS_FAILURES = 10
 MAX_ADDRESS_FAILURES = 20
+ACCOUNT_WINDOW_S = 24 * 3600
+MAX_ACCOUNT_FAILURES = 50
+KNOWN_ADDRESS_S = 30 * 24 * 3600
 T = TypeVar("T")
 
 
@@ -58,7 +79,8 @@ class FailureStore(Protocol):
     def recent(self, key: str, since: float) -> list[float]:
         """The failure times of ``key`` after ``since``, oldest first."""
 
-    def add(self, key: str, at: float) -> None: ...
+    def add(self, key: str, at: float, keep_s: float = WINDOW_S) -> None:
+        """Records a time for ``key``, kept at least ``keep_s``."""
 
     def clear(self, key: str) -> None: ...
 
@@ -82,7 +104,7 @@ class MemoryStore:
                 return []
             return list(times)
 
-    def add(self, key: str, at: float) -> None:
+    def add(self, key: str, at: float, keep_s: float = WINDOW_S) -> None:
         with self._lock:
             self._failures.setdefault(key, deque()).append(at)
 
@@ -124,13 +146,13 @@ class RedisStore:
 
         return self._call("reading failures", run)
 
-    def add(self, key: str, at: float) -> None:
+    def add(self, key: str, at: float, keep_s: float = WINDOW_S) -> None:
         name = self._prefix + key
 
         def run() -> None:
             pipe = self._redis.pipeline()
             pipe.zadd(name, {f"{at:.6f}:{time.monotonic_ns()}": at})
-            pipe.expire(name, WINDOW_S + 60)
+            pipe.expire(name, int(keep_s) + 60)
             pipe.execute()
 
         self._call("recording a failure", run)
@@ -143,7 +165,11 @@ class RedisStore:
 class Limit:
     key: str
     max_failures: int
-    what: str  # "this account" / "this address", for the refusal
+    what: str  # "this account from this address", ..., for the refusal
+    window_s: float = WINDOW_S
+    # Set for the account-wide limit: the key that marks the client address as one the
+    # account signed in from; such an address is not held by this limit.
+    known_key: str | None = None
 
 
 class LoginLimiter:
@@ -151,22 +177,36 @@ class LoginLimiter:
         self.store = store
 
     @staticmethod
-    def limits(realm: str, email: str, address: str) -> tuple[Limit, Limit]:
-        """The account's and the client address's limits of one login."""
-        account = email.strip().lower()
-        return (Limit(f"account:{realm}:{account}", MAX_ACCOUNT_FAILURES, "this account"),
-                Limit(f"address:{address}", MAX_ADDRESS_FAILURES, "this address"))
+    def limits(realm: str, email: str, address: str) -> tuple[Limit, Limit, Limit]:
+        """The limits of one login: the account from this address, the address, and the
+        account from every address."""
+        account = f"{realm}:{email.strip().lower()}"
+        return (Limit(f"account-address:{account}:{address}", MAX_ACCOUNT_ADDRESS_FAILURES,
+                      "this account from this address"),
+                Limit(f"address:{address}", MAX_ADDRESS_FAILURES, "this address"),
+                Limit(f"account:{account}", MAX_ACCOUNT_FAILURES,
+                      "this account from addresses it has not signed in from",
+                      ACCOUNT_WINDOW_S, f"known:{account}:{address}"))
+
+    def _holds(self, limit: Limit, at: float) -> int | None:
+        """Seconds until ``limit`` lets this login through, or None if it does now."""
+        failures = self.store.recent(limit.key, at - limit.window_s)
+        known = (limit.known_key is not None
+                 and bool(self.store.recent(limit.known_key, at - KNOWN_ADDRESS_S)))
+        if len(failures) < limit.max_failures or known:
+            return None
+        # Unlocked once fewer than max_failures remain inside the window.
+        free_at = failures[-limit.max_failures] + limit.window_s
+        return max(1, math.ceil(free_at - at))
 
     def check(self, limits: tuple[Limit, ...]) -> None:
-        """Raises TooManyAttempts while any of ``limits`` is locked out."""
+        """Raises TooManyAttempts while any of ``limits`` holds this login."""
         at = now()
         waits = []
         for limit in limits:
-            failures = self.store.recent(limit.key, at - WINDOW_S)
-            if len(failures) >= limit.max_failures:
-                # Unlocked once fewer than max_failures remain inside the window.
-                free_at = failures[-limit.max_failures] + WINDOW_S
-                waits.append((max(1, math.ceil(free_at - at)), limit))
+            wait = self._holds(limit, at)
+            if wait is not None:
+                waits.append((wait, limit))
         if waits:
             wait, limit = max(waits, key=lambda item: item[0])
             raise TooManyAttempts(
@@ -175,11 +215,16 @@ class LoginLimiter:
     def failed(self, limits: tuple[Limit, ...]) -> None:
         at = now()
         for limit in limits:
-            self.store.add(limit.key, at)
+            self.store.add(limit.key, at, limit.window_s)
 
     def succeeded(self, limits: tuple[Limit, ...]) -> None:
-        """A right password: the account's failures are forgotten (the address's stay)."""
+        """A right password: the account's failures from this address are forgotten (the
+        address's and the account-wide ones stay), and the address is known to the account."""
         self.store.clear(limits[0].key)
+        for limit in limits:
+            if limit.known_key is not None:
+                self.store.clear(limit.known_key)
+                self.store.add(limit.known_key, now(), KNOWN_ADDRESS_S)
 
 
 _app_lock = threading.Lock()
@@ -201,5 +246,32 @@ def login_limiter(request: Request) -> LoginLimiter:
         return limiter
 
 
+def _trusted(address: str, proxies: list[str]) -> bool:
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        return False
+    return any(ip in ipaddress.ip_network(block) for block in proxies)
+
+
 def client_address(request: Request) -> str:
-    return request.client.host if request.client else "unknown"
+    """The address the login limits count: the connection's peer, unless the peer is a proxy
+    of DEXLABEL_TRUSTED_PROXIES; then the right-most X-Forwarded-For address that is not a
+    trusted proxy itself (the addresses left of it were written by the client and prove
+    nothing). A header from any other peer is ignored, so it cannot be forged."""
+    peer = request.client.host if request.client else "unknown"
+    proxies = get_settings().trusted_proxies
+    if not proxies or not _trusted(peer, proxies):
+        return peer
+    hops = [hop.strip() for header in request.headers.getlist("x-forwarded-for")
+            for hop in header.split(",")]
+    for hop in reversed(hops):
+        if not hop:
+            continue
+        try:
+            address = str(ipaddress.ip_address(hop))
+        except ValueError:
+            return peer  # a hop a trusted proxy would not write: count the proxy itself
+        if not _trusted(address, proxies):
+            return address
+    return peer

@@ -43,7 +43,7 @@ def test_failed_logins_lock_the_account_until_the_window_passes(
     _new_worker(client, admin_headers)
     email, password = ((ADMIN_EMAIL, ADMIN_PASSWORD) if path == "/api/auth/token"
                        else (WORKER_EMAIL, WORKER_PASSWORD))
-    for _ in range(limits.MAX_ACCOUNT_FAILURES):
+    for _ in range(limits.MAX_ACCOUNT_ADDRESS_FAILURES):
         assert _login(client, email, "wrong password", path).status_code == 401
     locked = _login(client, email, "wrong password", path)
     assert locked.status_code == 429, locked.text
@@ -83,6 +83,7 @@ def test_an_unknown_email_takes_as_long_as_a_known_one(
 ) -> None:
     _new_worker(client, admin_headers)
     monkeypatch.setattr(limits, "MAX_ACCOUNT_FAILURES", 1000)
+    monkeypatch.setattr(limits, "MAX_ACCOUNT_ADDRESS_FAILURES", 1000)
     monkeypatch.setattr(limits, "MAX_ADDRESS_FAILURES", 1000)
     known = ADMIN_EMAIL if path == "/api/auth/token" else WORKER_EMAIL
 
@@ -152,7 +153,7 @@ def test_the_redis_store_counts_and_clears_failures(
 ) -> None:
     limiter = limits.LoginLimiter(limits.RedisStore(redis_url, f"instance-{time.time()}"))
     lock = limiter.limits("admin", "a@example.org", "10.0.0.1")
-    for _ in range(limits.MAX_ACCOUNT_FAILURES):
+    for _ in range(limits.MAX_ACCOUNT_ADDRESS_FAILURES):
         limiter.check(lock)
         limiter.failed(lock)
     with pytest.raises(limits.TooManyAttempts) as refused:
