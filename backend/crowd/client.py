@@ -50,15 +50,19 @@ MTurkClient = Any
 
 
 class MarketplaceError(DexlabelError):
-    """The marketplace refused a request; ``turk_code`` is its TurkErrorCode."""
+    """The marketplace refused a request; ``turk_code`` is its TurkErrorCode; ``retryable``
+    when it did not answer or answered "try again" (a 5xx or throttling) rather than no."""
 
     status_code = 502
     code = "marketplace_error"
+    retryable = False
 
-    def __init__(self, detail: str, operation: str, turk_code: str = "") -> None:
+    def __init__(self, detail: str, operation: str, turk_code: str = "",
+                 retryable: bool = False) -> None:
         super().__init__(detail, operation=operation, turk_code=turk_code)
         self.operation = operation
         self.turk_code = turk_code
+        self.retryable = retryable or self.retryable
 
 
 class MarketplaceRefused(MarketplaceError):
@@ -86,6 +90,9 @@ INPUT_REFUSALS = frozenset({
     "AWS.MechanicalTurk.QualificationTypeDoesNotExist",
     "AWS.MechanicalTurk.InvalidMaximumAssignmentsIncrease",
 })
+# Answers that mean "not now" rather than "no".
+THROTTLING = frozenset({"Throttling", "ThrottlingException", "RequestLimitExceeded",
+                        "ServiceUnavailable", "AWS.ServiceUnavailable"})
 # The parameter a refusal is about, where its message does not name it.
 REFUSED_PARAMETER = {
     "AWS.MechanicalTurk.InvalidMaximumAssignmentsIncrease": "NumberOfAdditionalAssignments",
@@ -96,6 +103,7 @@ class MarketplaceUnreachable(MarketplaceError):
     """No answer from the marketplace at ``url`` (refused, timed out, closed, TLS)."""
 
     code = "marketplace_unreachable"
+    retryable = True
 
 
 class CrowdConfigError(DexlabelError):
@@ -215,17 +223,20 @@ def refused_fields(message: str, turk_code: str, params: Mapping[str, Any],
 def _failure(exc: Exception, operation: str, params: Mapping[str, Any],
              fields: Mapping[str, str] | None) -> MarketplaceError:
     """The MarketplaceError for a botocore failure other than an unreachable marketplace."""
+    retryable = False
     if isinstance(exc, ClientError):
         error = exc.response.get("Error", {})
         turk_code = str(exc.response.get("TurkErrorCode", "") or error.get("Code", ""))
         message = str(error.get("Message", str(exc)))
+        status = int(exc.response.get("ResponseMetadata", {}).get("HTTPStatusCode", 0) or 0)
+        retryable = status >= 500 or turk_code in THROTTLING
     else:
         turk_code = PARAMETER_VALIDATION if isinstance(exc, ParamValidationError) else ""
         message = str(exc)
     if turk_code in INPUT_REFUSALS:
         return MarketplaceRefused(f"{operation}: {message}", operation, turk_code,
                                   refused_fields(message, turk_code, params, fields))
-    return MarketplaceError(f"{operation}: {message}", operation, turk_code)
+    return MarketplaceError(f"{operation}: {message}", operation, turk_code, retryable)
 
 
 def call(client: MTurkClient, operation: str, /, **params: Any) -> dict[str, Any]:

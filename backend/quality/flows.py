@@ -18,11 +18,11 @@ from sqlalchemy import func, select
 from backend.annotation.models import Assignment
 from backend.config import get_settings
 from backend.crowd import actions, decisions
-from backend.crowd.client import MTurkClient, make_client
+from backend.crowd.client import MarketplaceError, MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
-from backend.jobs.service import check_lease, checkpoint
+from backend.jobs.service import RetryLater, check_lease, checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
 
@@ -57,7 +57,8 @@ def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
         rows = session.execute(select(QCReport.id, QCReport.assignment_id).where(
             QCReport.sequence_id == sequence_id, QCReport.target_key == target_key,
             (QCReport.action.is_(None))
-            | QCReport.action_detail.in_((REOPEN_PENDING, GRANT_PENDING)))
+            | QCReport.action_detail.startswith(REOPEN_PENDING, autoescape=True)
+            | (QCReport.action_detail == GRANT_PENDING))
             .order_by(QCReport.id))
         return [(int(r), int(a)) for r, a in rows]
 
@@ -80,7 +81,7 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
         assignment = session.get_one(Assignment, assignment_id)
         if report.action_detail == GRANT_PENDING:
             follow_up = _grant
-        elif report.action_detail == REOPEN_PENDING:
+        elif (report.action_detail or "").startswith(REOPEN_PENDING):
             follow_up = _reopen
         elif assignment.status in ("approved", "rejected"):
             report.action, report.action_detail = assignment.status, "decided by an admin"
@@ -120,18 +121,51 @@ def _grant(client: MTurkClient, report_id: int, assignment_id: int) -> None:
         session.get_one(QCReport, report_id).action_detail = GRANTED
 
 
+class ReopenNotDone(RetryLater):
+    """The marketplace did not answer a re-open; the job is retried and tries again."""
+
+
 def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
-    """One more assignment on the rejected work's HIT (its token makes a repeat add nothing)."""
+    """One more assignment on the rejected work's HIT (its token makes a repeat add nothing).
+
+    The report says what happened: re-opened; not re-opened because the HIT has expired or the
+    marketplace refused (its reason, for an admin to act on); or, when the marketplace did not
+    answer, still pending: the job fails this attempt and its retry (or the target's next QC
+    run) tries the re-open again.
+    """
+    retry: MarketplaceError | None = None
     with session_scope() as session, session.no_autoflush:
         hit = hit_of(session, session.get_one(Assignment, assignment_id))
-        # (A HIT found for a submission has its marketplace id.)
-        if hit is not None and hit.hit_id is not None and hit.expired_at is None:
-            try:
-                actions.add_assignments(session, client, hit.hit_id, 1, allow_large_hits=True)
-            except DexlabelError as exc:
-                log.warning("could not re-open HIT %s: %s", hit.hit_id, exc.detail)
         report = session.get_one(QCReport, report_id)
-        report.action_detail = REOPENED
+        # (A HIT found for a submission has its marketplace id.)
+        if hit is None or hit.hit_id is None:
+            report.action_detail = "rejected; not re-opened: the work has no marketplace HIT"
+            return
+        if hit.expired_at is not None:
+            report.action_detail = (f"rejected; not re-opened: HIT {hit.hit_id} has expired; "
+                                    "publish the task again for more work")
+            return
+        try:
+            actions.add_assignments(session, client, hit.hit_id, 1, allow_large_hits=True)
+            report.action_detail = REOPENED
+            return
+        except MarketplaceError as exc:
+            if exc.retryable:
+                retry = exc
+                report.action_detail = (f"{REOPEN_PENDING}: the marketplace could not take it now "
+                                        f"({exc.detail}); trying again")
+            else:
+                report.action_detail = _refused(hit.hit_id, exc.detail)
+        except DexlabelError as exc:
+            report.action_detail = _refused(hit.hit_id, exc.detail)
+        log.warning("could not re-open HIT %s: %s", hit.hit_id, report.action_detail)
+    if retry is not None:  # raised after the report's detail is committed
+        raise ReopenNotDone(f"re-opening HIT {hit.hit_id}: {retry.detail}") from retry
+
+
+def _refused(hit_id: str, reason: object) -> str:
+    return (f"rejected; NOT re-opened: the marketplace refused one more assignment on HIT "
+            f"{hit_id} ({reason}); add one by hand or publish the task again")
 
 
 def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str) -> list[str]:
