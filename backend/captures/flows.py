@@ -162,10 +162,18 @@ def delete_sequence(sequence_id: int, force: bool = False,
     """Delete a sequence: its rows (and the work on it, with ``force``), then its stored frames,
     models, thumbnails and solve results.
 
-    The rows go first, in their own committed transaction, so nothing ever refers to a removed
-    file; files that cannot be removed then are reported as a StorageError naming the prefix.
+    Its open HITs are expired on the marketplace first (a worker could otherwise still take
+    work that has nowhere to go); a marketplace that refuses or cannot be reached stops the
+    delete with its error, nothing deleted. The rows go next, in their own committed
+    transaction, so nothing ever refers to a removed file; files that cannot be removed then
+    are reported as a StorageError naming the prefix.
     """
+    from backend.crowd.flows import expire_sequence_hits
+
     storage = storage or get_storage()
+    with session_scope() as session:  # not found, or work and no force: refused before any HIT
+        service.delete_sequence(session, sequence_id, force, check_only=True)
+    expire_sequence_hits(sequence_id)
     with session_scope() as session:
         deleted = service.delete_sequence(session, sequence_id, force)
     prefixes = (service.capture_prefix(deleted.storage_uid),

@@ -303,16 +303,20 @@ class DeletedSequence:
     finished_assignments: int
 
 
-def delete_sequence(session: Session, sequence_id: int, force: bool = False) -> DeletedSequence:
+def delete_sequence(session: Session, sequence_id: int, force: bool = False,
+                    check_only: bool = False) -> DeletedSequence:
     """Delete a sequence's rows and everything that hangs off them (cameras, frames, objects,
-    hands, tasks, assignments, HIT and QC records, solve runs: the foreign keys cascade).
-    Its stored files are the caller's to remove, once this is committed.
+    hands, tasks, assignments, HIT and QC records, solve runs: the foreign keys cascade); its
+    payment ledger is first summed into crowd_deleted_costs. Its stored files are the
+    caller's to remove, once this is committed. ``check_only``: raise as a delete would,
+    delete nothing.
 
     Raises:
         NotFound: no such sequence.
         Conflict: it has submitted or approved work and ``force`` is not given.
     """
     from backend.annotation.models import Assignment, Task
+    from backend.crowd.costs import keep_deleted
 
     seq = get_sequence_or_raise(session, sequence_id)
     tasks = session.scalar(select(func.count()).select_from(Task)
@@ -329,6 +333,10 @@ def delete_sequence(session: Session, sequence_id: int, force: bool = False) -> 
             f"force (`--force`, `?force=true`) to delete it anyway")
     deleted = DeletedSequence(sequence_id, seq.subject.name, seq.name, seq.storage_uid,
                               tasks, sum(by_status.values()), finished)
+    if check_only:
+        return deleted
+    # The payment rows go with the assignments; the money they record stays in the cost report.
+    keep_deleted(session, sequence_id, f"{seq.subject.name}/{seq.name}")
     session.execute(delete(Sequence).where(Sequence.id == sequence_id)
                     .execution_options(synchronize_session=False))
     session.expunge_all()

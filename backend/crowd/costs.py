@@ -7,7 +7,9 @@ balance at publish time; an expired HIT takes no more work, so only its submitte
 assignments stay held), and bonuses whose ledger row is still pending (started, not yet
 confirmed paid). Open slots belong to no worker yet: a worker's committed money is their
 submitted, undecided assignments and pending bonuses, so the per-worker lines need not add up
-to the project's committed total.
+to the project's committed total. A sequence deleted with its work (a forced delete) keeps
+its line, "subject/name (deleted)" under the key "deleted:<id>", from what its ledger held
+when it was deleted (crowd_deleted_costs); its workers' lines keep that money too.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from sqlalchemy.orm import Session
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Sequence, Subject
 from backend.crowd import pricing
-from backend.crowd.models import CrowdHit, CrowdPayment, CrowdSubmission
+from backend.crowd.models import CrowdDeletedCost, CrowdHit, CrowdPayment, CrowdSubmission
 from backend.crowd.schemas import CostLine, CostsRead
 
 FIELDS = ("spent_rewards", "spent_bonuses", "spent_fees",
@@ -143,6 +145,42 @@ def _sequence_names(session: Session, keys: list[str]) -> dict[str, str]:
     return {str(seq): f"{subject}/{name}" for seq, subject, name in rows}
 
 
+def keep_deleted(session: Session, sequence_id: int, name: str) -> int:
+    """Copy the ledger of sequence ``sequence_id`` (about to be deleted with its work) into
+    crowd_deleted_costs, per worker, kind and state; the number of payment rows kept."""
+    rows = session.execute(
+        select(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state,
+               func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents),
+               func.count())
+        .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
+        .join(Task, Task.id == Assignment.task_id).where(Task.sequence_id == sequence_id)
+        .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state)).all()
+    session.add_all(CrowdDeletedCost(sequence_id=sequence_id, sequence_name=name,
+                                     worker_id=worker, kind=kind, state=state,
+                                     amount_cents=int(amount), fee_cents=int(fee), payments=n)
+                    for worker, kind, state, amount, fee, n in rows)
+    session.flush()
+    return sum(int(n) for *_, n in rows)
+
+
+def _deleted(session: Session, by_sequence: _Totals, by_worker: _Totals) -> dict[str, str]:
+    """The ledger kept for deleted sequences, added under "deleted:<id>" keys; their names."""
+    names: dict[str, str] = {}
+    for row in session.scalars(select(CrowdDeletedCost)):
+        key = f"deleted:{row.sequence_id}"
+        names[key] = f"{row.sequence_name} (deleted)"
+        parts = _payment_parts(row.kind, row.state, row.amount_cents, row.fee_cents)
+        _add(by_sequence, key, **parts)
+        _add(by_worker, row.worker_id, **parts)
+    return names
+
+
+def _order(key: str) -> tuple[int, int]:
+    """Sequences by id, deleted ones after the others."""
+    deleted = key.startswith("deleted:")
+    return (int(deleted), int(key.removeprefix("deleted:")))
+
+
 def costs(session: Session) -> CostsRead:
     """Spend and commitments for the project, per sequence (keyed by id, named subject/name)
     and per worker."""
@@ -150,10 +188,12 @@ def costs(session: Session) -> CostsRead:
     by_worker: _Totals = {}
     decided = _payments(session, by_sequence, by_worker)
     _held(session, decided, by_sequence, by_worker)
+    deleted_names = _deleted(session, by_sequence, by_worker)
     total = [sum(column) for column in zip(*by_sequence.values(), strict=True)] \
         or [0] * len(FIELDS)
-    names = _sequence_names(session, list(by_sequence))
+    names = _sequence_names(session, [k for k in by_sequence if k not in deleted_names])
+    names.update(deleted_names)
     return CostsRead(total=_line("project", total),
                      by_sequence=[_line(k, by_sequence[k], names.get(k, f"sequence {k}"))
-                                  for k in sorted(by_sequence, key=int)],
+                                  for k in sorted(by_sequence, key=_order)],
                      by_worker=[_line(k, v) for k, v in sorted(by_worker.items())])

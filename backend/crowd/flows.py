@@ -12,8 +12,9 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
-from backend.crowd import decisions, pricing
-from backend.crowd.client import MTurkClient
+from backend.config import get_settings
+from backend.crowd import actions, decisions, pricing
+from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.models import CrowdHit
 from backend.crowd.publish import check_assignments, publish_task, requirements
 from backend.crowd.schemas import CostRead, PaymentRead, PublishOptions, PublishResult
@@ -110,3 +111,27 @@ def _count(result: PublishResult, hit_id: str, outcome: str) -> None:
     field = _COUNTERS[outcome]
     setattr(result, field, getattr(result, field) + 1)
     result.hit_ids.append(hit_id)
+
+
+def expire_sequence_hits(sequence_id: int, client: MTurkClient | None = None) -> list[str]:
+    """Expire every open HIT of the sequence's tasks on the marketplace (no more work is taken;
+    submitted work can still be decided), one committed unit each; their ids.
+
+    A marketplace that refuses or cannot be reached stops here with its error, so a delete
+    that needs the HITs closed first does not go on. The client is made only when there is a
+    HIT to expire.
+    """
+    with session_scope() as session:
+        open_hits = list(session.scalars(
+            select(CrowdHit.hit_id).join(Task, Task.id == CrowdHit.task_id)
+            .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None),
+                   CrowdHit.expired_at.is_(None)).order_by(CrowdHit.id)))
+    done: list[str] = []
+    if open_hits and client is None:
+        client = make_client(get_settings())
+    for hit_id in open_hits:
+        assert hit_id is not None
+        with session_scope() as session, session.no_autoflush:
+            actions.expire_hit(session, client, hit_id)
+        done.append(hit_id)
+    return done

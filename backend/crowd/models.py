@@ -9,6 +9,7 @@ from __future__ import annotations
 from datetime import datetime
 
 from sqlalchemy import (
+    BigInteger,
     CheckConstraint,
     ForeignKey,
     Integer,
@@ -105,3 +106,20 @@ class CrowdWorkerAction(TimestampMixin, Base):
     target: Mapped[str] = mapped_column(String(64), default="")
     value: Mapped[int | None] = mapped_column(Integer)
     reason: Mapped[str | None] = mapped_column(Text)
+
+
+class CrowdDeletedCost(TimestampMixin, Base):
+    """What the ledger held for a sequence deleted with its work, per worker and kind: the
+    payment rows go with the sequence, the money spent stays in the cost report."""
+
+    __tablename__ = "crowd_deleted_costs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    sequence_id: Mapped[int] = mapped_column(Integer)  # the deleted sequence's id (no key)
+    sequence_name: Mapped[str] = mapped_column(String(300))  # "subject/name"
+    worker_id: Mapped[str] = mapped_column(String(64))
+    kind: Mapped[str] = mapped_column(String(16))
+    state: Mapped[str] = mapped_column(String(16))
+    amount_cents: Mapped[int] = mapped_column(BigInteger)
+    fee_cents: Mapped[int] = mapped_column(BigInteger)
+    payments: Mapped[int] = mapped_column(Integer)
