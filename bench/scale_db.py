@@ -731,6 +731,8 @@ def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     """Each heavy read the QC and solve jobs and the progress page run, as a function of no
     arguments that opens its own session and returns how many things it read."""
     from backend.db import session_scope
+    from backend.exports.content import load_sequence
+    from backend.exports.service import check_request
     from backend.pipeline import accepted_digest
     from backend.progress.service import sequence_progress
     from backend.quality.inputs import target_inputs
@@ -764,6 +766,9 @@ def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
         "qc_worker_quality": run(lambda s: len(worker_quality(s))),
         "solve_approved_labels": run(lambda s: len(approved_labels(s, seq, frames))),
         "solve_count_approved": run(lambda s: count_approved(s, seq)),
+        "export_load_sequence": run(lambda s: len(load_sequence(s, seq).work)),
+        "export_check_project": run(
+            lambda s: len(check_request(s, "json", None, "accepted", {}).ids)),
     }
 
 
@@ -773,6 +778,7 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     from sqlalchemy import select
 
     from backend.accounts.service import create_admin
+    from backend.annotation.models import Assignment
     from backend.app import create_app
     from backend.captures.models import Camera
     from backend.db import session_scope
@@ -796,6 +802,8 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
                 return len(body["tasks"])
             if "frames" in body:
                 return len(body["frames"])
+            if "items" in body or "assignments" in body:
+                return len(body.get("items", body.get("assignments", [])))
             return len(body.get("by_sequence", [])) + len(body.get("by_worker", []))
         return call
 
@@ -803,6 +811,8 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     with session_scope() as session:
         serial = session.scalar(select(Camera.serial).where(Camera.sequence_id == seq)
                                 .order_by(Camera.view_index).limit(1))
+        worker = session.scalar(select(Assignment.worker_id).where(
+            Assignment.worker_id.is_not(None)).order_by(Assignment.id).limit(1))
     return {
         "GET /api/auth/me (floor)": get("/api/auth/me"),
         "GET /api/sequences": get("/api/sequences"),
@@ -816,6 +826,9 @@ def api_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
         "GET /api/tasks?sequence_id=": get(f"/api/tasks?sequence_id={seq}"),
         "GET /api/sequences/{id}/views/{serial}/frames": get(
             f"/api/sequences/{seq}/views/{serial}/frames"),
+        "GET /api/qc/queue": get("/api/qc/queue"),
+        "GET /api/crowd/workers": get("/api/crowd/workers"),
+        "GET /api/crowd/workers/{id}": get(f"/api/crowd/workers/{worker}"),
     }
 
 

@@ -10,11 +10,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from sqlalchemy import select
+from sqlalchemy import exists, select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import INCLUDE_STATUSES, sequence_tasks, work_query
-from backend.captures.models import Camera, Sequence
+from backend.annotation.accepted import INCLUDE_STATUSES
+from backend.annotation.models import Assignment, Task
+from backend.captures.models import Camera, Sequence, Subject
 from backend.config import get_settings
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError, NotFound
@@ -23,7 +24,7 @@ from backend.exports.content import fetch_solve, load_sequence
 from backend.exports.writers import EXPORTERS
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job, get_job_or_raise
-from backend.solve.service import current_run
+from backend.solve.models import SolveRun
 from worker.formats import FORMATS, SOLVE_FORMATS
 from worker.formats.dexycb import SPLIT_SETUPS
 
@@ -84,14 +85,18 @@ def check_request(session: Session, fmt: str, sequence_ids: list[int] | None, in
         if not ids:
             raise InvalidExport("sequences must list at least one sequence id, or ask for all",
                                 field="sequences")
+    # A constant number of statements whatever the project's size (a whole-project export of
+    # 1,000 sequences used to send four per sequence).
+    names = _names(session, ids)
+    ready = _exportable(session, None if sequence_ids is None else ids, fmt, include)
     if sequence_ids is not None:
         for sequence_id in ids:
-            _check_sequence(session, sequence_id, fmt, include)
+            _check_sequence(sequence_id, names, ready, fmt, include)
         return Covered(ids, [])
     covered, skipped = [], []
     for sequence_id in ids:
         try:
-            _check_sequence(session, sequence_id, fmt, include)
+            _check_sequence(sequence_id, names, ready, fmt, include)
         except NotExportable as exc:
             skipped.append(exc.detail)
         else:
@@ -119,21 +124,43 @@ def _check_options(fmt: str, options: dict[str, Any], archive: str) -> None:
                             "archive cannot hold links", field="options.frames")
 
 
-def _check_sequence(session: Session, sequence_id: int, fmt: str, include: str) -> None:
-    seq = session.get(Sequence, sequence_id)
-    if seq is None:
-        raise NotFound(f"sequence {sequence_id} does not exist", field="sequences")
-    name = f"sequence {sequence_id} ({seq.subject.name}/{seq.name})"
+def _names(session: Session, ids: list[int]) -> dict[int, str]:
+    """Each existing sequence of ``ids`` as an export names it: "sequence 3 (subject/name)"."""
+    rows = session.execute(select(Sequence.id, Subject.name, Sequence.name)
+                           .join(Subject, Subject.id == Sequence.subject_id)
+                           .where(Sequence.id.in_(ids)))
+    return {i: f"sequence {i} ({subject}/{name})" for i, subject, name in rows}
+
+
+def _exportable(session: Session, ids: list[int] | None, fmt: str, include: str
+                ) -> dict[str, set[int]]:
+    """Of ``ids`` (None: every sequence), those with a finished solve and, for a labels
+    format, those with work in ``include``'s statuses: one statement each."""
     if fmt in SOLVE_FORMATS:
-        if current_run(session, sequence_id) is None:
+        solved = select(SolveRun.sequence_id).where(SolveRun.status == "done").distinct()
+        if ids is not None:
+            solved = solved.where(SolveRun.sequence_id.in_(ids))
+        return {"solved": set(session.scalars(solved))}
+    labelled = (select(Task.sequence_id).distinct()
+                .where(exists().where(Assignment.task_id == Task.id,
+                                      Assignment.status.in_(INCLUDE_STATUSES[include]))))
+    if ids is not None:
+        labelled = labelled.where(Task.sequence_id.in_(ids))
+    return {include: set(session.scalars(labelled))}
+
+
+def _check_sequence(sequence_id: int, names: dict[int, str], ready: dict[str, set[int]],
+                    fmt: str, include: str) -> None:
+    name = names.get(sequence_id)
+    if name is None:
+        raise NotFound(f"sequence {sequence_id} does not exist", field="sequences")
+    if fmt in SOLVE_FORMATS:
+        if sequence_id not in ready["solved"]:
             raise NotExportable(f"{name} has no finished solve; the {fmt} format exports its "
                                 f"3D labels (run `dexlabel solve {sequence_id}`)",
                                 field="sequences")
         return
-    tasks = [t.id for t in sequence_tasks(session, sequence_id)]
-    found = session.scalars(work_query(tasks, INCLUDE_STATUSES[include], with_tracks=False)
-                            .limit(1)).first()
-    if found is None:
+    if sequence_id not in ready[include]:
         what = "accepted" if include == "accepted" else "submitted"
         raise NotExportable(f"{name} has no {what} labels to export", field="sequences")
 

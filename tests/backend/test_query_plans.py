@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -378,3 +379,25 @@ def test_costs_summed_by_the_database_match_a_row_by_row_count(filled: str) -> N
             for line in report.by_worker} == by_worker
     assert len(report.by_sequence) == SEQUENCES
     assert cents(report.total.committed) > 0 and cents(report.total.spent) > 0
+
+
+def test_a_whole_project_export_is_checked_in_a_few_statements(filled: str) -> None:
+    """Which sequences an export covers: a few statements whatever the project's size (it
+    was four per sequence), and the same answer as asking for each sequence on its own."""
+    from backend.db import session_scope
+    from backend.exports.service import NotExportable, check_request
+
+    for fmt in ("json", "dexycb"):
+        found: list[Any] = []
+        plans = _plans(lambda s, fmt=fmt, found=found: found.append(
+            check_request(s, fmt, None, "accepted", {})))
+        assert len(plans) <= 4, (fmt, len(plans))
+        covered, skipped = found[0]
+        assert covered and len(covered) + len(skipped) == SEQUENCES
+        with session_scope() as session:
+            for seq in (covered[0], covered[-1]):
+                assert check_request(session, fmt, [seq], "accepted", {}).ids == [seq]
+            for reason in skipped[:3]:
+                seq = int(reason.split()[1])
+                with pytest.raises(NotExportable, match=re.escape(reason)):
+                    check_request(session, fmt, [seq], "accepted", {})
