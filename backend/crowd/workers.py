@@ -14,8 +14,8 @@ import statistics
 from collections import defaultdict
 from typing import Any
 
-from sqlalchemy import Select, func, select, union
-from sqlalchemy.orm import Session
+from sqlalchemy import ColumnElement, Select, func, select, union
+from sqlalchemy.orm import InstrumentedAttribute, Session
 
 from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
@@ -35,22 +35,38 @@ from backend.quality.service import qc_score
 # Reports a listing row carries for its sparkline (the newest ones); a worker's own page
 # carries up to HISTORY_DETAIL, and their newest ASSIGNMENTS_DETAIL assignments.
 HISTORY_ROW = 30
+_Column = ColumnElement[Any] | InstrumentedAttribute[Any]
 HISTORY_DETAIL = 500
 ASSIGNMENTS_DETAIL = 200
 
 
 def _known_workers() -> Select[Any]:
     """Every worker id the crowd pages list (see the module's docstring), once each."""
+    # Each part is made distinct on its own (by its index where there is one), so the union
+    # sorts a few hundred ids, not every report, submission and payment of the project.
     return union(
-        select(QCReport.worker_id.label("worker_id")).where(QCReport.provisional.is_(False)),
-        select(CrowdSubmission.worker_id),
-        select(CrowdPayment.worker_id),
-        select(CrowdWorkerAction.worker_id).where(CrowdWorkerAction.kind == "block"),
+        select(QCReport.worker_id.label("worker_id")).where(QCReport.provisional.is_(False))
+        .distinct(),
+        select(CrowdSubmission.worker_id).distinct(),
+        select(CrowdPayment.worker_id).distinct(),
+        select(CrowdWorkerAction.worker_id).where(CrowdWorkerAction.kind == "block").distinct(),
     ).subquery().select()
 
 
-def _median(values: list[float]) -> float | None:
-    return round(statistics.median(values), 3) if values else None
+def _medians(session: Session, value: _Column, worker: _Column,
+             *where: ColumnElement[bool]) -> dict[str, float]:
+    """The median of ``value`` per worker (rounded to 0.001) over the rows ``where`` selects.
+    PostgreSQL takes it (a big project's workers have thousands of rows each); SQLite, which
+    has no percentile, hands the values over."""
+    where = (*where, value.is_not(None))
+    if session.get_bind().dialect.name == "postgresql":
+        rows = session.execute(select(worker, func.percentile_cont(0.5).within_group(value))
+                               .where(*where).group_by(worker))
+        return {wid: round(float(m), 3) for wid, m in rows}
+    values: dict[str, list[float]] = defaultdict(list)
+    for wid, v in session.execute(select(worker, value).where(*where)):
+        values[wid].append(float(v))
+    return {wid: round(statistics.median(vs), 3) for wid, vs in values.items()}
 
 
 def _history(session: Session, worker_ids: list[str], limit: int
@@ -73,15 +89,10 @@ def _history(session: Session, worker_ids: list[str], limit: int
     return out
 
 
-def _errors(session: Session, worker_ids: list[str]) -> dict[str, list[float]]:
-    """Every measured median error (px) of each worker's reports."""
-    error = QCReport.metrics["median_error_px"].as_float()
-    out: dict[str, list[float]] = defaultdict(list)
-    for wid, value in session.execute(select(QCReport.worker_id, error)
-                                      .where(QCReport.worker_id.in_(worker_ids))):
-        if value is not None:
-            out[wid].append(float(value))
-    return out
+def _errors(session: Session, worker_ids: list[str]) -> dict[str, float]:
+    """The median of the measured median errors (px) of each worker's reports."""
+    return _medians(session, QCReport.metrics["median_error_px"].as_float(), QCReport.worker_id,
+                    QCReport.worker_id.in_(worker_ids))
 
 
 def _scores(session: Session, worker_ids: list[str]) -> dict[str, tuple[int, float | None]]:
@@ -98,19 +109,16 @@ def _scores(session: Session, worker_ids: list[str]) -> dict[str, tuple[int, flo
 
 
 def _work(session: Session, worker_ids: list[str]
-          ) -> tuple[dict[str, dict[str, int]], dict[str, list[float]]]:
-    """Per worker: assignments per status, and the working time of each submitted one."""
+          ) -> tuple[dict[str, dict[str, int]], dict[str, float]]:
+    """Per worker: assignments per status, and the median working time of submitted ones."""
     counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for wid, status, n in session.execute(
             select(Assignment.worker_id, Assignment.status, func.count())
             .where(Assignment.worker_id.in_(worker_ids))
             .group_by(Assignment.worker_id, Assignment.status)):
         counts[wid][status] = int(n)
-    times: dict[str, list[float]] = defaultdict(list)
-    for wid, seconds in session.execute(
-            select(Assignment.worker_id, Assignment.working_time_s)
-            .where(Assignment.worker_id.in_(worker_ids), Assignment.submitted_at.is_not(None))):
-        times[wid].append(float(seconds))
+    times = _medians(session, Assignment.working_time_s, Assignment.worker_id,
+                     Assignment.worker_id.in_(worker_ids), Assignment.submitted_at.is_not(None))
     return counts, times
 
 
@@ -155,8 +163,8 @@ def worker_stats(session: Session, worker_ids: list[str], history: int = HISTORY
                                                                 "rejected")),
             approved=c.get(ACCEPTED, 0), rejected=c.get("rejected", 0),
             approval_rate=round(c.get(ACCEPTED, 0) / decided, 4) if decided else None,
-            scored=scored, score=score, median_error_px=_median(errors.get(wid, [])),
-            median_working_time_s=_median(times.get(wid, [])),
+            scored=scored, score=score, median_error_px=errors.get(wid),
+            median_working_time_s=times.get(wid),
             earned_rewards=pricing.cents_to_dollars(rewards),
             earned_bonuses=pricing.cents_to_dollars(bonuses),
             earned=pricing.cents_to_dollars(rewards + bonuses),

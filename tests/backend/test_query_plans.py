@@ -401,3 +401,46 @@ def test_a_whole_project_export_is_checked_in_a_few_statements(filled: str) -> N
                 seq = int(reason.split()[1])
                 with pytest.raises(NotExportable, match=re.escape(reason)):
                     check_request(session, fmt, [seq], "accepted", {})
+
+
+def test_crowd_worker_medians_taken_by_the_database_match_the_rows(filled: str) -> None:
+    """The worker listing's medians, which PostgreSQL takes, equal the median of each worker's
+    rows, and its workers are every id the reports, submissions, payments and blocks name."""
+    import statistics
+    from collections import defaultdict
+
+    from backend.annotation.models import Assignment
+    from backend.crowd import workers
+    from backend.crowd.models import CrowdPayment, CrowdSubmission, CrowdWorkerAction
+    from backend.db import session_scope
+    from backend.quality.models import QCReport
+
+    with session_scope() as session:
+        listed = workers.list_workers(session, 1000, 0)
+        ids = {w.worker_id for w in listed}
+        named = (set(session.scalars(select(QCReport.worker_id)
+                                     .where(QCReport.provisional.is_(False))))
+                 | set(session.scalars(select(CrowdSubmission.worker_id)))
+                 | set(session.scalars(select(CrowdPayment.worker_id)))
+                 | set(session.scalars(select(CrowdWorkerAction.worker_id)
+                                       .where(CrowdWorkerAction.kind == "block"))))
+        assert ids == named and [w.worker_id for w in listed] == sorted(ids)
+        errors: dict[str, list[float]] = defaultdict(list)
+        for wid, metrics in session.execute(select(QCReport.worker_id, QCReport.metrics)):
+            if metrics.get("median_error_px") is not None:
+                errors[wid].append(float(metrics["median_error_px"]))
+        times: dict[str, list[float]] = defaultdict(list)
+        for wid, seconds in session.execute(
+                select(Assignment.worker_id, Assignment.working_time_s)
+                .where(Assignment.submitted_at.is_not(None))):
+            times[wid].append(float(seconds))
+    checked = 0
+    for w in listed:
+        want_error = round(statistics.median(errors[w.worker_id]), 3) \
+            if errors[w.worker_id] else None
+        want_time = round(statistics.median(times[w.worker_id]), 3) \
+            if times[w.worker_id] else None
+        assert w.median_error_px == pytest.approx(want_error, abs=1.01e-3), w.worker_id
+        assert w.median_working_time_s == pytest.approx(want_time, abs=1.01e-3), w.worker_id
+        checked += want_error is not None
+    assert checked > 10
