@@ -577,6 +577,8 @@ def fill(url: str, sequences: int = 1000, seed: int = 0,
     and their work, then VACUUM and ANALYZE it. Returns what was written."""
     import psycopg
 
+    from backend.crowd.totals import REBUILD_SQL
+
     filler = _Filler(seed, sequences)
     with psycopg.connect(psycopg_url(url)) as conn:
         filler.subjects()
@@ -594,6 +596,9 @@ def fill(url: str, sequences: int = 1000, seed: int = 0,
             for table in COLUMNS:
                 cur.execute(f"SELECT setval(pg_get_serial_sequence('{table}', 'id'), "
                             f"GREATEST((SELECT max(id) FROM {table}), 1))")
+            # The cost report's running totals, as the product keeps them with each payment.
+            for statement in REBUILD_SQL:
+                cur.execute(statement)
         conn.commit()
         conn.autocommit = True
         # The steady state of a live database: statistics and visibility maps as autovacuum

@@ -14,16 +14,19 @@ when it was deleted (crowd_deleted_costs); its workers' lines keep that money to
 
 from __future__ import annotations
 
-from collections import defaultdict
-from typing import Any
-
 from sqlalchemy import ColumnElement, case, exists, func, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Sequence, Subject
-from backend.crowd import pricing
-from backend.crowd.models import CrowdDeletedCost, CrowdHit, CrowdPayment, CrowdSubmission
+from backend.crowd import pricing, totals
+from backend.crowd.models import (
+    CrowdCostTotal,
+    CrowdDeletedCost,
+    CrowdHit,
+    CrowdPayment,
+    CrowdSubmission,
+)
 from backend.crowd.schemas import CostLine, CostsRead
 
 FIELDS = ("spent_rewards", "spent_bonuses", "spent_fees",
@@ -33,12 +36,10 @@ _DECISIONS = ("approval", "rejection")
 # HITs of one price within a sequence: (sequence id, reward cents, max assignments).
 _Shape = tuple[int, int, int]
 
-# The database does the sums, in a few grouped passes over the ledger, the HITs and the
-# undecided submissions whatever the size of the project; only the groups come back. A live
-# HIT's open slots are its assignments not decided yet, max_assignments - decisions: a HIT's
-# decisions never outnumber its assignments (one approval or rejection per assignment, and the
-# marketplace gives a HIT at most MaxAssignments, which adding assignments keeps in step), so
-# the slots of HITs of one shape add up as their max_assignments less their decisions.
+# The ledger's sums come from crowd_cost_totals (backend.crowd.totals: kept with each payment
+# row, a few rows per sequence and per worker), and a live HIT's open slots from its own
+# ``decided`` count (max_assignments - decided): two small reads and one grouped pass over the
+# HITs and the undecided submissions, whatever the size of the ledger.
 
 
 def _add(totals: _Totals, key: str, **cents: int) -> None:
@@ -57,41 +58,14 @@ def _payment_parts(kind: str, state: str, amount: int, fee: int) -> dict[str, in
     return {"committed_bonuses": amount, "committed_fees": fee}
 
 
-def _live() -> ColumnElement[Any]:
-    """1 for a payment on an assignment of a live (not expired) HIT we published, else 0."""
-    return case((CrowdHit.id.is_not(None) & CrowdHit.expired_at.is_(None), 1), else_=0)
-
-
-def _ledger() -> Any:
-    return (select().select_from(CrowdPayment)
-            .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
-            .join(Task, Task.id == Assignment.task_id)
-            .outerjoin(CrowdHit, CrowdHit.hit_id == Assignment.hit_id))
-
-
-def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals
-              ) -> dict[_Shape, int]:
-    """Ledger sums per sequence and per worker; the decisions on live HITs by HIT shape."""
-    live = _live().label("live")
-    sums = (func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents), func.count())
-    per_sequence = _ledger().add_columns(
-        Task.sequence_id, CrowdPayment.kind, CrowdPayment.state, CrowdHit.reward_cents,
-        CrowdHit.max_assignments, live, *sums,
-    ).group_by(Task.sequence_id, CrowdPayment.kind, CrowdPayment.state, CrowdHit.reward_cents,
-               CrowdHit.max_assignments, live)
-    decided: dict[_Shape, int] = defaultdict(int)
-    for seq, kind, state, reward, slots, on_live, amount, fee, n in session.execute(
-            per_sequence):
-        _add(by_sequence, str(seq), **_payment_parts(kind, state, int(amount), int(fee)))
-        if on_live and kind in _DECISIONS:
-            decided[(seq, reward, slots)] += int(n)
-    # A payment row names its worker: no join.
-    per_worker = (select(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state,
-                         *sums[:2])
-                  .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state))
-    for worker, kind, state, amount, fee in session.execute(per_worker):
-        _add(by_worker, worker, **_payment_parts(kind, state, int(amount), int(fee)))
-    return decided
+def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
+    """The ledger's sums per sequence and per worker, from the running totals."""
+    rows = session.execute(select(CrowdCostTotal.scope, CrowdCostTotal.key, CrowdCostTotal.kind,
+                                  CrowdCostTotal.state, CrowdCostTotal.amount_cents,
+                                  CrowdCostTotal.fee_cents))
+    for scope, key, kind, state, amount, fee in rows:
+        target = by_sequence if scope == "sequence" else by_worker
+        _add(target, key, **_payment_parts(kind, state, int(amount), int(fee)))
 
 
 def _undecided() -> ColumnElement[bool]:
@@ -100,19 +74,18 @@ def _undecided() -> ColumnElement[bool]:
                            CrowdPayment.kind.in_(_DECISIONS))
 
 
-def _held(session: Session, decided: dict[_Shape, int], by_sequence: _Totals,
-          by_worker: _Totals) -> None:
+def _held(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
     """Money still held: per sequence, every live HIT's open slots and an expired HIT's
     waiting submissions; per worker, their submitted work not decided yet."""
     is_live = CrowdHit.expired_at.is_(None)
     shapes = (select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
-                     func.sum(case((is_live, CrowdHit.max_assignments), else_=0)))
+                     func.sum(case((is_live, CrowdHit.max_assignments - CrowdHit.decided),
+                                   else_=0)))
               .join(Task, Task.id == CrowdHit.task_id).where(CrowdHit.hit_id.is_not(None))
               .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
     open_slots: dict[_Shape, int] = {}
-    for seq, reward, slots, live_slots in session.execute(shapes):
-        shape = (seq, reward, slots)
-        open_slots[shape] = max(int(live_slots or 0) - decided.get(shape, 0), 0)
+    for seq, reward, slots, live_open in session.execute(shapes):
+        open_slots[(seq, reward, slots)] = max(int(live_open or 0), 0)
     waiting = (select(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
                       CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None), func.count())
                .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
@@ -155,6 +128,7 @@ def keep_deleted(session: Session, sequence_id: int, name: str) -> int:
         .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
         .join(Task, Task.id == Assignment.task_id).where(Task.sequence_id == sequence_id)
         .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state)).all()
+    totals.forget_sequence(session, sequence_id)
     session.add_all(CrowdDeletedCost(sequence_id=sequence_id, sequence_name=name,
                                      worker_id=worker, kind=kind, state=state,
                                      amount_cents=int(amount), fee_cents=int(fee), payments=n)
@@ -163,15 +137,15 @@ def keep_deleted(session: Session, sequence_id: int, name: str) -> int:
     return sum(int(n) for *_, n in rows)
 
 
-def _deleted(session: Session, by_sequence: _Totals, by_worker: _Totals) -> dict[str, str]:
-    """The ledger kept for deleted sequences, added under "deleted:<id>" keys; their names."""
+def _deleted(session: Session, by_sequence: _Totals) -> dict[str, str]:
+    """The ledger kept for deleted sequences, added under "deleted:<id>" keys (the workers'
+    totals never lost it); their names."""
     names: dict[str, str] = {}
     for row in session.scalars(select(CrowdDeletedCost)):
         key = f"deleted:{row.sequence_id}"
         names[key] = f"{row.sequence_name} (deleted)"
-        parts = _payment_parts(row.kind, row.state, row.amount_cents, row.fee_cents)
-        _add(by_sequence, key, **parts)
-        _add(by_worker, row.worker_id, **parts)
+        _add(by_sequence, key,
+             **_payment_parts(row.kind, row.state, row.amount_cents, row.fee_cents))
     return names
 
 
@@ -186,9 +160,9 @@ def costs(session: Session) -> CostsRead:
     and per worker."""
     by_sequence: _Totals = {}
     by_worker: _Totals = {}
-    decided = _payments(session, by_sequence, by_worker)
-    _held(session, decided, by_sequence, by_worker)
-    deleted_names = _deleted(session, by_sequence, by_worker)
+    _payments(session, by_sequence, by_worker)
+    _held(session, by_sequence, by_worker)
+    deleted_names = _deleted(session, by_sequence)
     total = [sum(column) for column in zip(*by_sequence.values(), strict=True)] \
         or [0] * len(FIELDS)
     names = _sequence_names(session, [k for k in by_sequence if k not in deleted_names])

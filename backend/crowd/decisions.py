@@ -25,7 +25,7 @@ from sqlalchemy.orm import Session
 from backend.annotation.models import Assignment
 from backend.annotation.service import get_assignment_or_raise
 from backend.config import get_settings
-from backend.crowd import pricing
+from backend.crowd import pricing, totals
 from backend.crowd.client import MarketplaceError, MTurkClient, call, paginate
 from backend.crowd.models import CrowdHit, CrowdPayment
 from backend.crowd.schemas import PaymentRead
@@ -88,7 +88,7 @@ def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str
     session.add(row)
     assignment.status = _DONE[kind]
     submission.market_status = _MARKET_STATUS[kind]
-    session.flush()
+    totals.record(session, row)
     return _payment_read(row)
 
 
@@ -154,12 +154,13 @@ def begin_bonus(session: Session, assignment_id: int, amount_cents: int, reason:
         # Checked and resent with the reason it was started with: the marketplace lists it so.
         intent["reason"] = row.feedback or reason
         return BonusIntent(state="pending", same_paid=_same_paid(session, row), **intent)
-    session.add(CrowdPayment(kind="bonus", assignment_id=assignment.id,
-                             worker_id=submission.worker_id, request_token=token,
-                             amount_cents=amount_cents, fee_cents=pricing.fee_cents(amount_cents),
-                             feedback=reason, state="pending"))
+    row = CrowdPayment(kind="bonus", assignment_id=assignment.id,
+                       worker_id=submission.worker_id, request_token=token,
+                       amount_cents=amount_cents, fee_cents=pricing.fee_cents(amount_cents),
+                       feedback=reason, state="pending")
+    session.add(row)
     try:
-        session.flush()
+        totals.record(session, row)
     except IntegrityError as exc:
         raise Conflict(f"bonus {key!r} of assignment {assignment_id} is being paid by another "
                        "request; try again", state="pending") from exc
@@ -207,6 +208,7 @@ def finish_bonus(session: Session, token: str) -> PaymentRead:
     row = session.scalar(select(CrowdPayment).where(CrowdPayment.request_token == token))
     if row is None:
         raise NotFound(f"no bonus with token {token} in the ledger")
-    row.state = "done"
+    old_state, row.state = row.state, "done"
     session.flush()
+    totals.moved(session, row, old_state)
     return _payment_read(row)

@@ -40,6 +40,9 @@ class CrowdHit(TimestampMixin, Base):
     max_assignments: Mapped[int] = mapped_column(Integer)
     reward_cents: Mapped[int] = mapped_column(Integer)
     expired_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # Approvals and rejections of its assignments in our ledger, counted as each is written
+    # (backend.crowd.totals): a live HIT's open slots are max_assignments - decided.
+    decided: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
 
 
 class CrowdSubmission(TimestampMixin, Base):
@@ -123,3 +126,25 @@ class CrowdDeletedCost(TimestampMixin, Base):
     amount_cents: Mapped[int] = mapped_column(BigInteger)
     fee_cents: Mapped[int] = mapped_column(BigInteger)
     payments: Mapped[int] = mapped_column(Integer)
+
+
+class CrowdCostTotal(Base):
+    """Running sums of the payment ledger, per sequence and per worker, by kind and state:
+    written in the transaction that writes or changes each payment row (backend.crowd.totals),
+    so they always equal the sums over crowd_payments, and the cost report reads a few
+    thousand rows instead of joining the whole ledger to its assignments, tasks and HITs."""
+
+    __tablename__ = "crowd_cost_totals"
+    __table_args__ = (
+        UniqueConstraint("scope", "key", "kind", "state"),
+        CheckConstraint("scope IN ('sequence', 'worker')", name="scope_valid"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    scope: Mapped[str] = mapped_column(String(16))
+    key: Mapped[str] = mapped_column(String(64))  # the sequence id, or the worker id
+    kind: Mapped[str] = mapped_column(String(16))
+    state: Mapped[str] = mapped_column(String(16))
+    amount_cents: Mapped[int] = mapped_column(BigInteger, default=0)
+    fee_cents: Mapped[int] = mapped_column(BigInteger, default=0)
+    payments: Mapped[int] = mapped_column(Integer, default=0)
