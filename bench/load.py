@@ -4,7 +4,9 @@ Starts its own `dexlabel serve` on a free local port in a new instance (a temp f
 PostgreSQL also a new database on the local server, dropped at the end), imports a synthetic
 capture (``--capture DIR`` reuses one written by `dexlabel synth`), creates the hand tasks and
 ``--annotators`` direct assignment links through the admin API, then runs that many simulated
-annotators (asyncio + httpx, one kept-alive connection each) for ``--seconds``: each autosaves
+annotators (asyncio streams, one kept-alive connection each, requests encoded once as bytes
+and answers read by their length: a client lean enough not to eat the cores the server
+needs) for ``--seconds``: each autosaves
 its full hand task (21 points keyed on every frame, PUT /api/annotate/tracks with the version
 it holds) every 2 s, one save in flight at a time, giving up on a save after 15 s as the page
 does.
@@ -33,8 +35,10 @@ Prints a JSON summary on its last line:
     server_cpu_s, cpu_s_per_save
                                 CPU seconds of the server process(es) during the run (autosaves
                                 and page loads together), and per acknowledged save
-    bench_cpu_s                 CPU seconds of the client (this process and the one that
-                                runs the page-load bursts) during the run
+    bench_cpu_s, bench_cpu_ms_per_save
+                                CPU seconds of the client (this process and the one that
+                                runs the page-load bursts) during the run, and ms per
+                                acknowledged save
     bench_loop_lag_ms           how late the annotators' event loop wakes from 100 ms sleeps
                                 (p50, p99, max): latencies include the client's own delay
     server_log                  counts of tracebacks and "database is locked" in its log
@@ -44,7 +48,8 @@ Prints a JSON summary on its last line:
                                 before the crowd starts, ``--alone`` saves of one annotator
                                 back to back: the server's CPU ms per save with nothing else
                                 to do (what a save costs, little moved by other load on the
-                                machine), and the wall time per save
+                                machine), and the wall time per save;
+                                alone_bench_cpu_ms_per_save: the client's own CPU per save
 Usage: python bench/load.py [--db sqlite|postgres] [--annotators 200] [--seconds 60]
        [--workers 1] [--burst 100] [--bursts 2] [--seed 7] [--views 2] [--capture DIR]
        [--alone 300]
@@ -238,32 +243,108 @@ def _error_kind(exc: Exception) -> str:
     return type(exc).__name__
 
 
-async def _send(client: Any, method: str, url: str, **kwargs: Any) -> Any:
-    """One request; sent again once when the connection broke before any answer came (a kept-
-    alive connection the server had just closed), as browsers do."""
-    import httpx
+class Connection:
+    """One kept-alive HTTP/1.1 connection of an annotator's page, as lean as a client gets:
+    each request goes out as bytes encoded here in one write, and the answer is read by its
+    Content-Length (or its chunks). A crowd's browsers run on their own machines; on this
+    one the load generator shares the cores with the server, so its own cost per save is kept
+    to a fraction of the server's (``bench_cpu_ms_per_save``)."""
 
-    # The page gives up on a request after REQUEST_TIMEOUT_S in all (frontend/annotate/api.js).
-    async with asyncio.timeout(REQUEST_TIMEOUT_S):
-        try:
-            return await client.request(method, url, **kwargs)
-        except (httpx.ReadError, httpx.RemoteProtocolError, httpx.WriteError):
-            return await client.request(method, url, **kwargs)
+    def __init__(self, host: str, port: int) -> None:
+        self.host, self.port = host, port
+        self.reader: asyncio.StreamReader | None = None
+        self.writer: asyncio.StreamWriter | None = None
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+        self.reader = self.writer = None
+
+    def encode(self, method: str, path: str, headers: dict[str, str], body: bytes = b"") -> bytes:
+        lines = [f"{method} {path} HTTP/1.1", f"Host: {self.host}:{self.port}",
+                 *(f"{k}: {v}" for k, v in headers.items()), f"Content-Length: {len(body)}"]
+        return ("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + body
+
+    async def request(self, raw: bytes) -> tuple[int, bytes]:
+        """Send one encoded request; (status, body). Sent again once when a kept-alive
+        connection broke before any answer came (the server had just closed it), as browsers
+        do; the connection is dropped when the request fails or times out half-way."""
+        for attempt in (0, 1):
+            if self.writer is None:
+                self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
+            try:
+                self.writer.write(raw)
+                await self.writer.drain()
+                assert self.reader is not None
+                status_line = await self.reader.readline()
+                if not status_line:
+                    raise ConnectionResetError("closed before an answer")
+            except (ConnectionError, asyncio.IncompleteReadError):
+                self.close()
+                if attempt:
+                    raise
+                continue
+            try:
+                return await self._answer(status_line)
+            except BaseException:
+                self.close()
+                raise
+        raise AssertionError("unreachable")
+
+    async def _answer(self, status_line: bytes) -> tuple[int, bytes]:
+        assert self.reader is not None
+        status = int(status_line.split(b" ", 2)[1])
+        length, chunked, close = 0, False, False
+        while (line := await self.reader.readline()) not in (b"\r\n", b""):
+            name, _, value = line.partition(b":")
+            name = name.strip().lower()
+            if name == b"content-length":
+                length = int(value)
+            elif name == b"transfer-encoding":
+                chunked = b"chunked" in value.lower()
+            elif name == b"connection":
+                close = b"close" in value.lower()
+        if chunked:
+            parts = []
+            while size := int((await self.reader.readline()).split(b";")[0], 16):
+                parts.append(await self.reader.readexactly(size + 2))
+            await self.reader.readline()
+            body = b"".join(p[:-2] for p in parts)
+        else:
+            body = await self.reader.readexactly(length)
+        if close:
+            self.close()
+        return status, body
 
 
-async def _annotate(base: str, who: Annotator, start_in: float, stop: asyncio.Event,
+async def _annotate(port: int, who: Annotator, start_in: float, stop: asyncio.Event,
                     stats: Stats) -> None:
     """One annotator's page: its own connection (kept alive), one save at a time."""
-    import httpx
+    conn = Connection("127.0.0.1", port)
+    try:
+        await _autosave(conn, who, start_in, stop, stats)
+    finally:
+        conn.close()
 
-    async with httpx.AsyncClient(base_url=base, limits=httpx.Limits(max_connections=1)) as client:
-        await _autosave(client, who, start_in, stop, stats)
+
+async def _save(conn: Connection, who: Annotator, edits: int) -> tuple[int, dict[str, Any]]:
+    """One autosave of the annotator's tracks from the version it holds; (status, answer).
+    The page gives up after REQUEST_TIMEOUT_S in all (frontend/annotate/api.js)."""
+    raw = conn.encode("PUT", "/api/annotate/tracks", {
+        "Authorization": f"Bearer {who.token}", "Content-Type": "application/json"},
+        _body(who, edits))
+    try:
+        async with asyncio.timeout(REQUEST_TIMEOUT_S):
+            status, body = await conn.request(raw)
+    except TimeoutError:
+        conn.close()  # its answer may still come: this connection is spent
+        raise
+    return status, json.loads(body) if body else {}
 
 
-async def _autosave(client: Any, who: Annotator, start_in: float, stop: asyncio.Event,
+async def _autosave(conn: Connection, who: Annotator, start_in: float, stop: asyncio.Event,
                     stats: Stats) -> None:
     loop = asyncio.get_running_loop()
-    headers = {"Authorization": f"Bearer {who.token}", "Content-Type": "application/json"}
     with contextlib.suppress(TimeoutError):
         await asyncio.wait_for(stop.wait(), start_in)
         return
@@ -272,18 +353,17 @@ async def _autosave(client: Any, who: Annotator, start_in: float, stop: asyncio.
         edits += 1
         started = loop.time()
         try:
-            resp = await _send(client, "PUT", "/api/annotate/tracks", content=_body(who, edits),
-                               headers=headers, timeout=REQUEST_TIMEOUT_S)
+            status, answer = await _save(conn, who, edits)
         except Exception as exc:  # every failure of the request counts, by kind
             stats.save_errors[_error_kind(exc)] += 1
         else:
-            if resp.status_code == 200:
-                who.version = who.acked = resp.json()["version"]
+            if status == 200:
+                who.version = who.acked = answer["version"]
                 stats.save_ms.append((loop.time() - started) * 1000)
             else:
-                stats.save_errors[f"http_{resp.status_code}"] += 1
-                if resp.status_code == 409:  # a save that timed out was stored after all
-                    who.version = resp.json().get("current_version", who.version)
+                stats.save_errors[f"http_{status}"] += 1
+                if status == 409:  # a save that timed out was stored after all
+                    who.version = answer.get("current_version", who.version)
         wait = started + SAVE_PERIOD_S - loop.time()
         if wait > 0:
             with contextlib.suppress(TimeoutError):
@@ -391,69 +471,75 @@ async def _after_load(base: str, token: str) -> dict[str, Any]:
     return {"after_load_ms": ms}
 
 
-async def _saves_alone(client: Any, server_pid: int, who: Annotator, count: int
+async def _saves_alone(port: int, server_pid: int, who: Annotator, count: int
                        ) -> dict[str, Any]:
     """``count`` saves of one annotator back to back before the crowd starts: the server's CPU
     milliseconds per save with nothing else to do (a figure that the machine's other load
-    hardly moves, unlike latencies) and the wall time per save."""
+    hardly moves, unlike latencies), the wall time per save, and this client's CPU per save."""
     if count == 0:
         return {}
-    headers = {"Authorization": f"Bearer {who.token}", "Content-Type": "application/json"}
+    conn = Connection("127.0.0.1", port)
 
     async def save(edits: int) -> None:
-        resp = await client.put("/api/annotate/tracks", content=_body(who, edits),
-                                headers=headers)
-        resp.raise_for_status()
-        who.version = who.acked = resp.json()["version"]
+        status, answer = await _save(conn, who, edits)
+        if status != 200:
+            raise RuntimeError(f"a save alone was answered {status}: {answer}")
+        who.version = who.acked = answer["version"]
 
-    for i in range(min(count, 20)):  # warm-up
-        await save(i)
-    cpu0, t0 = _tree_cpu_s(server_pid), time.perf_counter()
-    for i in range(count):
-        await save(i)
+    try:
+        for i in range(min(count, 20)):  # warm-up
+            await save(i)
+        cpu0, t0, own0 = _tree_cpu_s(server_pid), time.perf_counter(), time.process_time()
+        for i in range(count):
+            await save(i)
+        own = time.process_time() - own0
+    finally:
+        conn.close()
     return {"alone_saves": count,
             "alone_cpu_ms_per_save": round((_tree_cpu_s(server_pid) - cpu0) / count * 1000, 2),
-            "alone_ms_per_save": round((time.perf_counter() - t0) / count * 1000, 2)}
+            "alone_ms_per_save": round((time.perf_counter() - t0) / count * 1000, 2),
+            "alone_bench_cpu_ms_per_save": round(own / count * 1000, 2)}
 
 
-async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Namespace,
+async def _drive(port: int, server_pid: int, sequence_id: int, args: argparse.Namespace,
                  database_url: str) -> dict[str, Any]:
     import httpx
 
+    base = f"http://127.0.0.1:{port}"
     async with httpx.AsyncClient(base_url=base, timeout=60.0) as client:
         annotators = await _admin(client, sequence_id, args.annotators, args.seed)
-        alone = await _saves_alone(client, server_pid, annotators[0], args.alone)
-        rng = random.Random(args.seed)
-        stats, stop = Stats(), asyncio.Event()
-        loop = asyncio.get_running_loop()
-        spawn = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(1, mp_context=spawn) as helper:
-            helper_pid = await loop.run_in_executor(helper, os.getpid)  # started before the run
-            cpu0 = _tree_cpu_s(server_pid)
-            bench0, helper0 = time.process_time(), _tree_cpu_s(helper_pid)
-            t0 = time.monotonic()
-            lags: list[float] = []
-            lag = asyncio.create_task(_loop_lag(stop, lags))
-            crowd = [asyncio.create_task(_annotate(base, a, rng.uniform(0, SAVE_PERIOD_S),
-                                                   stop, stats)) for a in annotators]
-            for i in range(args.bursts):
-                at = t0 + args.seconds * (i + 1) / (args.bursts + 1)
-                await asyncio.sleep(max(0.0, at - time.monotonic()))
-                picks = [annotators[(i * args.burst + k) % len(annotators)].token
-                         for k in range(args.burst)]
-                *loads, after_burst = await loop.run_in_executor(helper, _burst, base, picks)
-                for ms, error in loads:
-                    if error is None and ms is not None:
-                        stats.load_ms.append(ms)
-                    else:
-                        stats.load_errors[error or "unknown"] += 1
-                stats.after_bursts.append({"after_load_ms": after_burst[0]})
-            await asyncio.sleep(max(0.0, t0 + args.seconds - time.monotonic()))
-            stop.set()
-            await asyncio.gather(*crowd, lag)
-            elapsed = time.monotonic() - t0
-            cpu = _tree_cpu_s(server_pid) - cpu0
-            bench_cpu = time.process_time() - bench0 + _tree_cpu_s(helper_pid) - helper0
+    alone = await _saves_alone(port, server_pid, annotators[0], args.alone)
+    rng = random.Random(args.seed)
+    stats, stop = Stats(), asyncio.Event()
+    loop = asyncio.get_running_loop()
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(1, mp_context=spawn) as helper:
+        helper_pid = await loop.run_in_executor(helper, os.getpid)  # started before the run
+        cpu0 = _tree_cpu_s(server_pid)
+        bench0, helper0 = time.process_time(), _tree_cpu_s(helper_pid)
+        t0 = time.monotonic()
+        lags: list[float] = []
+        lag = asyncio.create_task(_loop_lag(stop, lags))
+        crowd = [asyncio.create_task(_annotate(port, a, rng.uniform(0, SAVE_PERIOD_S),
+                                               stop, stats)) for a in annotators]
+        for i in range(args.bursts):
+            at = t0 + args.seconds * (i + 1) / (args.bursts + 1)
+            await asyncio.sleep(max(0.0, at - time.monotonic()))
+            picks = [annotators[(i * args.burst + k) % len(annotators)].token
+                     for k in range(args.burst)]
+            *loads, after_burst = await loop.run_in_executor(helper, _burst, base, picks)
+            for ms, error in loads:
+                if error is None and ms is not None:
+                    stats.load_ms.append(ms)
+                else:
+                    stats.load_errors[error or "unknown"] += 1
+            stats.after_bursts.append({"after_load_ms": after_burst[0]})
+        await asyncio.sleep(max(0.0, t0 + args.seconds - time.monotonic()))
+        stop.set()
+        await asyncio.gather(*crowd, lag)
+        elapsed = time.monotonic() - t0
+        cpu = _tree_cpu_s(server_pid) - cpu0
+        bench_cpu = time.process_time() - bench0 + _tree_cpu_s(helper_pid) - helper0
     after = await _after_load(base, annotators[0].token)
     stored = _stored_versions(database_url, [a.assignment_id for a in annotators])
     lost = sum(1 for a in annotators if stored.get(a.assignment_id, 0) < a.acked)
@@ -473,6 +559,7 @@ async def _drive(base: str, server_pid: int, sequence_id: int, args: argparse.Na
         "server_cpu_s": round(cpu, 1),
         "cpu_s_per_save": round(cpu / saves, 4) if saves else None,
         "bench_cpu_s": round(bench_cpu, 1),
+        "bench_cpu_ms_per_save": round(bench_cpu / saves * 1000, 2) if saves else None,
         "bench_loop_lag_ms": {"p50": _pct(lags, 0.5), "p99": _pct(lags, 0.99),
                               "max": _pct(lags, 1.0)},
         "run_s": round(elapsed, 1), **alone,
@@ -517,7 +604,7 @@ def main() -> None:
         load_before = os.getloadavg()[0]
         server = _start_server(port, args.workers, log)
         try:
-            results = asyncio.run(_drive(base, server.pid, sequence_id, args, database_url))
+            results = asyncio.run(_drive(port, server.pid, sequence_id, args, database_url))
         finally:
             stop_s = _stop_server(server)
     finally:
