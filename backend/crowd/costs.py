@@ -14,7 +14,7 @@ when it was deleted (crowd_deleted_costs); its workers' lines keep that money to
 
 from __future__ import annotations
 
-from sqlalchemy import ColumnElement, case, exists, func, select
+from sqlalchemy import ColumnElement, exists, func, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
@@ -77,15 +77,17 @@ def _undecided() -> ColumnElement[bool]:
 def _held(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
     """Money still held: per sequence, every live HIT's open slots and an expired HIT's
     waiting submissions; per worker, their submitted work not decided yet."""
-    is_live = CrowdHit.expired_at.is_(None)
+    # Only HITs with open slots (ix_crowd_hits_open_task_id, a partial index, holds them) add
+    # to the held money.
     shapes = (select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
-                     func.sum(case((is_live, CrowdHit.max_assignments - CrowdHit.decided),
-                                   else_=0)))
-              .join(Task, Task.id == CrowdHit.task_id).where(CrowdHit.hit_id.is_not(None))
+                     func.sum(CrowdHit.max_assignments - CrowdHit.decided))
+              .join(Task, Task.id == CrowdHit.task_id)
+              .where(CrowdHit.hit_id.is_not(None), CrowdHit.expired_at.is_(None),
+                     CrowdHit.max_assignments > CrowdHit.decided)
               .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
     open_slots: dict[_Shape, int] = {}
     for seq, reward, slots, live_open in session.execute(shapes):
-        open_slots[(seq, reward, slots)] = max(int(live_open or 0), 0)
+        open_slots[(seq, reward, slots)] = int(live_open)
     waiting = (select(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
                       CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None), func.count())
                .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
