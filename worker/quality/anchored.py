@@ -53,6 +53,13 @@ _SNAPS = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (SNAP_
 MIN_HIDDEN_FRAMES = 6
 # An issue span: the track this far off the anchored point (px).
 ISSUE_PX = 10.0
+# A label that marks none of its landmarks visible anywhere has nothing to anchor; it is judged
+# by the object itself: a frame shows the object when at least SHOWN_SHARE of SHOWN_SAMPLES
+# surface points (its vertices, evenly taken) are in view, about a fifth of the side facing
+# the camera, enough for a careful worker to place a landmark. An object that never shows in
+# the view (out of the image, behind another object or the hand) is rightly labelled hidden.
+SHOWN_SHARE = 0.1
+SHOWN_SAMPLES = 64
 
 
 @dataclass(frozen=True)
@@ -195,6 +202,40 @@ def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
     return shown
 
 
+def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
+                 depth: DepthMaps | None) -> np.ndarray:
+    """(F,) share of object ``target``'s sampled surface points (SHOWN_SAMPLES vertices) the
+    view shows, by the rules of point_visible (in the image, no solved mesh nearer along the
+    ray, no depth reading well in front); NaN where the pose is unknown."""
+    vertices = scene.vertices[target]
+    samples = vertices[np.unique(np.linspace(0, len(vertices) - 1,
+                                             min(SHOWN_SAMPLES, len(vertices))).astype(int))]
+    origin = camera.T_cam_to_world[:, 3]
+    out = np.full(scene.poses.shape[1], np.nan)
+    for f in range(scene.poses.shape[1]):
+        pose = scene.poses[target, f]
+        if not np.isfinite(pose).all():
+            continue
+        world = samples @ pose[:, :3].T + pose[:, 3]
+        pix, z = camera.project(world), camera.depth_of(world)
+        shown = np.isfinite(z) & (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < camera.width) \
+            & (pix[:, 1] >= 0) & (pix[:, 1] < camera.height)
+        reach = np.linalg.norm(world - origin, axis=1)
+        dirs = (world - origin) / reach[:, None]
+        for index in range(len(scene.vertices)):
+            tri = scene.triangles(index, f)
+            if shown.any() and np.isfinite(tri).all():
+                shown &= ~(ray_hits(origin, dirs, tri)[0] < reach - MESH_MARGIN_M)
+        at = np.flatnonzero(shown)
+        if depth is not None and at.size:
+            rows = np.rint(pix[at, 1]).astype(int).clip(0, camera.height - 1)
+            cols = np.rint(pix[at, 0]).astype(int).clip(0, camera.width - 1)
+            reading = depth[(np.full(at.size, f), rows, cols)] / 1000.0
+            shown[at[(reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)]] = False
+        out[f] = shown.mean()
+    return out
+
+
 def _drift(errors: np.ndarray) -> float | None:
     """Median error of the last third of the clip less that of the first third, px (the
     largest over the landmarks)."""
@@ -220,7 +261,10 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         AnchoredQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
         frames both call visible), anchored_visible_occluded (share of the point's visible
         frames marked occluded), anchored_hidden_visible (share of its hidden frames marked
-        visible), anchored_drift_px, anchored_fraction (landmarks that could be anchored);
+        visible), anchored_drift_px, anchored_fraction (of the landmarks marked visible
+        somewhere, those that could be anchored; None when none is: then
+        anchored_visible_occluded is the share of frames where the object shows, see
+        SHOWN_SHARE);
         per_joint / per_frame median errors; issues where a landmark is over ISSUE_PX off.
     """
     xy = np.asarray(label.xy, np.float64)
@@ -252,6 +296,8 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     judged = np.isfinite(errors)
     hidden = ~shown & known[:, None] & decided
     seen = shown & decided
+    # Landmarks the worker shows somewhere: only these can be anchored.
+    placed = int((visible & np.isfinite(xy).all(axis=2)).any(axis=0).sum())
     metrics: dict[str, float | None] = {
         "anchored_median_px": num(np.median(errors[judged])) if judged.any() else None,
         "anchored_p90_px": num(np.percentile(errors[judged], 90)) if judged.any() else None,
@@ -260,8 +306,16 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         "anchored_hidden_visible": num((hidden & visible).sum() / hidden.sum())
         if anchored and hidden.sum() >= MIN_HIDDEN_FRAMES else None,
         "anchored_drift_px": _drift(errors),
-        "anchored_fraction": num(anchored / points),
+        "anchored_fraction": num(anchored / placed) if placed else None,
     }
+    if not placed and known.any():
+        # Every landmark marked hidden all through: right where the object never shows; the
+        # frames where it does are frames marked occluded while it can be seen.
+        share = object_shown(camera, scene, target, depth)
+        asked = np.isfinite(share) & decided.any(axis=1)
+        if asked.any():
+            metrics["anchored_visible_occluded"] = num(
+                (share[asked] >= SHOWN_SHARE).sum() / asked.sum())
     per_joint, per_frame = per_point_and_frame(errors)
     issues = [dict(i, about="anchored") for i in error_issues(errors, ISSUE_PX)]
     return AnchoredQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
