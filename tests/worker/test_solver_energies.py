@@ -99,7 +99,8 @@ class TestHandEnergy:
         data = HandData(
             t64(rng.uniform(40, 120, (1, 2, 21, 2))), t64(rng.random((1, 2, 21))), 0.3,
             _depth_data(rng.normal(0, 0.05, (6, 3)), faces, rng.dirichlet(np.ones(3), 6)),
-            smooth_target=t64(rng.normal(0, 0.05, (1, 21, 3))), sqrt_smooth=0.2)
+            smooth_target=t64(rng.normal(0, 0.05, (1, 21, 3))), sqrt_smooth=t64([0.2]),
+            pose_target=t64(rng.normal(0, 0.3, (1, 45))), sqrt_pose_smooth=t64([1.5]))
         pose_m = t64(np.concatenate([[0.2, -0.3, 0.1], rng.normal(0, 0.3, 45),
                                      [0.0, 0.0, 0.02]])[None]).requires_grad_(True)
         rig = Rig(cams)
@@ -210,7 +211,9 @@ class TestHandJacobian:
         points[:3] += rng.normal(0, 0.003, (3, 3))
         data = HandData(t64(rng.uniform(40, 120, (1, 3, 21, 2))), t64(rng.random((1, 3, 21))),
                         0.3, _depth_data(points, faces, bary),
-                        smooth_target=t64(rng.normal(0, 0.05, (1, 21, 3))), sqrt_smooth=0.2)
+                        smooth_target=t64(rng.normal(0, 0.05, (1, 21, 3))),
+                        sqrt_smooth=t64([0.2]), pose_target=t64(rng.normal(0, 0.3, (1, 45))),
+                        sqrt_pose_smooth=t64([1.5]))
         assert data.depth.interior[0, 3:].all() and not data.depth.interior[0, :3].any()
         rig = Rig(cams)
         from worker.solver.jacobians import hand_jacobian

@@ -5,7 +5,7 @@ and is refined in one batch; objects rest at their initial pose until the eviden
 and are then held, fitted with a prior of moving with the palm (see `objects`). Keypoint residuals
 are reweighted with a Cauchy loss (iteratively reweighted least squares) so that gross
 labelling errors lose their pull; depth matches are renewed a few times (ICP-style rounds);
-an optional smoothness term pulls each frame's joints towards its neighbours' mean.
+a smoothness term pulls each frame's joints towards its neighbours' mean in every round.
 """
 
 from __future__ import annotations
@@ -32,8 +32,13 @@ ROBUST_ROUNDS = 3
 
 
 def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, iterations: int,
-             rounds: int, smooth: bool = False) -> None:
-    """Refine state.hand_pose on the labelled frames in place."""
+             rounds: int) -> None:
+    """Refine state.hand_pose on the labelled frames in place.
+
+    Each round renews the robust weights and, with settings.w_smooth > 0, the smoothness
+    targets (each frame's neighbours' mean joints from the current poses), then runs LM; frames
+    are independent within a round, so the smoothness couples them from round to round.
+    """
     subject = problem.require_subject()
     frames = state.hand_frames
     settings = problem.settings
@@ -43,9 +48,14 @@ def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, itera
             robust = cauchy_weights(np.moveaxis(state.hand_errors(problem), 0, 1),
                                     settings.robust_scale_px)
         data = problem.hand_data(frames, robust, depth)
-        if smooth and settings.w_smooth > 0:
-            data.smooth_target = problem.tensor(_neighbour_mean(state.joints(problem), frames))
-            data.sqrt_smooth = float(np.sqrt(settings.w_smooth))
+        if settings.w_smooth > 0:
+            target, inner = neighbour_mean(state.joints(problem), frames)
+            data.smooth_target = problem.tensor(target)
+            data.sqrt_smooth = problem.tensor(np.sqrt(settings.w_smooth) * inner)
+        if settings.w_smooth_pose > 0:
+            target, inner = neighbour_mean(state.hand_pose[frames, 3:48], frames)
+            data.pose_target = problem.tensor(target)
+            data.sqrt_pose_smooth = problem.tensor(np.sqrt(settings.w_smooth_pose) * inner)
 
         def residuals(p: torch.Tensor, data: HandData = data) -> torch.Tensor:
             return hand_residuals(subject, problem.rig, p, data)
@@ -58,15 +68,25 @@ def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, itera
         state.hand_pose[frames] = pose.cpu().numpy()
 
 
-def _neighbour_mean(joints: np.ndarray, frames: np.ndarray) -> np.ndarray:
-    """(B, 21, 3) mean of each labelled frame's labelled neighbours' joints (itself if none)."""
+def neighbour_mean(values: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per labelled frame (B,) the mean (B, ...) of its two neighbours' values (joints, pose
+    coefficients), and (B,) 1.0 where both neighbours (f - 1 and f + 1) are labelled, else 0.0
+    (its own values).
+
+    Pulling a frame towards its neighbours' mean penalises the second difference over time
+    (acceleration), not the velocity: a hand moving or closing steadily is not held back. A
+    frame at either end of a labelled run has only one neighbour, and pulling it towards that
+    one would hold back its velocity, so it gets no pull.
+    """
     index = {int(f): b for b, f in enumerate(frames)}
-    out = joints.copy()
+    out = values.copy()
+    inner = np.zeros(len(frames))
     for b, f in enumerate(frames):
-        near = [index[g] for g in (f - 1, f + 1) if g in index]
-        if near:
-            out[b] = joints[near].mean(axis=0)
-    return out
+        before, after = index.get(int(f) - 1), index.get(int(f) + 1)
+        if before is not None and after is not None:
+            out[b] = 0.5 * (values[before] + values[after])
+            inner[b] = 1.0
+    return out, inner
 
 
 def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
@@ -95,7 +115,7 @@ def solve_default(problem: Problem, timings: dict[str, float]) -> SolveState:
             depth = problem.depth_data(len(problem.objects),
                                        [matches[f] for f in state.hand_frames], problem.hand_faces,
                                        robust_mm)
-            fit_hand(problem, state, depth, settings.lm_iterations, 1, smooth=True)
+            fit_hand(problem, state, depth, settings.lm_iterations, 1)
             palm = palm_poses(problem, state)
         for o, motion in enumerate(state.motion):
             refit_held(problem, state, o, motion, matches, palm)

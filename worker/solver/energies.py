@@ -6,6 +6,7 @@ Per frame, for one target (the hand, or one object):
   E_kpt   = w_kpt / sum(gamma) * sum gamma ||proj(X) - p||^2        px^2
   E_depth = w_depth / N_D * sum_i ||d_i - closest_i||^2              mm^2 (N_D: all matched points)
   E_reg   = w_reg * ||theta_pca||^2                                  rad^2 (hand only)
+  E_pose_smooth = w_smooth_pose * ||theta_pca - mean of its neighbours'||^2   rad^2 (hand only)
 The square roots of the weights (including any robust reweighting) are folded into the `sqrt_w`
 tensors, so the functions here only evaluate geometry. Frames: world; lengths metres.
 """
@@ -42,14 +43,19 @@ class DepthData:
 class HandData:
     """keypoints (B, V, 21, 2) px (NaN-free, zeros where unlabelled); sqrt_w (B, V, 21);
     sqrt_reg: scalar sqrt(w_reg); depth: DepthData or None; smooth_target: (B, 21, 3) joints
-    the frame is pulled towards (its neighbours' mean) with weight sqrt_smooth, or None."""
+    the frame is pulled towards (its neighbours' mean), or None; sqrt_smooth: (B,) the square
+    root of each frame's smoothness weight (0 where a frame has no neighbour on both sides);
+    pose_target: (B, 45) PCA pose coefficients the frame is pulled towards (its neighbours'
+    mean), or None, with per-frame weights sqrt_pose_smooth (B,) as for the joints."""
 
     keypoints: torch.Tensor
     sqrt_w: torch.Tensor
     sqrt_reg: float
     depth: DepthData | None
     smooth_target: torch.Tensor | None = None
-    sqrt_smooth: float = 0.0
+    sqrt_smooth: torch.Tensor | None = None
+    pose_target: torch.Tensor | None = None
+    sqrt_pose_smooth: torch.Tensor | None = None
 
 
 @dataclass
@@ -99,15 +105,19 @@ def keypoint_residuals(projected: torch.Tensor, target: torch.Tensor,
 
 def hand_residuals(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandData
                    ) -> torch.Tensor:
-    """(B, M) residuals of the hand for pose_m (B, 51): keypoints, regulariser, depth, smooth."""
+    """(B, M) residuals of the hand for pose_m (B, 51): keypoints, regulariser, depth, joint
+    smoothness, pose smoothness (the last two where given)."""
     ids = data.depth.vertex_ids if data.depth is not None else pose_m.new_zeros(0).long()
     joints, vertices = hand.pose(pose_m, ids)
     parts = [keypoint_residuals(rig.project(joints), data.keypoints, data.sqrt_w),
              pose_m[:, 3:48] * data.sqrt_reg]
     if data.depth is not None:
         parts.append(depth_residuals(vertices, data.depth))
-    if data.smooth_target is not None:
-        parts.append(((joints - data.smooth_target) * MM_PER_M * data.sqrt_smooth).flatten(1))
+    if data.smooth_target is not None and data.sqrt_smooth is not None:
+        parts.append(((joints - data.smooth_target) * MM_PER_M
+                      * data.sqrt_smooth[:, None, None]).flatten(1))
+    if data.pose_target is not None and data.sqrt_pose_smooth is not None:
+        parts.append((pose_m[:, 3:48] - data.pose_target) * data.sqrt_pose_smooth[:, None])
     return torch.cat(parts, dim=1)
 
 

@@ -5,7 +5,7 @@ projection of 21 joints in V views and through every depth match; instead the ta
 through MANO's forward kinematics only (joints and the matched vertices), and the rest is
 chained on: each projected joint depends on its own 3D position (a 3-tangent autodiff of the
 projection), each depth residual linearly on its triangle's corners. Rows follow
-`energies.hand_residuals`: keypoints, regulariser, depth, smoothness.
+`energies.hand_residuals`: keypoints, regulariser, depth, smoothness of joints and pose.
 
 For a depth point matched inside a triangle the residual is n . (p - c); its Jacobian here
 keeps the normal n fixed (the usual point-to-plane linearisation). At the matching pose p - c
@@ -52,15 +52,17 @@ def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandD
     d_joints = fk[:, :63].reshape(batch, 21, 3, -1)
     d_pixels = _projection_derivative(rig, joints)  # (B, V, 21, 2, 3)
     parts = [(data.sqrt_w[..., None, None] * (d_pixels @ d_joints[:, None])).flatten(1, 3)]
-    reg = torch.zeros(45, pose_m.shape[1], dtype=pose_m.dtype, device=pose_m.device)
-    reg[:, 3:48] = torch.eye(45, dtype=pose_m.dtype, device=pose_m.device) * data.sqrt_reg
-    parts.append(reg.expand(batch, -1, -1))
+    pca = torch.zeros(45, pose_m.shape[1], dtype=pose_m.dtype, device=pose_m.device)
+    pca[:, 3:48] = torch.eye(45, dtype=pose_m.dtype, device=pose_m.device)  # d theta_pca
+    parts.append((pca * data.sqrt_reg).expand(batch, -1, -1))
     if depth is not None:
         vertices = value[:, 63:].reshape(batch, -1, 3)
         d_vertices = fk[:, 63:].reshape(batch, vertices.shape[1], 3, -1)
         parts.append(_depth_jacobian(vertices, d_vertices, depth))
-    if data.smooth_target is not None:
-        parts.append((d_joints * MM_PER_M * data.sqrt_smooth).flatten(1, 2))
+    if data.smooth_target is not None and data.sqrt_smooth is not None:
+        parts.append((d_joints * MM_PER_M * data.sqrt_smooth[:, None, None, None]).flatten(1, 2))
+    if data.pose_target is not None and data.sqrt_pose_smooth is not None:
+        parts.append(pca * data.sqrt_pose_smooth[:, None, None])
     return torch.cat(parts, dim=1)
 
 
