@@ -9,11 +9,20 @@ Scenarios (``--scenario``, comma-separated; default all but the slow pool and ti
     hands-8, hands-4     the mixed crowd, one worker per view (DexYCB labels every view once):
                          ``--draws`` crowds, each view's worker drawn from the mixed profile
                          weights (half careful), on the capture with 8 / 4 views
-    objects-8, objects-4 the same for object landmarks (one worker per object task); the
-                         sequence has a finished solve whose object poses are the capture's
-                         ground truth, so each landmark track is also checked against the
-                         solved object (worker.quality.anchored). A frozen ("lazy") track on an
-                         object that never moves is right, and counted apart (lazy-still)
+    objects-8, objects-4 the same for object landmarks (one worker per object task), each
+                         landmark track also checked against the solved object
+                         (worker.quality.anchored). ``--object-poses solved`` (the default):
+                         each crowd goes the product's way (bench/_qc_pipeline.py): QC before
+                         the solve, rejected tasks re-opened to another crowd worker, work left
+                         for review decided by an admin who judges right, the solve (default
+                         optimiser) of the accepted labels once every task has them, then the
+                         landmark QC the solve queues; ~30-60 s a crowd at 8 views.
+                         ``truth``: the solve is stood in for by the capture's true object
+                         poses (the check judges the workers, not the solver). Both take the
+                         same first workers. A frozen ("lazy") track on an object that never
+                         moves is right, and counted apart (lazy-still), as is a bad profile's
+                         label that marks hidden all through an object its view never shows
+                         (unseen: a careful worker's label there is the same)
     pool                 every view gets one careful worker and one bad one per round
                          (``--rounds``), all scored together (several workers per view)
     timing               one QC job of one hand target, one careful worker per view, timed
@@ -26,11 +35,18 @@ Per scenario: confusion {profile: {approve, review, reject, provisional}} (provi
 counted in its outcome), bad_flagged_rate, good_flagged_rate, and for hands swaps_found /
 swaps_total: swappers whose report names ring and little over a span inside the true window
 (+-2 frames; the tail of the window where no two other views see both fingers cannot be
-asserted), and swap_coverage, the mean share of the true window reported.
+asserted), and swap_coverage, the mean share of the true window reported. Object scenarios after the
+product's solve count each crowd's first workers (the labels the truth run judges) and add:
+pipeline (rounds, re-opened tasks, admin decisions, crowds solved), reopened (the re-opened
+tasks' workers' confusion), the solve's object ADD (mm, per object: median and maximum over
+the crowds, frames the solve trusts), its flagged poses, and its seconds.
 
-Prints one JSON line: {"captures", "crowd_seed", "draws", "scenarios": {name: summary}}.
+Prints one JSON line: {"captures", "crowd_seed", "draws", "object_draws", "object_poses",
+"scenarios": {name: summary}} (an object scenario run with both poses is named
+"objects-8 (truth)" and "objects-8 (solved)").
 Usage: python bench/qc.py [--capture DIR ...] [--capture-seed 7] [--crowd-seed 11]
                           [--scenario hands-8,hands-4,objects-8,objects-4] [--draws 10]
+                          [--object-draws N] [--object-poses solved|truth|truth,solved]
 """
 
 from __future__ import annotations
@@ -49,6 +65,7 @@ from _server import isolated_workdir
 BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder")
 DEFAULT_SCENARIOS = "hands-8,hands-4,objects-8,objects-4"
 ALL_SCENARIOS = ("hands-8", "hands-4", "objects-8", "objects-4", "pool", "timing")
+OBJECT_POSES = ("truth", "solved")
 # A reported swap span may start or end this many frames outside the true window.
 SPAN_SLACK = 2
 
@@ -72,9 +89,9 @@ def _captures(given: list[Path], wanted: set[int], seed: int, work: Path) -> dic
     return out
 
 
-def _setup(capture: Path, kind: str = "hand") -> tuple[int, list[dict]]:
-    """Import, create the tasks; (sequence id, tasks of ``kind`` as dicts, with "moving":
-    whether the task's object is the grasped one)."""
+def _setup(capture: Path) -> tuple[int, list[dict]]:
+    """Import, create the tasks; (sequence id, every task as a dict, with "moving": whether
+    the task's object is the grasped one)."""
     from backend.annotation.models import Task
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
@@ -93,18 +110,29 @@ def _setup(capture: Path, kind: str = "hand") -> tuple[int, list[dict]]:
                   "width": t.camera.width, "height": t.camera.height,
                   "moving": t.object_id is not None
                   and session.get_one(SceneObject, t.object_id).grasped}
-                 for t in session.query(Task).filter_by(sequence_id=sequence_id)]
-    return sequence_id, [t for t in tasks if t["kind"] == kind]
+                 for t in session.query(Task).filter_by(sequence_id=sequence_id)
+                 .order_by(Task.id)]
+    return sequence_id, tasks
 
 
-def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Generator) -> int:
-    """One simulated worker's submitted assignment, written as the page's submit writes it."""
+def _of_kind(tasks: list[dict], kind: str) -> list[dict]:
+    return [t for t in tasks if t["kind"] == kind]
+
+
+def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Generator,
+            unseen: set[int] | None = None) -> int:
+    """One simulated worker's submitted assignment, written as the page's submit writes it.
+    Its id joins ``unseen`` (if given) when the view never shows the task's points and the
+    label marks them all hidden: right work, whatever the profile."""
     from backend.annotation.models import Assignment, Track
     from backend.db import session_scope, utcnow
     from worker.synth.annotators import annotate
+    from worker.tracks import dense_points
 
     xy, visible = truth.points(task, rng)
     work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)
+    hidden = not visible.any() and not dense_points(
+        enumerate(work.tracks), task["num_frames"], xy.shape[1])[1].any()
     with session_scope() as session:
         assignment = Assignment(task_id=task["id"], worker_id=worker,
                                 external_id=f"bench-{worker}-{task['id']}", status="submitted",
@@ -113,12 +141,15 @@ def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Ge
                              for p, rows in enumerate(work.tracks)]
         session.add(assignment)
         session.flush()
+        if unseen is not None and hidden:
+            unseen.add(assignment.id)
         return assignment.id
 
 
-def _clear(sequence_id: int) -> None:
-    """Remove every assignment of the sequence and its report (the next crowd starts afresh,
-    as in a new project: thresholds are learned from its own reports)."""
+def _clear(sequence_id: int, kind: str | None = None) -> None:
+    """Remove every assignment of the sequence (of ``kind``'s tasks, if given) and its report
+    (the next crowd starts afresh, as in a new project: thresholds are learned from its own
+    reports)."""
     from sqlalchemy import delete, select
 
     from backend.annotation.models import Assignment, Task
@@ -126,8 +157,11 @@ def _clear(sequence_id: int) -> None:
     from backend.quality.models import QCReport
 
     with session_scope() as session:
-        session.execute(delete(QCReport).where(QCReport.sequence_id == sequence_id))
         task_ids = select(Task.id).where(Task.sequence_id == sequence_id)
+        if kind is not None:
+            task_ids = task_ids.where(Task.kind == kind)
+        session.execute(delete(QCReport).where(QCReport.sequence_id == sequence_id,
+                                               QCReport.task_id.in_(task_ids)))
         for assignment in session.scalars(select(Assignment).where(
                 Assignment.task_id.in_(task_ids))):
             session.delete(assignment)
@@ -181,7 +215,7 @@ class _Tally:
         # Why careful work was flagged and which bad work passed (a few of each, to look at).
         self.misses: list[str] = []
 
-    def add(self, profile_of: dict[int, str], frames: int) -> None:
+    def add(self, profile_of: dict[int, str], frames: int, tag: str = "") -> None:
         from backend.db import session_scope
         from backend.quality.models import QCReport
 
@@ -194,7 +228,7 @@ class _Tally:
                 good, passed = profile == "careful", report.outcome == "approve"
                 if profile in ("careful", *BAD_PROFILES) and good != passed \
                         and len(self.misses) < 12:
-                    self.misses.append(f"{profile} {report.target_key} {report.outcome}: "
+                    self.misses.append(f"{tag}{profile} {report.target_key} {report.outcome}: "
                                        + "; ".join(report.reasons[:3]))
                 if profile == "swapper" and report.target_key.startswith("hand"):
                     found, covered = _swap_check(report.swaps, frames)
@@ -239,32 +273,143 @@ def _fresh_setup(name: str) -> None:
         cached.cache_clear()
 
 
-def mixed(capture: Path, kind: str, draws: int, crowd_seed: int) -> dict:
+def _label_profile(task: dict, profile: str, unseen: bool = False) -> str:
+    """The profile a label is counted under: a frozen track on an object that never moves is
+    right (lazy-still), and so is a bad profile's label marking hidden all through an object
+    the view never shows (unseen: a careful worker's label there is the same)."""
+    if task["kind"] == "object" and profile != "careful" and unseen:
+        return "unseen"
+    still = task["kind"] == "object" and profile == "lazy" and not task["moving"]
+    return "lazy-still" if still else profile
+
+
+def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
+          object_poses: str = "truth") -> dict:
     """``draws`` crowds on one imported capture, one worker per task of ``kind`` drawn from the
-    mixed profile weights, every target's QC job run; the summed confusion table."""
+    mixed profile weights, every target's QC job run; the summed confusion table. Object
+    landmarks are judged against the capture's true object poses (``object_poses`` "truth")
+    or after the product's own solve of each crowd's accepted work ("solved")."""
     from backend.crowd.simulate import CaptureTruth
     from worker.synth.annotators import draw_profiles
 
     _fresh_setup(f"qc-{kind}")
-    sequence_id, tasks = _setup(capture, kind)
-    if kind == "object":
+    sequence_id, every = _setup(capture)
+    tasks = _of_kind(every, kind)
+    if kind == "object" and object_poses == "truth":
         _store_true_solve(capture, sequence_id)
     truth = CaptureTruth(capture)
-    tally = _Tally(extra=("lazy-still",) if kind == "object" else ())
+    tally = _Tally(extra=("lazy-still", "unseen") if kind == "object" else ())
     rng = np.random.default_rng(crowd_seed)
+    unseen: set[int] = set()
+    solved = _SolvedCrowd(sequence_id, every, truth, crowd_seed) \
+        if kind == "object" and object_poses == "solved" else None
     seconds = []
     for draw in range(draws):
-        _clear(sequence_id)
+        _clear(sequence_id, kind)
         profile_of = {}
         for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng), strict=True):
-            key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng)
-            still = kind == "object" and profile == "lazy" and not task["moving"]
-            profile_of[key] = "lazy-still" if still else profile
-        seconds += [_run_qc(sequence_id, target)[0]
-                    for target in sorted({t["target_key"] for t in tasks})]
-        tally.add(profile_of, tasks[0]["num_frames"])
-    return {"views": _views_of(capture), "draws": draws, **tally.summary(kind == "hand"),
-            "qc_job_s_median": round(statistics.median(seconds), 3)}
+            key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng, unseen)
+            profile_of[key] = _label_profile(task, profile, key in unseen)
+        if solved is not None:
+            solved.run(draw, profile_of)
+        else:
+            seconds += [_run_qc(sequence_id, target)[0]
+                        for target in sorted({t["target_key"] for t in tasks})]
+        tally.add(profile_of, tasks[0]["num_frames"], f"d{draw} ")
+    out = {"views": _views_of(capture), "draws": draws, **tally.summary(kind == "hand")}
+    if kind == "object":
+        out["object_poses"] = object_poses
+    if solved is not None:
+        return {**out, **solved.summary()}
+    return {**out, "qc_job_s_median": round(statistics.median(seconds), 3)}
+
+
+class _SolvedCrowd:
+    """The object scenarios after the product's own solve (bench/_qc_pipeline.py): the hand's
+    careful labels submitted once, each crowd carried through QC, re-opened tasks, an admin's
+    decisions, the solve and the landmark QC after it."""
+
+    def __init__(self, sequence_id: int, tasks: list[dict], truth: Any, crowd_seed: int) -> None:
+        self.sequence_id, self.truth = sequence_id, truth
+        self.tasks = {t["id"]: t for t in tasks}
+        # Re-opened tasks' workers and the hand's come from their own stream, so each crowd's
+        # first workers are the same as with the true poses.
+        self.rng = np.random.default_rng([crowd_seed, 1])
+        self.hand: dict[int, str] = {}
+        self.reopened = _Tally(extra=("lazy-still", "unseen"))
+        self.counts: dict[str, int] = {}
+        # {profile: {assignment status: count}} of the first workers once all is done: what
+        # the product accepted (approved labels are the ones the solve used).
+        self.status: dict[str, dict[str, int]] = {}
+        self.solve_s: list[float] = []
+        self.draw_s: list[float] = []
+        self.unsolved: list[dict] = []
+        self.add_mm: list[list[float]] = []
+        self.flagged: list[int] = []
+        self.true_poses = truth.object_poses()
+        self.draw, self.made = 0, 0
+
+    def _resubmit(self, task_id: int) -> tuple[int, str]:
+        """Another worker on a task whose label was rejected: careful for the hand, drawn
+        from the mixed crowd for an object."""
+        from worker.synth.annotators import draw_profiles
+
+        task = self.tasks[task_id]
+        profile = "careful" if task["kind"] == "hand" else \
+            draw_profiles(1, "mixed", self.rng)[0]
+        self.made += 1
+        unseen: set[int] = set()
+        key = _submit(task, profile, f"{profile}-d{self.draw}-r{self.made}-{task_id}",
+                      self.truth, self.rng, unseen)
+        return key, _label_profile(task, profile, key in unseen)
+
+    def run(self, draw: int, first: dict[int, str]) -> None:
+        """One crowd (``first``: {assignment id: profile} of its object labels) from its
+        submission to the landmark QC after the solve."""
+        import _qc_pipeline as pipe
+
+        started = time.perf_counter()
+        self.draw = draw
+        pipe.clear_solves(self.sequence_id)
+        submitted = [t["id"] for t in self.tasks.values() if t["kind"] == "object"]
+        if not self.hand:
+            for task in self.tasks.values():
+                if task["kind"] == "hand":
+                    key = _submit(task, "careful", f"careful-hand-{task['id']}", self.truth,
+                                  self.rng)
+                    self.hand[key] = "careful"
+                    submitted.append(task["id"])
+        profile_of = {**self.hand, **first}
+        counts, why = pipe.to_solve(self.sequence_id, submitted, profile_of, self._resubmit)
+        for name, value in counts.items():
+            self.counts[name] = self.counts.get(name, 0) + value
+        for profile, status in pipe.statuses(first).items():
+            row = self.status.setdefault(profile, {})
+            for name, n in status.items():
+                row[name] = row.get(name, 0) + n
+        later = {k: v for k, v in profile_of.items() if k not in first and k not in self.hand}
+        self.reopened.add(later, next(iter(self.tasks.values()))["num_frames"])
+        if why is not None:
+            self.unsolved.append({"draw": draw, "why": why})
+        run = pipe.solved_run(self.sequence_id)
+        if run is not None:
+            self.solve_s.append(run[1])
+            add, flagged = pipe.object_add_mm(self.sequence_id, self.true_poses)
+            self.add_mm.append(add)
+            self.flagged.append(flagged)
+        self.draw_s.append(time.perf_counter() - started)
+
+    def summary(self) -> dict:
+        add = np.array(self.add_mm, float).reshape(len(self.add_mm), -1)
+        return {"pipeline": self.counts, "unsolved": self.unsolved, "first_status": self.status,
+                "reopened": {p: row for p, row in self.reopened.table.items() if any(row.values())},
+                "solve_add_mm_median": np.round(np.median(add, axis=0), 2).tolist()
+                if len(add) else None,
+                "solve_add_mm_max": np.round(add.max(axis=0), 2).tolist() if len(add) else None,
+                "solve_flagged_poses": self.flagged,
+                "solve_s_median": round(statistics.median(self.solve_s), 1)
+                if self.solve_s else None,
+                "draw_s_median": round(statistics.median(self.draw_s), 1)}
 
 
 def pool(capture: Path, rounds: int, crowd_seed: int) -> dict:
@@ -273,7 +418,8 @@ def pool(capture: Path, rounds: int, crowd_seed: int) -> dict:
     from backend.crowd.simulate import CaptureTruth
 
     _fresh_setup("qc-pool")
-    sequence_id, tasks = _setup(capture)
+    sequence_id, every = _setup(capture)
+    tasks = _of_kind(every, "hand")
     truth, rng = CaptureTruth(capture), np.random.default_rng(crowd_seed)
     profile_of: dict[int, str] = {}
     for r in range(rounds):
@@ -294,7 +440,8 @@ def timing(capture: Path, repeats: int, crowd_seed: int) -> dict:
     from backend.crowd.simulate import CaptureTruth
 
     _fresh_setup("qc-timing")
-    sequence_id, tasks = _setup(capture)
+    sequence_id, every = _setup(capture)
+    tasks = _of_kind(every, "hand")
     truth, rng = CaptureTruth(capture), np.random.default_rng(crowd_seed)
     for task in tasks:
         _submit(task, "careful", f"timed-{task['id']}", truth, rng)
@@ -315,6 +462,11 @@ def main() -> None:
     parser.add_argument("--scenario", default=DEFAULT_SCENARIOS,
                         help=f"comma-separated, of {', '.join(ALL_SCENARIOS)}")
     parser.add_argument("--draws", type=int, default=10, help="crowds per mixed scenario")
+    parser.add_argument("--object-draws", type=int, default=None,
+                        help="crowds per object scenario (default: --draws)")
+    parser.add_argument("--object-poses", default="solved",
+                        help="comma-separated, of truth, solved: the object poses the landmark "
+                             "check after the solve is judged against")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
@@ -322,24 +474,34 @@ def main() -> None:
     unknown = sorted(set(scenarios) - set(ALL_SCENARIOS))
     if unknown:
         parser.error(f"unknown scenario(s) {unknown}; known: {', '.join(ALL_SCENARIOS)}")
+    poses = [s.strip() for s in args.object_poses.split(",") if s.strip()]
+    if not poses or set(poses) - set(OBJECT_POSES):
+        parser.error(f"--object-poses must name some of {', '.join(OBJECT_POSES)}, got "
+                     f"{args.object_poses!r}")
+    object_draws = args.draws if args.object_draws is None else args.object_draws
 
     work = isolated_workdir("qc", DEXLABEL_QC_BLOCK_AFTER_FAILURES="0")
     wanted = {int(s.split("-")[1]) for s in scenarios if "-" in s} | \
         ({8} if {"pool", "timing"} & set(scenarios) else set())
     captures = _captures(args.capture, wanted, args.capture_seed, work)
     out: dict[str, dict] = {}
-    for name in scenarios:
+    runs = [(name, None) for name in scenarios if not name.startswith("objects")]
+    runs += [(name, pose) for name in scenarios if name.startswith("objects") for pose in poses]
+    for name, pose in runs:
         started = time.perf_counter()
+        label = name if pose is None or len(poses) == 1 else f"{name} ({pose})"
         if name in ("pool", "timing"):
             run = pool(captures[8], args.rounds, args.crowd_seed) if name == "pool" \
                 else timing(captures[8], args.repeats, args.crowd_seed)
         else:
             kind, views = name.split("-")
-            run = mixed(captures[int(views)], kind.rstrip("s"), args.draws, args.crowd_seed)
-        out[name] = {**run, "seconds": round(time.perf_counter() - started, 1)}
-        print(f"{name}: {json.dumps(out[name])}", flush=True)
+            run = mixed(captures[int(views)], kind.rstrip("s"),
+                        object_draws if pose else args.draws, args.crowd_seed, pose or "truth")
+        out[label] = {**run, "seconds": round(time.perf_counter() - started, 1)}
+        print(f"{label}: {json.dumps(out[label])}", flush=True)
     print(json.dumps({"captures": {v: str(p) for v, p in sorted(captures.items())},
-                      "crowd_seed": args.crowd_seed, "draws": args.draws, "scenarios": out}))
+                      "crowd_seed": args.crowd_seed, "draws": args.draws,
+                      "object_draws": object_draws, "object_poses": poses, "scenarios": out}))
 
 
 if __name__ == "__main__":
