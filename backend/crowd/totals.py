@@ -71,17 +71,23 @@ def forget_sequence(session: Session, sequence_id: int) -> None:
 
 REBUILD_SQL = (
     "DELETE FROM crowd_cost_totals",
+    "UPDATE crowd_hits SET decided = 0",
     ("INSERT INTO crowd_cost_totals (scope, key, kind, state, amount_cents, fee_cents, payments) "
      "SELECT 'sequence', CAST(t.sequence_id AS VARCHAR(64)), p.kind, p.state, "
      "SUM(p.amount_cents), SUM(p.fee_cents), COUNT(*) FROM crowd_payments p "
      "JOIN assignments a ON a.id = p.assignment_id JOIN tasks t ON t.id = a.task_id "
      "GROUP BY t.sequence_id, p.kind, p.state"),
+    # A worker's totals keep the money of deleted sequences (crowd_deleted_costs).
     ("INSERT INTO crowd_cost_totals (scope, key, kind, state, amount_cents, fee_cents, payments) "
-     "SELECT 'worker', p.worker_id, p.kind, p.state, SUM(p.amount_cents), SUM(p.fee_cents), "
-     "COUNT(*) FROM crowd_payments p GROUP BY p.worker_id, p.kind, p.state"),
-    ("UPDATE crowd_hits SET decided = (SELECT COUNT(*) FROM crowd_payments p "
-     "JOIN assignments a ON a.id = p.assignment_id WHERE a.hit_id = crowd_hits.hit_id "
-     "AND p.kind IN ('approval', 'rejection'))"),
+     "SELECT 'worker', x.worker_id, x.kind, x.state, SUM(x.amount), SUM(x.fee), SUM(x.n) "
+     "FROM (SELECT worker_id, kind, state, amount_cents AS amount, fee_cents AS fee, 1 AS n "
+     "FROM crowd_payments UNION ALL SELECT worker_id, kind, state, amount_cents, fee_cents, "
+     "payments FROM crowd_deleted_costs) AS x GROUP BY x.worker_id, x.kind, x.state"),
+    # One grouped pass (a subquery per HIT would scan the assignments once per HIT).
+    ("UPDATE crowd_hits SET decided = d.n FROM (SELECT a.hit_id AS hit_id, COUNT(*) AS n "
+     "FROM crowd_payments p JOIN assignments a ON a.id = p.assignment_id "
+     "WHERE p.kind IN ('approval', 'rejection') AND a.hit_id IS NOT NULL GROUP BY a.hit_id) "
+     "AS d WHERE crowd_hits.hit_id = d.hit_id"),
 )
 
 
