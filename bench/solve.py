@@ -6,8 +6,9 @@ labels are simulated with `--crowd-seed` (hand keypoints = ground-truth joint_2d
 visibility from the ground-truth segmentation; 2 landmarks per object per view on ground-truth
 mesh vertices, projected, with noise; a share of gross errors anywhere in the image), and the
 capture is solved. Each run happens in its own process so that its time and peak memory are its
-own. Per object: ADD mean, 95th percentile and maximum over frames, frames flagged, frames over
-10 mm and how many of those are flagged, and how far a static object moves over the clip.
+own. The hand: MPJPE over all joints, per finger and over the fingertips. Per object: ADD mean,
+95th percentile and maximum over frames, frames flagged, frames over 10 mm and how many of
+those are flagged, and how far a static object moves over the clip.
 The paper/default speed ratio is measured on the same frames (the first `--paper-frames`).
 `--scenario` runs a list of named scenarios (8views 4views 5objects noise5 gross5 gross15, or
 all) instead of the one configuration; either way one JSON object is printed on the last line.
@@ -42,6 +43,10 @@ from worker.synth.annotators import hand_visibility, mesh_landmarks  # noqa: E40
 from worker.synth.capture import generate_capture  # noqa: E402
 
 TIPS = [JOINT_NAMES.index(t) for t in TIP_NAMES]
+# DexYCB joint order: the wrist, then per finger (thumb, index, middle, ring, little) 4 joints
+# from the palm out (MCP, PIP, DIP, tip; the thumb's CMC, MCP, IP, tip).
+FINGERS = {"wrist": [0], **{name: [1 + 4 * f + k for k in range(4)] for f, name in
+                            enumerate(("thumb", "index", "middle", "ring", "little"))}}
 # The scenarios of `--scenario`: capture changes (views, objects) and label changes.
 SCENARIOS: dict[str, dict] = {
     "8views": {},
@@ -226,6 +231,9 @@ def run_config(cache: str, frames: int, sigma: float, gross: float, optimiser: s
         "sigma_px": sigma, "gross_fraction": gross, "crowd_seed": seed, "threads": threads,
         "labelled_frames": int(lab.sum()),
         "mpjpe_mm": round(float(err.mean()), 4),
+        "mpjpe_per_finger_mm": {name: round(float(err[:, ids].mean()), 3)
+                                for name, ids in FINGERS.items()},
+        "mpjpe_tips_mm": round(float(err[:, TIPS].mean()), 3),
         "triangulation_mpjpe_mm": round(float(tri_err.mean()), 4),
         "objects": objects,
         "object_add_mm": [o["add_mean_mm"] for o in objects],
