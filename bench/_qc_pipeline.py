@@ -26,7 +26,7 @@ from sqlalchemy import delete, select
 
 # A crowd whose tasks are still not all accepted after this many rounds of re-opened tasks
 # and admin decisions is reported unsolved (each round is a few QC jobs, no solve).
-MAX_ROUNDS = 8
+MAX_ROUNDS = 12
 # Profiles an admin approves (a frozen track on a still object is right, and so is marking
 # hidden all through an object the view never shows).
 RIGHT = ("careful", "lazy-still", "unseen")
@@ -150,15 +150,16 @@ def to_solve(sequence_id: int, task_ids: list[int], profile_of: dict[int, str],
             break
         asked = []
         for task_id, (assignment_id, status) in sorted(_unaccepted(sequence_id).items()):
-            if status == "rejected":
+            if status == "submitted":
+                right = profile_of.get(assignment_id) in RIGHT
+                _admin_decides(assignment_id, right)
+                counts["admin_approved" if right else "admin_rejected"] += 1
+                status = "approved" if right else "rejected"
+            if status == "rejected":  # by QC or by the admin: the task is re-opened
                 new_id, profile = resubmit(task_id)
                 profile_of[new_id] = profile
                 counts["reopened"] += 1
                 asked.append(task_id)
-            elif status == "submitted":
-                right = profile_of.get(assignment_id) in RIGHT
-                _admin_decides(assignment_id, right)
-                counts["admin_approved" if right else "admin_rejected"] += 1
         request_qc_of(asked)
     return counts, None if counts["solved"] else why_unsolved(sequence_id)
 

@@ -300,13 +300,14 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
     truth = CaptureTruth(capture)
     tally = _Tally(extra=("lazy-still", "unseen") if kind == "object" else ())
     rng = np.random.default_rng(crowd_seed)
-    unseen: set[int] = set()
     solved = _SolvedCrowd(sequence_id, every, truth, crowd_seed) \
         if kind == "object" and object_poses == "solved" else None
     seconds = []
     for draw in range(draws):
         _clear(sequence_id, kind)
         profile_of = {}
+        # Per crowd: the database may give a removed assignment's id to the next crowd's.
+        unseen: set[int] = set()
         for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng), strict=True):
             key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng, unseen)
             profile_of[key] = _label_profile(task, profile, key in unseen)
