@@ -404,6 +404,8 @@ def _plain_rows(
     than "placed") when every one is a list of plain JSON values that passes every check of
     :func:`validate_keyframes` (what the annotation page sends, in one quick pass); None sends
     them through the full check, which names each problem."""
+    if _stored_form(keyframes, num_frames, width, height):
+        return keyframes if type(keyframes) is list else list(keyframes)
     rows: list[list[Any]] = []
     previous = -1
     for row in keyframes:
@@ -445,6 +447,28 @@ def _plain_rows(
         rows.append([frame, float(x), float(y), seen] if source is None else
                     [frame, float(x), float(y), seen, source])
     return rows
+
+
+def _stored_form(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:
+    """Whether every keyframe is already a valid row in its stored form ([frame, float x,
+    float y, 1 or 0] or [frame, None, None, 0], frames increasing): what the page sends,
+    checked without building new rows."""
+    previous = -1
+    for row in keyframes:
+        if type(row) is not list or len(row) != 4:
+            return False
+        frame, x, y, visible = row
+        if type(frame) is not int or not previous < frame < num_frames:
+            return False
+        previous = frame
+        if type(x) is float and type(y) is float:
+            if (type(visible) is int and (visible == 1 or visible == 0)
+                    and 0 <= x < width and 0 <= y < height):
+                continue
+        elif x is None and y is None and visible == 0 and type(visible) is int:
+            continue
+        return False
+    return True
 
 
 def _plainly_valid(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:

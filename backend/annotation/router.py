@@ -293,9 +293,8 @@ def prefill_suggestions(claims: WorkerClaims, session: SessionDep,
 @router.put("/annotate/tracks", response_model=SaveResult,
             openapi_extra=body_limit(MAX_SAVE_BYTES))
 def save_tracks(body: TracksSave, claims: WriterClaims, session: SessionDep) -> SaveResult:
-    assignment, clip = service.assignment_for_save(session, _assignment_id(claims))
-    assignment = service.save_tracks(session, assignment, body, clip)
-    return SaveResult(version=assignment.version, status=assignment.status)
+    return SaveResult(version=service.autosave(session, _assignment_id(claims), body),
+                      status="working")
 
 
 @router.post("/annotate/submit", response_model=SaveResult,
