@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import time
+from collections.abc import AsyncIterator
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
+from contextlib import asynccontextmanager
 from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html
@@ -80,6 +84,27 @@ def create_app() -> FastAPI:
     install_database_outage_answer(app)
     if FRONTEND_DIR.is_dir():
         app.mount("/", StaticFiles(directory=FRONTEND_DIR, html=True), name="frontend")
+    return app
+
+
+def create_served_app() -> FastAPI:
+    """The app as `dexlabel serve` runs it in each server process: :func:`create_app`, and
+    once it has started, everything built so far (modules, the app, its routes and models,
+    ~300,000 objects that live as long as the process) is moved out of the garbage
+    collector's reach, so that its passes stop walking them again and again as requests
+    allocate (a track save makes ~3,000 lists). Server CPU per autosave under a crowd of 200:
+    14.9 -> 9.2 ms (bench/load.py). Not for tests: frozen objects are never collected."""
+    app = create_app()
+    inner = app.router.lifespan_context
+
+    @asynccontextmanager
+    async def lifespan(app_: FastAPI) -> AsyncIterator[Any]:
+        async with inner(app_) as state:
+            gc.collect()
+            gc.freeze()
+            yield state
+
+    app.router.lifespan_context = lifespan
     return app
 
 

@@ -180,7 +180,7 @@ def serve(
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _exit_cleanly)
     try:
-        uvicorn.run("backend.app:create_app", factory=True, host=host, port=port,
+        uvicorn.run("backend.app:create_served_app", factory=True, host=host, port=port,
                     workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
                     # The client address behind a proxy is DEXLABEL_TRUSTED_PROXIES' business
                     # (backend.accounts.limits.client_address), not uvicorn's loopback default.

@@ -65,9 +65,30 @@ def bundle_etag(camera: Camera, fingerprint: str) -> str:
 
 def build_bundle(storage: Storage, camera: Camera, frames: list[Frame], etag: str) -> bytes:
     """The bundle of ``frames`` (one camera's, in index order), cached by camera and ETag."""
-    cached = bundle_cache.get((camera.id, etag))
+    key = (camera.id, etag)
+    cached = bundle_cache.get(key)
     if cached is not None:
         return cached
+    # One build per bundle: the requests that miss it meanwhile (a crowd opening its pages
+    # at once) wait for that build instead of each reading every frame again, which stalled
+    # every other request of the process for seconds.
+    with _BUILDS_GUARD:
+        build = _builds.setdefault(key, threading.Lock())
+    with build:
+        cached = bundle_cache.get(key)
+        if cached is None:
+            cached = _build(storage, camera, frames)
+            bundle_cache.put(key, cached)
+    with _BUILDS_GUARD:
+        _builds.pop(key, None)
+    return cached
+
+
+_BUILDS_GUARD = threading.Lock()
+_builds: dict[tuple[int, str], threading.Lock] = {}
+
+
+def _build(storage: Storage, camera: Camera, frames: list[Frame]) -> bytes:
     with ThreadPoolExecutor(_READ_THREADS) as pool:
         blobs = list(pool.map(lambda f: storage.get_bytes(f.color_key), frames))
     entries, offset = [], 0
@@ -78,9 +99,8 @@ def build_bundle(storage: Storage, camera: Camera, frames: list[Frame], etag: st
         "sequence_id": camera.sequence_id, "serial": camera.serial,
         "width": camera.width, "height": camera.height, "frames": entries,
     }, separators=(",", ":")).encode()
-    data = b"".join([BUNDLE_MAGIC, struct.pack("<II", BUNDLE_VERSION, len(header)), header, *blobs])
-    bundle_cache.put((camera.id, etag), data)
-    return data
+    return b"".join([BUNDLE_MAGIC, struct.pack("<II", BUNDLE_VERSION, len(header)), header,
+                     *blobs])
 
 
 def parse_bundle(data: bytes) -> tuple[dict, list[bytes]]:
