@@ -403,12 +403,12 @@ def _plain_rows(
     """The keyframes as stored ([frame, x, y, visible01] with float x, y, plus a source other
     than "placed") when every one is a list of plain JSON values that passes every check of
     :func:`validate_keyframes` (what the annotation page sends, in one quick pass); None sends
-    them through the full check, which names each problem."""
-    if _stored_form(keyframes, num_frames, width, height):
-        return keyframes if type(keyframes) is list else list(keyframes)
-    rows: list[list[Any]] = []
+    them through the full check, which names each problem. Rows already in their stored form
+    (what the page sends) are kept as sent: new rows are built only from the first one that
+    is not."""
+    rows: list[list[Any]] | None = None
     previous = -1
-    for row in keyframes:
+    for index, row in enumerate(keyframes):
         if type(row) is not list:
             return None
         if len(row) == 4:
@@ -436,39 +436,27 @@ def _plain_rows(
         if x is None and y is None:
             if seen:
                 return None
-            rows.append([frame, None, None, 0] if source is None else
-                        [frame, None, None, 0, source])
+            as_sent = len(row) == 4 and type(visible) is int
+        else:
+            if (type(x) is not float and type(x) is not int) or (
+                    type(y) is not float and type(y) is not int):
+                return None
+            if not (0 <= x < width and 0 <= y < height):  # NaN fails here too
+                return None
+            as_sent = (len(row) == 4 and type(visible) is int and type(x) is float
+                       and type(y) is float)
+        if as_sent:
+            if rows is not None:
+                rows.append(row)
             continue
-        if (type(x) is not float and type(x) is not int) or (
-                type(y) is not float and type(y) is not int):
-            return None
-        if not (0 <= x < width and 0 <= y < height):  # NaN fails here too
-            return None
-        rows.append([frame, float(x), float(y), seen] if source is None else
-                    [frame, float(x), float(y), seen, source])
+        if rows is None:
+            rows = list(keyframes[:index])
+        position = [None, None] if x is None else [float(x), float(y)]
+        rows.append([frame, *position, seen] if source is None else
+                    [frame, *position, seen, source])
+    if rows is None:
+        return keyframes if type(keyframes) is list else list(keyframes)
     return rows
-
-
-def _stored_form(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:
-    """Whether every keyframe is already a valid row in its stored form ([frame, float x,
-    float y, 1 or 0] or [frame, None, None, 0], frames increasing): what the page sends,
-    checked without building new rows."""
-    previous = -1
-    for row in keyframes:
-        if type(row) is not list or len(row) != 4:
-            return False
-        frame, x, y, visible = row
-        if type(frame) is not int or not previous < frame < num_frames:
-            return False
-        previous = frame
-        if type(x) is float and type(y) is float:
-            if (type(visible) is int and (visible == 1 or visible == 0)
-                    and 0 <= x < width and 0 <= y < height):
-                continue
-        elif x is None and y is None and visible == 0 and type(visible) is int:
-            continue
-        return False
-    return True
 
 
 def _plainly_valid(keyframes: Sequence[Any], num_frames: int, width: int, height: int) -> bool:

@@ -306,9 +306,9 @@ def _write_tracks(session: Session, assignment_id: int, rows: list[list[list[Any
     """
     if not rows:
         return
+    statement = _TRACKS_UPDATE[session.get_bind().dialect.name]
     # msgspec writes the ~3,000 floats of a full hand save about 8 times faster than the
     # standard library, with the same shortest round-trip form (the rows hold no NaN).
-    statement = _TRACKS_UPDATE[session.get_bind().dialect.name]
     found = set(session.execute(statement, {
         "assignment": assignment_id, "rows": _JSON_ENCODER.encode(rows).decode()}).scalars())
     added = [{"assignment_id": assignment_id, "point_index": p, "keyframes": kf}
