@@ -22,11 +22,12 @@ from backend.captures.models import Frame, Sequence
 from backend.captures.service import camera_model, sequence_cameras
 from backend.quality.models import QCReport
 from backend.solve.inputs import hand_model_for, merge_labels
-from backend.solve.results import decode_result, trusted_object_poses
+from backend.solve.results import decode_result, hand_trust, object_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.hand import HandLayer
+from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.tracks import dense_points
 
 
@@ -96,6 +97,24 @@ class SolveContent:
     hand_faces: np.ndarray | None = None
     root_joint: np.ndarray | None = None
     result_key: str | None = None
+    # Trust of every solved value (see backend.solve.results): object_confidence (O, F) in
+    # [0, 1] and object_flags (O, F) str; hand_confidence (F,) and hand_flags (F,) str; a flag
+    # is the reason the value is not trusted, "" where it is. Filled by fetch_solve.
+    object_confidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    object_flags: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=str))
+    hand_confidence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    hand_flags: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=str))
+
+    def hand_trusted(self, frame: int) -> bool:
+        """True where the solve labelled the hand at ``frame`` and did not flag it."""
+        joints = self.arrays["hand_joints"][frame]
+        return bool(np.isfinite(joints).all()) and not self.hand_flags[frame]
+
+    def object_flag(self, index: int, frame: int) -> dict[str, Any]:
+        """{"valid", "confidence", "flag"} of object ``index``'s pose at ``frame``."""
+        flag = str(self.object_flags[index, frame])
+        return {"valid": not flag, "confidence": round(float(self.object_confidence[index, frame]),
+                                                       3), "flag": flag or None}
 
 
 @dataclass
@@ -111,6 +130,7 @@ class SequenceContent:
     hands: list[HandContent]
     work: list[WorkContent] = field(default_factory=list)
     solve: SolveContent | None = None
+    _provenance: dict[str, list[list[ProvenanceState]]] = field(default_factory=dict)
 
     def merged_labels(self, view: int, target_key: str) -> tuple[np.ndarray, np.ndarray] | None:
         """The accepted work of one view and target merged as the solve merges it: (F, P, 2) px
@@ -118,6 +138,24 @@ class SequenceContent:
         chosen = [(w.xy, w.visible) for w in self.work
                   if w.view == view and w.target_key == target_key and w.status == "approved"]
         return merge_labels(chosen) if chosen else None
+
+    def provenance_states(self, target_key: str) -> list[list[ProvenanceState]]:
+        """Per view, per frame the provenance state of ``target_key``'s accepted labels
+        (worker.formats.provenance; a view with several approved assignments takes the first)."""
+        states: list[list[ProvenanceState]] = []
+        for v in range(len(self.views)):
+            work = next((w for w in self.work if w.view == v and w.target_key == target_key
+                         and w.status == "approved"), None)
+            states.append(view_states(work.keyframes, self.num_frames) if work is not None
+                          else ["none"] * self.num_frames)
+        return states
+
+    def provenance(self, target_key: str, frame: int) -> dict[str, Any]:
+        """One frame's provenance of a target: {"views_decided", "views": {serial: state}}."""
+        if target_key not in self._provenance:
+            self._provenance[target_key] = self.provenance_states(target_key)
+        return frame_provenance(self._provenance[target_key], [v.serial for v in self.views],
+                                frame)
 
 
 def _qc(report: QCReport | None) -> dict[str, Any] | None:
@@ -209,7 +247,8 @@ def fetch_solve(content: SequenceContent) -> None:
     if solve is None or solve.arrays or solve.result_key is None:
         return
     solve.arrays = decode_result(get_storage().get_bytes(solve.result_key))
-    # A pose the solve flagged as not trusted is exported as unlabelled, as DexYCB leaves what
-    # it cannot label: every writer reads the poses from here and skips a NaN one.
-    solve.arrays["object_poses"] = trusted_object_poses(solve.arrays)
+    # Every solved value is kept; its trust travels beside it and each format writes the flag
+    # in the form its readers understand (see the README's Export section).
+    solve.object_confidence, solve.object_flags = object_trust(solve.arrays)
+    solve.hand_confidence, solve.hand_flags = hand_trust(solve.arrays)
     _solved_hand(solve)

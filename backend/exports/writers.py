@@ -19,7 +19,7 @@ from backend.exports.content import SequenceContent, ViewContent
 from backend.solve.inputs import load_mesh
 from backend.solve.results import frame_payload
 from backend.storage import LocalStorage, Storage, get_storage
-from worker.formats import bop, coco, cvat, dexycb, jsonfmt
+from worker.formats import bop, coco, cvat, dexycb, dexycb_flags, jsonfmt
 from worker.formats.files import encode_image, npz_bytes, yaml_text
 from worker.geometry.mesh_io import Mesh
 from worker.geometry.transforms import invert_pose, transform_points
@@ -180,16 +180,13 @@ class DexYCBExporter(Exporter):
             self._once(dexycb.mano_file(name), yaml_text(dexycb.mano_doc(betas)).encode())
         self._models(content)
         grasped = next((o.index for o in content.objects if o.grasped), 0)
-        self.archive.write(f"{seq}/{dexycb.META_FILE}", yaml_text(dexycb.meta_doc(
+        meta = dexycb.meta_doc(
             [v.serial for v in content.views], content.num_frames,
             [o.ycb_id for o in content.objects], grasped, [h.side for h in content.hands],
-            calibs, calib, undistorted)).encode())
-        poses = np.transpose(solve.arrays["object_poses"], (1, 0, 2, 3))
-        hand_pose_m = np.asarray(solve.arrays["hand_pose_m"])[:, None]
-        if not content.hands:
-            hand_pose_m = hand_pose_m[:, :0]
-        self.archive.write(f"{seq}/{dexycb.POSE_FILE}",
-                           npz_bytes(dexycb.pose_arrays(poses, hand_pose_m)))
+            calibs, calib, undistorted)
+        meta.update(_dexycb_flag_meta(content))
+        self.archive.write(f"{seq}/{dexycb.META_FILE}", yaml_text(meta).encode())
+        self.archive.write(f"{seq}/{dexycb.POSE_FILE}", npz_bytes(_dexycb_pose(content)))
         for view in content.views:
             self._view(content, view, seq)
             step()
@@ -221,12 +218,17 @@ class DexYCBExporter(Exporter):
         arrays = solve.arrays
         frames = _Frames(self, view) if self.options.get("frames") else None
         folder = f"{seq}/{view.serial}"
+        present = np.isfinite(arrays["object_poses"]).all(axis=(2, 3))
+        valid = present & (solve.object_flags == "")
         for f in range(content.num_frames):
             seg = seg_of(self, content, view, f)
+            # A flagged hand frame is unlabelled, as DexYCB leaves a hand it cannot label.
+            hand = bool(content.hands) and solve.hand_trusted(f)
             labels = dexycb.camera_frame_labels(
                 view.camera.T_cam_to_world, view.camera.K, arrays["object_poses"][:, f],
-                arrays["hand_pose_m"][f] if content.hands else None,
-                arrays["hand_joints"][f] if content.hands else None, solve.root_joint, seg)
+                arrays["hand_pose_m"][f] if hand else None,
+                arrays["hand_joints"][f] if hand else None, solve.root_joint, seg)
+            labels.update(dexycb_flags.frame_flag_arrays(valid[:, f]))
             self.archive.write(f"{folder}/{dexycb.labels_file(f)}", npz_bytes(labels))
             if frames is not None:
                 frames.put(folder, f)
@@ -238,6 +240,41 @@ class DexYCBExporter(Exporter):
             for name, lines in dexycb.split_lists(str(setup), self.split_items).items():
                 self.archive.write(f"splits/{setup}_{name}.txt",
                                    "".join(f"{line}\n" for line in lines).encode())
+
+
+def _dexycb_pose(content: SequenceContent) -> dict[str, np.ndarray]:
+    """pose.npz: world poses (a flagged hand frame unlabelled) and the trust arrays beside."""
+    solve = content.solve
+    assert solve is not None
+    arrays = solve.arrays
+    frames = content.num_frames
+    hand_ok = np.array([solve.hand_trusted(f) for f in range(frames)], dtype=bool)
+    hand_pose_m = np.where(hand_ok[:, None], np.asarray(arrays["hand_pose_m"]), np.nan)[:, None]
+    if not content.hands:
+        hand_pose_m = hand_pose_m[:, :0]
+    out = dexycb.pose_arrays(np.transpose(arrays["object_poses"], (1, 0, 2, 3)), hand_pose_m)
+    out.update(dexycb_flags.pose_flag_arrays(
+        solve.object_flags, solve.object_confidence,
+        np.isfinite(arrays["object_poses"]).all(axis=(2, 3)), solve.hand_flags,
+        solve.hand_confidence, np.isfinite(arrays["hand_joints"]).all(axis=(1, 2)),
+        hand_pose_m.shape[1]))
+    return out
+
+
+def _dexycb_flag_meta(content: SequenceContent) -> dict[str, Any]:
+    """meta.yml's added keys: the flags' reasons and the labels' provenance."""
+    solve = content.solve
+    assert solve is not None
+    serials = [v.serial for v in content.views]
+    hand = (dexycb_flags.target_provenance(
+        content.provenance_states(f"hand:{content.hands[0].index}"), serials)
+        if content.hands else None)
+    objects = [dexycb_flags.target_provenance(
+        content.provenance_states(f"object:{o.index}"), serials) for o in content.objects]
+    hand_flags = solve.hand_flags if content.hands else np.full(content.num_frames, "")
+    return {dexycb_flags.META_LABEL_FLAGS: dexycb_flags.flags_doc(solve.object_flags,
+                                                                  hand_flags),
+            dexycb_flags.META_LABEL_PROVENANCE: dexycb_flags.provenance_doc(hand, objects)}
 
 
 def _work_entry(content: SequenceContent, w: Any) -> dict[str, Any]:

@@ -7,8 +7,10 @@ Arrays (F frames, V views, O objects, world frame, metres unless named):
     landmark_vertices (L, 2) int rows [object, vertex] in landmark order; betas (K,);
     hand_side () str; serials (V,) str; object_names (O,) str;
     object_confidence (O, F) in [0, 1]; object_flags (O, F) str, why a pose is not trusted
-    ("" = trusted). A flagged object pose is unlabelled in every export. Results stored before
-    these two arrays existed read as fully trusted (see `object_trust`).
+    ("" = trusted); hand_confidence (F,) in [0, 1]; hand_flags (F,) str, why a hand frame is
+    not trusted ("" = trusted). Exports keep a flagged object pose beside its flag and leave a
+    flagged hand frame unlabelled. Results stored before these arrays existed read as fully
+    trusted (see `object_trust`, `hand_trust`).
 """
 
 from __future__ import annotations
@@ -73,12 +75,20 @@ def object_trust(arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]
     return confidence, flags
 
 
-def trusted_object_poses(arrays: dict[str, np.ndarray]) -> np.ndarray:
-    """(O, F, 3, 4) object poses with every flagged one NaN (unlabelled)."""
-    _, flags = object_trust(arrays)
-    poses = np.array(arrays["object_poses"], dtype=np.float64)
-    poses[flags != ""] = np.nan
-    return poses
+def hand_trust(arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) confidence in [0, 1] and (F,) flag reasons ("" = trusted) of a result's hand frames.
+
+    Results without ``hand_confidence`` / ``hand_flags`` (or with arrays of another length) read
+    as fully trusted: confidence 1, no flag.
+    """
+    frames = len(arrays["labelled"])
+    confidence = arrays.get("hand_confidence")
+    flags = arrays.get("hand_flags")
+    if confidence is None or confidence.shape != (frames,):
+        confidence = np.ones(frames)
+    if flags is None or flags.shape != (frames,):
+        flags = np.full(frames, "", dtype=str)
+    return np.asarray(confidence, dtype=np.float64), np.asarray(flags, dtype=str)
 
 
 def _mean_or_none(values: np.ndarray) -> float | None:
@@ -124,10 +134,13 @@ def frame_payload(arrays: dict[str, np.ndarray], frame: int) -> dict[str, Any]:
     errors = arrays["kpt_error_px"][frame]
     pose_m = arrays["hand_pose_m"][frame]
     confidence, flags = object_trust(arrays)
+    hand_confidence, hand_flags = hand_trust(arrays)
     return {
         "frame": frame,
         "labelled": labelled,
         "reason": str(arrays["reasons"][frame]) or None,
+        "hand_confidence": round(float(hand_confidence[frame]), 3),
+        "hand_flag": str(hand_flags[frame]) or None,
         "hand_pose_m": _finite_or_none(pose_m) if np.isfinite(pose_m).all() else None,
         "hand_joints": (_finite_or_none(arrays["hand_joints"][frame])
                         if np.isfinite(arrays["hand_joints"][frame]).all() else None),

@@ -20,7 +20,12 @@ Layout (paths relative to a capture root; ``WxH`` is the image size)::
 Per camera and frame ``labels_%06d.npz``: ``seg`` uint8 (H, W) (0 background, the object's
 YCB id, 255 the hand), ``pose_y`` float32 (O, 3, 4) object-to-camera, ``pose_m`` float32 (1, 51)
 in the camera frame, ``joint_3d`` float32 (1, 21, 3) metres in the camera frame, ``joint_2d``
-float32 (1, 21, 2) pixels; every entry -1 where there is no label.
+float32 (1, 21, 2) pixels. Where the hand has no label (or its label is flagged), ``joint_3d``
+and ``joint_2d`` are all -1 and ``pose_m`` all 0, as the DexYCB toolkit documents and reads
+them; a ``pose_y`` row is -1 only where no pose exists at all. In ``pose.npz`` a frame without
+a hand pose has ``pose_m`` all 0 and one without an object pose the row [0, 0, 0, 1, 0, 0, 0],
+which the toolkit's viewer reads as absent. The export adds its own keys beside these (see
+:mod:`worker.formats.dexycb_flags`); readers that look keys up by name are unaffected.
 
 Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres; ``apriltag`` is the
 table's frame in the world (DexYCB's viewer crops its point clouds in it; its loader needs the
@@ -72,8 +77,12 @@ HAND_SEG_VALUE = 255
 IMAGE_WIDTH = 640
 IMAGE_HEIGHT = 480
 FPS = 30.0
-# Every entry of a label array of a frame (or an object) without a label.
+# Every entry of joint_3d / joint_2d (and of a pose_y row) without a label.
 NO_LABEL = -1.0
+# Every entry of pose_m without a label (the toolkit tests pose_m == 0).
+NO_POSE_M = 0.0
+# pose.npz's pose_y row of an object without a pose (the toolkit's viewer skips it).
+NO_POSE_ROW = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 
 # --- file and folder names -----------------------------------------------------------------
 
@@ -215,8 +224,8 @@ def pose_arrays(object_poses: np.ndarray, pose_m: np.ndarray) -> dict[str, np.nd
     """pose.npz's arrays from world-frame poses, float32.
 
     object_poses: (F, O, 3, 4) object-to-world, metres (NaN: no label). pose_m: (F, H, 51).
-    Returns pose_y (F, O, 7) as quaternion xyzw + translation, and pose_m (F, H, 51); NO_LABEL
-    wherever the input is not finite.
+    Returns pose_y (F, O, 7) as quaternion xyzw + translation (NO_POSE_ROW where the pose is
+    not finite), and pose_m (F, H, 51) (NO_POSE_M where it is not finite).
     """
     object_poses = np.asarray(object_poses, dtype=np.float64)
     pose_m = np.asarray(pose_m, dtype=np.float64)
@@ -228,8 +237,8 @@ def pose_arrays(object_poses: np.ndarray, pose_m: np.ndarray) -> dict[str, np.nd
     safe = np.where(finite[..., None, None], object_poses, np.eye(3, 4))
     quat = matrix_to_quaternion(safe[..., :3])
     pose_y = np.concatenate([quat, safe[..., 3]], axis=-1)
-    pose_y[~finite] = NO_LABEL
-    out_m = np.where(np.isfinite(pose_m).all(axis=-1, keepdims=True), pose_m, NO_LABEL)
+    pose_y[~finite] = NO_POSE_ROW
+    out_m = np.where(np.isfinite(pose_m).all(axis=-1, keepdims=True), pose_m, NO_POSE_M)
     return {POSE_Y: pose_y.astype(np.float32), POSE_M: out_m.astype(np.float32)}
 
 
@@ -239,7 +248,8 @@ def label_arrays(seg: np.ndarray, pose_y: np.ndarray, pose_m: np.ndarray | None,
 
     seg: (H, W) uint8. pose_y: (O, 3, 4) object-to-camera (a non-finite pose is unlabelled).
     pose_m: (51,) camera frame; joint_3d: (21, 3) metres, camera frame; joint_2d: (21, 2) px.
-    None (or any non-finite entry) makes the hand's arrays NO_LABEL.
+    None (or any non-finite entry) leaves the hand unlabelled: joint_3d and joint_2d NO_LABEL,
+    pose_m NO_POSE_M.
     """
     seg = np.asarray(seg)
     if seg.ndim != 2:
@@ -252,10 +262,10 @@ def label_arrays(seg: np.ndarray, pose_y: np.ndarray, pose_m: np.ndarray | None,
     shapes = ((POSE_M_SIZE,), (NUM_JOINTS, 3), (NUM_JOINTS, 2))
     arrays = []
     labelled = all(a is not None and np.isfinite(np.asarray(a, float)).all() for a in hand)
-    for value, shape in zip(hand, shapes, strict=True):
+    for value, shape, empty in zip(hand, shapes, (NO_POSE_M, NO_LABEL, NO_LABEL), strict=True):
         if value is not None and np.asarray(value).shape != shape:
             raise ValueError(f"hand label must have shape {shape}, got {np.asarray(value).shape}")
-        arrays.append(np.asarray(value, np.float64) if labelled else np.full(shape, NO_LABEL))
+        arrays.append(np.asarray(value, np.float64) if labelled else np.full(shape, empty))
     return {SEG: seg.astype(np.uint8), POSE_Y: pose_y.astype(np.float32),
             POSE_M: arrays[0][None].astype(np.float32),
             JOINT_3D: arrays[1][None].astype(np.float32),
