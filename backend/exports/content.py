@@ -25,9 +25,9 @@ from backend.solve.inputs import hand_model_for, merge_labels
 from backend.solve.results import decode_result, hand_trust, object_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage
+from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.geometry import CameraModel
 from worker.hand import HandLayer
-from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.tracks import dense_points
 
 

@@ -21,7 +21,7 @@ from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError, NotFound
 from backend.exports.archive import ExportArchive
 from backend.exports.content import fetch_solve, load_sequence
-from backend.exports.writers import EXPORTERS
+from backend.exports.formats import EXPORTERS
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job, get_job_or_raise
 from backend.solve.models import SolveRun

@@ -14,12 +14,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from backend.exports import trust
 from backend.exports.archive import ExportArchive
 from backend.exports.content import SequenceContent, ViewContent
 from backend.solve.inputs import load_mesh
 from backend.solve.results import frame_payload
 from backend.storage import LocalStorage, Storage, get_storage
-from worker.formats import bop, coco, cvat, dexycb, dexycb_flags, jsonfmt
+from worker.formats import cvat, dexycb, dexycb_flags, jsonfmt, offimage
 from worker.formats.files import encode_image, npz_bytes, yaml_text
 from worker.geometry.mesh_io import Mesh
 from worker.geometry.transforms import invert_pose, transform_points
@@ -362,133 +363,15 @@ class CvatExporter(Exporter):
                                          width=view.camera.width, height=view.camera.height,
                                          name=f"{content.subject}/{content.name}/{view.serial}",
                                          task_id=content.sequence_id) as writer:
+                outside = trust.outside_tracks(content, view) if content.hands else None
                 for w in content.work:
                     if w.view == v and w.target_key in label_of:
-                        writer.add_track(label_of[w.target_key], w.keyframes)
+                        points: list[list[Any]] = list(w.keyframes)
+                        if w.kind == "hand" and outside is not None:
+                            # A joint the solve places outside the image is outside, not
+                            # held at the border where the page had to store it.
+                            points = [list(offimage.mark_outside(kfs, outside[:, p]))
+                                      for p, kfs in enumerate(points)]
+                        writer.add_track(label_of[w.target_key], points)
             self.frames_written += content.num_frames
             step()
-
-
-class CocoExporter(Exporter):
-    """One COCO keypoints document (``annotations.json``) over every view-frame image; hand
-    keypoints from the accepted 2D labels (``options.labels = "2d"``, the default) or the solve
-    projected (``"3d"``); object masks from the solve where there is one."""
-
-    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
-        super().__init__(archive, options, include)
-        self.projected = options.get("labels") == "3d"
-        self._member = archive.open("annotations.json")
-        self._out = self._member.__enter__()
-        self.writer = coco.CocoWriter(
-            self._out, label_source="projected_3d" if self.projected else "annotated_2d",
-            info={"include": include})
-
-    def add(self, content: SequenceContent, step: Step) -> None:
-        hand_key = f"hand:{content.hands[0].index}" if content.hands else None
-        for v, view in enumerate(content.views):
-            merged = content.merged_labels(v, hand_key) if hand_key else None
-            for f in range(content.num_frames):
-                seg = self._seg(content, view, f)
-                self.writer.add_image(
-                    f"{_seq_dir(content)}/{view.serial}/{dexycb.color_file(f)}",
-                    view.camera.width, view.camera.height, seg=seg,
-                    hand=self._hand(content, view, merged, f),
-                    extra={"sequence_id": content.sequence_id, "serial": view.serial,
-                           "frame": f})
-                self.frames_written += 1
-            step()
-
-    def _seg(self, content: SequenceContent, view: ViewContent, frame: int) -> np.ndarray | None:
-        if content.solve is None:
-            return None
-        # The frames of this format are the stored (raw) ones: the meshes are drawn where the
-        # lens shows them, each vertex moved by the distortion.
-        cam = view.camera
-        w2c = invert_pose(cam.T_cam_to_world)
-        meshes = []
-        for verts, faces, value in _world_meshes(self, content, frame):
-            points = transform_points(w2c, verts)
-            z = points[:, 2:3]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                from worker.geometry.cameras import distort_normalized
-                xy = distort_normalized(points[:, :2] / z, cam.dist)
-            meshes.append((np.concatenate([xy * z, z], axis=1), faces, value))
-        return dexycb.render_seg(meshes, cam.K, cam.width, cam.height)
-
-    def _hand(self, content: SequenceContent, view: ViewContent,
-              merged: tuple[np.ndarray, np.ndarray] | None, frame: int
-              ) -> coco.HandKeypoints | None:
-        side = content.hands[0].side if content.hands else None
-        if side not in ("right", "left"):
-            return None
-        if self.projected:
-            if content.solve is None:
-                return None
-            joints = content.solve.arrays["hand_joints"][frame]
-            if not np.isfinite(joints).all():
-                return None
-            return coco.HandKeypoints(view.camera.project(joints), np.ones(21, bool),
-                                      side=side)  # type: ignore[arg-type]
-        if merged is None:
-            return None
-        xy, visible = merged
-        return coco.HandKeypoints(xy[frame], visible[frame], side=side)  # type: ignore[arg-type]
-
-    def finish(self) -> None:
-        self.writer.close()
-        self._member.__exit__(None, None, None)
-
-
-class BopExporter(Exporter):
-    """BOP: one scene per sequence and view (ids in export order, listed in ``scenes.json``),
-    pinhole images, and the models of every object seen."""
-
-    def __init__(self, archive: ExportArchive, options: dict[str, Any], include: str) -> None:
-        super().__init__(archive, options, include)
-        self.scene_id = 0
-        self.scenes: dict[str, Any] = {}
-        self.models: dict[int, bop.ObjectModel] = {}
-
-    def add(self, content: SequenceContent, step: Step) -> None:
-        solve = content.solve
-        assert solve is not None
-        for obj in content.objects:
-            mesh = self.mesh(obj.mesh_key)
-            self.models.setdefault(obj.ycb_id, bop.ObjectModel(obj.ycb_id, mesh.vertices,
-                                                               mesh.faces))
-        models = {o.ycb_id: self.models[o.ycb_id] for o in content.objects}
-        with_frames = bool(self.options.get("frames"))
-        for view in content.views:
-            self.scene_id += 1
-            cam = view.camera
-            writer = bop.BopSceneWriter(self.archive.write, self.scene_id,
-                                        bop.SceneCamera(cam.K, cam.T_cam_to_world, cam.width,
-                                                        cam.height), models)
-            frames = _Frames(self, view) if with_frames else None
-            for f in range(content.num_frames):
-                poses = [(o.ycb_id, solve.arrays["object_poses"][o.index, f])
-                         for o in content.objects
-                         if np.isfinite(solve.arrays["object_poses"][o.index, f]).all()]
-                depth = rgb = None
-                if frames is not None:
-                    rgb = frames.color(f)
-                    raw = frames.depth(f)
-                    depth = (None if raw is None else
-                             cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED))
-                writer.add_image(f, seg_of(self, content, view, f), poses, depth=depth, rgb=rgb)
-                self.frames_written += 1
-            writer.close()
-            self.scenes[f"{self.scene_id:06d}"] = {
-                "sequence_id": content.sequence_id, "subject": content.subject,
-                "sequence": content.name, "serial": view.serial}
-            step()
-
-    def finish(self) -> None:
-        bop.write_models(self.archive.write, self.models.values())
-        self.archive.write("scenes.json", jsonfmt.document_bytes(self.scenes))
-
-
-EXPORTERS: dict[str, type[Exporter]] = {
-    "dexycb": DexYCBExporter, "json": JsonExporter, "cvat": CvatExporter,
-    "coco": CocoExporter, "bop": BopExporter,
-}

@@ -7,12 +7,17 @@ member, or a file). Nothing here reads the database or storage.
 Layout written (BOP's dataset format, ``docs/bop_datasets_format.md`` of bop_toolkit)::
 
     models/models_info.json          write_models: per obj_id min_x/y/z, size_x/y/z, diameter (mm)
+                                     and symmetries_continuous / symmetries_discrete where the
+                                     mesh has them (worker.formats.symmetry)
     models/obj_OOOOOO.ply            write_models: the mesh in mm (binary PLY)
+    test_targets_bop19.json          write_targets: the instances to score (see ``notes``)
     <split>/SSSSSS/scene_camera.json BopSceneWriter.close: per image cam_K, depth_scale,
                                      cam_R_w2c, cam_t_w2c (mm)
     <split>/SSSSSS/scene_gt.json     per image a list of obj_id, cam_R_m2c, cam_t_m2c (mm)
     <split>/SSSSSS/scene_gt_info.json  per image and ground truth bbox_obj, bbox_visib,
-                                     px_count_all, px_count_valid, px_count_visib, visib_fract
+                                     px_count_all, px_count_valid, px_count_visib, visib_fract,
+                                     and our ``dexlabel`` note (pose_valid, pose_confidence,
+                                     pose_flag, provenance) where one is given
     <split>/SSSSSS/mask/IIIIII_GGGGGG.png       full silhouette (0/255), as if nothing occluded it
     <split>/SSSSSS/mask_visib/IIIIII_GGGGGG.png the visible part (0/255)
     <split>/SSSSSS/depth/IIIIII.png  (when a depth image is given) uint16
@@ -37,7 +42,11 @@ y down, the centre of the top-left pixel at (0, 0)):
 - per image, :meth:`BopSceneWriter.add_image`: ``im_id`` (int >= 0, the frame index), ``seg``
   (height, width) uint8 (0 background, object ids, 255 hand), ``object_poses`` a sequence of
   (obj_id, (3, 4) object-to-world pose in metres), optional ``depth`` (height, width) uint16 in
-  depth units (0 = no measurement), optional ``rgb`` encoded image bytes.
+  depth units (0 = no measurement), optional ``rgb`` encoded image bytes, optional ``notes``
+  (per posed object a JSON object). Every posed object is kept in scene_gt; one whose note says
+  ``pose_valid`` false (a pose the solve flagged) is left out of the scene's test targets, so
+  BOP's evaluation does not score estimates against it, as it skips instances less than 10 %
+  visible.
 
 Inside, poses become ``T_m2c = inv(T_cam_to_world) o T_obj_to_world`` and ``T_w2c`` with
 translations in mm. The full silhouette is each object's mesh alone rasterised with K and its
@@ -71,6 +80,11 @@ from worker.synth.raster import NEAR_PLANE, rasterize
 FileSink = Callable[[str, bytes], None]
 
 MM_PER_M = 1000.0
+# Our fields in a scene_gt_info entry (BOP readers keep unknown keys).
+NOTES_KEY = "dexlabel"
+# bop_toolkit's enumerate_test_targets default: an instance is a target from 10 % visible on.
+TARGET_MIN_VISIB_FRACT = 0.1
+TARGETS_FILE = "test_targets_bop19.json"
 EMPTY_BOX = [-1, -1, -1, -1]
 _DIAMETER_BLOCK = 2048  # points per block of the pairwise-distance search, bounds its memory
 
@@ -149,12 +163,23 @@ def model_ply(model: ObjectModel) -> bytes:
 
 
 def write_models(sink: FileSink, models: Iterable[ObjectModel], folder: str = "models") -> None:
-    """Write ``<folder>/models_info.json`` and ``<folder>/obj_OOOOOO.ply`` for every model."""
-    infos: dict[str, dict[str, float]] = {}
+    """Write ``<folder>/models_info.json`` (with each model's symmetries, see
+    :mod:`worker.formats.symmetry`) and ``<folder>/obj_OOOOOO.ply`` for every model."""
+    from worker.formats.symmetry import bop_symmetries
+
+    infos: dict[str, dict[str, Any]] = {}
     for model in sorted(models, key=lambda m: m.obj_id):
-        infos[str(model.obj_id)] = model_info(model)
+        infos[str(model.obj_id)] = {**model_info(model),
+                                    **bop_symmetries(*_checked_model(model))}
         sink(f"{folder}/obj_{model.obj_id:06d}.ply", model_ply(model))
     sink(f"{folder}/models_info.json", _json_bytes(infos))
+
+
+def write_targets(sink: FileSink, targets: Iterable[Mapping[str, int]]) -> None:
+    """``test_targets_bop19.json``: a JSON list of {scene_id, im_id, obj_id, inst_count}."""
+    rows = sorted(targets, key=lambda t: (t["scene_id"], t["im_id"], t["obj_id"]))
+    sink(TARGETS_FILE, ("[\n" + ",\n".join(json.dumps(dict(t)) for t in rows)
+                        + "\n]\n").encode())
 
 
 def _json_bytes(document: Mapping[str, Any]) -> bytes:
@@ -252,12 +277,21 @@ class BopSceneWriter:
         self._scene_camera: dict[str, Any] = {}
         self._scene_gt: dict[str, Any] = {}
         self._scene_gt_info: dict[str, Any] = {}
+        self._scene_id = int(scene_id)
+        # BOP's test targets of this scene: trusted instances visible enough to be scored.
+        self.targets: list[dict[str, int]] = []
         self._closed = False
 
     def add_image(self, im_id: int, seg: np.ndarray,
                   object_poses: Sequence[tuple[int, np.ndarray]], *,
-                  depth: np.ndarray | None = None, rgb: bytes | None = None) -> None:
-        """Record image ``im_id``: its seg, the posed objects, optional depth and colour."""
+                  depth: np.ndarray | None = None, rgb: bytes | None = None,
+                  notes: Sequence[Mapping[str, Any]] | None = None) -> None:
+        """Record image ``im_id``: its seg, the posed objects, optional depth and colour.
+
+        notes: per posed object, JSON fields written under :data:`NOTES_KEY` in its
+        scene_gt_info entry; a note with ``pose_valid`` false keeps the instance in scene_gt
+        and out of :attr:`targets`.
+        """
         if self._closed:
             raise RuntimeError("the BOP scene writer is closed")
         size = (self._camera.height, self._camera.width)
@@ -277,11 +311,22 @@ class BopSceneWriter:
         self._scene_camera[key] = {
             "cam_K": _flat(self._K), "depth_scale": float(self._camera.depth_scale),
             "cam_R_w2c": _flat(self._w2c[:, :3]), "cam_t_w2c": _flat(self._w2c[:, 3] * MM_PER_M)}
+        if notes is not None and len(notes) != len(object_poses):
+            raise ValueError(f"notes must have one entry per posed object ({len(object_poses)}), "
+                             f"got {len(notes)}")
         gts, infos = [], []
+        counts: dict[int, int] = {}
         for gt_id, (obj_id, pose) in enumerate(object_poses):
             gt, info = self._ground_truth(im_id, gt_id, int(obj_id), pose, seg, depth)
+            note = dict(notes[gt_id]) if notes is not None else {}
+            if note:
+                info[NOTES_KEY] = note
+            if note.get("pose_valid", True) and info["visib_fract"] >= TARGET_MIN_VISIB_FRACT:
+                counts[int(obj_id)] = counts.get(int(obj_id), 0) + 1
             gts.append(gt)
             infos.append(info)
+        self.targets.extend({"scene_id": self._scene_id, "im_id": int(im_id), "obj_id": obj_id,
+                             "inst_count": n} for obj_id, n in sorted(counts.items()))
         self._scene_gt[key] = gts
         self._scene_gt_info[key] = infos
         if depth is not None:

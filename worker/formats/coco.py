@@ -17,6 +17,8 @@ Input, per image (one camera view of one frame), passed to :meth:`CocoWriter.add
   centre of the top-left pixel at (0, 0)), which is also COCO's for keypoints.
 - ``extra``: optional JSON-serialisable fields copied into the image record (sequence, camera
   serial, frame index, ...).
+- ``objects``: optional {object value in ``seg``: fields} copied into that object's annotation
+  (the export's pose flag, confidence and provenance); an ``iscrowd`` there replaces the 0.
 
 The writer's ``label_source`` says where the keypoints came from: ``"annotated_2d"`` (the crowd's
 2D labels or their consensus) or ``"projected_3d"`` (the solved 3D joints projected into the
@@ -32,8 +34,8 @@ Output (COCO's data format, keypoint detection):
   [x, y, w, h] and ``area`` from the hand's mask (``seg == 255``) when ``seg`` is given and the
   mask is not empty (bbox as ``pycocotools.mask.toBbox``, area = pixel count, ``segmentation`` =
   the mask's RLE), otherwise from the labelled keypoints (their min/max box, area = w * h, as
-  ``COCO.loadRes`` computes it for keypoint results; no ``segmentation``); ``iscrowd`` 0.
-  An image with ``hand`` None gets no hand annotation.
+  ``COCO.loadRes`` computes it for keypoint results; no ``segmentation``); ``iscrowd`` 0 unless
+  ``hand.extra`` sets it. An image with ``hand`` None gets no hand annotation.
 - object annotation per object value present in ``seg``: ``segmentation`` = compressed COCO RLE
   (``{"size": [h, w], "counts": str}``), ``bbox`` and ``area`` from the mask, ``iscrowd`` 0, and
   ``num_keypoints`` 0 so that COCOeval with ``iouType="keypoints"`` skips objects (it reads
@@ -223,7 +225,8 @@ class CocoWriter:
 
     def add_image(self, file_name: str, width: int, height: int, *,
                   seg: np.ndarray | None = None, hand: HandKeypoints | None = None,
-                  extra: Mapping[str, Any] | None = None) -> int:
+                  extra: Mapping[str, Any] | None = None,
+                  objects: Mapping[int, Mapping[str, Any]] | None = None) -> int:
         """Record one view-frame image with its labels; returns its COCO image id (1-based)."""
         if self._closed:
             raise RuntimeError("the COCO writer is closed")
@@ -248,15 +251,14 @@ class CocoWriter:
         if seg is not None:
             for value in np.unique(seg).tolist():
                 if value not in (0, HAND_SEG_VALUE):
-                    self._add_object(image_id, value, seg == value)
+                    self._add_object(image_id, value, seg == value, (objects or {}).get(value))
         return image_id
 
     def _add_hand(self, image_id: int, hand: HandKeypoints, mask: np.ndarray | None,
                   width: int, height: int) -> None:
         keypoints, num_keypoints = hand_keypoints_field(hand, width, height)
-        record: dict[str, Any] = {**hand.extra, "category_id": HAND_CATEGORY_ID,
-                                  "keypoints": keypoints, "num_keypoints": num_keypoints,
-                                  "iscrowd": 0}
+        record: dict[str, Any] = {"iscrowd": 0, **hand.extra, "category_id": HAND_CATEGORY_ID,
+                                  "keypoints": keypoints, "num_keypoints": num_keypoints}
         if hand.side is not None:
             record["hand_side"] = hand.side
         if mask is not None and mask.any():
@@ -269,10 +271,12 @@ class CocoWriter:
             return  # neither a mask nor a labelled joint: nothing locates the hand
         self._add_annotation(image_id, record)
 
-    def _add_object(self, image_id: int, value: int, mask: np.ndarray) -> None:
+    def _add_object(self, image_id: int, value: int, mask: np.ndarray,
+                    extra: Mapping[str, Any] | None) -> None:
         self._add_annotation(image_id, {
-            "category_id": int(value), "segmentation": encode_rle(mask), "bbox": mask_bbox(mask),
-            "area": float(np.count_nonzero(mask)), "iscrowd": 0, "num_keypoints": 0})
+            "iscrowd": 0, **(extra or {}), "category_id": int(value),
+            "segmentation": encode_rle(mask), "bbox": mask_bbox(mask),
+            "area": float(np.count_nonzero(mask)), "num_keypoints": 0})
 
     def _add_annotation(self, image_id: int, record: dict[str, Any]) -> None:
         self._annotation_count += 1

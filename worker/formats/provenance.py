@@ -53,11 +53,8 @@ def view_states(points: Sequence[Iterable[Any]], num_frames: int) -> list[Proven
         placed = np.isfinite(dense_track(kfs, num_frames).xy).all(axis=1)
         rows = np.flatnonzero(placed)
         np.add.at(votes, (rows, state[rows]), 1)
-    out: list[ProvenanceState] = []
-    for row in votes:
-        # argmax takes the first of equal counts: the state higher in STATES.
-        out.append(STATES[int(np.argmax(row))] if row.any() else STATES[_NONE])
-    return out
+    # argmax takes the first of equal counts: the state higher in STATES.
+    return [STATES[int(np.argmax(row))] if row.any() else STATES[_NONE] for row in votes]
 
 
 def views_decided(states: Sequence[Sequence[str]]) -> list[int]:
