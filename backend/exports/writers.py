@@ -266,16 +266,22 @@ def _dexycb_flag_meta(content: SequenceContent) -> dict[str, Any]:
     """meta.yml's added keys: the flags' reasons and the labels' provenance."""
     solve = content.solve
     assert solve is not None
+    provenance = _provenance(content)
+    hand_flags = solve.hand_flags if content.hands else np.full(content.num_frames, "")
+    return {dexycb_flags.META_LABEL_FLAGS: dexycb_flags.flags_doc(solve.object_flags,
+                                                                  hand_flags),
+            dexycb_flags.META_LABEL_PROVENANCE: dexycb_flags.provenance_doc(
+                provenance["hand"], provenance["objects"])}
+
+
+def _provenance(content: SequenceContent) -> dict[str, Any]:
+    """Per target over the clip: {"views_decided": F ints, "views": {serial: F states}}."""
     serials = [v.serial for v in content.views]
     hand = (dexycb_flags.target_provenance(
         content.provenance_states(f"hand:{content.hands[0].index}"), serials)
         if content.hands else None)
-    objects = [dexycb_flags.target_provenance(
-        content.provenance_states(f"object:{o.index}"), serials) for o in content.objects]
-    hand_flags = solve.hand_flags if content.hands else np.full(content.num_frames, "")
-    return {dexycb_flags.META_LABEL_FLAGS: dexycb_flags.flags_doc(solve.object_flags,
-                                                                  hand_flags),
-            dexycb_flags.META_LABEL_PROVENANCE: dexycb_flags.provenance_doc(hand, objects)}
+    return {"hand": hand, "objects": [dexycb_flags.target_provenance(
+        content.provenance_states(f"object:{o.index}"), serials) for o in content.objects]}
 
 
 def _work_entry(content: SequenceContent, w: Any) -> dict[str, Any]:
@@ -326,6 +332,7 @@ class JsonExporter(Exporter):
                 "betas": arrays["betas"].tolist(),
                 "frames": [frame_payload(arrays, f) for f in range(content.num_frames)],
                 "consensus": consensus(content),
+                "provenance": _provenance(content),
             }
         document = jsonfmt.sequence_document(
             {"id": content.sequence_id, "subject": content.subject, "name": content.name,
