@@ -107,8 +107,8 @@ def _objects(out_label: Any, truth_label: Any, models: list[np.ndarray],
         add = float(np.linalg.norm(moved - (vertices @ true[:, :3].T + true[:, 3]), axis=1).mean())
         key = "trusted" if valid[o] else "flagged"
         acc["add"][o][key].append(add * 1000)
-        world = moved @ T[:, :3].T + T[:, 3]
-        acc["world"].setdefault((o, frame), []).append(world)
+        world = np.concatenate([T[:, :3] @ R, (T[:, :3] @ pose[:, 3] + T[:, 3])[:, None]], axis=1)
+        acc["world"].setdefault((o, frame), []).append((world, moved @ T[:, :3].T + T[:, 3]))
 
 
 def _sequence(out: Path, truth: Path, seq: str, max_mm: float) -> dict[str, Any]:
@@ -133,13 +133,14 @@ def _sequence(out: Path, truth: Path, seq: str, max_mm: float) -> dict[str, Any]
     flags = (meta.get(dexycb_flags.META_LABEL_FLAGS) or {}).get("hand") or {}
     spread_mm, spread_deg = 0.0, 0.0
     for rows in objects["world"].values():
-        stack = np.stack(rows)
-        spread_mm = max(spread_mm, float(np.linalg.norm(stack - stack.mean(0), axis=-1).max()))
-        for other in rows[1:]:
-            A, B = rows[0] - rows[0].mean(0), other - other.mean(0)
-            u, _, vt = np.linalg.svd(A.T @ B)
-            cos = (np.trace(u @ vt) - 1) / 2
-            spread_deg = max(spread_deg, float(np.degrees(np.arccos(np.clip(cos, -1, 1)))))
+        stack = np.stack([pose for pose, _ in rows])
+        spread_mm = max(spread_mm, float(np.linalg.norm(
+            np.stack([v for _, v in rows]) - np.stack([v for _, v in rows]).mean(0),
+            axis=-1).max()))
+        for other in stack[1:]:
+            # The angle between two rotations from their Frobenius distance (stable near 0).
+            d = np.linalg.norm(other[:, :3] - stack[0][:, :3]) / (2 * np.sqrt(2))
+            spread_deg = max(spread_deg, float(np.degrees(2 * np.arcsin(min(d, 1.0)))))
     per_frame = {f: round(float(np.mean(v)), 3) for f, v in sorted(hand["per_frame"].items())}
     return {
         "sequence": seq,

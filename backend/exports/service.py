@@ -224,8 +224,9 @@ def run_export(fmt: str, sequence_ids: list[int], include: str, options: dict[st
         exporter = EXPORTERS[fmt](archive, options, include)
         for sequence_id in sequence_ids:
             with session_scope() as session:
-                content = load_sequence(session, sequence_id, include,
-                                        with_solve=fmt != "cvat")
+                # CVAT needs no solve, but where there is one it says which joints left the
+                # image (exported outside).
+                content = load_sequence(session, sequence_id, include)
             fetch_solve(content)
             exporter.add(content, step)
         exporter.finish()

@@ -127,7 +127,7 @@ def check_coco(archive: zipfile.ZipFile, tmp: Path, sequence_id: int) -> None:
 # BOP
 
 _BOP_FILE = re.compile(
-    r"^(models/(models_info\.json|obj_\d{6}\.ply)|scenes\.json|"
+    r"^(models/(models_info\.json|obj_\d{6}\.ply)|scenes\.json|test_targets_bop19\.json|"
     r"test/\d{6}/(scene_camera\.json|scene_gt\.json|scene_gt_info\.json|"
     r"(mask|mask_visib)/\d{6}_\d{6}\.png|rgb/\d{6}\.jpg|depth/\d{6}\.png))$")
 _INFO_KEYS = {"bbox_obj", "bbox_visib", "px_count_all", "px_count_valid", "px_count_visib",
@@ -197,7 +197,10 @@ def _check_bop_scene(archive: zipfile.ZipFile, root: str, cam: dict[str, Any],
         assert sorted(g["obj_id"] for g in gt[im]) == sorted(ycb for _, ycb in seen)
         assert len(gt_info[im]) == len(gt[im])
         for g_id, (g, info) in enumerate(zip(gt[im], gt_info[im], strict=True)):
-            assert set(g) == {"obj_id", "cam_R_m2c", "cam_t_m2c"} and set(info) == _INFO_KEYS
+            assert set(g) == {"obj_id", "cam_R_m2c", "cam_t_m2c"}
+            assert set(info) == _INFO_KEYS | {"dexlabel"}
+            assert set(info["dexlabel"]) == {"pose_valid", "pose_confidence", "pose_flag",
+                                             "provenance"}
             R = np.asarray(g["cam_R_m2c"]).reshape(3, 3)
             t_mm = np.asarray(g["cam_t_m2c"])
             assert 100 < t_mm[2] < 5000, f"cam_t_m2c must be millimetres, got {t_mm}"

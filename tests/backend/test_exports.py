@@ -7,6 +7,8 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+
+import yaml
 from pathlib import Path
 
 import jsonschema
@@ -31,7 +33,7 @@ from backend.solve.service import current_run
 from backend.storage import get_storage
 from tests.backend import export_checks
 from tests.backend.test_solve_api import _solve, approved, sequence  # noqa: F401
-from worker.formats import dexycb, jsonfmt
+from worker.formats import dexycb, dexycb_flags, jsonfmt
 from worker.geometry.transforms import invert_pose, transform_points
 
 pytestmark = pytest.mark.slow
@@ -86,7 +88,9 @@ def _check_labels(root: Path, seq_id: int, cameras: dict[str, dict]) -> None:
             lab = np.load(seq_dir / serial / dexycb.labels_file(f))
             assert lab["seg"].dtype == np.uint8 and lab["seg"].shape == cam["size"][::-1]
             if not labelled[f]:
-                assert (lab["joint_3d"] == -1).all() and (lab["pose_m"] == -1).all()
+                # DexYCB's toolkit: joint_3d and joint_2d all -1, pose_m all 0.
+                assert (lab["joint_3d"] == -1).all() and (lab["joint_2d"] == -1).all()
+                assert (lab["pose_m"] == 0).all()
                 continue
             joints = transform_points(w2c, arrays["hand_joints"][f])
             assert np.array_equal(lab["joint_3d"][0], joints.astype(np.float32))
@@ -298,3 +302,112 @@ def test_a_failing_export_leaves_no_archive_and_says_why(
     assert result.exit_code == 1 and "the export failed" in result.output, result.output
     assert "nothing was written at" in result.output and "Traceback" not in result.output
     assert list((tmp_path / "out").iterdir()) == []
+
+
+HAND_REASON = "hand frame not pinned down: interpolated in every view"
+OBJECT_REASON = "landmarks 14.0 px off in 2 views"
+
+
+def _flag_stored_result(sequence_id: int, hand_frame: int, object_frame: int
+                        ) -> dict[str, np.ndarray]:
+    """Rewrites the current run's stored result with the hand flagged at ``hand_frame`` and
+    object 0 at ``object_frame`` (as the solve writes its flags); returns the arrays."""
+    with session_scope() as s:
+        run = current_run(s, sequence_id)
+        assert run is not None and run.result_key
+        key = run.result_key
+    arrays = decode_result(get_storage().get_bytes(key))
+    frames = len(arrays["labelled"])
+    assert arrays["labelled"][hand_frame]
+    hand_flags = np.full(frames, "", dtype=object)
+    hand_flags[hand_frame] = HAND_REASON
+    arrays["hand_flags"] = hand_flags.astype(str)
+    arrays["hand_confidence"] = np.where(hand_flags == "", 0.9, 0.1)
+    object_flags = arrays["object_flags"].astype(object)
+    object_flags[0, object_frame] = OBJECT_REASON
+    arrays["object_flags"] = object_flags.astype(str)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    get_storage().put_bytes(key, buf.getvalue())
+    return arrays
+
+
+def _check_dexycb_flags(root: Path, arrays: dict[str, np.ndarray], ycb_ids: list[int],
+                        hand_frame: int, object_frame: int) -> None:
+    seq_dir = next(root.glob(dexycb.META_GLOB)).parent
+    meta = yaml.safe_load((seq_dir / dexycb.META_FILE).read_text())
+    flags = meta[dexycb_flags.META_LABEL_FLAGS]
+    assert {int(f): r for f, r in flags["hand"].items()} == {hand_frame: HAND_REASON}
+    assert {int(f): {int(o): r for o, r in v.items()} for f, v in flags["pose_y"].items()} == {
+        object_frame: {0: OBJECT_REASON}}
+    provenance = meta[dexycb_flags.META_LABEL_PROVENANCE]
+    assert len(provenance["hand"]["views_decided"]) == len(arrays["labelled"])
+    assert max(provenance["hand"]["views_decided"]) == len(provenance["hand"]["views"]) == 3
+    pose = np.load(seq_dir / dexycb.POSE_FILE)
+    assert (pose["pose_m"][hand_frame] == 0).all() and pose["pose_m_valid"][hand_frame, 0] == 0
+    assert pose["pose_y_valid"][object_frame, 0] == 0 and pose["pose_y_valid"].sum() == (
+        pose["pose_y_valid"].size - 1)
+    for serial in meta[dexycb.META_SERIALS]:
+        w2c = invert_pose(np.asarray(yaml.safe_load(
+            (root / dexycb.extrinsics_file(meta[dexycb.META_EXTRINSICS])).read_text()
+        )[dexycb.EXTRINSICS][serial]).reshape(3, 4))
+        hand = np.load(seq_dir / serial / dexycb.labels_file(hand_frame))
+        assert (hand["joint_3d"] == -1).all() and (hand["joint_2d"] == -1).all()
+        assert (hand["pose_m"] == 0).all()
+        assert (hand["seg"] == dexycb.HAND_SEG_VALUE).any()  # the mesh stays in seg
+        lab = np.load(seq_dir / serial / dexycb.labels_file(object_frame))
+        # The flagged row is the solved pose (not -1), the flag beside it.
+        solved = np.concatenate([w2c[:, :3] @ arrays["object_poses"][0, object_frame][:, :3],
+                                 (w2c[:, :3] @ arrays["object_poses"][0, object_frame][:, 3]
+                                  + w2c[:, 3])[:, None]], axis=1)
+        np.testing.assert_allclose(lab["pose_y"][0], solved, atol=2e-6)
+        assert lab["pose_y_valid"].tolist() == [0, 1]
+        assert (lab["seg"] == ycb_ids[0]).any()
+
+
+def test_flagged_values_stay_beside_their_flags_in_every_format(
+    client: TestClient, admin_headers: dict, approved: int, tmp_path: Path  # noqa: F811
+) -> None:
+    _solve(client, admin_headers, approved, {"optimiser": "default"})
+    arrays = _flag_stored_result(approved, hand_frame=2, object_frame=3)
+    with session_scope() as s:
+        ycb_ids = [o.ycb_id for o in s.get_one(Sequence, approved).objects]
+    state = _export(client, admin_headers, {"format": "dexycb", "sequences": [approved]})
+    root = tmp_path / "dexycb"
+    _download(client, admin_headers, state).extractall(root)
+    _check_dexycb_flags(root, arrays, ycb_ids, 2, 3)
+
+    state = _export(client, admin_headers, {"format": "coco", "sequences": [approved],
+                                            "options": {"labels": "3d"}})
+    document = json.loads(_download(client, admin_headers, state).read("annotations.json"))
+    frame_of = {i["id"]: i["frame"] for i in document["images"]}
+    flagged = [a for a in document["annotations"]
+               if a["category_id"] == ycb_ids[0] and frame_of[a["image_id"]] == 3]
+    assert flagged and all(a["iscrowd"] == 1 and a["pose_flag"] == OBJECT_REASON
+                           and a["pose_valid"] is False for a in flagged)
+    hands = [a for a in document["annotations"] if a["category_id"] == 255]
+    assert {frame_of[a["image_id"]] for a in hands if a["iscrowd"]} == {2}
+    assert all(a["hand_flag"] == (HAND_REASON if frame_of[a["image_id"]] == 2 else None)
+               and "views_decided" in a["provenance"] for a in hands)
+
+    state = _export(client, admin_headers, {"format": "bop", "sequences": [approved]})
+    archive = _download(client, admin_headers, state)
+    targets = json.loads(archive.read("test_targets_bop19.json"))
+    for scene in json.loads(archive.read("scenes.json")):
+        gt = json.loads(archive.read(f"test/{scene}/scene_gt.json"))["3"]
+        info = json.loads(archive.read(f"test/{scene}/scene_gt_info.json"))["3"]
+        [note] = [i["dexlabel"] for g, i in zip(gt, info, strict=True)
+                  if g["obj_id"] == ycb_ids[0]]
+        assert note["pose_valid"] is False and note["pose_flag"] == OBJECT_REASON
+        assert not [t for t in targets if (t["scene_id"], t["im_id"], t["obj_id"]) == (
+            int(scene), 3, ycb_ids[0])]
+    assert any(t["obj_id"] == ycb_ids[0] and t["im_id"] != 3 for t in targets)
+
+    state = _export(client, admin_headers, {"format": "json", "sequences": [approved]})
+    archive = _download(client, admin_headers, state)
+    document = json.loads(archive.read(archive.namelist()[0]))
+    jsonschema.validate(document, jsonfmt.schema())
+    frames = document["solve"]["frames"]
+    assert [f["hand_flag"] for f in frames].count(HAND_REASON) == 1 and frames[2]["hand_flag"]
+    assert frames[3]["objects"][0]["flag"] == OBJECT_REASON and frames[3]["objects"][0]["pose"]
+    assert len(document["solve"]["provenance"]["hand"]["views_decided"]) == len(frames)
