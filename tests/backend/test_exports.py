@@ -7,13 +7,12 @@ from __future__ import annotations
 import io
 import json
 import zipfile
-
-import yaml
 from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pytest
+import yaml
 from fastapi.testclient import TestClient
 from sqlalchemy import select
 from typer.testing import CliRunner
@@ -28,7 +27,7 @@ from backend.config import get_settings
 from backend.db import session_scope
 from backend.jobs.models import Job
 from backend.jobs.service import execute
-from backend.solve.results import decode_result
+from backend.solve.results import decode_result, hand_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage
 from tests.backend import export_checks
@@ -411,3 +410,16 @@ def test_flagged_values_stay_beside_their_flags_in_every_format(
     assert [f["hand_flag"] for f in frames].count(HAND_REASON) == 1 and frames[2]["hand_flag"]
     assert frames[3]["objects"][0]["flag"] == OBJECT_REASON and frames[3]["objects"][0]["pose"]
     assert len(document["solve"]["provenance"]["hand"]["views_decided"]) == len(frames)
+
+
+def test_hand_trust_reads_results_without_hand_flags_as_trusted() -> None:
+    arrays = {"labelled": np.array([True, True, False])}
+    confidence, flags = hand_trust(arrays)
+    assert confidence.tolist() == [1.0, 1.0, 1.0] and flags.tolist() == ["", "", ""]
+    arrays.update(hand_confidence=np.array([0.9, 0.1, 0.0]),
+                  hand_flags=np.array(["", "interpolated in every view", ""]))
+    confidence, flags = hand_trust(arrays)
+    assert confidence.tolist() == [0.9, 0.1, 0.0]
+    assert flags.tolist() == ["", "interpolated in every view", ""]
+    arrays["hand_flags"] = np.array(["", ""])  # another length: not this result's
+    assert hand_trust(arrays)[1].tolist() == ["", "", ""]

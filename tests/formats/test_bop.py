@@ -23,6 +23,7 @@ from worker.formats.bop import (
     SceneCamera,
     model_info,
     write_models,
+    write_targets,
 )
 from worker.formats.dexycb import YCB_CLASSES
 from worker.geometry.mesh_io import read_mesh
@@ -237,6 +238,41 @@ class TestBopSceneWriter:
             writer.add_image(0, seg, poses)
 
 
+class TestFlaggedPoses:
+    def test_a_flagged_pose_stays_in_scene_gt_with_a_note_and_leaves_the_targets(self) -> None:
+        files: dict[str, bytes] = {}
+        scene = _scene(0.0)
+        writer = BopSceneWriter(files.__setitem__, 2, SceneCamera(K, T_CAM_TO_WORLD, WIDTH,
+                                                                   HEIGHT), MODELS)
+        notes = [{"pose_valid": True, "pose_flag": None},
+                 {"pose_valid": False, "pose_flag": "depth sees through 80% of it"},
+                 {"pose_valid": True, "pose_flag": None}]
+        writer.add_image(5, scene["seg"], [(k, scene["world"][k]) for k in (NEAR, FAR, CUT)],
+                         notes=notes)
+        writer.close()
+        gt = json.loads(files["test/000002/scene_gt.json"])["5"]
+        info = json.loads(files["test/000002/scene_gt_info.json"])["5"]
+        assert [g["obj_id"] for g in gt] == [NEAR, FAR, CUT]
+        assert [i["dexlabel"] for i in info] == notes
+        assert info[1]["visib_fract"] > 0.1  # visibility stays the truth
+        # bop_toolkit's rule for targets: visib_fract >= 0.1, here also trusted.
+        expected = [k for k, i in zip((NEAR, FAR, CUT), info, strict=True)
+                    if i["visib_fract"] >= 0.1 and i["dexlabel"]["pose_valid"]]
+        assert sorted(t["obj_id"] for t in writer.targets) == sorted(expected)
+        assert FAR not in expected and NEAR in expected
+        assert all((t["scene_id"], t["im_id"], t["inst_count"]) == (2, 5, 1)
+                   for t in writer.targets)
+        write_targets(files.__setitem__, writer.targets)
+        assert json.loads(files["test_targets_bop19.json"]) == writer.targets
+
+    def test_notes_must_match_the_posed_objects(self) -> None:
+        scene = _scene(0.0)
+        writer = BopSceneWriter(lambda p, d: None, 2, SceneCamera(K, T_CAM_TO_WORLD, WIDTH,
+                                                                   HEIGHT), MODELS)
+        with pytest.raises(ValueError, match="one entry per posed object"):
+            writer.add_image(0, scene["seg"], [(NEAR, scene["world"][NEAR])], notes=[])
+
+
 class TestModels:
     def test_models_info_gives_box_extents_and_diameter_in_mm(self, exported: Any) -> None:
         files, _ = exported
@@ -250,6 +286,15 @@ class TestModels:
             np.testing.assert_allclose([entry["size_x"], entry["size_y"], entry["size_z"]],
                                        2 * half_mm)
             assert entry["diameter"] == pytest.approx(2 * np.linalg.norm(half_mm))
+
+    def test_models_info_lists_the_symmetries_of_each_box(self, exported: Any) -> None:
+        files, _ = exported
+        infos = json.loads(files["models/models_info.json"])
+        # Boxes with three different sides: three half turns; the cube has more.
+        assert len(infos[str(NEAR)]["symmetries_discrete"]) == 3
+        assert len(infos[str(FAR)]["symmetries_discrete"]) == 3
+        assert len(infos[str(CUT)]["symmetries_discrete"]) > 3
+        assert all("symmetries_continuous" not in i for i in infos.values())
 
     def test_diameter_of_a_flat_model_is_searched_over_all_points(self) -> None:
         square = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]], dtype=float)

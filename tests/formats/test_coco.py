@@ -197,6 +197,38 @@ class TestCocoWriter:
             assert ann["iscrowd"] == 0 and ann["num_keypoints"] == 0
             assert mask_utils.toBbox(coco.annToRLE(ann)).tolist() == ann["bbox"]
 
+    def test_a_flagged_object_stays_as_a_crowd_region_that_cocoeval_ignores(
+            self, tmp_path: Path) -> None:
+        images = _sample_images(2)[:1]
+        flag = {"pose_valid": False, "pose_flag": "landmarks 14 px off", "iscrowd": 1}
+        images[0]["objects"] = {BOX: flag, MUG: {"pose_valid": True, "pose_flag": None}}
+        path = tmp_path / "coco.json"
+        path.write_text(json.dumps(_write(images)))
+        coco = COCO(str(path))
+        (box,) = coco.loadAnns(coco.getAnnIds(catIds=[BOX]))
+        (mug,) = coco.loadAnns(coco.getAnnIds(catIds=[MUG]))
+        assert box["iscrowd"] == 1 and box["pose_flag"] == "landmarks 14 px off"
+        assert mug["iscrowd"] == 0 and mug["pose_valid"] is True
+        np.testing.assert_array_equal(coco.annToMask(box), images[0]["seg"] == BOX)
+        # A detection on the flagged box is neither a hit nor a false positive; a missed
+        # crowd region costs nothing: AP stays 1 with the mug alone detected.
+        for detections in ([mug], [mug, box]):
+            results = coco.loadRes([dict(a, score=1.0, iscrowd=0) for a in detections])
+            evaluation = COCOeval(coco, results, iouType="segm")
+            evaluation.params.catIds = [MUG, BOX]
+            evaluation.evaluate()
+            evaluation.accumulate()
+            evaluation.summarize()
+            assert evaluation.stats[0] == pytest.approx(1.0)
+
+    def test_a_hand_flag_can_make_its_annotation_a_crowd_region(self) -> None:
+        image = _sample_images(1)[0]
+        hand = image["hand"]
+        image["hand"] = HandKeypoints(hand.xy, hand.visible, side="right",
+                                      extra={"iscrowd": 1, "hand_flag": "not pinned down"})
+        (ann,) = [a for a in _write([image])["annotations"] if a["category_id"] == 255]
+        assert ann["iscrowd"] == 1 and ann["hand_flag"] == "not pinned down"
+
     def test_images_keep_ids_names_and_extra_fields(self) -> None:
         document = _write(_sample_images(3))
         assert [i["id"] for i in document["images"]] == [1, 2, 3]
