@@ -391,7 +391,7 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     careful (a blind acceptor's view is rejected, so it does not count); each assignment is
     created first so that its id draws its check cells (with the instance's key), then its
     tracks are saved with their sources."""
-    from qc import _clear, _fresh_setup, _run_qc, _setup
+    from qc import _clear, _fresh_setup, _of_kind, _run_qc, _setup
 
     from backend.annotation.models import Assignment, Track
     from backend.config import get_settings
@@ -401,7 +401,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     from worker.tracking.checks import check_key
 
     _fresh_setup("assist-qc")
-    sequence_id, tasks = _setup(capture, "hand")
+    sequence_id, every_task = _setup(capture)
+    tasks = _of_kind(every_task, "hand")
     task_of = {t["serial"]: t for t in tasks}
     key = check_key(get_settings().signing_key)
     rng = np.random.default_rng(seed)
