@@ -14,7 +14,8 @@ is a failure. scale_db fills a database of its own on the machine's PostgreSQL
 (dexlabel_bench_runs_PID, dropped at the end).
 
 Prints one line per bench as it ends, then one JSON object on its last line: {"ok", "seconds",
-"load" (1/5/15-minute load average at the start and the end), "commit", "benches": {name:
+"cpu_s" (CPU seconds of the run and the benches it waited for), "load" (1/5/15-minute load
+average at the start and the end), "commit", "benches": {name:
 {"ok", "seconds", "command", "problems"} or {"skipped"}}}. Exits 1 if any bench failed.
 
 About 5-6 minutes on this 2-core machine when it is quiet (much longer under load: each
@@ -28,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -138,10 +140,19 @@ def main() -> None:
         print(f"smoke {name}: {json.dumps(results[name])}", flush=True)
     ok = all(r["ok"] for r in results.values())
     print(json.dumps({"ok": ok, "seconds": round(time.perf_counter() - started, 1),
+                      "cpu_s": _cpu_s(),
                       "load": {"start": load_start,
                                "end": [round(x, 2) for x in os.getloadavg()]},
                       "commit": commit(), "benches": results}))
     sys.exit(0 if ok else 1)
+
+
+def _cpu_s() -> float:
+    """CPU seconds (user + system) of this run and every bench process it waited for: what
+    the run costs whatever else the machine is doing."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return round(own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime, 1)
 
 
 if __name__ == "__main__":
