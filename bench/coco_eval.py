@@ -171,6 +171,9 @@ def evaluate(export_path: Path, gt_path: Path) -> dict[str, Any]:
     sigmas = np.asarray(exported.dataset["info"]["oks_sigmas"])
     hands = [dict(a, score=1.0) for a in exported.loadAnns(exported.getAnnIds(
         catIds=[HAND_CATEGORY_ID])) if a["num_keypoints"] > 0]
+    if not hands:
+        raise SystemExit("no hand task has accepted work, so the export has no hand to score: "
+                         "give the crowd more --rounds or --views")
     evaluation = COCOeval(gt, gt.loadRes(hands), iouType="keypoints")
     evaluation.params.kpt_oks_sigmas = sigmas
     evaluation.params.catIds = [HAND_CATEGORY_ID]
@@ -198,7 +201,8 @@ def evaluate(export_path: Path, gt_path: Path) -> dict[str, Any]:
 
 
 EPILOG = ("Default run here (2 shared cores): about 20 s (4 x 36) quiet, 1 minute at 8 views;"
-          " more under load. Short: --views 2 --frames 6 --rounds 1.")
+          " more under load. Short: --views 4 --frames 6 --rounds 2 (at 2 views QC may accept"
+          " nothing).")
 
 
 def main() -> None:

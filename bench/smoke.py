@@ -55,7 +55,7 @@ QUICK: dict[str, Run] = {
                    "proposals.assisted.between.mean_px", "proposals.assisted.proposed",
                    "timing_ms.pure", "timing_ms.endpoint", "qc.blind_flagged_rate",
                    "qc.careful_flagged_rate", "targets")),
-    "coco_eval": Run("coco_eval", ("--views", "2", "--frames", "6", "--rounds", "1"),
+    "coco_eval": Run("coco_eval", ("--views", "4", "--frames", "12", "--rounds", "3"),
                      ("AP", "AP50", "AP75", "mean_px_error", "crowd", "seconds")),
     "drills": Run("drills", ("kill-qc",), ("kill_to_done_s", "attempts", "payments"),
                   equal={"drill": "kill-qc", "ok": True, "assignments_paid_twice": 0},
