@@ -921,7 +921,7 @@ def run(url: str, sequences: int, keep: bool, repeat: int, queries: bool,
 
 EPILOG = ("Default run here (2 shared cores): about 4-8 minutes (the 1,000-sequence fill takes"
           " 2-4, then the timings); needs PostgreSQL. Short: --sequences 2 --repeat 1"
-          " (seconds), --no-queries.")
+          " (under a minute), --no-queries.")
 
 
 def main(argv: Sequence[str] | None = None) -> None:
