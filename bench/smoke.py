@@ -8,8 +8,8 @@ repository root, on small synthetic captures made once for the run (4 views x 12
 be a JSON object holding the keys listed here (dotted paths into nested objects, present and
 not null; a few values must equal what is given, e.g. a drill's "ok").
 
-A bench that needs a tool the machine lacks (annotate: Chromium; scale_db and drills:
-PostgreSQL) is skipped, except in CI (CI=true or DEXLABEL_TEST_REQUIRE_SERVICES=1), where that
+A bench that needs a tool the machine lacks (annotate: Chromium; scale_db: PostgreSQL) is
+skipped, except in CI (CI=true or DEXLABEL_TEST_REQUIRE_SERVICES=1), where that
 is a failure. scale_db fills a database of its own on the machine's PostgreSQL
 (dexlabel_bench_runs_PID, dropped at the end).
 
@@ -58,8 +58,7 @@ QUICK: dict[str, Run] = {
     "coco_eval": Run("coco_eval", ("--views", "4", "--frames", "12", "--rounds", "3"),
                      ("AP", "AP50", "AP75", "mean_px_error", "crowd", "seconds")),
     "drills": Run("drills", ("kill-qc",), ("kill_to_done_s", "attempts", "payments"),
-                  equal={"drill": "kill-qc", "ok": True, "assignments_paid_twice": 0},
-                  needs=("postgres",)),
+                  equal={"drill": "kill-qc", "ok": True, "assignments_paid_twice": 0}),
     "export": Run("export", ("--sequences", "2", "--frames", "4", "--views", "2"),
                   ("runs.dexycb_2.seconds", "runs.bop_2.seconds", "runs.coco_2.frames_per_s",
                    "runs.cvat_2.seconds",
