@@ -18,8 +18,9 @@ Prints one line per bench as it ends, then one JSON object on its last line: {"o
 average at the start and the end), "commit", "benches": {name:
 {"ok", "seconds", "command", "problems"} or {"skipped"}}}. Exits 1 if any bench failed.
 
-About 5-6 minutes on this 2-core machine when it is quiet (much longer under load: each
-bench's time scales with the machine's load average).
+Length here (2 cores): 15.6 minutes at a load average of about 20 (other people's work on the
+cores), of which 296 CPU seconds were the run's own; on a quiet machine about 5-6 minutes (an
+estimate: that CPU time plus the kill-qc drill's waits, not a measurement).
 
     python bench/smoke.py [--only assist,qc] [--list]
 """
@@ -109,7 +110,8 @@ def commit() -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
-        epilog="About 5-6 minutes here on a quiet machine; --only runs a few benches.")
+        epilog="About 5-6 minutes here on a quiet machine (15.6 at a load average of 20); "
+               "--only runs a few benches.")
     parser.add_argument("--only", default="", help="comma-separated bench names")
     parser.add_argument("--list", action="store_true", help="print the commands, run nothing")
     args = parser.parse_args()
