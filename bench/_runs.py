@@ -10,8 +10,10 @@ repository root and returns what a summary reports.
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -42,10 +44,13 @@ class Run:
 
 
 class Context:
-    """What runs share: small captures (made once, on first use) and a scratch folder."""
+    """What runs share: small captures (made once, on first use) and a scratch folder
+    (removed at exit unless DEXLABEL_BENCH_KEEP is set)."""
 
     def __init__(self, work: Path | None = None) -> None:
         self.work = work or Path(tempfile.mkdtemp(prefix="dexlabel-bench-runs-"))
+        if work is None and not os.environ.get("DEXLABEL_BENCH_KEEP"):
+            atexit.register(shutil.rmtree, self.work, ignore_errors=True)
         self._made: dict[str, Path] = {}
 
     def capture(self, name: str, frames: int, views: int = 4) -> Path:
@@ -76,12 +81,9 @@ def missing_tool(run: Run) -> str | None:
     """Why ``run`` cannot run on this machine, or None."""
     if "chromium" in run.needs and not Path(CHROMIUM).exists():
         return f"Chromium is not installed at {CHROMIUM}"
-    if "postgres" in run.needs:
-        import shutil
-
-        if shutil.which("pg_isready") is None or subprocess.run(
-                ["pg_isready", "-q", "-h", "127.0.0.1", "-p", "5432"]).returncode != 0:
-            return "PostgreSQL is not answering on 127.0.0.1:5432"
+    if "postgres" in run.needs and (shutil.which("pg_isready") is None or subprocess.run(
+            ["pg_isready", "-q", "-h", "127.0.0.1", "-p", "5432"]).returncode != 0):
+        return "PostgreSQL is not answering on 127.0.0.1:5432"
     return None
 
 
