@@ -391,7 +391,7 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     careful (a blind acceptor's view is rejected, so it does not count); each assignment is
     created first so that its id draws its check cells (with the instance's key), then its
     tracks are saved with their sources."""
-    from qc import _clear, _fresh_setup, _run_qc, _setup
+    from qc import _clear, _fresh_setup, _of_kind, _run_qc, _setup
 
     from backend.annotation.models import Assignment, Track
     from backend.config import get_settings
@@ -401,7 +401,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     from worker.tracking.checks import check_key
 
     _fresh_setup("assist-qc")
-    sequence_id, tasks = _setup(capture, "hand")
+    sequence_id, every_task = _setup(capture)
+    tasks = _of_kind(every_task, "hand")
     task_of = {t["serial"]: t for t in tasks}
     key = check_key(get_settings().signing_key)
     rng = np.random.default_rng(seed)
@@ -502,8 +503,15 @@ def _capture_for(given: Path | None, work: Path, seed: int, frames: int, views: 
     return out.resolve()
 
 
+EPILOG = ("Default run here (2 shared cores): 6-12 minutes (two 4-view captures made, 72 and"
+          " 24 frames; two solves; 5 QC crowds); --views 8 about 10-15 minutes. Short:"
+          " --capture DIR --fast-capture DIR (reuse captures), --solve none, --draws 1, --runs"
+          " 1, --skip-qc; smallest: --frames 12 --fast-frames 6 --draws 1 --runs 1 --solve none"
+          " (about 30 s quiet).")
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=EPILOG)
     parser.add_argument("--capture", type=Path, help="a synthetic capture (default: generate)")
     parser.add_argument("--fast-capture", type=Path,
                         help="the same scene at --fast-frames (default: generate)")

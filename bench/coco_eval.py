@@ -6,7 +6,8 @@ the mixed profile (backend.crowd.simulate's profiles and ground-truth points, su
 annotation page stores them) per hand task still without accepted work, then the product's QC
 job scores and decides them all; after the rounds the demo admin approves, for each task still
 without accepted work, the assignment QC left for review with the smallest error
-(backend.demo.approve_reviewed). The accepted labels are exported as COCO (the product's export,
+(picked as backend.demo.approve_reviewed picks it; decided as direct-link work, which has no
+marketplace submission to pay). The accepted labels are exported as COCO (the product's export,
 ``labels=2d``), and the capture's ground truth (per camera ``labels_*.npz`` joint_2d, raw image
 pixels, with the visibility the synthetic annotators see: backend.crowd.simulate's
 hand_visibility) is written by the same COCO writer the same way (same images, no seg, so both
@@ -89,7 +90,6 @@ def _submit(task: dict[str, Any], profile: str, worker: str, truth: Any,
 def crowd(sequence_id: int, capture: Path, rounds: int, seed: int) -> dict[str, Any]:
     """Rounds of simulated workers and QC, then the admin's approvals; who accepted what."""
     from backend.crowd.simulate import CaptureTruth
-    from backend.demo import approve_reviewed
     from backend.quality.flows import run_qc
     from worker.synth.annotators import draw_profiles
 
@@ -107,10 +107,40 @@ def crowd(sequence_id: int, capture: Path, rounds: int, seed: int) -> dict[str, 
             _submit(task, profile, f"{profile}-r{round_}-{i}-{task['id']}", truth, rng)
         run_qc(sequence_id, "hand:0")
     by_qc = len(tasks) - len(_unaccepted(tasks))
-    by_admin = approve_reviewed(sequence_id)
+    by_admin = _approve_reviewed(sequence_id)
     return {"hand_tasks": len(tasks), "submissions": dict(profiles), "accepted_by_qc": by_qc,
             "approved_by_admin": by_admin, "without_labels": len(_unaccepted(tasks)),
             "accepted_profiles": dict(Counter(w.split("-")[0] for w in _accepted_workers()))}
+
+
+def _approve_reviewed(sequence_id: int) -> int:
+    """The admin's approvals of direct-link work (no marketplace submission to pay): for each
+    hand task still without accepted work, the assignment QC left for review (not
+    provisional) with the smallest median error, as backend.demo.approve_reviewed picks it;
+    the number approved."""
+    from _qc_pipeline import _admin_decides
+    from sqlalchemy import select
+
+    from backend.annotation.models import Assignment
+    from backend.db import session_scope
+    from backend.quality.models import QCReport
+
+    open_ids = {t["id"] for t in _unaccepted(_hand_tasks(sequence_id))}
+    with session_scope() as session:
+        rows = session.execute(
+            select(QCReport.task_id, QCReport.assignment_id, QCReport.metrics)
+            .join(Assignment, Assignment.id == QCReport.assignment_id)
+            .where(QCReport.sequence_id == sequence_id, QCReport.outcome == "review",
+                   QCReport.provisional.is_(False), Assignment.status == "submitted")).all()
+    best: dict[int, tuple[float, int]] = {}
+    for task_id, assignment_id, metrics in rows:
+        error = (metrics or {}).get("median_error_px")
+        key = (float("inf") if error is None else float(error), assignment_id)
+        if task_id in open_ids and (task_id not in best or key < best[task_id]):
+            best[task_id] = key
+    for _error, assignment_id in best.values():
+        _admin_decides(assignment_id, approve=True)
+    return len(best)
 
 
 def _accepted_workers() -> list[str]:
@@ -171,6 +201,9 @@ def evaluate(export_path: Path, gt_path: Path) -> dict[str, Any]:
     sigmas = np.asarray(exported.dataset["info"]["oks_sigmas"])
     hands = [dict(a, score=1.0) for a in exported.loadAnns(exported.getAnnIds(
         catIds=[HAND_CATEGORY_ID])) if a["num_keypoints"] > 0]
+    if not hands:
+        raise SystemExit("no hand task has accepted work, so the export has no hand to score: "
+                         "give the crowd more --rounds or --views")
     evaluation = COCOeval(gt, gt.loadRes(hands), iouType="keypoints")
     evaluation.params.kpt_oks_sigmas = sigmas
     evaluation.params.catIds = [HAND_CATEGORY_ID]
@@ -197,8 +230,13 @@ def evaluate(export_path: Path, gt_path: Path) -> dict[str, Any]:
             "images_with_true_hand": int(gt_hands), "oks_sigmas": "export info.oks_sigmas"}
 
 
+EPILOG = ("Default run here (2 shared cores): about 20 s (4 x 36) quiet, 1 minute at 8 views;"
+          " more under load. Short: --views 4 --frames 6 --rounds 2 (at 2 views QC may accept"
+          " nothing).")
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=EPILOG)
     parser.add_argument("--seed", type=int, default=101)
     parser.add_argument("--views", type=int, default=4)
     parser.add_argument("--frames", type=int, default=36)

@@ -453,8 +453,14 @@ def timing(capture: Path, repeats: int, crowd_seed: int) -> dict:
                                for name in runs[0][1]}}
 
 
+EPILOG = ("Default run here (2 shared cores): well over half an hour (every default scenario"
+          " at 10 crowds; each object crowd goes through a solve, 1.5-3 minutes); captures made"
+          " 2-4 minutes each. Short: --capture DIR (4 or 8 views) --scenario hands-4 --draws 1;"
+          " --object-poses truth skips the solves.")
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser()
+    parser = argparse.ArgumentParser(epilog=EPILOG)
     parser.add_argument("--capture", type=Path, action="append", default=[],
                         help="a synthetic capture (repeatable; one per view count)")
     parser.add_argument("--capture-seed", type=int, default=7,

@@ -306,8 +306,14 @@ def _targets(name: str, run: dict) -> dict:
     return {}
 
 
+EPILOG = ("Default run here (2 shared cores): 3-6 minutes (an 8 x 72 capture made once and"
+          " cached in --work, the solve, and the paper optimiser on --paper-frames at about 8 s"
+          " a frame); --scenario all 10-20 minutes. Short: --capture DIR --frames 4"
+          " --paper-frames 2, or --skip-paper.")
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=EPILOG)
     parser.add_argument("--work", default="/tmp/dexlabel_bench", help="cache folder")
     parser.add_argument("--capture", type=Path, help="a synthetic capture folder to solve")
     parser.add_argument("--capture-seed", type=int, default=7, help="seed of a generated capture")
