@@ -62,7 +62,8 @@ import numpy as np
 
 from _server import isolated_workdir
 
-BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder")
+# same_spot (both landmarks on one spot) is drawn for object tasks only.
+BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot")
 DEFAULT_SCENARIOS = "hands-8,hands-4,objects-8,objects-4"
 ALL_SCENARIOS = ("hands-8", "hands-4", "objects-8", "objects-4", "pool", "timing")
 OBJECT_POSES = ("truth", "solved")
@@ -308,7 +309,8 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
         profile_of = {}
         # Per crowd: the database may give a removed assignment's id to the next crowd's.
         unseen: set[int] = set()
-        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng), strict=True):
+        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng, kind),
+                                 strict=True):
             key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng, unseen)
             profile_of[key] = _label_profile(task, profile, key in unseen)
         if solved is not None:
@@ -357,7 +359,7 @@ class _SolvedCrowd:
 
         task = self.tasks[task_id]
         profile = "careful" if task["kind"] == "hand" else \
-            draw_profiles(1, "mixed", self.rng)[0]
+            draw_profiles(1, "mixed", self.rng, "object")[0]
         self.made += 1
         unseen: set[int] = set()
         key = _submit(task, profile, f"{profile}-d{self.draw}-r{self.made}-{task_id}",
