@@ -82,8 +82,8 @@ def draw_profiles(count: int, profile: str, rng: np.random.Generator,
         weights = np.array([mix[n] for n in names])
         return [names[i] for i in rng.choice(len(names), size=count, p=weights / weights.sum())]
     if profile not in known:
-        raise ValueError(f"unknown {kind} profile {profile!r}; one of {', '.join(known)} or "
-                         "mixed")
+        raise ValueError(f"unknown profile {profile!r} for {kind} work; one of "
+                         f"{', '.join(known)} or mixed")
     return [profile] * count
 
 
