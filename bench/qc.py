@@ -9,7 +9,8 @@ Scenarios (``--scenario``, comma-separated; default all but the slow pool and ti
     hands-8, hands-4     the mixed crowd, one worker per view (DexYCB labels every view once):
                          ``--draws`` crowds, each view's worker drawn from the mixed profile
                          weights (half careful), on the capture with 8 / 4 views
-    objects-8, objects-4 the same for object landmarks (one worker per object task), each
+    objects-8, objects-4 the same for object landmarks (one worker per object task, drawn
+                         from the object mix: same_spot, both landmarks on one spot, too), each
                          landmark track also checked against the solved object
                          (worker.quality.anchored). ``--object-poses solved`` (the default):
                          each crowd goes the product's way (bench/_qc_pipeline.py): QC before

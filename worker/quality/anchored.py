@@ -13,6 +13,10 @@ whose projection the track follows best, and judged:
   is nearer along the ray, or where the depth camera reads a surface well in front of it (a
   hand); the share of visible frames marked occluded and of hidden frames marked visible;
 - drift: how much the error grows from the first third of the clip to the last.
+- the points themselves: distinct on the surface, in plain view, shown through the clip
+  (worker.quality.landmark_points).
+
+The poses are the solve's, or before any solve an unmoved object's pose given at import.
 
 Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 """
