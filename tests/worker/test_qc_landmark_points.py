@@ -161,3 +161,27 @@ class TestSimulatedObjectWorkers:
         assert "same_spot" in set(draw_profiles(400, "mixed", rng, "object"))
         assert set(draw_profiles(400, "mixed", rng)) == set(PROFILES)
         assert set(OBJECT_PROFILES) - set(PROFILES) == {"same_spot"}
+
+
+def test_careful_workers_pick_distinct_points_in_plain_view_on_a_rendered_box():
+    import cv2
+
+    from backend.crowd.simulate import surface_points
+    from worker.synth.annotators import PLAIN_VIEW_COS, mesh_landmarks, vertex_normals
+
+    cam = camera()
+    vertices, faces = surface_points(*box())
+    still = np.repeat(np.eye(3, 4)[None], 3, axis=0)
+    hull = cv2.convexHull(cam.project(vertices).astype(np.float32)).astype(np.int32)
+    seg = np.zeros((3, 480, 640), np.uint8)
+    for frame in seg:
+        cv2.fillConvexPoly(frame, hull, 7)
+    normals = vertex_normals(vertices, faces)
+    towards = cam.T_cam_to_world[:, 3] - vertices
+    cosine = np.einsum("ni,ni->n", normals, towards) / np.linalg.norm(towards, axis=1)
+    for seed in range(10):
+        _, visible, ids = mesh_landmarks(cam, seg, 7, vertices, faces, still,
+                                         np.random.default_rng(seed))
+        assert visible.all()
+        assert (cosine[ids] >= PLAIN_VIEW_COS).all(), cosine[ids]
+        assert np.linalg.norm(vertices[ids[0]] - vertices[ids[1]]) >= LANDMARK_SEPARATION_M

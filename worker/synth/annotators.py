@@ -52,6 +52,10 @@ KEY_STEP = 4
 # twice the least separation QC asks of two landmarks (worker.quality.decide.QCThresholds
 # .landmark_min_separation_mm, 15 mm), where the visible side of the object allows it.
 LANDMARK_SEPARATION_M = 0.03
+# ... and in plain view: where the view shows enough of them, on surface turned at most 60
+# degrees from the camera (cosine 0.5); a point seen edge-on slides off its spot with the
+# slightest turn of the object.
+PLAIN_VIEW_COS = 0.5
 RING = (13, 14, 15, 16)
 LITTLE = (17, 18, 19, 20)
 # Half-width (px) of the square around a point's rounded pixel searched for its own label: a
@@ -167,7 +171,8 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` landmarks a person would pick on an object in one view: distinct mesh
     vertices (distinct_points, ``separation_m`` apart where the view allows) visible where the
-    object first shows, followed through the object's true motion.
+    object first shows, in plain view there (PLAIN_VIEW_COS) where enough are, followed
+    through the object's true motion.
 
     seg: (F, H, W) labels; vertices (N, 3) object frame, metres; poses (F, 3, 4) object to the
     camera's world frame. Returns (F, count, 2) px (NaN before the object shows), (F, count)
@@ -178,11 +183,17 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
     ids = np.full(count, -1)
     xy = np.full((frames, count, 2), np.nan)
     visible = np.zeros((frames, count), dtype=bool)
+    centre = camera.T_cam_to_world[:, 3]
     for f in range(frames):
         world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
-        ok = visible_vertices(camera, seg[f], value, world, normals @ poses[f, :, :3].T)
+        turned = normals @ poses[f, :, :3].T
+        ok = visible_vertices(camera, seg[f], value, world, turned)
         if ids[0] < 0 and ok.sum() >= count:
-            ids = distinct_points(vertices, np.flatnonzero(ok), count, separation_m, rng)
+            towards = centre - world
+            cosine = np.einsum("ni,ni->n", turned, towards) / np.linalg.norm(towards, axis=1)
+            plain = ok & (cosine >= PLAIN_VIEW_COS)
+            ids = distinct_points(vertices, np.flatnonzero(plain if plain.sum() >= count else ok),
+                                  count, separation_m, rng)
         if ids[0] >= 0:
             xy[f] = camera.project(world[ids])
             visible[f] = ok[ids]
