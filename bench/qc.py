@@ -9,7 +9,8 @@ Scenarios (``--scenario``, comma-separated; default all but the slow pool and ti
     hands-8, hands-4     the mixed crowd, one worker per view (DexYCB labels every view once):
                          ``--draws`` crowds, each view's worker drawn from the mixed profile
                          weights (half careful), on the capture with 8 / 4 views
-    objects-8, objects-4 the same for object landmarks (one worker per object task), each
+    objects-8, objects-4 the same for object landmarks (one worker per object task, drawn
+                         from the object mix: same_spot, both landmarks on one spot, too), each
                          landmark track also checked against the solved object
                          (worker.quality.anchored). ``--object-poses solved`` (the default):
                          each crowd goes the product's way (bench/_qc_pipeline.py): QC before
@@ -62,7 +63,8 @@ import numpy as np
 
 from _server import isolated_workdir
 
-BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder")
+# same_spot (both landmarks on one spot) is drawn for object tasks only.
+BAD_PROFILES = ("sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot")
 DEFAULT_SCENARIOS = "hands-8,hands-4,objects-8,objects-4"
 ALL_SCENARIOS = ("hands-8", "hands-4", "objects-8", "objects-4", "pool", "timing")
 OBJECT_POSES = ("truth", "solved")
@@ -308,7 +310,8 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
         profile_of = {}
         # Per crowd: the database may give a removed assignment's id to the next crowd's.
         unseen: set[int] = set()
-        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng), strict=True):
+        for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng, kind),
+                                 strict=True):
             key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng, unseen)
             profile_of[key] = _label_profile(task, profile, key in unseen)
         if solved is not None:
@@ -357,7 +360,7 @@ class _SolvedCrowd:
 
         task = self.tasks[task_id]
         profile = "careful" if task["kind"] == "hand" else \
-            draw_profiles(1, "mixed", self.rng)[0]
+            draw_profiles(1, "mixed", self.rng, "object")[0]
         self.made += 1
         unseen: set[int] = set()
         key = _submit(task, profile, f"{profile}-d{self.draw}-r{self.made}-{task_id}",

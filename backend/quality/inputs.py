@@ -211,3 +211,27 @@ def solved_objects(session: Session, sequence_id: int) -> tuple[SolvedObjects, i
     return SolvedObjects(vertices=[np.asarray(m.vertices, np.float64) for m in meshes],
                          faces=[np.asarray(m.faces, np.int64) for m in meshes],
                          poses=poses), run.id
+
+
+def import_posed_objects(session: Session, sequence_id: int, target: int
+                         ) -> SolvedObjects | None:
+    """The sequence's objects at the poses given at import (SceneObject.initial_pose,
+    object-to-world at frame 0), when object ``target`` (its SceneObject.index) is one that
+    stays where it was put: an object nobody grasps keeps its import pose in every frame, the
+    grasped one only at frame 0 (NaN after it). None when the target is the grasped object or
+    has no import pose: then only a solve says where it is."""
+    from worker.quality.anchored import SolvedObjects
+
+    sequence = session.get_one(Sequence, sequence_id)
+    objects = sorted(sequence.objects, key=lambda o: o.index)
+    if not 0 <= target < len(objects) or objects[target].grasped \
+            or objects[target].initial_pose is None:
+        return None
+    poses = np.full((len(objects), sequence.num_frames, 3, 4), np.nan)
+    for i, obj in enumerate(objects):
+        if obj.initial_pose is not None:
+            poses[i, :None if not obj.grasped else 1] = np.asarray(obj.initial_pose, np.float64)
+    storage = get_storage()
+    meshes = [load_mesh(storage, o.mesh_key) for o in objects]
+    return SolvedObjects(vertices=[np.asarray(m.vertices, np.float64) for m in meshes],
+                         faces=[np.asarray(m.faces, np.int64) for m in meshes], poses=poses)

@@ -39,6 +39,7 @@ from backend.quality.inputs import (
     TargetInputs,
     depth_maps,
     highlight_mask,
+    import_posed_objects,
     solved_objects,
     target_inputs,
 )
@@ -173,9 +174,11 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
 def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
                      timings: dict[str, float]) -> dict[str, Any]:
     """Object landmarks: each label on its own and against the object's motion as the other
-    labels show it (worker.quality.landmarks); once the sequence is solved, also against the
-    solved object (worker.quality.anchored): each landmark anchored to the object's surface
-    and its track reprojected, visibility judged against the solved meshes and depth."""
+    labels show it (worker.quality.landmarks); once the sequence is solved, or before that
+    for an object nobody grasps (at its import pose), also against the known object
+    (worker.quality.anchored): each landmark anchored to the object's surface and its track
+    reprojected, visibility judged against the known meshes and depth, the landmarks distinct
+    points in plain view (worker.quality.landmark_points)."""
     from worker.quality.anchored import merge_anchored, score_anchored
     from worker.quality.landmarks import score_object
 
@@ -188,11 +191,16 @@ def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
             masks[view] = {0: mask}
     results = score_object(inputs.cameras, crowd, masks)
     started = time.perf_counter()
-    solved = solved_objects(session, inputs.sequence_id)
+    target = int(inputs.target_key.split(":", 1)[1])
+    # Before any solve, an object that stays where it was put is known all through: its
+    # landmarks are judged against their projected anchors, not against its lack of motion.
+    solved: tuple[Any, int | None] | None = solved_objects(session, inputs.sequence_id)
+    if solved is None:
+        posed = import_posed_objects(session, inputs.sequence_id, target)
+        solved = None if posed is None else (posed, None)
     if solved is None:
         return results
     scene, run_id = solved
-    target = int(inputs.target_key.split(":", 1)[1])
     depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
     for lab in crowd:
         anchored = score_anchored(inputs.cameras[lab.view], lab, scene, target,

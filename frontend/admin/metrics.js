@@ -13,7 +13,8 @@
  * @property {string} name       the metric's key in report.metrics
  * @property {string} label      its human name
  * @property {string} value      formatted with its unit ("3.2 px", "12.5%", "150 s"); "–" unknown
- * @property {string} unit       "px", "%", "s", "px/frame²", "×" or "" (a count or identifier)
+ * @property {string} unit       "px", "mm", "%", "s", "px/frame²", "×" or "" (a count, an
+ *                               identifier or a cosine)
  * @property {string} explain    one line: what the number measures
  * @property {string|null} threshold  the limits it was held to ("review above 3.0 px; reject
  *                               above 12.0 px"), null where the report holds it to none
@@ -28,7 +29,7 @@
 /**
  * @typedef {Object} MetricInfo
  * @property {string} label
- * @property {"px"|"%"|"s"|"px/frame²"|"×"|""} unit
+ * @property {"px"|"mm"|"%"|"s"|"px/frame²"|"×"|""} unit
  * @property {string | Partial<Record<Basis, string>> & {any?: string}} explain
  */
 
@@ -74,6 +75,15 @@ const METRICS = {
     + "at its start." },
   anchored_fraction: { label: "Landmarks on the object", unit: "%", explain:
     "Share of the landmarks that could be tied to a point of the solved object." },
+  landmark_separation_mm: { label: "Landmarks apart on the object", unit: "mm", explain:
+    "Distance between the two landmarks' points on the object's surface: two landmarks on one "
+    + "spot fix nothing that one does not." },
+  anchored_facing: { label: "Landmarks in plain view", unit: "", explain:
+    "How squarely the surface under each landmark faces the camera (cosine of the angle, 1 = "
+    + "head-on, 0 = edge-on; the least over the landmarks)." },
+  anchored_shown_fraction: { label: "Landmarks shown", unit: "%", explain:
+    "Of the frames where the object's pose is known, the share in which each landmark's "
+    + "point can be seen (the least over the landmarks)." },
   anchored_visible_occluded: { label: "Seen landmarks marked occluded", unit: "%", explain:
     "Of the frames where the solved object shows a landmark's point, the share marked "
     + "occluded." },
@@ -92,7 +102,7 @@ const METRICS = {
   } },
   visible_behind_surface: { label: "Covered points marked visible", unit: "%", explain: {
     any: "Of the points the depth camera sees covered by something other than the hand "
-      + "itself, the share marked visible.",
+      + "itself, the share marked visible; measured once at least 10 such points were seen.",
     gold: "Of the points occluded in the gold labels, the share marked visible.",
   } },
   motion_ratio: { label: "Motion ratio", unit: "×", explain: {
@@ -140,7 +150,8 @@ const METRICS = {
   working_time_s: { label: "Working time", unit: "s", explain:
     "Time the worker spent on the task." },
   solve_run: { label: "Solve run", unit: "", explain:
-    "The 3D solve whose object poses the landmarks were checked against." },
+    "The 3D solve whose object poses the landmarks were checked against (none: the object's "
+    + "pose given at import, for an object nobody moves)." },
 };
 
 /**
@@ -152,6 +163,7 @@ function formatted(value, unit) {
   if (typeof value !== "number" || !Number.isFinite(value)) return NONE;
   switch (unit) {
     case "px": return `${value.toFixed(1)} px`;
+    case "mm": return `${value.toFixed(1)} mm`;
     case "%": return `${(value * 100).toFixed(1)}%`;
     case "s": return `${Math.round(value)} s`;
     case "px/frame²": return `${value.toFixed(1)} px/frame²`;
@@ -166,7 +178,8 @@ function formatted(value, unit) {
  * @returns {MetricInfo}
  */
 function guessed(name) {
-  const suffixes = /** @type {const} */ ([["_px", "px"], ["_fraction", "%"], ["_s", "s"]]);
+  const suffixes = /** @type {const} */ ([["_px", "px"], ["_mm", "mm"], ["_fraction", "%"],
+    ["_s", "s"]]);
   for (const [suffix, unit] of suffixes) {
     if (name.endsWith(suffix) && name.length > suffix.length) {
       return { label: sentenceCase(name.slice(0, -suffix.length)), unit, explain: "" };

@@ -28,6 +28,15 @@ export function legendStops() {
 }
 
 /**
+ * The heat map's type size for its point names, CSS px: 13 px where the rows allow (a hand's
+ * 21 names read at 13 px like the page's small print; 9 px type drew them about 6 px tall).
+ * @param {number} row  the row height, CSS px
+ */
+export function heatFontPx(row) {
+  return Math.max(9, Math.min(row - 2, 13));
+}
+
+/**
  * Where the heat map's cells are: one row per point, one column per frame, after a column of
  * point names. Shared with the timeline, whose frames line up with the cells above.
  * @param {number} frames  F
@@ -37,8 +46,9 @@ export function legendStops() {
  */
 export function heatLayout(frames, points, width, size = {}) {
   const left = size.label ?? 92;
-  // 21 hand joints at 9 px a row; an object's two landmarks get taller rows.
-  const row = size.row ?? Math.max(9, Math.min(22, Math.floor(200 / Math.max(points, 1))));
+  // 21 hand joints at 15 px a row, tall enough for their names in 13 px type (heatFontPx);
+  // an object's two landmarks get taller rows.
+  const row = size.row ?? Math.max(15, Math.min(22, Math.floor(320 / Math.max(points, 1))));
   const cell = Math.max((width - left) / Math.max(frames, 1), 1);
   return { left, top: 0, cell, row, width: left + cell * frames, height: row * points };
 }

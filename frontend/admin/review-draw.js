@@ -6,7 +6,7 @@
 
 import { svg } from "./views.js";
 import {
-  NO_ERROR, errorColour, pointAt, spanRows, spansOf, viewport,
+  NO_ERROR, errorColour, heatFontPx, pointAt, spanRows, spansOf, viewport,
 } from "./replay.js";
 
 /** A heat map cell without an error where the worker marked the point occluded. */
@@ -172,7 +172,8 @@ function drawReference(ctx, at, shown) {
 export function drawHeat(canvas, review, layout) {
   const { ctx, size } = context(canvas);
   ctx.clearRect(0, 0, size.width, size.height);
-  ctx.font = `${Math.min(layout.row, 11)}px system-ui, sans-serif`;
+  const font = heatFontPx(layout.row);
+  ctx.font = `${font}px system-ui, sans-serif`;
   ctx.textBaseline = "middle";
   const frames = review.num_frames, points = review.point_names.length;
   for (let p = 0; p < points; p += 1) {
@@ -188,7 +189,7 @@ export function drawHeat(canvas, review, layout) {
     }
   }
   Object.assign(canvas.dataset, { left: layout.left, top: layout.top,
-    cell: layout.cell.toFixed(3), row: layout.row });
+    cell: layout.cell.toFixed(3), row: layout.row, font });
 }
 
 /**

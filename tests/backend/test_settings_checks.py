@@ -17,7 +17,7 @@ from backend.config import InvalidSettings, Settings, get_settings
 from worker.quality.decide import QCThresholds
 
 README = Path(__file__).resolve().parents[2] / "README.md"
-QC_KEYS = "k_reject, k_review, min_population, motion_ratio_high"
+QC_KEYS = "k_reject, k_review, landmark_min_separation_mm, min_population, motion_ratio_high"
 
 
 @pytest.fixture
@@ -42,6 +42,12 @@ class TestQcThresholds:
         assert type(loaded["k_review"]) is float and type(loaded["min_population"]) is int
         bounds = QCThresholds(**loaded)
         assert (bounds.k_review, bounds.k_reject, bounds.min_population) == (2.0, 6.0, 4)
+
+    def test_the_landmarks_minimum_separation_is_a_setting(
+            self, clean_env: pytest.MonkeyPatch) -> None:
+        clean_env.setenv("DEXLABEL_QC_THRESHOLDS", '{"landmark_min_separation_mm": 25}')
+        bounds = QCThresholds(**Settings().qc_thresholds)
+        assert bounds.landmark_min_separation_mm == 25.0
 
     @pytest.mark.parametrize("key", ["approve_px_max", "bounds", "K_REVIEW"])
     def test_unknown_key_is_refused_naming_it_and_the_known_ones(

@@ -329,6 +329,10 @@ def test_review_panel_fits_narrow_windows_and_the_sequence_view(
         box = page.locator(selector).bounding_box()
         assert box is not None and box["x"] >= 0 and box["x"] + box["width"] <= 1024, selector
     assert page.evaluate("document.documentElement.scrollWidth") <= 1024
+    # The heat map's 21 joint names in 13 px type, on rows tall enough to hold them.
+    heat = page.locator("#queue-review canvas.heatmap")
+    assert float(heat.get_attribute("data-row") or 0) >= 15
+    assert heat.get_attribute("data-font") == "13"
     page.screenshot(path=str(output_dir / "admin-review-queue-1024.png"))
 
     # The same panel under a sequence's reports.
@@ -342,6 +346,8 @@ def test_review_panel_fits_narrow_windows_and_the_sequence_view(
     page.screenshot(path=str(output_dir / "admin-review-sequence-1280.png"))
     page.set_viewport_size({"width": 1024, "height": 700})
     page.screenshot(path=str(output_dir / "admin-review-sequence-1024.png"))
+    page.set_viewport_size({"width": 1440, "height": 900})
+    page.screenshot(path=str(output_dir / "admin-review-sequence-1440.png"), full_page=True)
 
     # The read-only annotation page: a new tab with its link, or, where the server has no such
     # link yet, the button disabled with a reason.

@@ -15,6 +15,7 @@ const EMITTED = [
   "moved_with_hand", "moved_with_object", "jump_fraction", "max_step_ratio", "static_fraction",
   "anchored_median_px", "anchored_p90_px", "anchored_visible_occluded",
   "anchored_hidden_visible", "anchored_drift_px", "anchored_fraction", "solve_run",
+  "landmark_separation_mm", "anchored_facing", "anchored_shown_fraction",
 ];
 
 const HAND_REPORT = {
@@ -160,4 +161,16 @@ test("renderMetricList writes a name, value, threshold and over flag per metric"
   const time = dl.children[rows.findIndex((r) => r.name === "working_time_s") * 2 + 1];
   assert.equal(time.attributes["data-over"], "false");
   assert.match(time.text, /^151 s(?! \()/);
+});
+
+test("an object's landmarks read their separation in mm against the fixed minimum", () => {
+  const rows = Object.fromEntries(metricRows({
+    method: "consensus", target_key: "object:1",
+    metrics: { landmark_separation_mm: 1.46, anchored_facing: 0.88, solve_run: null },
+    thresholds: { "landmark_separation_mm.reject_below": 15 } }).map((r) => [r.name, r]));
+  assert.equal(rows.landmark_separation_mm.value, "1.5 mm");
+  assert.equal(rows.landmark_separation_mm.threshold, "reject below 15.0 mm");
+  assert.equal(rows.landmark_separation_mm.over, true);
+  assert.equal(rows.anchored_facing.value, "0.88");
+  assert.equal(rows.solve_run.value, "–");
 });

@@ -2,8 +2,8 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import {
-  ERROR_MAX_PX, NO_ERROR, cellAt, errorColour, evidenceFeedback, followView, heatLayout, pointAt,
-  spanRows, spansOf, stepFrame, viewport, zoomAt,
+  ERROR_MAX_PX, NO_ERROR, cellAt, errorColour, evidenceFeedback, followView, heatFontPx,
+  heatLayout, pointAt, spanRows, spansOf, stepFrame, viewport, zoomAt,
 } from "../../frontend/admin/replay.js";
 
 const hue = (/** @type {string} */ colour) => Number(/hsl\((\d+)/.exec(colour)?.[1]);
@@ -16,6 +16,14 @@ test("error colours run from green at 0 px to red at the top of the scale", () =
   assert.ok(hue(errorColour(3)) > hue(errorColour(12)));
   assert.equal(errorColour(null), NO_ERROR);
   assert.equal(errorColour(Number.NaN), NO_ERROR);
+});
+
+test("a hand's 21 heat map rows are tall enough for 13 px names", () => {
+  const hand = heatLayout(72, 21, 900);
+  assert.ok(hand.row >= 15, String(hand.row));
+  assert.equal(heatFontPx(hand.row), 13);
+  assert.equal(heatLayout(72, 2, 900).row, 22);
+  assert.ok(heatFontPx(9) <= 9);
 });
 
 test("heat map cells are found back from where they are drawn", () => {

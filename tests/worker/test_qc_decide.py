@@ -74,7 +74,8 @@ class TestLearnThresholds:
     def test_keys_say_which_way_each_threshold_cuts_and_bounds_are_configurable(self):
         settings = QCThresholds(bounds={"jitter_px": MetricBound("above", (1.0, 2.0))})
         learned = learn_thresholds([_metrics()] * 10, settings)
-        assert set(learned) == {"jitter_px.review_above", "motion_ratio.review_above"}
+        assert set(learned) == {"jitter_px.review_above", "motion_ratio.review_above",
+                                "landmark_separation_mm.reject_below"}
         assert "motion_ratio.reject_below" in learn_thresholds([_metrics()] * 10)
 
 

@@ -13,6 +13,10 @@ whose projection the track follows best, and judged:
   is nearer along the ray, or where the depth camera reads a surface well in front of it (a
   hand); the share of visible frames marked occluded and of hidden frames marked visible;
 - drift: how much the error grows from the first third of the clip to the last.
+- the points themselves: distinct on the surface, in plain view, shown through the clip
+  (worker.quality.landmark_points).
+
+The poses are the solve's, or before any solve an unmoved object's pose given at import.
 
 Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 """
@@ -26,6 +30,7 @@ import numpy as np
 
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.quality.consensus import ViewLabels, decided_of
+from worker.quality.landmark_points import facing, separation_mm, shown_fraction
 from worker.quality.metrics import (
     AssignmentQC,
     DepthMaps,
@@ -264,7 +269,10 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         visible), anchored_drift_px, anchored_fraction (of the landmarks marked visible
         somewhere, those that could be anchored; None when none is: then
         anchored_visible_occluded is the share of frames where the object shows, see
-        SHOWN_SHARE);
+        SHOWN_SHARE); landmark_separation_mm (least distance between anchored points),
+        anchored_facing (least, over the landmarks, median cosine of the surface's turn
+        towards the camera), anchored_shown_fraction (least share of the known frames a
+        landmark's point shows in): see worker.quality.landmark_points;
         per_joint / per_frame median errors; issues where a landmark is over ISSUE_PX off.
     """
     xy = np.asarray(label.xy, np.float64)
@@ -282,17 +290,22 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     shown = np.zeros((frames, points), bool)
     # Frames without a solved pose of the object judge nothing.
     known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
-    anchored = 0
+    found: dict[int, np.ndarray] = {}
+    faced: list[float] = []
     for p in range(points):
         point = anchor(camera, xy[:, p], visible[:, p], scene, target)
         if point is None:
             continue
-        anchored += 1
+        found[p] = point
         world = _track_of(camera, point, scene.poses[target])
         shown[:, p] = point_visible(camera, world, scene, depth)
+        cosine = facing(camera, point, world, shown[:, p], scene, target)
+        if cosine is not None:
+            faced.append(cosine)
         both = shown[:, p] & visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
         reprojection[:, p] = camera.project(world)
         errors[both, p] = np.linalg.norm(reprojection[both, p] - xy[both, p], axis=1)
+    anchored = len(found)
     judged = np.isfinite(errors)
     hidden = ~shown & known[:, None] & decided
     seen = shown & decided
@@ -307,6 +320,12 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         if anchored and hidden.sum() >= MIN_HIDDEN_FRAMES else None,
         "anchored_drift_px": _drift(errors),
         "anchored_fraction": num(anchored / placed) if placed else None,
+        # Distinct points of the surface, in plain view, shown through the clip
+        # (worker.quality.landmark_points).
+        "landmark_separation_mm": separation_mm(list(found.values())),
+        "anchored_facing": num(min(faced)) if faced else None,
+        "anchored_shown_fraction": shown_fraction(
+            shown, known, np.isin(np.arange(points), list(found))),
     }
     if not placed and known.any():
         # Every landmark marked hidden all through: right where the object never shows; the
@@ -333,12 +352,15 @@ SUPERSEDED = ("moved_with_object", "jump_fraction", "max_step_ratio", "median_er
               "mean_error_px", "p90_error_px", "outlier_fraction", "motion_ratio")
 
 
-def merge_anchored(before: AssignmentQC, anchored: AssignmentQC, run_id: int) -> AnchoredQC:
-    """A landmark label's QC with the solved object's verdict added: the anchored metrics
+def merge_anchored(before: AssignmentQC, anchored: AssignmentQC,
+                   run_id: int | None) -> AnchoredQC:
+    """A landmark label's QC with the known object's verdict added: the anchored metrics
     join the label's own (replacing the SUPERSEDED motion guesses where the label could be
     judged), its per-landmark and per-frame errors are the anchored ones, and it is
-    provisional only where neither check could judge it. run_id: the solve run used."""
-    metrics = {**before.metrics, **anchored.metrics, "solve_run": float(run_id)}
+    provisional only where neither check could judge it. run_id: the solve run whose poses
+    were used, None for the poses given at import (an object that stays where it was put)."""
+    metrics = {**before.metrics, **anchored.metrics,
+               "solve_run": None if run_id is None else float(run_id)}
     if anchored.metrics.get("anchored_median_px") is not None:
         metrics.update(dict.fromkeys(SUPERSEDED))
     issues = anchored.issues + [i for i in before.issues

@@ -114,6 +114,12 @@ class QCThresholds:
     min_population: fewer assignments with a metric than this, and its threshold is the
         strict end of its bounds (a new project reviews more rather than approve blindly).
     motion_ratio_high: path length above this multiple of the hand's is noise (random clicks).
+    landmark_min_separation_mm: two landmarks of one object anchored closer than this on its
+        surface mark one spot (reject; worker.quality.landmark_points). 15 mm spans 9-13 px
+        at 0.7-1 m in a 640x480 view (f ~ 615 px): three to four times the page's 3 px "one
+        spot" radius and several times a careful click's error on the surface (2 px, 2-3 mm),
+        while the smallest YCB objects (a marker 2 cm thick, a tuna can 3.3 cm tall) still
+        show two points that far apart.
     bounds: MetricBound per metric (see _bounds).
     """
 
@@ -121,6 +127,7 @@ class QCThresholds:
     k_reject: float = 6.0
     min_population: int = 8
     motion_ratio_high: float = 3.0
+    landmark_min_separation_mm: float = 15.0
     bounds: dict[str, MetricBound] = field(default_factory=_bounds)
 
 
@@ -154,7 +161,9 @@ def learn_thresholds(metric_rows: list[dict[str, float | None]],
 
     Returns:
         {"<metric>.review_above": x, "<metric>.reject_above": y, ...} (or ..._below), each the
-        learned value clamped into its bounds, plus "motion_ratio.review_above".
+        learned value clamped into its bounds, plus the fixed "motion_ratio.review_above" and
+        "landmark_separation_mm.reject_below" (a rule of the task, not of the population: a
+        crowd that puts both landmarks on one spot does not make one spot right).
     """
     bounds = bounds if bounds is not None else QCThresholds()
     metric_rows = [r for r in metric_rows if not mostly_prefilled(r)]
@@ -171,6 +180,7 @@ def learn_thresholds(metric_rows: list[dict[str, float | None]],
             value = _learned(values, k, rule.worse) if enough else strict
             out[f"{name}.{level}_{rule.worse}"] = float(min(max(value, lo), hi))
     out["motion_ratio.review_above"] = bounds.motion_ratio_high
+    out["landmark_separation_mm.reject_below"] = bounds.landmark_min_separation_mm
     return out
 
 
@@ -249,6 +259,9 @@ _ADVICE: dict[str, Callable[[float, float], str]] = {
                                        "more by the end of the clip)."),
     "anchored_fraction": lambda v, t: ("Your landmarks are not on the object: place both on "
                                        "the highlighted object."),
+    "landmark_separation_mm": lambda v, t: (
+        f"Your two landmarks mark one spot of the object ({v:.0f} mm apart): pick two "
+        f"distinct points at least {t:.0f} mm apart on it and follow each one."),
     "moved_with_object": lambda v, t: (
         f"Your landmarks travel only {_pct(v)} as far as the object does in the other camera "
         "views: follow each landmark as the object moves."),

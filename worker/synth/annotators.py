@@ -14,8 +14,12 @@ Profiles (what each worker does wrong):
     lazy      places every point once, on one frame, and copies it to all frames (no motion).
     spammer   uniform random points anywhere in the image, all marked visible.
     occluder  marks every point occluded over a long span (60% of the clip); careful elsewhere.
+    same_spot puts every point on one spot (object landmarks: both on the first one's surface
+              point), followed carefully: two landmarks that say nothing more than one.
 
-``mixed`` draws profiles with MIXED_WEIGHTS: half careful, a tenth each of the others.
+``mixed`` draws profiles with MIXED_WEIGHTS for hands (half careful, a tenth each of the
+others) and OBJECT_MIXED_WEIGHTS for objects (half careful, the rest shared by every other
+profile, same_spot among them).
 Pure numpy; every random choice comes from the ``rng`` passed in.
 """
 
@@ -30,16 +34,28 @@ import numpy as np
 from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
 
-Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder"]
-PROFILES: tuple[str, ...] = get_args(Profile)
+Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot"]
+# Every profile; PROFILES are those of hand work (same_spot is an object worker's mistake).
+OBJECT_PROFILES: tuple[str, ...] = get_args(Profile)
+PROFILES: tuple[str, ...] = tuple(p for p in OBJECT_PROFILES if p != "same_spot")
 MIXED_WEIGHTS: dict[str, float] = {"careful": 0.5, "sloppy": 0.1, "swapper": 0.1, "lazy": 0.1,
                                    "spammer": 0.1, "occluder": 0.1}
+OBJECT_MIXED_WEIGHTS: dict[str, float] = {"careful": 0.5, **{
+    p: 0.5 / (len(OBJECT_PROFILES) - 1) for p in OBJECT_PROFILES if p != "careful"}}
 CAREFUL_SIGMA_PX = 2.0
 SLOPPY_SIGMA_PX = 8.0
 # The swap window as a fraction of the clip: frames 20 to 45 of a 72-frame clip.
 SWAP_WINDOW = (20 / 72, 45 / 72)
 OCCLUDED_SPAN = 0.6
 KEY_STEP = 4
+# A person picks an object's landmarks as distinct points, well apart on its surface (metres):
+# twice the least separation QC asks of two landmarks (worker.quality.decide.QCThresholds
+# .landmark_min_separation_mm, 15 mm), where the visible side of the object allows it.
+LANDMARK_SEPARATION_M = 0.03
+# ... and in plain view: where the view shows enough of them, on surface turned at most 60
+# degrees from the camera (cosine 0.5); a point seen edge-on slides off its spot with the
+# slightest turn of the object.
+PLAIN_VIEW_COS = 0.5
 RING = (13, 14, 15, 16)
 LITTLE = (17, 18, 19, 20)
 # Half-width (px) of the square around a point's rounded pixel searched for its own label: a
@@ -59,14 +75,19 @@ class SimulatedWork:
     tracks: list[list[list[float | None]]]
 
 
-def draw_profiles(count: int, profile: str, rng: np.random.Generator) -> list[str]:
-    """``count`` profile names: all ``profile``, or drawn with MIXED_WEIGHTS for ``mixed``."""
+def draw_profiles(count: int, profile: str, rng: np.random.Generator,
+                  kind: Literal["hand", "object"] = "hand") -> list[str]:
+    """``count`` profile names: all ``profile``, or for ``mixed`` drawn with MIXED_WEIGHTS
+    (``kind`` "hand") or OBJECT_MIXED_WEIGHTS ("object")."""
+    known = PROFILES if kind == "hand" else OBJECT_PROFILES
     if profile == "mixed":
-        names = list(MIXED_WEIGHTS)
-        weights = np.array([MIXED_WEIGHTS[n] for n in names])
+        mix = MIXED_WEIGHTS if kind == "hand" else OBJECT_MIXED_WEIGHTS
+        names = list(mix)
+        weights = np.array([mix[n] for n in names])
         return [names[i] for i in rng.choice(len(names), size=count, p=weights / weights.sum())]
-    if profile not in PROFILES:
-        raise ValueError(f"unknown profile {profile!r}; one of {', '.join(PROFILES)} or mixed")
+    if profile not in known:
+        raise ValueError(f"unknown profile {profile!r} for {kind} work; one of "
+                         f"{', '.join(known)} or mixed")
     return [profile] * count
 
 
@@ -130,11 +151,28 @@ def visible_vertices(camera: CameraModel, seg: np.ndarray, value: int, points: n
     return facing & inside & (count >= 3) & (seg[ys, xs] == value)
 
 
+def distinct_points(points: np.ndarray, candidates: np.ndarray, count: int,
+                    separation_m: float, rng: np.random.Generator) -> np.ndarray:
+    """``count`` ids out of ``candidates`` (ids into points (N, 3), metres) as a person picks
+    distinct landmarks: the first at random, each next at random among those at least
+    ``separation_m`` from every one taken, or the farthest from them where none is."""
+    ids = [int(rng.choice(candidates))]
+    while len(ids) < count:
+        rest = np.setdiff1d(candidates, ids)
+        gap = np.linalg.norm(points[rest][:, None] - points[ids][None], axis=2).min(axis=1)
+        apart = rest[gap >= separation_m]
+        ids.append(int(rng.choice(apart)) if apart.size else int(rest[np.argmax(gap)]))
+    return np.array(ids)
+
+
 def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
                    faces: np.ndarray, poses: np.ndarray, rng: np.random.Generator,
-                   count: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``count`` landmarks a person would pick on an object in one view: mesh vertices visible
-    where the object first shows, followed through the object's true motion.
+                   count: int = 2, separation_m: float = LANDMARK_SEPARATION_M
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``count`` landmarks a person would pick on an object in one view: distinct mesh
+    vertices (distinct_points, ``separation_m`` apart where the view allows) visible where the
+    object first shows, in plain view there (PLAIN_VIEW_COS) where enough are, followed
+    through the object's true motion.
 
     seg: (F, H, W) labels; vertices (N, 3) object frame, metres; poses (F, 3, 4) object to the
     camera's world frame. Returns (F, count, 2) px (NaN before the object shows), (F, count)
@@ -145,11 +183,17 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
     ids = np.full(count, -1)
     xy = np.full((frames, count, 2), np.nan)
     visible = np.zeros((frames, count), dtype=bool)
+    centre = camera.T_cam_to_world[:, 3]
     for f in range(frames):
         world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
-        ok = visible_vertices(camera, seg[f], value, world, normals @ poses[f, :, :3].T)
+        turned = normals @ poses[f, :, :3].T
+        ok = visible_vertices(camera, seg[f], value, world, turned)
         if ids[0] < 0 and ok.sum() >= count:
-            ids = rng.choice(np.flatnonzero(ok), count, replace=False)
+            towards = centre - world
+            cosine = np.einsum("ni,ni->n", turned, towards) / np.linalg.norm(towards, axis=1)
+            plain = ok & (cosine >= PLAIN_VIEW_COS)
+            ids = distinct_points(vertices, np.flatnonzero(plain if plain.sum() >= count else ok),
+                                  count, separation_m, rng)
         if ids[0] >= 0:
             xy[f] = camera.project(world[ids])
             visible[f] = ok[ids]
@@ -187,6 +231,9 @@ def _apply_profile(profile: str, xy: np.ndarray, vis: np.ndarray, size: tuple[in
         frame = int(rng.integers(frames))
         xy[:], vis[:] = xy[frame], vis[frame]
         return xy + rng.normal(0, sigma, (1, points, 2)), vis, extra
+    elif profile == "same_spot":
+        # Every point where the first one is: its position and its visibility.
+        xy[:], vis[:] = xy[:, :1], vis[:, :1]
     elif profile == "occluder":
         span = max(1, round(OCCLUDED_SPAN * frames))
         for p in range(points):
@@ -229,8 +276,8 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
                          f"{visible.shape}")
-    if profile not in PROFILES:
-        raise ValueError(f"unknown profile {profile!r}; one of {', '.join(PROFILES)}")
+    if profile not in OBJECT_PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; one of {', '.join(OBJECT_PROFILES)}")
     width, height = size
     noisy, vis, extra = _apply_profile(profile, np.asarray(xy, np.float64),
                                        np.asarray(visible, bool), size, rng)
