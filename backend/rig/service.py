@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
@@ -29,6 +30,8 @@ from worker.geometry.cameras import CameraModel
 from worker.rig import RigEstimate, RigThresholds, estimate_rig
 
 JOB_KIND = "rig_health"
+# Colour frames per view the depth registration looks at (edges of a few frames suffice).
+COLOR_FRAMES = 3
 
 
 def job_key(sequence_id: int) -> str:
@@ -39,7 +42,8 @@ def job_key(sequence_id: int) -> str:
 class RigInputs:
     """One sequence's rig as imported and its accepted hand labels: V serials and cameras,
     keypoints (V, F, 21, 2) px, visible (V, F, 21), depth V x (F, H, W) uint16 mm or None,
-    the master's view (the world frame) and how many accepted assignments there were."""
+    color V x {frame: (H, W, 3) uint8} of COLOR_FRAMES frames, the master's view (the world
+    frame) and how many accepted assignments there were."""
 
     sequence_id: int
     serials: list[str]
@@ -47,8 +51,24 @@ class RigInputs:
     keypoints: np.ndarray
     visible: np.ndarray
     depth: list[np.ndarray | None]
+    color: list[dict[int, np.ndarray]]
     master_view: int
     assignments: int
+
+
+def _color_frames(frames: list[Frame]) -> dict[int, np.ndarray]:
+    """COLOR_FRAMES evenly spaced colour frames of one view, decoded: {index: (H, W, 3)}."""
+    if not frames:
+        return {}
+    storage = get_storage()
+    picks = sorted({round(float(x)) for x in np.linspace(0, len(frames) - 1, COLOR_FRAMES)})
+    out = {}
+    for i in picks:
+        data = np.frombuffer(storage.get_bytes(frames[i].color_key), np.uint8)
+        image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        if image is not None:
+            out[frames[i].index] = image
+    return out
 
 
 def read_inputs(session: Session, sequence_id: int) -> RigInputs:
@@ -63,12 +83,14 @@ def read_inputs(session: Session, sequence_id: int) -> RigInputs:
         raise Conflict(f"sequence {sequence_id} has accepted hand labels in fewer than 3 "
                        "views; rig health compares views")
     storage = get_storage()
-    depth = [load_depth(storage, c, list(session.scalars(
-        select(Frame).where(Frame.camera_id == c.id).order_by(Frame.index)))) for c in cameras]
+    frames = [list(session.scalars(select(Frame).where(Frame.camera_id == c.id)
+                                   .order_by(Frame.index))) for c in cameras]
+    depth = [load_depth(storage, c, f) for c, f in zip(cameras, frames, strict=True)]
+    color = [_color_frames(f) for f in frames]
     serials = [c.serial for c in cameras]
     master = serials.index(seq.master_serial) if seq.master_serial in serials else 0
     return RigInputs(sequence_id, serials, [imported_model(c) for c in cameras],
-                     hand.keypoints, hand.visible, depth, master,
+                     hand.keypoints, hand.visible, depth, color, master,
                      count_accepted(session, sequence_id))
 
 
@@ -80,7 +102,8 @@ def estimate(inputs: RigInputs) -> tuple[dict[str, Any], dict[str, Any]]:
     """(cameras entry of a new version, its report) from the inputs; pure computation."""
     limits = RigThresholds()
     est: RigEstimate = estimate_rig(inputs.cameras, inputs.keypoints, inputs.visible,
-                                    inputs.depth, fixed=(inputs.master_view,), limits=limits)
+                                    inputs.depth, inputs.color, fixed=(inputs.master_view,),
+                                    limits=limits)
     cameras, rows = {}, []
     for serial, h, cam in zip(inputs.serials, est.health, est.cameras, strict=True):
         cameras[serial] = {"extrinsics": cam.T_cam_to_world.tolist(),

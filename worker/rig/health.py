@@ -80,7 +80,8 @@ def _faults(offset: int, corr: ExtrinsicCorrection, fit: DepthFit | None,
 
 
 def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.ndarray,
-                 depth: list[np.ndarray | None] | None = None, fixed: tuple[int, ...] = (0,),
+                 depth: list[np.ndarray | None] | None = None,
+                 color: list[dict[int, np.ndarray]] | None = None, fixed: tuple[int, ...] = (0,),
                  limits: RigThresholds | None = None) -> RigEstimate:
     """Estimate every view's faults from multi-view tracks.
 
@@ -88,6 +89,7 @@ def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.
         cameras: V views as calibrated. keypoints: (V, F, P, 2) px of the same P points in
             every view (hand joints), NaN where unlabelled. visible: (V, F, P) bool.
         depth: V aligned depth maps (F, H, W) uint16 mm or None (no depth fit).
+        color: per view {frame: (H, W, 3) uint8} of a few frames (none: no depth shift).
         fixed: views whose pose and time define the world (the master).
         limits: thresholds for naming a view.
     """
@@ -100,7 +102,7 @@ def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.
     refined = [c.camera for c in corrections]
     fits: list[DepthFit | None] = [None] * len(cameras)
     if depth is not None:
-        fits = fit_depth(refined, depth, k)
+        fits = fit_depth(refined, depth, k, color)
     health = [CameraHealth(v, int(k[v]), c.rotation_deg, c.translation_mm, c.image_shift_px,
                            c.residual_px_before, c.residual_px_after,
                            None if f is None else f.scale, None if f is None else f.shift_px,
