@@ -47,14 +47,14 @@ def ring_cameras(views: int = 8) -> list[CameraModel]:
 
 
 def moving_points(frames: int, rng: np.random.Generator) -> np.ndarray:
-    """(F, 21, 3) metres: a rigid-ish 21-point cloud (10 cm across) that turns and travels
-    about 15 cm over the clip, 8-18 cm above the plane."""
+    """(F, 21, 3) metres: a 21-point cloud (10 cm across) that turns and travels about 35 cm
+    over the clip (1-2 cm a frame, as a reaching hand), 8-18 cm above the plane."""
     base = rng.uniform([-0.05, -0.05, 0.10], [0.05, 0.05, 0.16], (21, 3))
     t = np.linspace(0.0, 1.0, frames)
     out = np.empty((frames, 21, 3))
     for f, s in enumerate(t):
-        rot = axis_angle_to_matrix(np.array([0.3, -0.2, 1.0]) * 0.8 * s)
-        centre = np.array([0.08 * np.sin(3 * s), 0.1 * s - 0.05, 0.02 * np.cos(2 * s)])
+        rot = axis_angle_to_matrix(np.array([0.3, -0.2, 1.0]) * 1.5 * s)
+        centre = np.array([0.12 * np.sin(6 * s), 0.2 * s - 0.1, 0.03 * np.cos(4 * s)])
         out[f] = (base - base.mean(0)) @ rot.T + base.mean(0) + centre
     return out
 
@@ -84,7 +84,7 @@ def depth_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     return depth, np.repeat(grey.astype(np.uint8)[..., None], 3, axis=2)
 
 
-def make_scene(frames: int = 30, noise_px: float = 1.5, seed: int = 0) -> RigScene:
+def make_scene(frames: int = 20, noise_px: float = 1.5, seed: int = 0) -> RigScene:
     rng = np.random.default_rng(seed)
     cameras = ring_cameras()
     points = moving_points(frames, rng)

@@ -11,7 +11,7 @@ them. Time offsets and depth shifts are already gated by their cost gain in
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -99,6 +99,18 @@ def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.
     k = np.array([o.frames for o in offsets])
     aligned, seen = align_views(keypoints, visible, k)
     corrections = refine_extrinsics(cameras, aligned, seen, fixed=fixed)
+    # Second pass: only the views whose correction shows in their labels move; the consistent
+    # ones stay as imported and pin the gauge with the master (a hand-sized cloud leaves some
+    # directions of a healthy view's pose to noise, which the depth check would then see).
+    off = tuple(v for v, c in enumerate(corrections)
+                if v not in fixed and c.image_shift_px > limits.image_shift_px)
+    if off:
+        corrections = refine_extrinsics(
+            cameras, aligned, seen, fixed=tuple(v for v in range(len(cameras)) if v not in off))
+    else:
+        corrections = [replace(c, camera=cameras[v], rotation_deg=0.0, translation_mm=0.0,
+                               image_shift_px=0.0, residual_px_after=c.residual_px_before)
+                       for v, c in enumerate(corrections)]
     refined = [c.camera for c in corrections]
     fits: list[DepthFit | None] = [None] * len(cameras)
     if depth is not None:
