@@ -23,7 +23,7 @@ from backend.captures.calibration import calibrated_models, camera_entry, versio
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import sequence_cameras
 from backend.config import get_settings
-from backend.solve.timing import depth_in_world_time, hand_in_world_time, objects_in_world_time
+from backend.solve.calibrated import depth_in_world_time, hand_in_world_time, objects_in_world_time
 from backend.storage import Storage, get_storage
 from worker.geometry.mesh_io import Mesh, read_mesh
 from worker.hand import HandModel, load_hand_model
