@@ -48,8 +48,8 @@ export function rigSummary(status) {
       ? "Estimating the rig from the accepted labels…"
       : "No rig-health estimate yet.";
   }
-  const off = report.faulty.length ? `Cameras off: ${report.faulty.join(", ")}.`
-    : "No camera is off.";
+  const off = report.faulty.length ? `cameras off: ${report.faulty.join(", ")}.`
+    : "no camera is off.";
   const use = status.version_in_use === 0 ? "the imported calibration is in use"
     : `version ${status.version_in_use} is in use`;
   return `Version ${report.version} from ${report.labels} accepted assignments; ${off} ` +

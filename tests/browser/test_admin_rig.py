@@ -52,7 +52,7 @@ def test_rig_panel_names_the_camera_and_adopts_the_version(page: Page, live_serv
     page.locator("#login button[type=submit]").click()
     expect(page.locator("#sequences-view")).to_be_visible()
     page.goto(f"{live_server.base}/admin/#/sequences/{live_server.sequence_id}")
-    expect(page.locator("#rig-summary")).to_contain_text(f"Cameras off: {serials[1]}.")
+    expect(page.locator("#rig-summary")).to_contain_text(f"cameras off: {serials[1]}.")
     expect(page.locator("#rig-rows tr")).to_have_count(len(serials))
     faulty = page.locator("#rig-rows tr.rig-faulty")
     expect(faulty).to_have_count(1)

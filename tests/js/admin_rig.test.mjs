@@ -33,10 +33,10 @@ test("rigRows writes every figure with its unit and names the faults", () => {
 
 test("rigSummary says which version, what is off and what is in use", () => {
   assert.equal(rigSummary({ report, version_in_use: 0 }),
-    "Version 2 from 48 accepted assignments; Cameras off: cam-3. (the imported calibration " +
+    "Version 2 from 48 accepted assignments; cameras off: cam-3. (the imported calibration " +
     "is in use.)");
   assert.match(rigSummary({ report: { ...report, faulty: [] }, version_in_use: 2 }),
-    /No camera is off\. \(version 2 is in use\.\)/);
+    /no camera is off\. \(version 2 is in use\.\)/);
   assert.equal(rigSummary({ report: null, job_status: "queued" }),
     "Estimating the rig from the accepted labels…");
   assert.equal(rigSummary({ report: null, job_status: null }), "No rig-health estimate yet.");
