@@ -40,6 +40,7 @@ from backend.portal.router import router as portal_router
 from backend.progress.router import router as progress_router
 from backend.quality.router import router as review_router
 from backend.queue import check_queue
+from backend.rig.router import router as rig_router
 from backend.solve.router import router as solve_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
@@ -68,6 +69,7 @@ def create_app() -> FastAPI:
     app.include_router(market_router)
     app.include_router(portal_router)
     app.include_router(solve_router)
+    app.include_router(rig_router)
     app.include_router(progress_router)
     app.include_router(exports_router)
 

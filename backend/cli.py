@@ -454,6 +454,7 @@ def _register_domain_commands() -> None:
     from backend.jobs.cli import jobs_app
     from backend.progress.cli import status_command
     from backend.quality.cli import qc_app, training_app
+    from backend.rig.cli import rig_app
     from backend.solve.cli import calibrate_hand_command, solve_command
 
     app.command("status")(status_command)
@@ -464,6 +465,7 @@ def _register_domain_commands() -> None:
     app.add_typer(jobs_app, name="jobs")
     app.add_typer(training_app, name="training")
     app.add_typer(sequences_app, name="sequences")
+    app.add_typer(rig_app, name="rig")
 
 
 _register_domain_commands()

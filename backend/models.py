@@ -2,6 +2,7 @@
 
 from backend.accounts.models import Admin
 from backend.annotation.models import Assignment, Task, Track
+from backend.captures.calibration import CalibrationVersion
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.crowd import models as crowd
 from backend.db import Base
@@ -12,6 +13,7 @@ from backend.quality.models import QCReport, TrainingClip
 from backend.solve.models import SolveRun
 
 __all__ = [
-    "Admin", "Assignment", "Base", "Camera", "Frame", "Hand", "Job", "QCReport", "SceneObject",
-    "Sequence", "SolveRun", "Subject", "Task", "Track", "TrainingClip", "crowd", "market", "portal",
+    "Admin", "Assignment", "Base", "CalibrationVersion", "Camera", "Frame", "Hand", "Job",
+    "QCReport", "SceneObject", "Sequence", "SolveRun", "Subject", "Task", "Track",
+    "TrainingClip", "crowd", "market", "portal",
 ]

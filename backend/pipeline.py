@@ -34,6 +34,7 @@ from backend.errors import DexlabelError
 from backend.jobs.service import enqueue_job, mark_waiting
 from backend.quality import flows as quality_flows
 from backend.quality.service import record_decision, request_landmark_qc, request_qc
+from backend.rig.service import adopt
 from backend.solve.models import SolveRun
 from backend.solve.service import request_solve
 
@@ -209,3 +210,23 @@ def run_solve(run_id: int) -> dict[str, Any]:
             jobs = request_landmark_qc(session, sequence_id)
         result["landmark_qc"] = len(jobs)
     return result
+
+
+# --- calibration -> solve ----------------------------------------------------------------
+
+
+def adopt_calibration(session: Session, sequence_id: int, number: int, solve: bool = True
+                      ) -> str:
+    """Put calibration version ``number`` in use (0: the imported one) and, when asked and
+    every task has accepted work, queue a solve under it; says what became of the solve."""
+    adopt(session, sequence_id, number)
+    if not solve:
+        return "not requested"
+    digest, missing = accepted_digest(session, sequence_id)
+    if digest is None:
+        return f"waiting: {missing} tasks not accepted yet"
+    try:
+        run = request_solve(session, sequence_id, labels_digest=digest)
+    except DexlabelError as exc:
+        return f"solve not started: {exc.detail}"
+    return f"solve run {run.id} queued"

@@ -22,6 +22,7 @@ from backend.db import session_scope
 from backend.exports.flows import export_job
 from backend.jobs.service import job_handler, requeue_stale
 from backend.queue import huey, queue_lost_messages
+from backend.rig.flows import run_rig_health
 from backend.storage import get_storage
 from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
 
@@ -84,6 +85,12 @@ def solve_run(args: dict[str, Any]) -> dict[str, Any]:
     result = pipeline.run_solve(int(args["run_id"]))
     outcome = f"failed: {result['error']}" if result.get("error") else "done"
     return {**result, "message": f"solve run {result['run_id']} {outcome}"}
+
+
+@job_handler("rig_health")
+def rig_health(args: dict[str, Any]) -> dict[str, Any]:
+    """Estimate a sequence's rig from its accepted labels; store a new calibration version."""
+    return run_rig_health(int(args["sequence_id"]))
 
 
 @job_handler("export")

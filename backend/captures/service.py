@@ -10,10 +10,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session, selectinload
 
+from backend.captures.calibration import imported_model
 from backend.captures.layout import SequencePlan
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.errors import Conflict, NotFound
@@ -350,10 +350,7 @@ def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:
 
 
 def camera_model(camera: Camera) -> CameraModel:
-    """A camera row as the worker packages take it (pixels, camera-to-world metres)."""
-    K = np.array([[camera.fx, 0.0, camera.ppx], [0.0, camera.fy, camera.ppy], [0.0, 0.0, 1.0]])
-    dist = np.zeros(5)
-    coeffs = np.asarray(camera.distortion or [], dtype=np.float64)[:5]
-    dist[: len(coeffs)] = coeffs
-    return CameraModel(K=K, dist=dist, T_cam_to_world=np.asarray(camera.extrinsics, float),
-                       width=camera.width, height=camera.height)
+    """A camera row's imported calibration as the worker packages take it (pixels,
+    camera-to-world metres); :func:`backend.captures.calibration.calibrated_models` gives the
+    version in use."""
+    return imported_model(camera)

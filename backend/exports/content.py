@@ -18,8 +18,9 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import INCLUDE_STATUSES, labelled_work, sequence_tasks
+from backend.captures.calibration import calibrated_models
 from backend.captures.models import Frame, Sequence
-from backend.captures.service import camera_model, sequence_cameras
+from backend.captures.service import sequence_cameras
 from backend.quality.models import QCReport
 from backend.solve.inputs import hand_model_for, merge_labels
 from backend.solve.results import decode_result, hand_trust, object_trust
@@ -219,10 +220,10 @@ def load_sequence(session: Session, sequence_id: int, include: str = "accepted",
     seq = session.get_one(Sequence, sequence_id)
     cameras = sequence_cameras(session, sequence_id)
     views = []
-    for camera in cameras:
+    for camera, model in zip(cameras, calibrated_models(session, cameras), strict=True):
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)
                                       .order_by(Frame.index)))
-        views.append(ViewContent(camera.serial, camera_model(camera),
+        views.append(ViewContent(camera.serial, model,
                                  [f.color_key for f in frames], [f.depth_key for f in frames]))
     content = SequenceContent(
         sequence_id=seq.id, subject=seq.subject.name, name=seq.name,

@@ -16,8 +16,9 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment, Task
+from backend.captures.calibration import calibrated_models
 from backend.captures.models import Camera, Frame, Sequence
-from backend.captures.service import camera_model, sequence_cameras
+from backend.captures.service import sequence_cameras
 from backend.config import get_settings
 from backend.solve.inputs import load_mesh
 from backend.solve.models import SolveRun
@@ -102,7 +103,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
         raise ValueError(f"sequence {sequence_id} has no tasks for target {target_key!r}")
     out = TargetInputs(sequence_id=sequence_id, target_key=target_key, kind=tasks[0].kind,
                        num_frames=sequence.num_frames, camera_rows=cameras,
-                       cameras=[camera_model(c) for c in cameras],
+                       cameras=calibrated_models(session, cameras),
                        tasks={t.id: t for t in tasks},
                        view_of_task={t.id: view_of[t.camera_id] for t in tasks})
     key = check_key(get_settings().signing_key)

@@ -19,9 +19,11 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import count_accepted, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment
+from backend.captures.calibration import calibrated_models, camera_entry, version_in_use
 from backend.captures.models import Camera, Frame, Sequence
-from backend.captures.service import camera_model, sequence_cameras
+from backend.captures.service import sequence_cameras
 from backend.config import get_settings
+from backend.solve.calibrated import depth_in_world_time, hand_in_world_time, objects_in_world_time
 from backend.storage import Storage, get_storage
 from worker.geometry.mesh_io import Mesh, read_mesh
 from worker.hand import HandModel, load_hand_model
@@ -151,20 +153,24 @@ def object_targets(seq: Sequence, cameras: list[Camera], labels: dict,
 
 
 def gather_inputs(session: Session, sequence_id: int, with_depth: bool = True) -> GatheredInputs:
-    """Cameras, merged approved labels, meshes, initial poses and depth of one sequence."""
+    """Cameras, merged approved labels, meshes, initial poses and depth of one sequence,
+    under the calibration version in use (labels and depth in world time)."""
     storage = get_storage()
     seq = session.get_one(Sequence, sequence_id)
     cameras = sequence_cameras(session, sequence_id)
+    version = version_in_use(session, sequence_id)
+    entries = [camera_entry(version, c) for c in cameras]
     labels = approved_labels(session, sequence_id, seq.num_frames)
-    hand = hand_target(seq, cameras, labels)
+    hand = hand_in_world_time(hand_target(seq, cameras, labels), entries)
     depth: list[np.ndarray | None] = []
     for camera in cameras:
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)
                                       .order_by(Frame.index)))
         depth.append(load_depth(storage, camera, frames) if with_depth else None)
     inputs = SolveInputs(
-        cameras=[camera_model(c) for c in cameras], num_frames=seq.num_frames, hand=hand,
-        objects=object_targets(seq, cameras, labels, storage), depth=depth,
+        cameras=calibrated_models(session, cameras), num_frames=seq.num_frames, hand=hand,
+        objects=objects_in_world_time(object_targets(seq, cameras, labels, storage), entries),
+        depth=depth_in_world_time(depth, entries),
         hand_model=hand_model_for(hand.side) if hand is not None else None)
     return GatheredInputs(inputs=inputs, serials=[c.serial for c in cameras],
                           object_names=[o.name for o in seq.objects],

@@ -51,6 +51,18 @@ export class AdminApi extends BearerClient {
   costs() { return this.request("GET", "/crowd/costs"); }
   /** @param {number} sequenceId */
   solveRuns(sequenceId) { return this.request("GET", `/sequences/${sequenceId}/solve-runs`); }
+  /** @param {number} sequenceId */
+  rigHealth(sequenceId) { return this.request("GET", `/sequences/${sequenceId}/rig-health`); }
+  /** Queue a new rig-health estimate. @param {number} sequenceId */
+  estimateRig(sequenceId) {
+    return this.request("POST", `/sequences/${sequenceId}/rig-health`);
+  }
+  /** Put a calibration version in use (0: imported) and re-solve.
+   * @param {number} sequenceId @param {number} version */
+  adoptCalibration(sequenceId, version) {
+    return this.request("POST", `/sequences/${sequenceId}/calibrations/${version}/adopt`,
+      { solve: true });
+  }
 
   /**
    * @param {number} assignmentId

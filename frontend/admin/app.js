@@ -6,6 +6,7 @@
 
 import { AdminApi, ApiError } from "./api.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
+import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import {
   crowdWorkers, initProject, openWorker, sequencesProgress, showJobRows, showProgress,
@@ -106,6 +107,7 @@ async function showSequence(sequenceId, assignmentId) {
   Object.assign(state, { sequence: sequenceId, reports, assignment: assignmentId, runs, serials });
   renderReportList();
   showSolveRuns(sequenceId, runs, serials);
+  await showRigHealth(sequenceId);
   $("report-detail").hidden = true;
   $("report-review").hidden = true;
   await showProgress(sequenceId);
@@ -320,6 +322,7 @@ function start() {
     if (button) exportLabels(Number(/** @type {HTMLElement} */ (button).dataset.export)).catch(fail);
   });
   initSolve(api, fail);
+  initRig(api, fail);
   initProject(api, fail, route);
   window.addEventListener("hashchange", () => {
     notify("");

@@ -1,0 +1,1 @@
+"""Rig health: per-camera faults estimated from the accepted labels, and refined calibrations."""

@@ -1,0 +1,74 @@
+"""Rig health on the admin page in a real browser: the newest estimate's table names the camera
+that is off (its row marked), adopting the refined version says what became of the re-solve,
+and the imported calibration can be put back; screenshots at 1024x700 and 1440x900.
+
+The version is stored directly with a report in the estimate's own form (backend/rig), so the
+page is checked without waiting for an estimate on the live capture."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from playwright.sync_api import Page, expect
+
+from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
+from tests.browser.helpers import server_settings
+
+
+def _store_version(server: LiveServer) -> list[str]:
+    from backend.captures.service import sequence_cameras
+    from backend.db import session_scope
+    from backend.rig.service import store_version
+
+    with server_settings(server), session_scope() as s:
+        cameras = sequence_cameras(s, server.sequence_id)
+        serials = [c.serial for c in cameras]
+        entries = {c.serial: {"extrinsics": c.extrinsics, "time_offset_frames": 0,
+                              "depth_scale": 1.0, "depth_shift_px": [0, 0]} for c in cameras}
+        entries[serials[1]]["time_offset_frames"] = 1
+        rows = [{"serial": serial, "view": v, "time_offset_frames": 0, "rotation_deg": 0.0,
+                 "translation_mm": 0.0, "image_shift_px": 0.0, "residual_px_before": 2.7,
+                 "residual_px_after": 2.7, "depth_scale_percent": 0.0,
+                 "depth_shift_px": [0, 0], "faults": []} for v, serial in enumerate(serials)]
+        rows[1].update(time_offset_frames=1, rotation_deg=0.46, translation_mm=4.9,
+                       image_shift_px=6.1, residual_px_before=9.4, residual_px_after=2.6,
+                       depth_scale_percent=1.0, depth_shift_px=[2, -3],
+                       faults=["1 frame late",
+                               ("pose off by 0.46 deg and 4.9 mm (the labelled points move "
+                                "6.1 px)"), "depth scale +1.0 %",
+                               "depth shifted by (2, -3) px against colour"])
+        store_version(s, server.sequence_id, entries, {
+            "labels": 2, "thresholds": {"image_shift_px": 0.8}, "cameras": rows,
+            "faulty": [serials[1]]})
+    return serials
+
+
+def test_rig_panel_names_the_camera_and_adopts_the_version(page: Page, live_server: LiveServer,
+                                                          output_dir: Path) -> None:
+    serials = _store_version(live_server)
+    page.goto(f"{live_server.base}/admin/")
+    page.locator("#login input[name=email]").fill(ADMIN_EMAIL)
+    page.locator("#login input[name=password]").fill(ADMIN_PASSWORD)
+    page.locator("#login button[type=submit]").click()
+    expect(page.locator("#sequences-view")).to_be_visible()
+    page.goto(f"{live_server.base}/admin/#/sequences/{live_server.sequence_id}")
+    expect(page.locator("#rig-summary")).to_contain_text(f"cameras off: {serials[1]}.")
+    expect(page.locator("#rig-rows tr")).to_have_count(len(serials))
+    faulty = page.locator("#rig-rows tr.rig-faulty")
+    expect(faulty).to_have_count(1)
+    expect(faulty.locator("td").first).to_have_text(serials[1])
+    expect(faulty).to_contain_text("1 frame late")
+    expect(faulty).to_contain_text("+1.00 %")
+    expect(page.locator("#rig-rows tr").first.locator("td").last).to_have_text("ok")
+    page.locator("#rig-section").scroll_into_view_if_needed()
+    for width, height in ((1024, 700), (1440, 900)):
+        page.set_viewport_size({"width": width, "height": height})
+        page.wait_for_timeout(150)
+        page.locator("#rig-section").screenshot(
+            path=str(output_dir / f"admin-rig-{width}x{height}.png"))
+    page.locator("#rig-adopt").click()
+    expect(page.locator("#rig-result")).to_contain_text("Version 1 in use; solve: waiting")
+    expect(page.locator("#rig-summary")).to_contain_text("(version 1 is in use.)")
+    expect(page.locator("#rig-adopt")).to_be_hidden()
+    page.locator("#rig-imported").click()
+    expect(page.locator("#rig-summary")).to_contain_text("the imported calibration is in use")
