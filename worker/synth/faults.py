@@ -98,10 +98,10 @@ def _check(kind: str, args: tuple[float, ...], text: str) -> None:
                          "depth-shift 0 <= LO <= HI <= 50 px; betas SIGMA in (0, 5])")
 
 
-def parse_faults(values: Iterable[str]) -> list[Fault]:
-    """Faults from command-line values, each one fault or a comma list of them: a part that is
-    only a number belongs to the fault before it (``extrinsics:0.2,2,late:1`` is two).
-    ``none`` (no fault) is skipped."""
+def split_fault_names(values: Iterable[str]) -> list[str]:
+    """Fault names from command-line values, each one fault or a comma list of them: a part
+    that is only a number belongs to the fault before it (``extrinsics:0.2,2,late:1`` is two
+    names); ``none`` (no fault) is kept as a name."""
     names: list[str] = []
     for value in values:
         for part in (p.strip() for p in value.split(",")):
@@ -111,7 +111,12 @@ def parse_faults(values: Iterable[str]) -> list[Fault]:
                 names[-1] += f",{part}"
             else:
                 names.append(part)
-    return [parse_fault(n) for n in names if n != "none"]
+    return names
+
+
+def parse_faults(values: Iterable[str]) -> list[Fault]:
+    """Faults from command-line values (see ``split_fault_names``); ``none`` is skipped."""
+    return [parse_fault(n) for n in split_fault_names(values) if n != "none"]
 
 
 def _is_number(text: str) -> bool:
