@@ -74,6 +74,7 @@ from worker.quality.swaps import (
     swap_corrections,
     undo_swaps,
 )
+from worker.quality.view_offset import ViewOffset, fit_view_offset
 
 # Rayleigh median / sigma: the median pixel distance of isotropic 2-D noise with per-axis sigma.
 _RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
@@ -160,6 +161,9 @@ class HandReport:
     # other views place each point (NaN where they do not fix it), "errors" (F, P) raw px
     # from the label to it (NaN where not scored).
     replay: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    # Per view, its camera's systematic offset (worker.quality.view_offset): where applied,
+    # the view's labels were taken back through it before scoring.
+    camera_offsets: dict[int, ViewOffset] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         pts = np.round(self.consensus, 6).astype(object)
@@ -470,6 +474,12 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
             raise ValueError(f"depth[{view}] must have shape (F={frames}, H, W), "
                              f"got {np.shape(dm)}")
     report, fit = _score(cameras, labels, labels, depth, opts)
+    # A camera whose calibration is off shows all its labels the same few pixels away: that
+    # is the camera's, taken out before anyone is scored (worker.quality.view_offset).
+    offsets = _camera_offsets(cameras, labels, fit)
+    if any(o.applied for o in offsets.values()):
+        labels = [_offset_corrected(lab, offsets[lab.view]) for lab in labels]
+        report, fit = _score(cameras, labels, labels, depth, opts)
     for _ in range(opts.swap_refits):
         corrections = swap_corrections(
             {k: a.swaps for k, a in report.assignments.items()}, report.consensus)
@@ -481,7 +491,40 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
         fit_labels = [_undone(lab, corrections[lab.key]) for lab in labels]
         reliability, rows = _suspects(report, labels, corrections, fit, opts)
         report, fit = _score(cameras, labels, fit_labels, depth, opts, fit, reliability, rows)
+    _report_offsets(report, offsets)
     return report
+
+
+def _camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: _Fit
+                    ) -> dict[int, ViewOffset]:
+    """Per view, the map fitted to (leave-one-out reference, observation) of every label of
+    the view over every point it is judged on (two other views fix it)."""
+    judged = np.isfinite(fit.spread).all(axis=(-1, -2)) & np.isfinite(fit.loo).all(axis=-1)
+    pairs: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for col, lab in enumerate(labels):
+        ok = judged[:, col]
+        obs = fit.pixels[ok, col]
+        pairs.setdefault(lab.view, []).append((obs - fit.loo[ok, col], obs))
+    return {view: fit_view_offset(view, found, cameras[view].K[:2, 2])
+            for view, found in pairs.items()}
+
+
+def _offset_corrected(lab: ViewLabels, offset: ViewOffset) -> ViewLabels:
+    return ViewLabels(lab.key, lab.view, offset.correct(lab.xy), lab.visible,
+                      lab.working_time_s, lab.decided)
+
+
+def _report_offsets(report: HandReport, offsets: dict[int, ViewOffset]) -> None:
+    """The camera offsets on the report, each applied one in its labels' metrics, and the
+    replay's references taken back to the view's own pixels."""
+    report.camera_offsets = offsets
+    for key, qc in report.assignments.items():
+        offset = offsets.get(qc.view)
+        if offset is None or not offset.applied:
+            continue
+        qc.metrics["camera_offset_px"] = num(offset.offset_px, 2)
+        if key in report.replay:
+            report.replay[key]["reference"] = offset.forward(report.replay[key]["reference"])
 
 
 def _own_swaps(report: HandReport, corrections: dict[str, list[dict]]) -> list[tuple[str, dict]]:
