@@ -80,10 +80,16 @@ def rescored(inputs: TargetInputs, label: ViewLabels, offset: ViewOffset, scene:
 
 
 def camera_notes(inputs: TargetInputs, metrics: dict[str, Any], view: int) -> list[str]:
-    """The report's words for a camera offset taken out of a label's view (none without)."""
-    offset = metrics.get("camera_offset_px")
-    if offset is None:
-        return []
+    """The report's words for a camera offset or lag taken out of a label's view (none
+    without)."""
     serial = inputs.camera_rows[view].serial
-    return [(f"camera {serial}: the whole view is {offset:.1f} px off the other views (its "
-             "calibration); taken out before scoring, not charged to the worker")]
+    notes = []
+    offset, lag = metrics.get("camera_offset_px"), metrics.get("camera_lag_frames")
+    if offset is not None:
+        notes.append(f"camera {serial}: the whole view is {offset:.1f} px off the other views "
+                     "(its calibration); taken out before scoring, not charged to the worker")
+    if lag:
+        notes.append(f"camera {serial}: its frames show the scene {abs(lag):.0f} frame(s) "
+                     f"{'late' if lag < 0 else 'early'} (its sync); taken out before scoring, "
+                     "not charged to the worker")
+    return notes

@@ -104,6 +104,7 @@ def test_a_sound_rig_reports_no_camera_offset() -> None:
     labels = [make_label(f"careful-{v}", v, truth_xy, "careful", 20 + v) for v in range(8)]
     report = score_hand(cams, labels)
     assert not any(o.applied for o in report.camera_offsets.values())
+    assert not any(report.camera_lags.values())
     assert all("camera_offset_px" not in qc.metrics for qc in report.assignments.values())
 
 
@@ -121,3 +122,23 @@ def test_bad_work_in_a_faulty_view_is_still_caught(faulty_scene, profile: str) -
     for key, qc in report.assignments.items():
         if key != "bad":
             assert qc.metrics["median_error_px"] < 2.5, (key, qc.metrics)
+
+
+def test_a_late_camera_is_found_and_its_careful_worker_not_charged() -> None:
+    cams = camera_ring()
+    # The hand's motion over 12 frames: ~4 px a frame in view 5, what one frame late shows.
+    truth_xy = truth_pixels(cams, moving_hand(12))
+    late = truth_xy.copy()
+    late[5, 1:] = truth_xy[5, :-1]  # view 5's frame f shows frame f - 1
+    labels = [make_label(f"careful-{v}", v, late, "careful", 50 + v) for v in range(8)]
+    labels[2] = make_label("lazy", 2, late, "lazy", 60)
+    report = score_hand(cams, labels)
+    assert report.camera_lags == {v: -1 if v == 5 else 0 for v in range(8)}
+    careful = report.assignments["careful-5"]
+    assert careful.metrics["camera_lag_frames"] == -1.0
+    assert careful.metrics["median_error_px"] < 2.5, careful.metrics
+    assert report.assignments["lazy"].metrics["median_error_px"] > 3.5
+    # The replay is in the view's own frames: frame f's reference is where frame f - 1 was.
+    ref = report.replay["careful-5"]["reference"]
+    ok = np.isfinite(ref[1:-1]).all(axis=-1)
+    assert np.median(np.linalg.norm(ref[1:-1][ok] - late[5, 1:-1][ok], axis=-1)) < 2.0
