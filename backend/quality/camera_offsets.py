@@ -73,7 +73,8 @@ def rescored(inputs: TargetInputs, label: ViewLabels, offset: ViewOffset, scene:
 
     moved = ViewLabels(label.key, label.view, offset.correct(label.xy), label.visible,
                        label.working_time_s, label.decided)
-    qc = score_anchored(inputs.cameras[label.view], moved, scene, target, depth)
+    qc = score_anchored(inputs.cameras[label.view], moved, scene, target, depth,
+                        offset.forward)
     qc.reprojection = offset.forward(qc.reprojection)
     qc.metrics["camera_offset_px"] = num(offset.offset_px, 2)
     return qc
