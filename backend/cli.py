@@ -86,19 +86,45 @@ def synth(
     frames: Annotated[int, typer.Option(min=2, max=10000)] = 72,
     views: Annotated[int, typer.Option(min=1, max=64)] = 8,
     objects: Annotated[int, typer.Option(min=1, max=10)] = 3,
+    fault: Annotated[list[str] | None, typer.Option(
+        help="rig fault the product reads, truth unchanged (repeatable or a comma list): "
+             "extrinsics:DEG,MM, late:N, depth-scale:S, depth-shift:LO-HI, betas[:SIGMA]; "
+             "see worker/synth/faults.py")] = None,
+    fault_seed: Annotated[int, typer.Option(min=0, help="seed of the faults' choices")] = 0,
 ) -> None:
     """Write a synthetic capture (DexYCB layout) with its ground-truth labels."""
     from worker.synth import generate_capture
+    from worker.synth.faults import parse_faults
 
     try:
+        faults = parse_faults(fault or [])
+        if faults and out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise FileExistsError(f"{out} exists and is not an empty folder")
+        clean = out.with_name(out.name + ".clean") if faults else out
         with progress(f"synthesising {views} views x {frames} frames") as step:
-            summary = generate_capture(out, seed=seed, frames=frames, views=views,
+            summary = generate_capture(clean, seed=seed, frames=frames, views=views,
                                        objects=objects)
             step(f"{summary.subject}/{summary.sequence}")
+        if faults:
+            _with_faults(clean, out, faults, fault_seed)
     except (FileExistsError, ValueError) as exc:
         fail(str(exc))
     typer.echo(f"wrote {summary.subject}/{summary.sequence}: {len(summary.serials)} views x "
                f"{summary.num_frames} frames, objects {summary.ycb_ids} -> {out}")
+
+
+def _with_faults(clean: Path, out: Path, faults: list[Any], seed: int) -> None:
+    """The faulty copy of the capture at ``clean`` written to ``out``; ``clean`` removed."""
+    import shutil
+
+    from worker.synth.faults import inject_faults
+
+    try:
+        with progress(f"injecting {', '.join(f.name for f in faults)}") as step:
+            record = inject_faults(clean, out, faults, seed=seed)
+            step(", ".join(sorted(record.get("cameras", {}))) or "calibration")
+    finally:
+        shutil.rmtree(clean, ignore_errors=True)
 
 
 def _import(path: Path) -> list[Any]:

@@ -45,9 +45,14 @@ the crowds, frames the solve trusts), its flagged poses, and its seconds.
 Prints one JSON line: {"captures", "crowd_seed", "draws", "object_draws", "object_poses",
 "scenarios": {name: summary}} (an object scenario run with both poses is named
 "objects-8 (truth)" and "objects-8 (solved)").
+``--fault NAME`` (repeatable or a comma list; see worker/synth/faults.py) runs every scenario
+on a copy of each capture with that rig fault injected (made once under the run's folder, the
+truth unchanged; ``none`` is the capture as it is) and prints "faults": {fault: {scenario:
+careful_flagged, bad_flagged}} with the full tables under "scenarios_by_fault".
 Usage: python bench/qc.py [--capture DIR ...] [--capture-seed 7] [--crowd-seed 11]
                           [--scenario hands-8,hands-4,objects-8,objects-4] [--draws 10]
                           [--object-draws N] [--object-poses solved|truth|truth,solved]
+                          [--fault none,extrinsics:0.5,5 ...] [--fault-seed 0]
 """
 
 from __future__ import annotations
@@ -61,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from _faults import CLEAN, HELP, fault_names, faulty_capture
 from _server import isolated_workdir
 
 # same_spot (both landmarks on one spot) is drawn for object tasks only.
@@ -479,7 +485,13 @@ def main() -> None:
                              "check after the solve is judged against")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--fault", action="append", help=HELP)
+    parser.add_argument("--fault-seed", type=int, default=0, help="seed of the faults' choices")
     args = parser.parse_args()
+    try:
+        faults = fault_names(args.fault)
+    except ValueError as exc:
+        parser.error(str(exc))
     scenarios = [s.strip() for s in args.scenario.split(",") if s.strip()]
     unknown = sorted(set(scenarios) - set(ALL_SCENARIOS))
     if unknown:
@@ -497,21 +509,47 @@ def main() -> None:
     out: dict[str, dict] = {}
     runs = [(name, None) for name in scenarios if not name.startswith("objects")]
     runs += [(name, pose) for name in scenarios if name.startswith("objects") for pose in poses]
-    for name, pose in runs:
-        started = time.perf_counter()
-        label = name if pose is None or len(poses) == 1 else f"{name} ({pose})"
-        if name in ("pool", "timing"):
-            run = pool(captures[8], args.rounds, args.crowd_seed) if name == "pool" \
-                else timing(captures[8], args.repeats, args.crowd_seed)
-        else:
-            kind, views = name.split("-")
-            run = mixed(captures[int(views)], kind.rstrip("s"),
-                        object_draws if pose else args.draws, args.crowd_seed, pose or "truth")
-        out[label] = {**run, "seconds": round(time.perf_counter() - started, 1)}
-        print(f"{label}: {json.dumps(out[label])}", flush=True)
-    print(json.dumps({"captures": {v: str(p) for v, p in sorted(captures.items())},
-                      "crowd_seed": args.crowd_seed, "draws": args.draws,
-                      "object_draws": object_draws, "object_poses": poses, "scenarios": out}))
+    by_fault: dict[str, dict] = {}
+    for fault in faults:
+        rig = {v: faulty_capture(p, fault, work, args.fault_seed) for v, p in captures.items()}
+        out = by_fault.setdefault(fault, {})
+        for name, pose in runs:
+            started = time.perf_counter()
+            label = name if pose is None or len(poses) == 1 else f"{name} ({pose})"
+            if name in ("pool", "timing"):
+                run = pool(rig[8], args.rounds, args.crowd_seed) if name == "pool" \
+                    else timing(rig[8], args.repeats, args.crowd_seed)
+            else:
+                kind, views = name.split("-")
+                run = mixed(rig[int(views)], kind.rstrip("s"),
+                            object_draws if pose else args.draws, args.crowd_seed,
+                            pose or "truth")
+            out[label] = {**run, "seconds": round(time.perf_counter() - started, 1)}
+            tag = label if fault == CLEAN else f"{fault} {label}"
+            print(f"{tag}: {json.dumps(out[label])}", flush=True)
+    summary = {"captures": {v: str(p) for v, p in sorted(captures.items())},
+               "crowd_seed": args.crowd_seed, "draws": args.draws,
+               "object_draws": object_draws, "object_poses": poses}
+    if faults == [CLEAN]:
+        summary["scenarios"] = by_fault[CLEAN]
+    else:
+        summary["faults"] = {fault: _fault_rates(runs) for fault, runs in by_fault.items()}
+        summary["fault_seed"], summary["scenarios_by_fault"] = args.fault_seed, by_fault
+    print(json.dumps(summary))
+
+
+def _fault_rates(runs: dict[str, dict]) -> dict[str, dict]:
+    """Per scenario the careful and bad work flagged under one fault (and the solve's object
+    ADD, mm, where the scenario solved)."""
+    out = {}
+    for label, run in runs.items():
+        if "good_flagged_rate" not in run:
+            continue
+        out[label] = {"careful_flagged": run["good_flagged_rate"],
+                      "bad_flagged": run["bad_flagged_rate"]}
+        if run.get("solve_add_mm_median") is not None:
+            out[label]["solve_add_mm_median"] = run["solve_add_mm_median"]
+    return out
 
 
 if __name__ == "__main__":

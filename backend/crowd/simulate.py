@@ -110,10 +110,18 @@ class CaptureTruth:
             self._views[serial] = (np.stack(joints), np.stack(segs), np.stack(poses))
         return self._views[serial]
 
+    def _shown(self, serial: str, frames: int) -> np.ndarray:
+        """(F,) the truth frame each of the view's image frames shows: a camera of a capture
+        with rig faults may be late (worker.synth.faults); workers label what they see."""
+        from worker.synth.faults import shown_frames
+
+        return shown_frames(self.root, serial, frames)
+
     def view(self, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
-        """(F, 21, 2) joint_2d px and (F, H, W) seg of one view."""
+        """(F, 21, 2) joint_2d px and (F, H, W) seg of one view, as its images show them."""
         joint_2d, seg, _ = self._labels(serial, frames)
-        return joint_2d, seg
+        shown = self._shown(serial, frames)
+        return joint_2d[shown], seg[shown]
 
     def _plan(self, folder: Path) -> SequencePlan:
         if folder not in self._plans:
@@ -123,7 +131,8 @@ class CaptureTruth:
     def object_points(self, serial: str, index: int, frames: int,
                       rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Two landmarks on object ``index`` in one view: surface points visible where it first
-        shows, followed through its true poses; (F, 2, 2) px and (F, 2) visibility."""
+        shows, followed through its true poses as the view's images show them; (F, 2, 2) px
+        and (F, 2) visibility."""
         plan = self._plan(self._folder(serial).parent)
         cam = next(c for c in plan.cameras if c.serial == serial)
         # The view's own camera frame as the world: the labels' pose_y are object-to-camera.
@@ -131,6 +140,8 @@ class CaptureTruth:
                              np.asarray(cam.distortion), np.eye(3, 4), cam.width, cam.height)
         mesh = read_mesh(plan.objects[index].mesh_path)
         _, seg, poses = self._labels(serial, frames)
+        shown = self._shown(serial, frames)
+        seg, poses = seg[shown], poses[shown]
         vertices, faces = surface_points(np.asarray(mesh.vertices, float),
                                          np.asarray(mesh.faces, int))
         xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id), vertices,

@@ -35,6 +35,7 @@ from backend.errors import NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
 from backend.quality import gold
+from backend.quality.camera_offsets import camera_notes, landmark_offsets, rescored
 from backend.quality.inputs import (
     TargetInputs,
     depth_maps,
@@ -202,10 +203,16 @@ def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
         return results
     scene, run_id = solved
     depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
+    anchored = {lab.key: score_anchored(inputs.cameras[lab.view], lab, scene, target,
+                                        depth.get(lab.view)) for lab in crowd}
+    # A camera's own offset is taken out of its view before its labels are judged.
+    offsets = landmark_offsets(session, inputs, scene, anchored)
     for lab in crowd:
-        anchored = score_anchored(inputs.cameras[lab.view], lab, scene, target,
-                                  depth.get(lab.view))
-        results[lab.key] = merge_anchored(results[lab.key], anchored, run_id)
+        offset = offsets.get(lab.view)
+        if offset is not None and offset.applied:
+            anchored[lab.key] = rescored(inputs, lab, offset, scene, target,
+                                         depth.get(lab.view))
+        results[lab.key] = merge_anchored(results[lab.key], anchored[lab.key], run_id)
     timings["anchored_s"] = round(time.perf_counter() - started, 3)
     return results
 
@@ -265,6 +272,7 @@ def score_target(session: Session, sequence_id: int, target_key: str,
         row.replay = replays[key]
         row.thresholds, row.outcome = thresholds, decision.outcome
         row.reasons, row.feedback = list(decision.reasons), decision.feedback
+        row.reasons += camera_notes(inputs, data.get("metrics", {}), qc.view)
         row.provisional = is_provisional or bool(decision.provisional)
         row.views = views
         counts[decision.outcome] += 1

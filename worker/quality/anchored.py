@@ -23,7 +23,7 @@ Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +65,10 @@ ISSUE_PX = 10.0
 # the view (out of the image, behind another object or the hand) is rightly labelled hidden.
 SHOWN_SHARE = 0.1
 SHOWN_SAMPLES = 64
+
+
+# Pixels (..., 2) of the camera model -> where the camera truly shows them.
+PixelMap = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -176,11 +180,15 @@ def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: Solv
 
 
 def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
-                  depth: DepthMaps | None) -> np.ndarray:
+                  depth: DepthMaps | None, image_map: PixelMap | None = None) -> np.ndarray:
     """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
-    solved mesh nearer along its ray, and no depth reading well in front of it."""
+    solved mesh nearer along its ray, and no depth reading well in front of it. image_map:
+    where the camera truly shows a projected pixel (a camera offset, worker.quality.
+    view_offset), so the depth map is read where the point is seen."""
     frames = len(world)
     pix = camera.project(world)
+    if image_map is not None:
+        pix = image_map(pix)
     z = camera.depth_of(world)
     inside = np.isfinite(z) & (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < camera.width) \
         & (pix[:, 1] >= 0) & (pix[:, 1] < camera.height)
@@ -254,13 +262,16 @@ def _drift(errors: np.ndarray) -> float | None:
 
 
 def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects, target: int,
-                   depth: DepthMaps | None = None) -> AnchoredQC:
+                   depth: DepthMaps | None = None, image_map: PixelMap | None = None
+                   ) -> AnchoredQC:
     """One worker's landmark label of object ``target`` against the solved scene.
 
     Args:
         camera: the label's view. label: xy (F, P, 2) px, visible (F, P).
         scene: the solved objects; target: the labelled object's index in it.
         depth: optional (F, H, W) uint16 mm of the view.
+        image_map: optional, where the camera truly shows a projected pixel (its offset);
+            the label is then in the camera model's pixels, the depth map in the camera's.
 
     Returns:
         AnchoredQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
@@ -298,7 +309,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
             continue
         found[p] = point
         world = _track_of(camera, point, scene.poses[target])
-        shown[:, p] = point_visible(camera, world, scene, depth)
+        shown[:, p] = point_visible(camera, world, scene, depth, image_map)
         cosine = facing(camera, point, world, shown[:, p], scene, target)
         if cosine is not None:
             faced.append(cosine)

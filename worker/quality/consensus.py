@@ -74,6 +74,13 @@ from worker.quality.swaps import (
     swap_corrections,
     undo_swaps,
 )
+from worker.quality.view_offset import (
+    ViewOffset,
+    fit_view_lag,
+    fit_view_offset,
+    shift_frames,
+    vacated_frames,
+)
 
 # Rayleigh median / sigma: the median pixel distance of isotropic 2-D noise with per-axis sigma.
 _RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
@@ -160,6 +167,10 @@ class HandReport:
     # other views place each point (NaN where they do not fix it), "errors" (F, P) raw px
     # from the label to it (NaN where not scored).
     replay: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    # Per view, its camera's systematic offset (worker.quality.view_offset) and its lag in
+    # whole frames: where found, the view's labels were taken back through them before scoring.
+    camera_offsets: dict[int, ViewOffset] = field(default_factory=dict)
+    camera_lags: dict[int, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         pts = np.round(self.consensus, 6).astype(object)
@@ -470,6 +481,12 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
             raise ValueError(f"depth[{view}] must have shape (F={frames}, H, W), "
                              f"got {np.shape(dm)}")
     report, fit = _score(cameras, labels, labels, depth, opts)
+    # A camera whose calibration is off shows all its labels the same few pixels away: that
+    # is the camera's, taken out before anyone is scored (worker.quality.view_offset).
+    offsets, lags = _camera_offsets(cameras, labels, fit, frames)
+    if any(o.applied for o in offsets.values()) or any(lags.values()):
+        labels = [_offset_corrected(lab, offsets[lab.view], lags[lab.view]) for lab in labels]
+        report, fit = _score(cameras, labels, labels, depth, opts)
     for _ in range(opts.swap_refits):
         corrections = swap_corrections(
             {k: a.swaps for k, a in report.assignments.items()}, report.consensus)
@@ -481,7 +498,53 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
         fit_labels = [_undone(lab, corrections[lab.key]) for lab in labels]
         reliability, rows = _suspects(report, labels, corrections, fit, opts)
         report, fit = _score(cameras, labels, fit_labels, depth, opts, fit, reliability, rows)
+    _report_offsets(report, offsets, lags)
     return report
+
+
+def _camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: _Fit,
+                    frames: int) -> tuple[dict[int, ViewOffset], dict[int, int]]:
+    """Per view, its lag (whole frames) and the map fitted to (leave-one-out reference,
+    observation) of every label of the view over every point it is judged on (two other
+    views fix it), the label shifted by the lag."""
+    judged = np.isfinite(fit.spread).all(axis=(-1, -2)) & np.isfinite(fit.loo).all(axis=-1)
+    pairs: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for col, lab in enumerate(labels):
+        obs = np.where(judged[:, col, None], fit.pixels[:, col], np.nan)
+        pairs.setdefault(lab.view, []).append(((obs - fit.loo[:, col]).reshape(frames, -1, 2),
+                                               obs.reshape(frames, -1, 2)))
+    lags = {view: fit_view_lag(found) for view, found in pairs.items()}
+    offsets = {view: fit_view_offset(view, [(r, shift_frames(o, lags[view])) for r, o in found],
+                                     cameras[view].K[:2, 2])
+               for view, found in pairs.items()}
+    return offsets, lags
+
+
+def _offset_corrected(lab: ViewLabels, offset: ViewOffset, lag: int) -> ViewLabels:
+    """The label re-indexed to the frames its images show and taken back through the map;
+    frames left without a position of their own are not the worker's decision there."""
+    xy, visible = shift_frames(lab.xy, lag), shift_frames(lab.visible, lag)
+    decided = shift_frames(decided_of(lab), lag) & ~vacated_frames(len(xy), lag)[:, None] \
+        if lag else lab.decided
+    return ViewLabels(lab.key, lab.view, offset.correct(xy), visible, lab.working_time_s,
+                      decided)
+
+
+def _report_offsets(report: HandReport, offsets: dict[int, ViewOffset],
+                    lags: dict[int, int]) -> None:
+    """The camera offsets and lags on the report, each one found in its labels' metrics, and
+    the replay's references taken back to the view's own pixels and frames."""
+    report.camera_offsets, report.camera_lags = offsets, lags
+    for key, qc in report.assignments.items():
+        offset, lag = offsets.get(qc.view), lags.get(qc.view, 0)
+        if lag:
+            qc.metrics["camera_lag_frames"] = float(lag)
+        if offset is not None and offset.applied:
+            qc.metrics["camera_offset_px"] = num(offset.offset_px, 2)
+        if key in report.replay and offset is not None:
+            replay = report.replay[key]
+            replay["reference"] = shift_frames(offset.forward(replay["reference"]), -lag)
+            replay["errors"] = shift_frames(replay["errors"], -lag)
 
 
 def _own_swaps(report: HandReport, corrections: dict[str, list[dict]]) -> list[tuple[str, dict]]:
