@@ -4,7 +4,12 @@ Everything is in image pixels (x right, y down) of one camera view with F frames
 (21 hand joints in DexYCB order, or 2 object landmarks). A worker's output is a list of P tracks,
 each a list of keyframe rows ``[frame, x, y, visible01]`` as the annotation page saves them
 (see worker.tracks): a keyframe every ``key_step`` frames plus the last frame, plus the frames
-where the worker's visibility or labelling changes, positions clamped inside the image.
+where the worker's visibility or labelling changes, positions clamped inside the image. A
+worker who follows the motion (careful, and the swapper and occluder where they are careful)
+also keys where the point's true path leaves the straight line between its keyframes by more
+than FOLLOW_TOLERANCE_PX (`follow_path`): as often as the motion demands, so that the
+interpolated frames walk the real path; the sloppy worker keys every ``key_step``-th frame
+whatever the motion.
 
 Profiles (what each worker does wrong):
     careful   Gaussian noise, sigma 2 px.
@@ -40,6 +45,12 @@ SLOPPY_SIGMA_PX = 8.0
 SWAP_WINDOW = (20 / 72, 45 / 72)
 OCCLUDED_SPAN = 0.6
 KEY_STEP = 4
+# How far (px) a careful worker lets the true path stray from the straight line between two
+# keyframes before keying the frame in between: about what a person sees while scrubbing a
+# 640x480 clip, and near the careful label noise (CAREFUL_SIGMA_PX) itself.
+FOLLOW_TOLERANCE_PX = 2.0
+# Profiles that key where the path bends (the others key every KEY_STEP-th frame only).
+FOLLOWS_MOTION = ("careful", "swapper", "occluder")
 RING = (13, 14, 15, 16)
 LITTLE = (17, 18, 19, 20)
 # Half-width (px) of the square around a point's rounded pixel searched for its own label: a
@@ -204,6 +215,36 @@ def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
     return sorted(k for k in keys if 0 <= k < frames)
 
 
+def follow_path(path: np.ndarray, visible: np.ndarray, keys: Iterable[int],
+                tolerance_px: float = FOLLOW_TOLERANCE_PX) -> list[int]:
+    """Keyframes of one point refined until its linear interpolation follows the true path.
+
+    path: (F, 2) true positions, image px (NaN where unknown); visible: (F,) bool; keys: the
+    frames keyed so far. Between two consecutive keys the frame (visible, with a position)
+    where the true path is farthest from the straight line between them is keyed, while that
+    distance exceeds ``tolerance_px``; spans with an unknown position at either end are left
+    alone. Returns the sorted keyframes, ``keys`` included.
+    """
+    path = np.asarray(path, np.float64)
+    known = np.isfinite(path).all(axis=1) & np.asarray(visible, bool)
+    out = sorted(set(int(k) for k in keys))
+    pending = list(zip(out[:-1], out[1:], strict=True))
+    while pending:
+        a, b = pending.pop()
+        if b - a < 2 or not (known[a] and known[b]):
+            continue
+        inner = np.arange(a + 1, b)
+        t = ((inner - a) / (b - a))[:, None]
+        line = path[a] * (1.0 - t) + path[b] * t
+        off = np.where(known[inner], np.linalg.norm(path[inner] - line, axis=1), 0.0)
+        worst = int(np.argmax(off))
+        if off[worst] > tolerance_px:
+            mid = int(inner[worst])
+            out.append(mid)
+            pending += [(a, mid), (mid, b)]
+    return sorted(out)
+
+
 def keyframe_actions(tracks: list[list[list[float | None]]]) -> dict[str, int]:
     """What a keyframe worker did to make ``tracks`` (P lists of [frame, x, y, visible01]
     rows), counted by worker.synth.assisted's rule: a click per visible keyframe, a key per
@@ -217,6 +258,19 @@ def _position(xy: np.ndarray) -> list[float | None]:
     if not np.isfinite(xy).all():
         return [None, None]
     return [round(float(xy[0]), 2), round(float(xy[1]), 2)]
+
+
+def _seen_path(truth: np.ndarray, profile: str, point: int) -> np.ndarray:
+    """(F, 2) the path the worker follows for one point: the true one, with the swapper's
+    exchanged points inside its window (it follows the finger it believes it labels)."""
+    path = truth[:, point].copy()
+    if profile == "swapper":
+        lo, hi = swap_window(truth.shape[0])
+        a, b = _swap_pairs(truth.shape[1])
+        pairs = dict(zip(a + b, b + a, strict=True))
+        if point in pairs:
+            path[lo:hi + 1] = truth[lo:hi + 1, pairs[point]]
+    return path
 
 
 def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile: str,
@@ -238,7 +292,11 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     noisy[..., 0] = np.clip(noisy[..., 0], 0.0, width - 1.0)
     noisy[..., 1] = np.clip(noisy[..., 1], 0.0, height - 1.0)
     tracks = []
+    truth = np.asarray(xy, np.float64)
     for p in range(xy.shape[1]):
         keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
+        if profile in FOLLOWS_MOTION:
+            # The worker's own visibility marks which frames they look at.
+            keys = follow_path(_seen_path(truth, profile, p), vis[:, p], keys)
         tracks.append([[f, *_position(noisy[f, p]), int(vis[f, p])] for f in keys])
     return SimulatedWork(profile=profile, tracks=tracks)
