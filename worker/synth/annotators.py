@@ -26,6 +26,7 @@ Pure numpy; every random choice comes from the ``rng`` passed in.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal, get_args
@@ -227,8 +228,8 @@ def follow_path(path: np.ndarray, visible: np.ndarray, keys: Iterable[int],
     """
     path = np.asarray(path, np.float64)
     known = np.isfinite(path).all(axis=1) & np.asarray(visible, bool)
-    out = sorted(set(int(k) for k in keys))
-    pending = list(zip(out[:-1], out[1:], strict=True))
+    out = sorted({int(k) for k in keys})
+    pending = list(itertools.pairwise(out))
     while pending:
         a, b = pending.pop()
         if b - a < 2 or not (known[a] and known[b]):
