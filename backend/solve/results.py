@@ -9,6 +9,9 @@ Arrays (F frames, V views, O objects, world frame, metres unless named):
     object_confidence (O, F) in [0, 1]; object_flags (O, F) str, why a pose is not trusted
     ("" = trusted). A flagged object pose is unlabelled in every export. Results stored before
     these two arrays existed read as fully trusted (see `object_trust`).
+    hand_confidence (F,) in [0, 1]; hand_flags (F,) str, why a frame's hand is not trusted
+    ("" = trusted; worker.solver.hand_confidence), read through `hand_trust`; results stored
+    before these existed read as trusted wherever the hand is labelled.
 """
 
 from __future__ import annotations
@@ -49,11 +52,38 @@ def encode_result(result: Any, serials: list[str], object_names: list[str],
             len(object_names), len(result.labelled)),
         "object_flags": np.asarray([[r or "" for r in flags] for flags in result.object_flags],
                                    dtype=str).reshape(len(object_names), len(result.labelled)),
+        **_hand_arrays(result, len(result.labelled)),
     }
     buf = io.BytesIO()
     # The keys are the arrays' names above; none of them is savez's allow_pickle keyword.
     np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
+
+
+def _hand_arrays(result: Any, frames: int) -> dict[str, np.ndarray]:
+    """hand_confidence (F,) and hand_flags (F,) of a result; a result without them (no hand,
+    or made before they existed) is trusted where labelled."""
+    confidence = np.asarray(getattr(result, "hand_confidence", np.zeros(0)), np.float64)
+    flags = list(getattr(result, "hand_flags", []) or [])
+    if confidence.shape != (frames,) or len(flags) != frames:
+        labelled = np.asarray(result.labelled, bool)
+        confidence = labelled.astype(np.float64)
+        flags = [None if ok else "hand not solved on this frame" for ok in labelled]
+    return {"hand_confidence": confidence,
+            "hand_flags": np.asarray([r or "" for r in flags], dtype=str).reshape(frames)}
+
+
+def hand_trust(arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) confidence in [0, 1] and (F,) flag reasons ("" = trusted) of a result's hand
+    frames; a result stored without them is trusted wherever the hand is labelled."""
+    labelled = np.asarray(arrays["labelled"], bool)
+    frames = labelled.shape[0]
+    confidence, flags = arrays.get("hand_confidence"), arrays.get("hand_flags")
+    if confidence is None or flags is None or confidence.shape != (frames,) \
+            or flags.shape != (frames,):
+        confidence = labelled.astype(np.float64)
+        flags = np.where(labelled, "", "hand not solved on this frame")
+    return confidence, flags
 
 
 def decode_result(data: bytes) -> dict[str, np.ndarray]:
