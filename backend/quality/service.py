@@ -40,6 +40,7 @@ from backend.quality.inputs import (
     depth_maps,
     highlight_mask,
     solved_objects,
+    stretch_checks,
     target_inputs,
 )
 from backend.quality.models import QCReport, TrainingClip
@@ -142,6 +143,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
     "gold" for training clips) keyed by assignment id (str), whether provisional, and each
     result's replay record."""
     from worker.quality.consensus import score_hand
+    from worker.quality.stretch_qc import add_stretch_results, without_contradicted
 
     training = set(session.scalars(select(TrainingClip.task_id).where(
         TrainingClip.task_id.in_(inputs.tasks))))
@@ -154,9 +156,14 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
         timings["read_depth_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
+        checks = stretch_checks(session, inputs, crowd)
+        crowd = [without_contradicted(lab, checks[lab.key]) for lab in crowd]
+        timings["stretches_s"] = round(time.perf_counter() - started, 3)
+        started = time.perf_counter()
         report = score_hand(inputs.cameras, crowd, depth=depth)
         timings["score_s"] = round(time.perf_counter() - started, 3)
         results.update(report.assignments)
+        add_stretch_results(report.assignments, checks, inputs.keyframes)
         hand_replay = report.replay
         provisional = bool(report.provisional)
     elif crowd:

@@ -82,7 +82,7 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
         errors[hf] = np.moveaxis(state.hand_errors(problem), 0, 1)
     depth_rms = state.depth_rms_mm(problem) if problem.clouds else np.full(frames, np.nan)
     trust = object_confidence(problem, state)
-    hand_trust, hand_flags = np.zeros(0), []
+    hand_trust, hand_flags = np.zeros(0), list[str | None]()
     if problem.hand is not None:
         hand_trust, hand_flags = hand_confidence(problem.hand.evidence, problem.gamma, labelled,
                                                  list(problem.reasons), errors, depth_rms)
