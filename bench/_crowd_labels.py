@@ -4,8 +4,9 @@ Instead of i.i.d. noise on every frame, each view is labelled by one simulated w
 (worker.synth.annotators: keyframes, linear interpolation in between), and, like the product's
 solve (backend.solve.inputs), its interpolated stretches are checked against the view's own
 images (worker.tracking.stretches): contradicted positions are dropped and the evidence codes
-go to the solve's hand confidence. ``every4`` is the path before keyframes followed the motion:
-a keyframe every 4th frame whatever the motion, no image check.
+go to the solve's hand confidence. ``every4`` keys every 4th frame whatever the motion (a worker
+who does not follow it), image-checked; ``every4-unchecked`` is the whole path before
+keyframes followed the motion: every 4th frame, no image check, every label trusted.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from worker.synth.annotators import KEY_STEP, annotate, keyframe_indices
 from worker.tracking.stretches import check_stretches
 from worker.tracks import dense_points
 
-LABEL_MODES = ("noise", "crowd", "every4")
+LABEL_MODES = ("noise", "crowd", "every4", "every4-unchecked")
 
 
 def write_grey(capture: Path, cache: Path, serials: list[str]) -> None:
@@ -46,20 +47,20 @@ def _every4(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int],
 def crowd_hand(joint_2d: np.ndarray, visible: np.ndarray, grey: np.ndarray, mode: str,
                size: tuple[int, int], rng: np.random.Generator
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """(V, F, 21, 2) px, (V, F, 21) visible and (V, F, 21) evidence codes (None for every4)
+    """(V, F, 21, 2) px, (V, F, 21) visible and (V, F, 21) evidence codes (None unchecked)
     of one careful worker per view. joint_2d: (V, F, 21, 2) true px; grey: (V, F, H, W)."""
     views, frames = joint_2d.shape[:2]
     xy = np.full(joint_2d.shape, np.nan)
     seen = np.zeros(visible.shape, bool)
     evidence = np.zeros(visible.shape, np.int8)
     for v in range(views):
-        if mode == "every4":
+        if mode.startswith("every4"):
             tracks = _every4(joint_2d[v], visible[v], size, rng)
         else:
             tracks = annotate(joint_2d[v], visible[v], size, "careful", rng).tracks
         xy[v], seen[v] = dense_points(enumerate(tracks), frames, joint_2d.shape[2])
-        if mode == "crowd":
+        if mode != "every4-unchecked":
             check = check_stretches(grey[v, :frames], tracks)
             xy[v][check.contradicted], seen[v][check.contradicted] = np.nan, False
             evidence[v] = check.evidence
-    return xy, seen, None if mode == "every4" else evidence
+    return xy, seen, None if mode == "every4-unchecked" else evidence

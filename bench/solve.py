@@ -12,9 +12,10 @@ those are flagged, and how far a static object moves over the clip.
 The paper/default speed ratio is measured on the same frames (the first `--paper-frames`).
 `--labels crowd` takes the hand labels from the simulated crowd's keyframe path instead (one
 careful worker per view keying where the path bends, interpolated, checked against the view's
-images: bench/_crowd_labels.py); `--labels every4` keys every 4th frame whatever the motion (the
-path before). Each run reports the solve's hand flags: frames flagged, MPJPE over trusted
-frames and trusted frames over 5 mm.
+images: bench/_crowd_labels.py); `--labels every4` keys every 4th frame whatever the motion,
+image-checked, and `--labels every4-unchecked` is the path before (no check, all trusted).
+Each run reports the solve's hand flags: frames flagged, MPJPE over trusted frames and trusted
+frames over 5 mm.
 `--scenario` runs a list of named scenarios (8views 4views 5objects noise5 gross5 gross15, or
 all) instead of the one configuration; either way one JSON object is printed on the last line.
 
@@ -355,7 +356,8 @@ def main() -> None:
     parser.add_argument("--skip-paper", action="store_true")
     parser.add_argument("--labels", choices=LABEL_MODES, default="noise",
                         help="hand labels: i.i.d. noise per frame, the crowd's keyframe path "
-                             "(careful workers, image-checked), or keys every 4th frame")
+                             "(careful workers, image-checked), keys every 4th frame "
+                             "(image-checked, or not)")
     parser.add_argument("--capture-frames", type=int, default=72,
                         help="frames of a generated capture")
     args = parser.parse_args()
