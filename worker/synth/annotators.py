@@ -275,11 +275,14 @@ def _seen_path(truth: np.ndarray, profile: str, point: int) -> np.ndarray:
 
 
 def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile: str,
-             rng: np.random.Generator, key_step: int = KEY_STEP) -> SimulatedWork:
+             rng: np.random.Generator, key_step: int = KEY_STEP,
+             follow_motion: bool | None = None) -> SimulatedWork:
     """One simulated worker's tracks for one view.
 
     xy: (F, P, 2) true positions, image px (NaN where unknown: such keyframes carry no
-    position); visible: (F, P) bool; size: (width, height) px.
+    position); visible: (F, P) bool; size: (width, height) px. follow_motion: also key where
+    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION), False: every
+    ``key_step``-th frame only (studies of keyframe spacing).
     """
     if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
@@ -296,7 +299,7 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     truth = np.asarray(xy, np.float64)
     for p in range(xy.shape[1]):
         keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
-        if profile in FOLLOWS_MOTION:
+        if (profile in FOLLOWS_MOTION) if follow_motion is None else follow_motion:
             # The worker's own visibility marks which frames they look at.
             keys = follow_path(_seen_path(truth, profile, p), vis[:, p], keys)
         tracks.append([[f, *_position(noisy[f, p]), int(vis[f, p])] for f in keys])
