@@ -85,8 +85,9 @@ def approved_labels(session: Session, sequence_id: int, num_frames: int,
                     ) -> dict[tuple[int, str], tuple[np.ndarray, np.ndarray]]:
     """Merged approved labels keyed by (camera id, target key) of every task that has any.
 
-    Hand labels are checked against their view's images (see the module); ``evidence``, if
-    given, receives each hand view's merged (F, P) EVIDENCE_* codes under the same key."""
+    With ``evidence`` (a dict to fill), hand labels are first checked against their view's
+    images (see the module) and it receives each hand view's merged (F, P) EVIDENCE_* codes
+    under the same key; without it, the labels are merged as stored (database reads only)."""
     # The sequence's tasks, then their approved work by task (each read by its index).
     tasks = {task.id: task for task in sequence_tasks(session, sequence_id)}
     grouped: dict[tuple[int, str], list] = defaultdict(list)
@@ -96,7 +97,7 @@ def approved_labels(session: Session, sequence_id: int, num_frames: int,
         task = tasks[assignment.task_id]
         key = (task.camera_id, task.target_key)
         xy, visible = dense_labels(assignment, num_frames, task.num_points)
-        if task.kind == "hand":
+        if task.kind == "hand" and evidence is not None:
             if task.camera_id not in grey:
                 grey[task.camera_id] = grey_frames(
                     session, get_storage(), task.camera_id, 0, num_frames - 1,
