@@ -157,13 +157,14 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         timings["read_depth_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
         checks = stretch_checks(session, inputs, crowd)
+        sent = {lab.key: lab for lab in crowd}
         crowd = [without_contradicted(lab, checks[lab.key]) for lab in crowd]
         timings["stretches_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
         report = score_hand(inputs.cameras, crowd, depth=depth)
         timings["score_s"] = round(time.perf_counter() - started, 3)
         results.update(report.assignments)
-        add_stretch_results(report.assignments, checks, inputs.keyframes)
+        add_stretch_results(report.assignments, checks, inputs.keyframes, sent)
         hand_replay = report.replay
         provisional = bool(report.provisional)
     elif crowd:

@@ -26,9 +26,12 @@ def _judged(keyframes: list) -> tuple[AssignmentQC, ViewLabels]:
     frames, _ = _truth(points=len(keyframes))
     check = check_stretches(frames, keyframes)
     xy, visible = dense_points(enumerate(keyframes), COUNT, len(keyframes))
-    label = without_contradicted(ViewLabels("7", 0, xy, visible), check)
+    sent = ViewLabels("7", 0, xy, visible)
+    label = without_contradicted(sent, check)
     qc = AssignmentQC("7", 0, dict(CLEAN), [2.0] * len(keyframes), [2.0] * COUNT)
-    add_stretch_results({"7": qc}, {"7": check}, {"7": keyframes})
+    add_stretch_results({"7": qc}, {"7": check}, {"7": keyframes}, {"7": sent})
+    # Contradicted positions are the worker's own work: never "mostly pre-filled".
+    assert qc.metrics["decided_fraction"] == 1.0
     return qc, label
 
 

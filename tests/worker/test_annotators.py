@@ -209,3 +209,15 @@ def test_careful_worker_walks_a_fast_path_and_sloppy_keys_every_fourth() -> None
     assert np.median(errors) < 3.0 and np.percentile(errors, 95) < 6.0
     sloppy = annotate(xy, vis, SIZE, "sloppy", np.random.default_rng(11))
     assert [row[0] for row in sloppy.tracks[0]] == [*range(0, 24, 4), 23]
+
+
+def test_careful_noise_keeps_its_sigma_and_does_not_shake_between_neighbours() -> None:
+    xy, vis = _circling(frames=400)
+    work = annotate(xy, vis, SIZE, "careful", np.random.default_rng(12), key_step=1)
+    dense, _ = dense_points(enumerate(work.tracks), 400, 21)
+    noise = dense - xy
+    assert abs(noise.std() - 2.0) < 0.15
+    # Independent 2 px noise every frame shakes by sqrt(6) * 2 = 4.9 px per axis (second
+    # difference); a person placing the point on the same spot frame after frame far less.
+    shake = (noise[2:] - 2 * noise[1:-1] + noise[:-2]).std()
+    assert shake < 2.5

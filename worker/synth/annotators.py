@@ -12,7 +12,9 @@ interpolated frames walk the real path; the sloppy worker keys every ``key_step`
 whatever the motion.
 
 Profiles (what each worker does wrong):
-    careful   Gaussian noise, sigma 2 px.
+    careful   Gaussian noise, sigma 2 px, correlated from frame to frame (CAREFUL_CORRELATION:
+              a person puts a point on the same spot of the joint frame after frame, so
+              keyframes on neighbouring frames do not shake against each other).
     sloppy    Gaussian noise, sigma 8 px.
     swapper   exchanges the ring and little fingers (the two landmarks on objects) over the
               frames 20/72 to 45/72 of the clip; careful elsewhere.
@@ -46,6 +48,9 @@ SLOPPY_SIGMA_PX = 8.0
 SWAP_WINDOW = (20 / 72, 45 / 72)
 OCCLUDED_SPAN = 0.6
 KEY_STEP = 4
+# Frame-to-frame correlation of a careful worker's noise (AR(1) per point and axis, marginal
+# sigma CAREFUL_SIGMA_PX): 0.66 between keyframes 4 frames apart, 0.9 between neighbours.
+CAREFUL_CORRELATION = 0.9
 # How far (px) a careful worker lets the true path stray from the straight line between two
 # keyframes before keying the frame in between: about what a person sees while scrubbing a
 # 640x480 clip, and near the careful label noise (CAREFUL_SIGMA_PX) itself.
@@ -204,7 +209,20 @@ def _apply_profile(profile: str, xy: np.ndarray, vis: np.ndarray, size: tuple[in
         for p in range(points):
             start = int(rng.integers(frames - span + 1))
             vis[start:start + span, p] = False
-    return xy + rng.normal(0, sigma, xy.shape), vis, extra
+    if profile == "sloppy":
+        return xy + rng.normal(0, sigma, xy.shape), vis, extra
+    return xy + correlated_noise(rng.normal(0, sigma, xy.shape), CAREFUL_CORRELATION), vis, extra
+
+
+def correlated_noise(white: np.ndarray, rho: float) -> np.ndarray:
+    """(F, ...) AR(1) noise along the first axis from white noise of the same shape: each frame
+    rho times the last plus sqrt(1 - rho^2) of its own draw, so every frame keeps the white
+    noise's sigma."""
+    out = np.array(white, dtype=np.float64, copy=True)
+    keep = np.sqrt(1.0 - rho ** 2)
+    for f in range(1, out.shape[0]):
+        out[f] = rho * out[f - 1] + keep * white[f]
+    return out
 
 
 def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
