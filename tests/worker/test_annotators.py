@@ -211,13 +211,13 @@ def test_careful_worker_walks_a_fast_path_and_sloppy_keys_every_fourth() -> None
     assert [row[0] for row in sloppy.tracks[0]] == [*range(0, 24, 4), 23]
 
 
-def test_careful_noise_keeps_its_sigma_and_does_not_shake_between_neighbours() -> None:
-    xy, vis = _circling(frames=400)
-    work = annotate(xy, vis, SIZE, "careful", np.random.default_rng(12), key_step=1)
-    dense, _ = dense_points(enumerate(work.tracks), 400, 21)
-    noise = dense - xy
-    assert abs(noise.std() - 2.0) < 0.15
-    # Independent 2 px noise every frame shakes by sqrt(6) * 2 = 4.9 px per axis (second
-    # difference); a person placing the point on the same spot frame after frame far less.
-    shake = (noise[2:] - 2 * noise[1:-1] + noise[:-2]).std()
-    assert shake < 2.5
+def test_keys_added_where_the_path_bends_do_not_shake_against_their_neighbours() -> None:
+    xy, vis = _circling()
+    shakes = []
+    for seed in range(10):
+        work = annotate(xy, vis, SIZE, "careful", np.random.default_rng(seed))
+        noise = dense_points(enumerate(work.tracks), 24, 21)[0] - xy
+        shakes.append(noise[2:] - 2 * noise[1:-1] + noise[:-2])
+        assert 0.8 < np.abs(noise).mean() < 2.5
+    # Independent 2 px noise on every frame would shake by sqrt(6) * 2 = 4.9 px per axis.
+    assert np.std(shakes) < 3.0

@@ -12,9 +12,8 @@ interpolated frames walk the real path; the sloppy worker keys every ``key_step`
 whatever the motion.
 
 Profiles (what each worker does wrong):
-    careful   Gaussian noise, sigma 2 px, correlated from frame to frame (CAREFUL_CORRELATION:
-              a person puts a point on the same spot of the joint frame after frame, so
-              keyframes on neighbouring frames do not shake against each other).
+    careful   Gaussian noise, sigma 2 px; a keyframe added where the path bends is placed
+              against the track already there (ADDED_KEY_SIGMA_PX, see `annotate`).
     sloppy    Gaussian noise, sigma 8 px.
     swapper   exchanges the ring and little fingers (the two landmarks on objects) over the
               frames 20/72 to 45/72 of the clip; careful elsewhere.
@@ -37,6 +36,7 @@ import numpy as np
 
 from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
+from worker.hand.joints import JOINT_NAMES
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder"]
 PROFILES: tuple[str, ...] = get_args(Profile)
@@ -48,9 +48,11 @@ SLOPPY_SIGMA_PX = 8.0
 SWAP_WINDOW = (20 / 72, 45 / 72)
 OCCLUDED_SPAN = 0.6
 KEY_STEP = 4
-# Frame-to-frame correlation of a careful worker's noise (AR(1) per point and axis, marginal
-# sigma CAREFUL_SIGMA_PX): 0.66 between keyframes 4 frames apart, 0.9 between neighbours.
-CAREFUL_CORRELATION = 0.9
+# A keyframe added between two others (where the path bends) is placed by dragging the
+# interpolated point onto the joint: it keeps the neighbouring keyframes' error (where the
+# worker sees the joint's centre) plus a small click error of its own, px per axis. So keys
+# on neighbouring frames do not shake against each other.
+ADDED_KEY_SIGMA_PX = 0.7
 # How far (px) a careful worker lets the true path stray from the straight line between two
 # keyframes before keying the frame in between: about what a person sees while scrubbing a
 # 640x480 clip, and near the careful label noise (CAREFUL_SIGMA_PX) itself.
@@ -209,19 +211,24 @@ def _apply_profile(profile: str, xy: np.ndarray, vis: np.ndarray, size: tuple[in
         for p in range(points):
             start = int(rng.integers(frames - span + 1))
             vis[start:start + span, p] = False
-    if profile == "sloppy":
-        return xy + rng.normal(0, sigma, xy.shape), vis, extra
-    return xy + correlated_noise(rng.normal(0, sigma, xy.shape), CAREFUL_CORRELATION), vis, extra
+    return xy + rng.normal(0, sigma, xy.shape), vis, extra
 
 
-def correlated_noise(white: np.ndarray, rho: float) -> np.ndarray:
-    """(F, ...) AR(1) noise along the first axis from white noise of the same shape: each frame
-    rho times the last plus sqrt(1 - rho^2) of its own draw, so every frame keeps the white
-    noise's sigma."""
-    out = np.array(white, dtype=np.float64, copy=True)
-    keep = np.sqrt(1.0 - rho ** 2)
-    for f in range(1, out.shape[0]):
-        out[f] = rho * out[f - 1] + keep * white[f]
+def _added_keys(seen: np.ndarray, noisy: np.ndarray, regular: list[int], keys: list[int],
+                rng: np.random.Generator) -> np.ndarray:
+    """(F, 2) one point's positions with each added keyframe (in ``keys``, not in
+    ``regular``) placed on the seen path with the error interpolated from the regular
+    keyframes around it plus ADDED_KEY_SIGMA_PX of its own. seen, noisy: (F, 2) px."""
+    out = noisy.copy()
+    error = noisy - seen
+    known = [k for k in regular if np.isfinite(error[k]).all()]
+    added = [k for k in keys if k not in set(regular) and np.isfinite(seen[k]).all()]
+    if not known or not added:
+        return out
+    for axis in (0, 1):
+        around = np.interp(added, known, error[known, axis])
+        out[added, axis] = seen[added, axis] + around + rng.normal(0, ADDED_KEY_SIGMA_PX,
+                                                                   len(added))
     return out
 
 
@@ -299,8 +306,9 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
 
     xy: (F, P, 2) true positions, image px (NaN where unknown: such keyframes carry no
     position); visible: (F, P) bool; size: (width, height) px. follow_motion: also key where
-    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION), False: every
-    ``key_step``-th frame only (studies of keyframe spacing).
+    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION) on hand tracks
+    (21 points; object landmarks keep every ``key_step``-th frame, as their QC is tuned for),
+    False: every ``key_step``-th frame only (studies of keyframe spacing).
     """
     if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
@@ -315,10 +323,17 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     noisy[..., 1] = np.clip(noisy[..., 1], 0.0, height - 1.0)
     tracks = []
     truth = np.asarray(xy, np.float64)
+    if follow_motion is None:
+        follow_motion = profile in FOLLOWS_MOTION and xy.shape[1] == len(JOINT_NAMES)
     for p in range(xy.shape[1]):
         keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
-        if (profile in FOLLOWS_MOTION) if follow_motion is None else follow_motion:
+        placed = noisy[:, p]
+        if follow_motion:
             # The worker's own visibility marks which frames they look at.
-            keys = follow_path(_seen_path(truth, profile, p), vis[:, p], keys)
-        tracks.append([[f, *_position(noisy[f, p]), int(vis[f, p])] for f in keys])
+            seen = _seen_path(truth, profile, p)
+            regular, keys = keys, follow_path(seen, vis[:, p], keys)
+            placed = _added_keys(seen, placed, regular, keys, rng)
+            placed[:, 0] = np.clip(placed[:, 0], 0.0, width - 1.0)
+            placed[:, 1] = np.clip(placed[:, 1], 0.0, height - 1.0)
+        tracks.append([[f, *_position(placed[f]), int(vis[f, p])] for f in keys])
     return SimulatedWork(profile=profile, tracks=tracks)
