@@ -123,7 +123,8 @@ def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, An
         visible = hand_visibility(joint_2d, seg)
         grey = _grey(seq_dir / serial, frames)
         size = (grey.shape[2], grey.shape[1])
-        work = annotate(truth, visible, size, "careful", rng, key_step=every)
+        work = annotate(truth, visible, size, "careful", rng, key_step=every,
+                        follow_motion=False)
         found = propose(grey, work.tracks)
         keyed = np.zeros(visible.shape, bool)
         for p, rows in enumerate(work.tracks):
@@ -183,7 +184,7 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
     joint_2d, seg = CaptureTruth(capture).view(serial, frames)
     grey = _grey(next(capture.glob(dexycb.META_GLOB)).parent / serial, frames)
     work = annotate(joint_2d, hand_visibility(joint_2d, seg), (grey.shape[2], grey.shape[1]),
-                    "careful", np.random.default_rng(0), key_step=every)
+                    "careful", np.random.default_rng(0), key_step=every, follow_motion=False)
     body = {"tracks": [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]}
     client = TestClient(create_app())
     headers = {"Authorization": f"Bearer {token}"}
@@ -290,7 +291,7 @@ def _work_one(view: _View, variant: str, key: bytes, assignment_id: int, prefill
 
     size = (view.grey.shape[2], view.grey.shape[1])
     if variant == "today":
-        work = annotate(view.truth, view.visible, size, "careful", rng)
+        work = annotate(view.truth, view.visible, size, "careful", rng, follow_motion=False)
         return work.tracks, keyframe_actions(work.tracks)
     setting = AssistSetting(view.grey, key, assignment_id, prefill)
     done = assisted_annotate(view.truth, view.visible, setting, variant, rng, *judging)

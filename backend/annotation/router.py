@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 
 from backend import pipeline
 from backend.accounts.deps import CurrentAdmin, bearer_token
-from backend.annotation import proposals, service, suggestions
+from backend.annotation import proposals, service, stretch_warnings, suggestions
 from backend.annotation.models import Assignment, Task
 from backend.annotation.points import point_colours, point_names, skeleton
 from backend.annotation.schemas import (
@@ -272,6 +272,18 @@ def tracking_proposals(body: proposals.ProposalsRequest, claims: WriterClaims,
     frame of the range, a position, whether it holds (ok) and its error. Nothing is stored;
     an accepted proposal is saved as a keyframe. 422 names bad keyframes or frame ranges."""
     return proposals.proposals(session, get_storage(), _assignment_of(session, claims), body)
+
+
+@router.post("/annotate/stretches", response_model=stretch_warnings.StretchesRead,
+             openapi_extra=body_limit(MAX_SAVE_BYTES))
+def interpolation_check(body: proposals.ProposalsRequest, claims: WriterClaims,
+                        session: SessionDep) -> stretch_warnings.StretchesRead:
+    """The check the page shows before submit: stretches between the keyframes sent that the
+    view's images say the track does not follow (tracked from both keyframes inwards), each
+    with a sentence naming the point, the frames and the distance. Nothing is stored. 422
+    names bad keyframes."""
+    return stretch_warnings.stretch_warnings(session, get_storage(),
+                                             _assignment_of(session, claims), body)
 
 
 @router.get("/annotate/suggestions", response_model=suggestions.SuggestionsRead)

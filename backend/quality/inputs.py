@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment, Task
+from backend.annotation.proposals import grey_frames
 from backend.captures.calibration import calibrated_models
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import sequence_cameras
@@ -26,6 +27,7 @@ from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
 from worker.geometry import CameraModel
 from worker.tracking.checks import accepted_checks, check_key
+from worker.tracking.stretches import StretchCheck, check_stretches
 from worker.tracks import SOURCE_PREFILLED, dense_points, keyframe_sources
 
 if TYPE_CHECKING:
@@ -60,6 +62,8 @@ class TargetInputs:
     who: dict[str, ScoredAssignment] = field(default_factory=dict)
     tasks: dict[int, Task] = field(default_factory=dict)
     view_of_task: dict[int, int] = field(default_factory=dict)
+    # Each label's stored keyframe rows, one list per point, keyed like ``labels``.
+    keyframes: dict[str, list[list[list[Any]]]] = field(default_factory=dict)
 
 
 def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int
@@ -83,14 +87,20 @@ def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: 
                       working_time_s=assignment.working_time_s, decided=decided)
 
 
-def check_counts(key: bytes, assignment: Assignment, num_frames: int, num_points: int
-                 ) -> tuple[int, int]:
-    """(accepted, corrected) check suggestions of a saved assignment (its stored rows)."""
+def stored_rows(assignment: Assignment, num_points: int) -> list[list[list[Any]]]:
+    """The assignment's stored keyframe rows, one list per point (empty where none)."""
     tracks: list[list[list[Any]]] = [[] for _ in range(num_points)]
     for track in assignment.tracks:
         if 0 <= track.point_index < num_points:
             tracks[track.point_index] = track.keyframes
-    return accepted_checks(key, assignment.id, tracks, num_points, num_frames)
+    return tracks
+
+
+def check_counts(key: bytes, assignment: Assignment, num_frames: int, num_points: int
+                 ) -> tuple[int, int]:
+    """(accepted, corrected) check suggestions of a saved assignment (its stored rows)."""
+    return accepted_checks(key, assignment.id, stored_rows(assignment, num_points),
+                           num_points, num_frames)
 
 
 def target_inputs(session: Session, sequence_id: int, target_key: str) -> TargetInputs:
@@ -112,9 +122,25 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
         task = out.tasks[assignment.task_id]
         view = view_of[task.camera_id]
         out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))
+        out.keyframes[str(assignment.id)] = stored_rows(assignment, task.num_points)
         out.who[str(assignment.id)] = ScoredAssignment(
             assignment.id, task.id, assignment.worker_id,
             check_counts(key, assignment, out.num_frames, task.num_points))
+    return out
+
+
+def stretch_checks(session: Session, inputs: TargetInputs, labels: list[ViewLabels]
+                   ) -> dict[str, StretchCheck]:
+    """Each hand label's stretches checked against its own view's images
+    (worker.tracking.stretches), keyed by the label's key; each view's frames read once."""
+    grey: dict[int, np.ndarray] = {}
+    out: dict[str, StretchCheck] = {}
+    for lab in labels:
+        camera = inputs.camera_rows[lab.view]
+        if lab.view not in grey:
+            grey[lab.view] = grey_frames(session, get_storage(), camera.id, 0,
+                                         inputs.num_frames - 1, (camera.width, camera.height))
+        out[lab.key] = check_stretches(grey[lab.view], inputs.keyframes[lab.key])
     return out
 
 

@@ -42,6 +42,7 @@ from backend.quality.inputs import (
     highlight_mask,
     import_posed_objects,
     solved_objects,
+    stretch_checks,
     target_inputs,
 )
 from backend.quality.models import QCReport, TrainingClip
@@ -144,6 +145,7 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
     "gold" for training clips) keyed by assignment id (str), whether provisional, and each
     result's replay record."""
     from worker.quality.consensus import score_hand
+    from worker.quality.stretch_qc import add_stretch_results, without_contradicted
 
     training = set(session.scalars(select(TrainingClip.task_id).where(
         TrainingClip.task_id.in_(inputs.tasks))))
@@ -156,9 +158,15 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
         timings["read_depth_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
+        checks = stretch_checks(session, inputs, crowd)
+        sent = {lab.key: lab for lab in crowd}
+        crowd = [without_contradicted(lab, checks[lab.key]) for lab in crowd]
+        timings["stretches_s"] = round(time.perf_counter() - started, 3)
+        started = time.perf_counter()
         report = score_hand(inputs.cameras, crowd, depth=depth)
         timings["score_s"] = round(time.perf_counter() - started, 3)
         results.update(report.assignments)
+        add_stretch_results(report.assignments, checks, inputs.keyframes, sent)
         hand_replay = report.replay
         provisional = bool(report.provisional)
     elif crowd:

@@ -23,12 +23,18 @@ def _offsets(entries: list[dict[str, Any]]) -> list[int]:
 
 def hand_in_world_time(hand: HandTarget | None, entries: list[dict[str, Any]]
                        ) -> HandTarget | None:
-    """The hand's (V, F, 21, 2) labels with each view shifted by its time offset."""
+    """The hand's (V, F, 21, 2) labels (and their evidence codes) with each view shifted by its
+    time offset."""
     offsets = _offsets(entries)
     if hand is None or not any(offsets):
         return hand
     keypoints, visible = apply_time_offsets(hand.keypoints, hand.visible, offsets)
-    return replace(hand, keypoints=keypoints, visible=visible)
+    evidence = hand.evidence
+    if evidence is not None:
+        # How each label was decided moves with it (0, "no label", where a view has no frame).
+        evidence = np.stack([shift_frames(np.asarray(codes), offset, 0)
+                             for codes, offset in zip(evidence, offsets, strict=True)])
+    return replace(hand, keypoints=keypoints, visible=visible, evidence=evidence)
 
 
 def objects_in_world_time(objects: list[ObjectTarget], entries: list[dict[str, Any]]

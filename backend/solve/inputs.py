@@ -3,6 +3,12 @@
 Labels come only from approved assignments. Where several are approved for one task (one view
 of one target), they are merged per frame: the median of their positions (pixels) and visible
 where most of them say visible. Views run in the cameras' ``view_index`` order.
+
+Hand labels are first checked against their own view's images (worker.tracking.stretches):
+an interpolated stretch the images say the hand left is dropped from the merge (it would pin
+the solve to a straight line the hand did not take), and each view keeps, per frame and joint,
+the best evidence any of its workers gave (keyed, confirmed by the images, unchecked) for the
+hand's per-frame confidence (worker.solver.hand_confidence).
 """
 
 from __future__ import annotations
@@ -11,6 +17,7 @@ import tempfile
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -19,6 +26,7 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import count_accepted, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment
+from backend.annotation.proposals import grey_frames
 from backend.captures.calibration import calibrated_models, camera_entry, version_in_use
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import sequence_cameras
@@ -30,6 +38,14 @@ from worker.hand import HandModel, load_hand_model
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import check_side
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
+from worker.tracking.stretches import (
+    EVIDENCE_CONFIRMED,
+    EVIDENCE_CONTRADICTED,
+    EVIDENCE_KEYED,
+    EVIDENCE_NONE,
+    EVIDENCE_UNCHECKED,
+    check_stretches,
+)
 from worker.tracks import dense_points
 
 
@@ -55,17 +71,56 @@ def merge_labels(labels: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarra
     return merged, 2 * votes > len(labels)
 
 
-def approved_labels(session: Session, sequence_id: int, num_frames: int
+def merge_evidence(codes: list[np.ndarray]) -> np.ndarray:
+    """(F, P) int8: per frame and point the best EVIDENCE_* code among a view's workers
+    (keyed before confirmed before unchecked; no label and contradicted count last)."""
+    rank = np.array([9, 0, 1, 2, 8], dtype=np.int8)  # indexed by code
+    ranked = np.stack([rank[c] for c in codes]).min(axis=0)
+    back = np.full(10, EVIDENCE_NONE, dtype=np.int8)
+    back[[0, 1, 2, 8]] = [EVIDENCE_KEYED, EVIDENCE_CONFIRMED, EVIDENCE_UNCHECKED,
+                          EVIDENCE_CONTRADICTED]
+    return back[ranked]
+
+
+def approved_labels(session: Session, sequence_id: int, num_frames: int,
+                    evidence: dict[tuple[int, str], np.ndarray] | None = None
                     ) -> dict[tuple[int, str], tuple[np.ndarray, np.ndarray]]:
-    """Merged approved labels keyed by (camera id, target key) of every task that has any."""
+    """Merged approved labels keyed by (camera id, target key) of every task that has any.
+
+    With ``evidence`` (a dict to fill), hand labels are first checked against their view's
+    images (see the module) and it receives each hand view's merged (F, P) EVIDENCE_* codes
+    under the same key; without it, the labels are merged as stored (database reads only)."""
     # The sequence's tasks, then their approved work by task (each read by its index).
     tasks = {task.id: task for task in sequence_tasks(session, sequence_id)}
     grouped: dict[tuple[int, str], list] = defaultdict(list)
+    codes: dict[tuple[int, str], list[np.ndarray]] = defaultdict(list)
+    grey: dict[int, np.ndarray] = {}
     for assignment in labelled_work(session, tasks):
         task = tasks[assignment.task_id]
-        grouped[(task.camera_id, task.target_key)].append(
-            dense_labels(assignment, num_frames, task.num_points))
+        key = (task.camera_id, task.target_key)
+        xy, visible = dense_labels(assignment, num_frames, task.num_points)
+        if task.kind == "hand" and evidence is not None:
+            if task.camera_id not in grey:
+                grey[task.camera_id] = grey_frames(
+                    session, get_storage(), task.camera_id, 0, num_frames - 1,
+                    (task.camera.width, task.camera.height))
+            check = check_stretches(grey[task.camera_id],
+                                    track_rows(assignment, task.num_points))
+            xy[check.contradicted], visible[check.contradicted] = np.nan, False
+            codes[key].append(check.evidence)
+        grouped[key].append((xy, visible))
+    if evidence is not None:
+        evidence.update({key: merge_evidence(found) for key, found in codes.items()})
     return {key: merge_labels(labels) for key, labels in grouped.items()}
+
+
+def track_rows(assignment: Assignment, num_points: int) -> list[list[list[Any]]]:
+    """The assignment's stored keyframe rows, one list per point (empty where none)."""
+    rows: list[list[list[Any]]] = [[] for _ in range(num_points)]
+    for track in assignment.tracks:
+        if 0 <= track.point_index < num_points:
+            rows[track.point_index] = list(track.keyframes)
+    return rows
 
 
 def count_approved(session: Session, sequence_id: int) -> int:
@@ -116,20 +171,25 @@ class GatheredInputs:
 
 
 def hand_target(seq: Sequence, cameras: list[Camera], labels: dict,
-                hand_index: int = 0) -> HandTarget | None:
-    """One hand's merged labels over all views (NaN in views nobody labelled); the solver
-    takes one hand, DexYCB's sequences have one."""
+                hand_index: int = 0, evidence: dict | None = None) -> HandTarget | None:
+    """One hand's merged labels over all views (NaN in views nobody labelled), with each
+    view's evidence codes where ``evidence`` has them (approved_labels); the solver takes
+    one hand, DexYCB's sequences have one."""
     hand = next((h for h in seq.hands if h.index == hand_index), None)
     if hand is None:
         return None
     key = f"hand:{hand.index}"
     keypoints = np.full((len(cameras), seq.num_frames, NUM_JOINTS, 2), np.nan)
     visible = np.zeros((len(cameras), seq.num_frames, NUM_JOINTS), dtype=bool)
+    codes = None if evidence is None else np.full(visible.shape, EVIDENCE_NONE, np.int8)
     for view, camera in enumerate(cameras):
         if (camera.id, key) in labels:
             keypoints[view], visible[view] = labels[(camera.id, key)]
+        if codes is not None and evidence is not None and (camera.id, key) in evidence:
+            codes[view] = evidence[(camera.id, key)]
     betas = np.asarray(hand.betas if hand.betas is not None else [], dtype=np.float64)
-    return HandTarget(side=hand.side, betas=betas, keypoints=keypoints, visible=visible)
+    return HandTarget(side=hand.side, betas=betas, keypoints=keypoints, visible=visible,
+                      evidence=codes)
 
 
 def object_targets(seq: Sequence, cameras: list[Camera], labels: dict,
@@ -160,8 +220,9 @@ def gather_inputs(session: Session, sequence_id: int, with_depth: bool = True) -
     cameras = sequence_cameras(session, sequence_id)
     version = version_in_use(session, sequence_id)
     entries = [camera_entry(version, c) for c in cameras]
-    labels = approved_labels(session, sequence_id, seq.num_frames)
-    hand = hand_in_world_time(hand_target(seq, cameras, labels), entries)
+    evidence: dict[tuple[int, str], np.ndarray] = {}
+    labels = approved_labels(session, sequence_id, seq.num_frames, evidence)
+    hand = hand_in_world_time(hand_target(seq, cameras, labels, evidence=evidence), entries)
     depth: list[np.ndarray | None] = []
     for camera in cameras:
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)

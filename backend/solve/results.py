@@ -51,11 +51,25 @@ def encode_result(result: Any, serials: list[str], object_names: list[str],
             len(object_names), len(result.labelled)),
         "object_flags": np.asarray([[r or "" for r in flags] for flags in result.object_flags],
                                    dtype=str).reshape(len(object_names), len(result.labelled)),
+        **_hand_arrays(result, len(result.labelled)),
     }
     buf = io.BytesIO()
     # The keys are the arrays' names above; none of them is savez's allow_pickle keyword.
     np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
+
+
+def _hand_arrays(result: Any, frames: int) -> dict[str, np.ndarray]:
+    """hand_confidence (F,) and hand_flags (F,) of a result; a result without them (no hand,
+    or made before they existed) is trusted where labelled."""
+    confidence = np.asarray(getattr(result, "hand_confidence", np.zeros(0)), np.float64)
+    flags = list(getattr(result, "hand_flags", []) or [])
+    if confidence.shape != (frames,) or len(flags) != frames:
+        labelled = np.asarray(result.labelled, bool)
+        confidence = labelled.astype(np.float64)
+        flags = [None if ok else "hand not solved on this frame" for ok in labelled]
+    return {"hand_confidence": confidence,
+            "hand_flags": np.asarray([r or "" for r in flags], dtype=str).reshape(frames)}
 
 
 def decode_result(data: bytes) -> dict[str, np.ndarray]:

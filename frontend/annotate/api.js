@@ -153,6 +153,17 @@ export class AnnotateApi {
   }
 
   /**
+   * The check before submit: stretches between keyframes the view's images say the track
+   * does not follow (nothing is stored).
+   * @param {{tracks: object[]}} body  saved rows
+   * @returns {Promise<{tolerance_px: number, checked_frames: number, warnings: Array<{point:
+   *   number, frames: number[], frame: number, offset_px: number, message: string}>}>}
+   */
+  stretches(body) {
+    return this.request("POST", "/api/annotate/stretches", body);
+  }
+
+  /**
    * Pre-fill from the other views' accepted work, and their epipolar data.
    * @returns {Promise<{available: boolean, reason: string|null, views: number,
    *   points: object[], epipolar: object[]}>}

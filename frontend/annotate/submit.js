@@ -1,5 +1,6 @@
 /**
- * Submitting: check the work (core completeness + suspicious), say what is missing frame by
+ * Submitting: check the work (core completeness + suspicious, then the stretches between
+ * keyframes against the view's images, from the server), say what is missing frame by
  * frame, and only then send it. Incomplete work cannot be submitted; suspicious work needs the
  * worker to confirm. After the server accepts it, a marketplace HIT is completed by posting
  * {turkSubmitTo}/mturk/externalSubmit.
@@ -49,6 +50,19 @@ export function checkWork(store, task) {
   return { complete, problems, warnings, byFrame: problemsByFrame(problems, task.num_frames) };
 }
 
+/**
+ * The server's image check as submit warnings: one per stretch the images say the track does
+ * not follow, worst first.
+ * @param {{warnings?: Array<{point: number, frame: number, message: string}>}|null} reply
+ * @returns {Array<{kind: string, point: number, frame: number, message: string}>}
+ */
+export function imageWarnings(reply) {
+  return (reply?.warnings ?? []).map((w) => ({
+    kind: "stretch", point: w.point, frame: w.frame,
+    message: `${w.message}: add a keyframe where it turns`,
+  }));
+}
+
 /** @param {FrameProblem} p @param {string[]} names */
 function frameProblemText(p, names) {
   const frames = p.from === p.to ? `Frame ${p.from}` : `Frames ${p.from}–${p.to}`;
@@ -94,15 +108,26 @@ export function openSubmitDialog(ctx) {
     dialog.close();
     ctx.show(p.from, p.points[0]);
   };
-  warningList.innerHTML = check.warnings.map((w) =>
-    `<li>Please check: ${escapeHtml(w.message)}</li>`).join("");
-  confirmBox.checked = false;
-  confirmBox.closest("label").hidden = check.warnings.length === 0;
   const update = () => {
     button.disabled = !check.complete || (check.warnings.length > 0 && !confirmBox.checked);
   };
+  const renderWarnings = () => {
+    warningList.innerHTML = check.warnings.map((w) =>
+      `<li>Please check: ${escapeHtml(w.message)}</li>`).join("");
+    confirmBox.closest("label").hidden = check.warnings.length === 0;
+    update();
+  };
+  confirmBox.checked = false;
   confirmBox.onchange = update;
-  update();
+  renderWarnings();
+  // The image check is advice: a failed request leaves the local checks as they are.
+  ctx.api.stretches({ tracks: ctx.saver.body().tracks }).then((reply) => {
+    const found = imageWarnings(reply);
+    if (!dialog.open || found.length === 0) return;
+    check.warnings.push(...found);
+    confirmBox.checked = false;
+    renderWarnings();
+  }, () => {});
   setError(dialog, "");
   button.onclick = () => submitNow(ctx);
   dialog.showModal();

@@ -91,7 +91,8 @@ def test_accepted_proposals_are_closer_to_the_true_joints_than_interpolation(
                         headers=admin_headers).json()["token"]
     frames = task["num_frames"]
     truth, visible = _truth(fast_capture, task["serial"], frames)
-    work = annotate(truth, visible, (640, 480), "careful", np.random.default_rng(3))
+    work = annotate(truth, visible, (640, 480), "careful", np.random.default_rng(3),
+                    follow_motion=False)
     body = {"tracks": [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]}
     resp = client.post(URL, json=body, headers=_bearer(token))
     assert resp.status_code == 200, resp.text

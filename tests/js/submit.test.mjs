@@ -3,7 +3,7 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
-import { checkWork, problemsByFrame } from "../../frontend/annotate/submit.js";
+import { checkWork, imageWarnings, problemsByFrame } from "../../frontend/annotate/submit.js";
 
 test("runs of frames missing the same points become one line each", () => {
   const problems = [
@@ -32,4 +32,14 @@ test("complete work has no problems; an all-static track is flagged for a confir
   assert.deepEqual(check.warnings.map((w) => w.kind), ["static"]);
   store.placePoint(0, 4, 20, 12);
   assert.deepEqual(checkWork(store, task).warnings, []);
+});
+
+test("the server's image check becomes one warning per stretch, in its words", () => {
+  const reply = { warnings: [{ point: 16, frames: [4, 8], frame: 6, offset_px: 14.2,
+    message: "ring tip moves 14 px between frames 4 and 8 that the track does not follow" }] };
+  assert.deepEqual(imageWarnings(reply), [{ kind: "stretch", point: 16, frame: 6,
+    message: "ring tip moves 14 px between frames 4 and 8 that the track does not follow: " +
+      "add a keyframe where it turns" }]);
+  assert.deepEqual(imageWarnings(null), []);
+  assert.deepEqual(imageWarnings({ warnings: [] }), []);
 });

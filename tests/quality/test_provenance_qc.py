@@ -133,7 +133,10 @@ def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: di
     # The blind acceptor's labels are as good as the suggestions: only the checks tell.
     assert blind.metrics["median_error_px"] < 5.0
     assert (blind.metrics["checks_accepted"], blind.metrics["checks_corrected"]) == (4, 0)
-    assert blind.outcome == "reject" and blind.reasons == [BLIND_REASON]
+    # Its positions are never what rejects it: at most its tracker-made track shakes a little
+    # against a reference of views keyed on nearly every frame of this fast clip (a review).
+    assert blind.outcome == "reject" and blind.reasons[0] == BLIND_REASON
+    assert all(r == BLIND_REASON or r.startswith("jitter_px") for r in blind.reasons)
     assert "15 px off the point on purpose" in blind.feedback
     # Every position a suggestion kept: not judged on position, and its kept checks reject it.
     assert prefilled.metrics["decided_fraction"] == 0.0

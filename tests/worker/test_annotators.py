@@ -12,10 +12,12 @@ from worker.synth.annotators import (
     RING,
     annotate,
     draw_profiles,
+    follow_path,
     hand_visibility,
     mesh_landmarks,
     swap_window,
 )
+from worker.tracks import dense_points
 
 FRAMES, WIDTH, HEIGHT = 72, 640, 480
 SIZE = (WIDTH, HEIGHT)
@@ -173,3 +175,49 @@ def test_object_never_shown_is_marked_occluded_without_positions() -> None:
     assert np.isnan(points).all() and not visible.any() and (ids == -1).all()
     work = annotate(points, visible, (160, 120), "careful", np.random.default_rng(0))
     assert work.tracks[0] == [[0, None, None, 0], [4, None, None, 0]]
+
+
+def _circling(frames: int = 24, radius: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """21 joints circling once in ``frames`` frames (a fast hand): (F, 21, 2), (F, 21)."""
+    angle = 2 * np.pi * np.arange(frames) / frames
+    centre = np.array([320.0, 240.0]) + np.arange(21)[:, None] * [3.0, 0.0]
+    xy = centre[None] + radius * np.stack([np.cos(angle), np.sin(angle)], -1)[:, None, :]
+    return xy, np.ones((frames, 21), dtype=bool)
+
+
+def _interpolation_errors(work, xy: np.ndarray) -> np.ndarray:
+    """(F, P) px distance of the worker's interpolated track from the truth."""
+    dense, _ = dense_points(enumerate(work.tracks), xy.shape[0], xy.shape[1])
+    return np.linalg.norm(dense - xy, axis=-1)
+
+
+def test_follow_path_keys_until_the_line_follows_the_path() -> None:
+    xy, vis = _circling()
+    keys = follow_path(xy[:, 0], vis[:, 0], [0, 23], tolerance_px=2.0)
+    dense = np.stack([np.interp(np.arange(24), keys, xy[keys, 0, k]) for k in (0, 1)], -1)
+    assert np.linalg.norm(dense - xy[:, 0], axis=1).max() <= 2.0
+    # A straight path needs nothing more than its ends.
+    line = np.stack([np.arange(24.0), np.zeros(24)], -1)
+    assert follow_path(line, np.ones(24, bool), [0, 23]) == [0, 23]
+
+
+def test_careful_worker_walks_a_fast_path_and_sloppy_keys_every_fourth() -> None:
+    xy, vis = _circling()
+    careful = annotate(xy, vis, SIZE, "careful", np.random.default_rng(11))
+    errors = _interpolation_errors(careful, xy)
+    # Keyed every 4th frame, the chord of a 60 deg arc of 60 px leaves 8 px in between.
+    assert np.median(errors) < 3.0 and np.percentile(errors, 95) < 6.0
+    sloppy = annotate(xy, vis, SIZE, "sloppy", np.random.default_rng(11))
+    assert [row[0] for row in sloppy.tracks[0]] == [*range(0, 24, 4), 23]
+
+
+def test_keys_added_where_the_path_bends_do_not_shake_against_their_neighbours() -> None:
+    xy, vis = _circling()
+    shakes = []
+    for seed in range(10):
+        work = annotate(xy, vis, SIZE, "careful", np.random.default_rng(seed))
+        noise = dense_points(enumerate(work.tracks), 24, 21)[0] - xy
+        shakes.append(noise[2:] - 2 * noise[1:-1] + noise[:-2])
+        assert 0.8 < np.abs(noise).mean() < 2.5
+    # Independent 2 px noise on every frame would shake by sqrt(6) * 2 = 4.9 px per axis.
+    assert np.std(shakes) < 3.0

@@ -88,7 +88,8 @@ class TestCarefulAssisted:
     def test_spends_fewer_actions_than_the_keyframe_worker_at_lower_error(self, clip) -> None:
         _, truth, visible = clip
         work = _work(clip, "careful")
-        today = annotate(truth, visible, (WIDTH, HEIGHT), "careful", np.random.default_rng(0))
+        today = annotate(truth, visible, (WIDTH, HEIGHT), "careful", np.random.default_rng(0),
+                         follow_motion=False)
         mine, theirs = work.actions, keyframe_actions(today.tracks)
 
         def total(actions: dict[str, int]) -> int:

@@ -103,6 +103,11 @@ def _bounds() -> dict[str, MetricBound]:
         # corrected ones (review); two are suggestions accepted without looking (reject).
         # Fixed, whatever the population does: work without suggestions keeps none.
         "checks_accepted": MetricBound("above", (0.0, 0.0), (1.0, 1.0)),
+        # Share of a hand track's interpolated stretches its own view's images say the point
+        # left (worker.quality.stretch_qc): a careful worker keys where the path bends and
+        # leaves 0-12% (the tracker's own slips); one keying every 4th frame through fast
+        # motion 70-80%.
+        "unfollowed_stretches": MetricBound("above", (0.2, 0.25), (0.45, 0.55)),
     }
 
 
@@ -305,6 +310,10 @@ def _issue_text(issue: dict, name: str) -> str:
         return f"the {name} was {error:.0f} px off the object in {frames}"
     if issue.get("about") == "anchored":
         return f"the {name} was {error:.0f} px off the object point it marks in {frames}"
+    if issue.get("about") == "stretch":
+        first, last = issue["frames"][:2]
+        return (f"the {name} moves {error:.0f} px between frames {first} and {last} that "
+                "your track does not follow (add a keyframe where it turns)")
     if issue.get("about") == "jump":
         first, last = issue["frames"][:2]
         return f"the {name} jumped {error:.0f} px between frames {first} and {last}"

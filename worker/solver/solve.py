@@ -10,6 +10,7 @@ import torch
 
 from worker.solver.confidence import object_confidence
 from worker.solver.default import solve_default
+from worker.solver.hand_confidence import hand_confidence
 from worker.solver.initial_pose import fit_initial_pose
 from worker.solver.paper import solve_paper
 from worker.solver.problem import Problem
@@ -81,6 +82,10 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
         errors[hf] = np.moveaxis(state.hand_errors(problem), 0, 1)
     depth_rms = state.depth_rms_mm(problem) if problem.clouds else np.full(frames, np.nan)
     trust = object_confidence(problem, state)
+    hand_trust, hand_flags = np.zeros(0), list[str | None]()
+    if problem.hand is not None:
+        hand_trust, hand_flags = hand_confidence(problem.hand.evidence, problem.gamma, labelled,
+                                                 list(problem.reasons), errors, depth_rms)
     return SolveResult(
         hand_pose_m=pose, hand_joints=joints, object_poses=state.object_poses.copy(),
         labelled=labelled, reasons=list(problem.reasons), kpt_error_px=errors,
@@ -90,7 +95,8 @@ def _result(problem: Problem, state: SolveState, timings: dict[str, float]) -> S
         timings=timings,
         betas=None if problem.subject is None else problem.betas.copy(),
         side=None if problem.hand is None else problem.hand.side,
-        object_confidence=trust.confidence, object_flags=trust.flags)
+        object_confidence=trust.confidence, object_flags=trust.flags,
+        hand_confidence=hand_trust, hand_flags=hand_flags)
 
 
 def hand_vertices(result: SolveResult, inputs: SolveInputs, frame: int) -> np.ndarray:

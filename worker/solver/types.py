@@ -22,12 +22,17 @@ class HandTarget:
     side: "right" or "left". betas: (10,) subject shape, fixed.
     keypoints: (V, F, 21, 2) px in DexYCB joint order, NaN where there is no label.
     visible: (V, F, 21) bool, the annotator's visibility flag (gamma in the paper).
+    evidence: optional (V, F, 21) int8 codes of how each label was decided
+        (worker.tracking.stretches.EVIDENCE_*: keyed, interpolated and confirmed by the
+        view's images, interpolated unchecked, contradicted); None: every label counts as
+        keyed (labels without provenance). Read by the hand's confidence only.
     """
 
     side: str
     betas: np.ndarray
     keypoints: np.ndarray
     visible: np.ndarray
+    evidence: np.ndarray | None = None
 
 
 @dataclass
@@ -153,6 +158,9 @@ class SolveResult:
     object_confidence: (O, F) in [0, 1], how well each object pose is supported by its
     evidence (see `worker.solver.confidence`). object_flags: per object, per frame None or the
     reason that pose is not trusted; a flagged pose is exported as unlabelled.
+    hand_confidence: (F,) in [0, 1], how well the evidence pins each frame's hand down;
+    hand_flags: (F,) None or the reason the frame's hand is not trusted (see
+    `worker.solver.hand_confidence`); empty when there is no hand.
     """
 
     hand_pose_m: np.ndarray
@@ -169,6 +177,8 @@ class SolveResult:
     side: str | None = None
     object_confidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     object_flags: list[list[str | None]] = field(default_factory=list)
+    hand_confidence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    hand_flags: list[str | None] = field(default_factory=list)
 
     def to_summary(self) -> dict:
         """JSON-friendly summary: counts, error statistics (px, mm), timings (s)."""

@@ -4,10 +4,16 @@ Everything is in image pixels (x right, y down) of one camera view with F frames
 (21 hand joints in DexYCB order, or 2 object landmarks). A worker's output is a list of P tracks,
 each a list of keyframe rows ``[frame, x, y, visible01]`` as the annotation page saves them
 (see worker.tracks): a keyframe every ``key_step`` frames plus the last frame, plus the frames
-where the worker's visibility or labelling changes, positions clamped inside the image.
+where the worker's visibility or labelling changes, positions clamped inside the image. A
+worker who follows the motion (careful, and the swapper and occluder where they are careful)
+also keys where the point's true path leaves the straight line between its keyframes by more
+than FOLLOW_TOLERANCE_PX (`follow_path`): as often as the motion demands, so that the
+interpolated frames walk the real path; the sloppy worker keys every ``key_step``-th frame
+whatever the motion.
 
 Profiles (what each worker does wrong):
-    careful   Gaussian noise, sigma 2 px.
+    careful   Gaussian noise, sigma 2 px; a keyframe added where the path bends is placed
+              against the track already there (ADDED_KEY_SIGMA_PX, see `annotate`).
     sloppy    Gaussian noise, sigma 8 px.
     swapper   exchanges the ring and little fingers (the two landmarks on objects) over the
               frames 20/72 to 45/72 of the clip; careful elsewhere.
@@ -25,6 +31,7 @@ Pure numpy; every random choice comes from the ``rng`` passed in.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal, get_args
@@ -33,6 +40,7 @@ import numpy as np
 
 from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
+from worker.hand.joints import JOINT_NAMES
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot"]
 # Every profile; PROFILES are those of hand work (same_spot is an object worker's mistake).
@@ -56,6 +64,17 @@ LANDMARK_SEPARATION_M = 0.03
 # degrees from the camera (cosine 0.5); a point seen edge-on slides off its spot with the
 # slightest turn of the object.
 PLAIN_VIEW_COS = 0.5
+# A keyframe added between two others (where the path bends) is placed by dragging the
+# interpolated point onto the joint: it keeps the neighbouring keyframes' error (where the
+# worker sees the joint's centre) plus a small click error of its own, px per axis. So keys
+# on neighbouring frames do not shake against each other.
+ADDED_KEY_SIGMA_PX = 0.7
+# How far (px) a careful worker lets the true path stray from the straight line between two
+# keyframes before keying the frame in between: about what a person sees while scrubbing a
+# 640x480 clip, and near the careful label noise (CAREFUL_SIGMA_PX) itself.
+FOLLOW_TOLERANCE_PX = 2.0
+# Profiles that key where the path bends (the others key every KEY_STEP-th frame only).
+FOLLOWS_MOTION = ("careful", "swapper", "occluder")
 RING = (13, 14, 15, 16)
 LITTLE = (17, 18, 19, 20)
 # Half-width (px) of the square around a point's rounded pixel searched for its own label: a
@@ -242,6 +261,24 @@ def _apply_profile(profile: str, xy: np.ndarray, vis: np.ndarray, size: tuple[in
     return xy + rng.normal(0, sigma, xy.shape), vis, extra
 
 
+def _added_keys(seen: np.ndarray, noisy: np.ndarray, regular: list[int], keys: list[int],
+                rng: np.random.Generator) -> np.ndarray:
+    """(F, 2) one point's positions with each added keyframe (in ``keys``, not in
+    ``regular``) placed on the seen path with the error interpolated from the regular
+    keyframes around it plus ADDED_KEY_SIGMA_PX of its own. seen, noisy: (F, 2) px."""
+    out = noisy.copy()
+    error = noisy - seen
+    known = [k for k in regular if np.isfinite(error[k]).all()]
+    added = [k for k in keys if k not in set(regular) and np.isfinite(seen[k]).all()]
+    if not known or not added:
+        return out
+    for axis in (0, 1):
+        around = np.interp(added, known, error[known, axis])
+        out[added, axis] = seen[added, axis] + around + rng.normal(0, ADDED_KEY_SIGMA_PX,
+                                                                   len(added))
+    return out
+
+
 def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
                      extra: Iterable[int] = ()) -> list[int]:
     """Frames a person keys for one point: every ``key_step``-th, the last, each change of
@@ -249,6 +286,36 @@ def keyframe_indices(frames: int, key_step: int, visible: np.ndarray,
     keys = set(range(0, frames, key_step)) | {frames - 1} | set(extra)
     keys |= {int(f) for f in np.flatnonzero(visible[1:] != visible[:-1]) + 1}
     return sorted(k for k in keys if 0 <= k < frames)
+
+
+def follow_path(path: np.ndarray, visible: np.ndarray, keys: Iterable[int],
+                tolerance_px: float = FOLLOW_TOLERANCE_PX) -> list[int]:
+    """Keyframes of one point refined until its linear interpolation follows the true path.
+
+    path: (F, 2) true positions, image px (NaN where unknown); visible: (F,) bool; keys: the
+    frames keyed so far. Between two consecutive keys the frame (visible, with a position)
+    where the true path is farthest from the straight line between them is keyed, while that
+    distance exceeds ``tolerance_px``; spans with an unknown position at either end are left
+    alone. Returns the sorted keyframes, ``keys`` included.
+    """
+    path = np.asarray(path, np.float64)
+    known = np.isfinite(path).all(axis=1) & np.asarray(visible, bool)
+    out = sorted({int(k) for k in keys})
+    pending = list(itertools.pairwise(out))
+    while pending:
+        a, b = pending.pop()
+        if b - a < 2 or not (known[a] and known[b]):
+            continue
+        inner = np.arange(a + 1, b)
+        t = ((inner - a) / (b - a))[:, None]
+        line = path[a] * (1.0 - t) + path[b] * t
+        off = np.where(known[inner], np.linalg.norm(path[inner] - line, axis=1), 0.0)
+        worst = int(np.argmax(off))
+        if off[worst] > tolerance_px:
+            mid = int(inner[worst])
+            out.append(mid)
+            pending += [(a, mid), (mid, b)]
+    return sorted(out)
 
 
 def keyframe_actions(tracks: list[list[list[float | None]]]) -> dict[str, int]:
@@ -266,12 +333,29 @@ def _position(xy: np.ndarray) -> list[float | None]:
     return [round(float(xy[0]), 2), round(float(xy[1]), 2)]
 
 
+def _seen_path(truth: np.ndarray, profile: str, point: int) -> np.ndarray:
+    """(F, 2) the path the worker follows for one point: the true one, with the swapper's
+    exchanged points inside its window (it follows the finger it believes it labels)."""
+    path = truth[:, point].copy()
+    if profile == "swapper":
+        lo, hi = swap_window(truth.shape[0])
+        a, b = _swap_pairs(truth.shape[1])
+        pairs = dict(zip(a + b, b + a, strict=True))
+        if point in pairs:
+            path[lo:hi + 1] = truth[lo:hi + 1, pairs[point]]
+    return path
+
+
 def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile: str,
-             rng: np.random.Generator, key_step: int = KEY_STEP) -> SimulatedWork:
+             rng: np.random.Generator, key_step: int = KEY_STEP,
+             follow_motion: bool | None = None) -> SimulatedWork:
     """One simulated worker's tracks for one view.
 
     xy: (F, P, 2) true positions, image px (NaN where unknown: such keyframes carry no
-    position); visible: (F, P) bool; size: (width, height) px.
+    position); visible: (F, P) bool; size: (width, height) px. follow_motion: also key where
+    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION) on hand tracks
+    (21 points; object landmarks keep every ``key_step``-th frame, as their QC is tuned for),
+    False: every ``key_step``-th frame only (studies of keyframe spacing).
     """
     if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
@@ -285,7 +369,18 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     noisy[..., 0] = np.clip(noisy[..., 0], 0.0, width - 1.0)
     noisy[..., 1] = np.clip(noisy[..., 1], 0.0, height - 1.0)
     tracks = []
+    truth = np.asarray(xy, np.float64)
+    if follow_motion is None:
+        follow_motion = profile in FOLLOWS_MOTION and xy.shape[1] == len(JOINT_NAMES)
     for p in range(xy.shape[1]):
         keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
-        tracks.append([[f, *_position(noisy[f, p]), int(vis[f, p])] for f in keys])
+        placed = noisy[:, p]
+        if follow_motion:
+            # The worker's own visibility marks which frames they look at.
+            seen = _seen_path(truth, profile, p)
+            regular, keys = keys, follow_path(seen, vis[:, p], keys)
+            placed = _added_keys(seen, placed, regular, keys, rng)
+            placed[:, 0] = np.clip(placed[:, 0], 0.0, width - 1.0)
+            placed[:, 1] = np.clip(placed[:, 1], 0.0, height - 1.0)
+        tracks.append([[f, *_position(placed[f]), int(vis[f, p])] for f in keys])
     return SimulatedWork(profile=profile, tracks=tracks)
