@@ -64,6 +64,10 @@ class SolveFrameRead(BaseModel):
     frame: int
     labelled: bool
     reason: str | None
+    # How well the evidence pins the hand down on this frame (0-1), and why it is not trusted
+    # (None: trusted); a flagged frame's pose is kept beside its flag.
+    hand_confidence: float = 1.0
+    hand_flag: str | None = None
     hand_pose_m: list[float] | None
     hand_joints: list[list[float]] | None
     objects: list[ObjectPose]
