@@ -272,9 +272,10 @@ def test_accepted_labels_reads_use_indexes(filled: str, sequence_id: int) -> Non
         return int(session.get_one(Sequence, seq).num_frames)
 
     assert _no_seq_scans(lambda s: accepted_digest(s, seq)) == 2
-    # The sequence, its cameras, the target's tasks, their assignments and all their tracks.
-    assert _no_seq_scans(lambda s: target_inputs(s, seq, "hand:0")) <= 5
-    assert _no_seq_scans(lambda s: target_inputs(s, seq, "object:2")) <= 5
+    # The sequence, its cameras, the calibration version in use, the target's tasks, their
+    # assignments and all their tracks.
+    assert _no_seq_scans(lambda s: target_inputs(s, seq, "hand:0")) <= 6
+    assert _no_seq_scans(lambda s: target_inputs(s, seq, "object:2")) <= 6
     assert _no_seq_scans(lambda s: approved_labels(s, seq, frames(s))) <= 4
     assert _no_seq_scans(lambda s: count_approved(s, seq)) == 2
 
