@@ -82,15 +82,19 @@ def _faults(offset: int, corr: ExtrinsicCorrection, fit: DepthFit | None,
 
 def _depth_pass(cameras: list[CameraModel], corrections: list[ExtrinsicCorrection],
                 pixels: np.ndarray, depth: list[np.ndarray | None], offsets: np.ndarray,
-                color: list[dict[int, np.ndarray]] | None, free: tuple[int, ...]
-                ) -> list[ExtrinsicCorrection]:
+                color: list[dict[int, np.ndarray]] | None, free: tuple[int, ...],
+                limits: RigThresholds) -> list[ExtrinsicCorrection]:
     """The free views' label-refined poses re-posed against the whole scene's depth
     (:mod:`worker.rig.surface`). Every view's depth scale and shift are estimated first and
     applied, so a depth fault is not taken for a pose fault. pixels: (V, F, P, 2) px."""
     refined = [c.camera for c in corrections]
-    fits = fit_depth(refined, depth, offsets, color)
-    maps = world_time_maps(depth, offsets, [(1.0, (0, 0)) if f is None else
-                                            (f.scale, f.shift_px) for f in fits])
+    fits = fit_depth(refined, depth, offsets, color, passes=1)
+    # A scale is applied only where it is a fault: one fitted against poses still off by a few
+    # mm is off by a few tenths of a percent, which would itself move the view along its axis.
+    maps = world_time_maps(depth, offsets, [
+        (1.0, (0, 0)) if f is None else
+        (f.scale if abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent else 1.0,
+         f.shift_px) for f in fits])
     if not maps:
         return corrections
     moved = refine_with_depth(refined, cameras, free, maps, pixels)
@@ -128,7 +132,7 @@ def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.
             cameras, aligned, seen, fixed=tuple(v for v in range(len(cameras)) if v not in off))
         if depth is not None:
             corrections = _depth_pass(cameras, corrections, observed(aligned, seen), depth, k,
-                                      color, off)
+                                      color, off, limits)
     else:
         corrections = [replace(c, camera=cameras[v], rotation_deg=0.0, translation_mm=0.0,
                                image_shift_px=0.0, residual_px_after=c.residual_px_before)

@@ -46,14 +46,15 @@ EDGE_JUMP_MM = 15.0
 # Pairs: nearest neighbour within the gate (mm), normals within MIN_NORMAL_COS; the gate
 # shrinks to max(MIN_GATE_MM, GATE_FACTOR x the median point-to-plane distance).
 START_GATE_MM = 30.0
-MIN_GATE_MM = 6.0
+MIN_GATE_MM = 3.0
 GATE_FACTOR = 3.0
 MIN_NORMAL_COS = 0.7
 MIN_PAIRS = 200
 # Depth noise (mm) and the Huber scale of its robust loss.
 SIGMA_MM = 2.0
 HUBER_MM = 3.0
-ICP_ITERATIONS = 8
+ICP_ITERATIONS = 25
+SWEEPS = 3
 
 
 @dataclass(frozen=True)
@@ -64,12 +65,21 @@ class Surface:
     normals: np.ndarray
 
 
-def depth_surface(camera: CameraModel, depth: np.ndarray, step: int) -> Surface:
+def ray_image(camera: CameraModel) -> np.ndarray:
+    """(H, W, 3) camera-frame rays (z = 1) of every pixel."""
+    q = np.stack(np.meshgrid(np.arange(camera.width), np.arange(camera.height)), axis=-1)
+    return pixels_to_rays(q.astype(np.float64), camera.K, camera.dist)
+
+
+def depth_surface(camera: CameraModel, depth: np.ndarray, step: int,
+                  rays: np.ndarray | None = None) -> Surface:
     """Camera-frame points (m) and normals (facing the camera) of one depth map (H, W) mm,
-    on a grid of ``step`` px; pixels without depth or next to an occluding edge left out."""
+    on a grid of ``step`` px; pixels without depth or next to an occluding edge left out.
+    rays: the camera's :func:`ray_image` if already computed."""
     if depth.shape != (camera.height, camera.width):
         raise ValueError(f"depth map must have shape ({camera.height}, {camera.width}), "
                          f"got {depth.shape}")
+    rays = ray_image(camera) if rays is None else rays
     r = NORMAL_REACH_PX
     xs = np.arange(r, camera.width - r, step)
     ys = np.arange(r, camera.height - r, step)
@@ -79,8 +89,7 @@ def depth_surface(camera: CameraModel, depth: np.ndarray, step: int) -> Surface:
     ok = (z > 0).all(axis=0) & (np.abs(z[1:] - z[0]).max(axis=0) < EDGE_JUMP_MM)
     pts = []
     for (dx, dy), zk in zip(offsets, z, strict=True):
-        q = np.stack([gx[ok] + dx, gy[ok] + dy], axis=-1).astype(np.float64)
-        pts.append(pixels_to_rays(q, camera.K, camera.dist) * (zk[ok] / 1000.0)[:, None])
+        pts.append(rays[gy[ok] + dy, gx[ok] + dx] * (zk[ok] / 1000.0)[:, None])
     normals = np.cross(pts[1] - pts[2], pts[3] - pts[4])
     length = np.linalg.norm(normals, axis=1)
     good = length > 0
@@ -90,10 +99,12 @@ def depth_surface(camera: CameraModel, depth: np.ndarray, step: int) -> Surface:
     return Surface(centre, normals)
 
 
-def world_surface(cameras: list[CameraModel], maps: list[np.ndarray | None]) -> Surface:
-    """The merged world-frame surface of the given views' depth maps (None: left out)."""
-    parts = [(cam, depth_surface(cam, m, TARGET_STEP_PX))
-             for cam, m in zip(cameras, maps, strict=True) if m is not None]
+def world_surface(cameras: list[CameraModel], maps: list[np.ndarray | None],
+                  rays: list[np.ndarray]) -> Surface:
+    """The merged world-frame surface of the given views' depth maps (None: left out);
+    rays: their :func:`ray_image`."""
+    parts = [(cam, depth_surface(cam, m, TARGET_STEP_PX, r))
+             for cam, m, r in zip(cameras, maps, rays, strict=True) if m is not None]
     if not parts:
         return Surface(np.zeros((0, 3)), np.zeros((0, 3)))
     return Surface(np.concatenate([camera_to_world(s.points, c.T_cam_to_world) for c, s in parts]),
@@ -202,7 +213,7 @@ def _label_terms(camera: CameraModel, points: np.ndarray, pixels: np.ndarray
 
 def refine_with_depth(cameras: list[CameraModel], anchors: list[CameraModel],
                       free: tuple[int, ...], maps: list[list[np.ndarray | None]],
-                      pixels: np.ndarray, sweeps: int = 3) -> list[CameraModel]:
+                      pixels: np.ndarray, sweeps: int = SWEEPS) -> list[CameraModel]:
     """The free views re-posed against the others' depth and points; the rest unchanged.
 
     Args:
@@ -218,6 +229,7 @@ def refine_with_depth(cameras: list[CameraModel], anchors: list[CameraModel],
         raise ValueError(f"cameras ({len(cameras)}), anchors ({len(anchors)}) and pixels "
                          f"{pixels.shape} must cover the same views")
     refined = list(cameras)
+    rays = [ray_image(c) for c in cameras]
     settled = [v for v in range(len(cameras)) if v not in free]
     for sweep in range(sweeps):
         for view in _order(refined, free, settled) if sweep == 0 else free:
@@ -227,7 +239,7 @@ def refine_with_depth(cameras: list[CameraModel], anchors: list[CameraModel],
             # re-posed), so the master's gauge spreads out instead of the faulty consensus.
             rest = settled if sweep == 0 else [v for v in range(len(cameras)) if v != view]
             refined[view] = _repose(refined[view], anchors[view],
-                                    _terms_of(refined, view, rest, maps, pixels))
+                                    _terms_of(refined, view, rest, maps, pixels, rays))
             settled.append(view)
     return refined
 
@@ -245,13 +257,14 @@ def _order(cameras: list[CameraModel], free: tuple[int, ...], settled: list[int]
 
 
 def _terms_of(cameras: list[CameraModel], view: int, rest: list[int],
-              maps: list[list[np.ndarray | None]], pixels: np.ndarray) -> _Terms:
+              maps: list[list[np.ndarray | None]], pixels: np.ndarray,
+              rays: list[np.ndarray]) -> _Terms:
     """One view's data under the current poses: its own depth, the ``rest`` views' merged
-    surface and its labels against the points of all other views."""
-    others = [world_surface([cameras[v] for v in rest], [frame[v] for v in rest])
-              for frame in maps]
-    own = [depth_surface(cameras[view], frame[view], SOURCE_STEP_PX)  # type: ignore[arg-type]
-           for frame in maps]
+    surface and its labels against the points of all other views; rays: per view (H, W, 3)."""
+    others = [world_surface([cameras[v] for v in rest], [frame[v] for v in rest],
+                            [rays[v] for v in rest]) for frame in maps]
+    own = [depth_surface(cameras[view], frame[view], SOURCE_STEP_PX,  # type: ignore[arg-type]
+                         rays[view]) for frame in maps]
     points, pix = _label_terms(
         cameras[view], leave_one_out_points(cameras, pixels, view).reshape(-1, 3),
         pixels[view].reshape(-1, 2))
