@@ -138,9 +138,9 @@ def _pairs(camera: CameraModel, terms: _Terms, gate_mm: float
         if len(own.points) == 0 or len(other.points) == 0:
             continue
         world = camera_to_world(own.points, camera.T_cam_to_world)
-        dist, idx = tree.query(world, distance_upper_bound=gate_mm / 1000.0)
+        dist, found = tree.query(world, distance_upper_bound=gate_mm / 1000.0)
         hit = np.isfinite(dist)
-        idx = idx[hit]
+        idx = np.asarray(found)[hit]
         agree = np.einsum("ij,ij->i", own.normals[hit] @ rot.T, other.normals[idx]) \
             > MIN_NORMAL_COS
         src.append(own.points[hit][agree])
@@ -159,7 +159,8 @@ def _residuals(anchor: CameraModel, params: np.ndarray, src: np.ndarray, tgt: np
     return plane, (cam.project(terms.points) - terms.pixels).ravel()
 
 
-def _step(anchor: CameraModel, params: np.ndarray, pairs: tuple[np.ndarray, ...],
+def _step(anchor: CameraModel, params: np.ndarray,
+          pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
           terms: _Terms) -> np.ndarray:
     """One Gauss-Newton step of the joint robust cost (Huber on depth, Cauchy on labels,
     the Gaussian prior on the move)."""
