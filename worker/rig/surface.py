@@ -226,9 +226,12 @@ def refine_with_depth(cameras: list[CameraModel], anchors: list[CameraModel],
         pixels: (V, F, P, 2) px labels in world time, NaN where unlabelled.
         sweeps: passes over the free views.
     """
-    if len(cameras) != len(anchors) or pixels.shape[0] != len(cameras):
+    if len(cameras) != len(anchors) or pixels.ndim != 4 or pixels.shape[0] != len(cameras) \
+            or pixels.shape[-1] != 2:
         raise ValueError(f"cameras ({len(cameras)}), anchors ({len(anchors)}) and pixels "
-                         f"{pixels.shape} must cover the same views")
+                         f"{pixels.shape} must cover the same views, pixels as (V, F, P, 2)")
+    if not set(free) < set(range(len(cameras))):
+        raise ValueError(f"free views {free} must leave at least one of {len(cameras)} fixed")
     refined = list(cameras)
     rays = [ray_image(c) for c in cameras]
     settled = [v for v in range(len(cameras)) if v not in free]
