@@ -12,6 +12,7 @@ from worker.rig import apply_depth_correction, apply_time_offsets, estimate_rig
 from worker.rig.common import shift_frames
 from worker.rig.depth import correct_depth
 from worker.rig.extrinsics import pose_change
+from worker.rig.surface import depth_surface, refine_with_depth
 
 pytestmark = pytest.mark.slow
 
@@ -119,3 +120,9 @@ def test_rig_health_refuses_bad_shapes() -> None:
         estimate_rig(scene.cameras, scene.keypoints[:3], scene.visible[:3])
     with pytest.raises(ValueError, match="at least 3 views"):
         estimate_rig(scene.cameras[:2], scene.keypoints[:2], scene.visible[:2])
+    with pytest.raises(ValueError, match="at least one of 8 fixed"):
+        refine_with_depth(scene.cameras, scene.cameras, tuple(range(8)), [], scene.keypoints)
+    with pytest.raises(ValueError, match=r"pixels as \(V, F, P, 2\)"):
+        refine_with_depth(scene.cameras, scene.cameras, (1,), [], scene.keypoints[0])
+    with pytest.raises(ValueError, match=r"depth map must have shape \(240, 320\)"):
+        depth_surface(scene.cameras[0], scene.depth[0], 8)
