@@ -89,12 +89,13 @@ def _depth_pass(cameras: list[CameraModel], corrections: list[ExtrinsicCorrectio
     applied, so a depth fault is not taken for a pose fault. pixels: (V, F, P, 2) px."""
     refined = [c.camera for c in corrections]
     fits = fit_depth(refined, depth, offsets, color, passes=1)
-    # A scale is applied only where it is a fault: one fitted against poses still off by a few
-    # mm is off by a few tenths of a percent, which would itself move the view along its axis.
+    # A scale is applied only where it is a fault and only to the views that stay in place: one
+    # fitted against a pose still off by a few mm is off by a few tenths of a percent, which
+    # would itself move the view along its axis (the final fit after the move finds it).
     maps = world_time_maps(depth, offsets, [
         (1.0, (0, 0)) if f is None else
-        (f.scale if abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent else 1.0,
-         f.shift_px) for f in fits])
+        (f.scale if v not in free and abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent
+         else 1.0, f.shift_px) for v, f in enumerate(fits)])
     if not maps:
         return corrections
     moved = refine_with_depth(refined, cameras, free, maps, pixels)
