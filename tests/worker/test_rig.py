@@ -12,6 +12,7 @@ from worker.rig import apply_depth_correction, apply_time_offsets, estimate_rig
 from worker.rig.common import shift_frames
 from worker.rig.depth import correct_depth
 from worker.rig.extrinsics import pose_change
+from worker.rig.surface import depth_surface, refine_with_depth
 
 pytestmark = pytest.mark.slow
 
@@ -51,6 +52,28 @@ def test_extrinsic_faults_are_named_and_corrected() -> None:
     before = pose_change(scene.cameras[3], faulty[3])
     after = pose_change(scene.cameras[3], est.cameras[3])
     assert after[0] < before[0] and after[1] < before[1]
+
+
+def test_depth_pins_the_poses_the_labels_leave_loose_and_keeps_scale_faults_apart() -> None:
+    # Two views off in pose, a third's depth 1 % long: the pose views are re-posed against the
+    # whole scene's depth (far closer to the truth than the hand's labels alone bring them),
+    # the scale view keeps its pose and is named for its depth.
+    scene = make_scene(frames=12, seed=2)
+    rng = np.random.default_rng(7)
+    faulty = list(scene.cameras)
+    faulty[3] = perturbed(scene.cameras[3], 0.5, 5.0, rng)
+    faulty[6] = perturbed(scene.cameras[6], 0.3, 3.0, rng)
+    depth = list(scene.depth)
+    depth[4] = np.clip(np.rint(depth[4] * 1.01), 0, 65535).astype(np.uint16)
+    labels_only = estimate_rig(faulty, scene.keypoints, scene.visible)
+    est = estimate_rig(faulty, scene.keypoints, scene.visible, depth, scene.color)
+    assert est.faulty_views == [3, 4, 6]
+    assert est.health[4].faults == ["depth scale +0.9 %"]
+    assert all(est.cameras[v] is scene.cameras[v] for v in (0, 1, 2, 4, 5, 7))
+    for v in (3, 6):
+        deg, mm = pose_change(scene.cameras[v], est.cameras[v])
+        assert deg < 0.1 and mm < 0.8
+        assert mm < 0.5 * pose_change(scene.cameras[v], labels_only.cameras[v])[1]
 
 
 def test_late_cameras_are_named_with_their_offset() -> None:
@@ -97,3 +120,9 @@ def test_rig_health_refuses_bad_shapes() -> None:
         estimate_rig(scene.cameras, scene.keypoints[:3], scene.visible[:3])
     with pytest.raises(ValueError, match="at least 3 views"):
         estimate_rig(scene.cameras[:2], scene.keypoints[:2], scene.visible[:2])
+    with pytest.raises(ValueError, match="at least one of 8 fixed"):
+        refine_with_depth(scene.cameras, scene.cameras, tuple(range(8)), [], scene.keypoints)
+    with pytest.raises(ValueError, match=r"pixels as \(V, F, P, 2\)"):
+        refine_with_depth(scene.cameras, scene.cameras, (1,), [], scene.keypoints[0])
+    with pytest.raises(ValueError, match=r"depth map must have shape \(240, 320\)"):
+        depth_surface(scene.cameras[0], scene.depth[0], 8)

@@ -56,7 +56,7 @@ class ExtrinsicCorrection:
     image_shift_px: float
 
 
-def _posed(camera: CameraModel, params: np.ndarray) -> CameraModel:
+def posed(camera: CameraModel, params: np.ndarray) -> CameraModel:
     """``camera`` moved by params (6,): a rotation vector (rad, camera frame, applied after
     the world-to-camera rotation) and a camera-centre displacement (m, world)."""
     rot_w2c = cv2.Rodrigues(params[:3].reshape(3, 1))[0] @ camera.T_cam_to_world[:, :3].T
@@ -66,7 +66,7 @@ def _posed(camera: CameraModel, params: np.ndarray) -> CameraModel:
 
 def _residuals(camera: CameraModel, params: np.ndarray, points: np.ndarray,
                pixels: np.ndarray) -> np.ndarray:
-    return (_posed(camera, params).project(points) - pixels).ravel()
+    return (posed(camera, params).project(points) - pixels).ravel()
 
 
 def _gauss_newton(camera: CameraModel, points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
@@ -104,7 +104,7 @@ def _resect(camera: CameraModel, anchor: CameraModel, points: np.ndarray,
     inl &= err < max(MIN_INLIER_PX, INLIER_FACTOR * float(np.median(err[inl])))
     if inl.sum() < MIN_POINTS:
         return camera
-    return _posed(anchor, _gauss_newton(anchor, points[inl], pixels[inl]))
+    return posed(anchor, _gauss_newton(anchor, points[inl], pixels[inl]))
 
 
 def pose_change(before: CameraModel, after: CameraModel) -> tuple[float, float]:
@@ -146,6 +146,19 @@ def refine_extrinsics(cameras: list[CameraModel], keypoints: np.ndarray, visible
             points = leave_one_out_points(refined, pixels, view).reshape(-1, 3)
             refined[view] = _resect(refined[view], cameras[view], points,
                                     pixels[view].reshape(-1, 2))
+    return describe_corrections(cameras, refined, pixels, before)
+
+
+def describe_corrections(cameras: list[CameraModel], refined: list[CameraModel],
+                         pixels: np.ndarray, before: list[float] | None = None
+                         ) -> list[ExtrinsicCorrection]:
+    """Per view, how far ``refined`` moved from ``cameras`` and its labels' residuals.
+
+    pixels: (V, F, P, 2) px in world time, NaN where unlabelled. before: the views' median
+    residuals (px) under ``cameras`` if already known.
+    """
+    if before is None:
+        before = [_median_residual(cameras, pixels, v) for v in range(len(cameras))]
     points = triangulate_views(refined, pixels, list(range(len(cameras))))
     out = []
     for view, camera in enumerate(refined):

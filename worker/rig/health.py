@@ -16,9 +16,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
-from worker.rig.common import align_views, check_tracks, shift_frames
+from worker.rig.common import align_views, check_tracks, observed, shift_frames
 from worker.rig.depth import DepthFit, correct_depth, fit_depth
-from worker.rig.extrinsics import ExtrinsicCorrection, refine_extrinsics
+from worker.rig.extrinsics import ExtrinsicCorrection, describe_corrections, refine_extrinsics
+from worker.rig.surface import refine_with_depth, world_time_maps
 from worker.rig.timing import TimeOffset, estimate_time_offsets
 
 
@@ -79,6 +80,29 @@ def _faults(offset: int, corr: ExtrinsicCorrection, fit: DepthFit | None,
     return out
 
 
+def _depth_pass(cameras: list[CameraModel], corrections: list[ExtrinsicCorrection],
+                pixels: np.ndarray, depth: list[np.ndarray | None], offsets: np.ndarray,
+                color: list[dict[int, np.ndarray]] | None, free: tuple[int, ...],
+                limits: RigThresholds) -> list[ExtrinsicCorrection]:
+    """The free views' label-refined poses re-posed against the whole scene's depth
+    (:mod:`worker.rig.surface`). Every view's depth scale and shift are estimated first and
+    applied, so a depth fault is not taken for a pose fault. pixels: (V, F, P, 2) px."""
+    refined = [c.camera for c in corrections]
+    fits = fit_depth(refined, depth, offsets, color, passes=1)
+    # A scale is applied only where it is a fault and only to the views that stay in place: one
+    # fitted against a pose still off by a few mm is off by a few tenths of a percent, which
+    # would itself move the view along its axis (the final fit after the move finds it).
+    maps = world_time_maps(depth, offsets, [
+        (1.0, (0, 0)) if f is None else
+        (f.scale if v not in free and abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent
+         else 1.0, f.shift_px) for v, f in enumerate(fits)])
+    if not maps:
+        return corrections
+    moved = refine_with_depth(refined, cameras, free, maps, pixels)
+    return describe_corrections(cameras, moved, pixels,
+                                [c.residual_px_before for c in corrections])
+
+
 def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.ndarray,
                  depth: list[np.ndarray | None] | None = None,
                  color: list[dict[int, np.ndarray]] | None = None, fixed: tuple[int, ...] = (0,),
@@ -107,6 +131,9 @@ def estimate_rig(cameras: list[CameraModel], keypoints: np.ndarray, visible: np.
     if off:
         corrections = refine_extrinsics(
             cameras, aligned, seen, fixed=tuple(v for v in range(len(cameras)) if v not in off))
+        if depth is not None:
+            corrections = _depth_pass(cameras, corrections, observed(aligned, seen), depth, k,
+                                      color, off, limits)
     else:
         corrections = [replace(c, camera=cameras[v], rotation_deg=0.0, translation_mm=0.0,
                                image_shift_px=0.0, residual_px_after=c.residual_px_before)
