@@ -120,14 +120,17 @@ export function openSubmitDialog(ctx) {
   confirmBox.checked = false;
   confirmBox.onchange = update;
   renderWarnings();
-  // The image check is advice: a failed request leaves the local checks as they are.
+  // The image check is advice: a failed request leaves the local checks as they are. The
+  // dialog says when it has its answer (data-image-check), for whoever waits on it.
+  dialog.dataset.imageCheck = "pending";
   ctx.api.stretches({ tracks: ctx.saver.body().tracks }).then((reply) => {
+    dialog.dataset.imageCheck = "done";
     const found = imageWarnings(reply);
     if (!dialog.open || found.length === 0) return;
     check.warnings.push(...found);
     confirmBox.checked = false;
     renderWarnings();
-  }, () => {});
+  }, () => { dialog.dataset.imageCheck = "done"; });
   setError(dialog, "");
   button.onclick = () => submitNow(ctx);
   dialog.showModal();

@@ -265,3 +265,15 @@ def object_pixels(server: LiveServer, serial: str, frame: int) -> np.ndarray:
     labels = [v for v in np.unique(seg) if v not in (0, 255)]  # 0: background, 255: the hand
     ys, xs = np.nonzero(seg == labels[0])
     return np.stack([xs, ys], axis=1).astype(float)
+
+
+def confirm_submit(dialog: Any) -> Any:
+    """The submit dialog's confirm button once the page's image check has answered, with any
+    warnings it (or the local checks) raised confirmed, as a worker who read them does."""
+    from playwright.sync_api import expect
+
+    expect(dialog).to_have_attribute("data-image-check", "done")
+    box = dialog.locator(".confirm-warnings input")
+    if box.is_visible():
+        box.check()
+    return dialog.locator(".submit-confirm")

@@ -17,6 +17,7 @@ from tests.browser.conftest import CLIP_FRAMES, VIEWPORT, LiveServer
 from tests.browser.helpers import (
     best_tracked_joint,
     check_cells,
+    confirm_submit,
     goto_frame,
     grab_and_drop,
     modifier_drag,
@@ -182,10 +183,7 @@ def _submit(page: Page) -> None:
     page.locator("#submit").click()
     dialog = page.locator("#submit-dialog")
     expect(dialog).to_contain_text("Every point is placed or marked occluded")
-    confirm = dialog.locator(".confirm-warnings input")
-    if confirm.is_visible():
-        confirm.check()
-    dialog.locator(".submit-confirm").click()
+    confirm_submit(dialog).click()
     expect(page.locator("#banner")).to_have_text("Submitted. Thank you!")
 
 

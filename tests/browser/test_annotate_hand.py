@@ -12,6 +12,7 @@ from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
     assert_rows_close,
     click_image,
+    confirm_submit,
     drag_image,
     frames_shown,
     goto_frame,
@@ -96,8 +97,9 @@ def _submit_through_marketplace(page: Page, turk: str) -> dict[str, list[str]]:
     page.locator("#submit").click()
     dialog = page.locator("#submit-dialog")
     expect(dialog).to_contain_text("Every point is placed or marked occluded")
+    confirm = confirm_submit(dialog)
     with page.expect_navigation():
-        dialog.locator(".submit-confirm").click()
+        confirm.click()
     assert len(posted) == 1
     return parse_qs(posted[0])
 

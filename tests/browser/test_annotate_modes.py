@@ -13,6 +13,7 @@ from backend.config import DEV_MARKET_REQUESTERS
 from tests.browser.conftest import LiveServer
 from tests.browser.helpers import (
     click_image,
+    confirm_submit,
     drag_image,
     frames_shown,
     goto_frame,
@@ -170,10 +171,8 @@ def test_work_without_movement_needs_a_confirm_then_submits_without_a_marketplac
     dialog = page.locator("#submit-dialog")
     expect(dialog.locator(".submit-summary")).to_contain_text("Every point is placed")
     expect(dialog.locator(".submit-warnings")).to_contain_text("no point moves")
-    confirm = dialog.locator(".submit-confirm")
-    expect(confirm).to_be_disabled()
-    dialog.locator(".confirm-warnings input").check()
-    confirm.click()
+    expect(dialog.locator(".submit-confirm")).to_be_disabled()
+    confirm_submit(dialog).click()
     expect(page.locator("#banner")).to_have_text("Submitted. Thank you!")
     assert urlparse(page.url).path == "/annotate/", "no marketplace to post to"
     assert live_server.worker_get_task(link["token"])["mode"] == "submitted"

@@ -10,6 +10,7 @@ from playwright.sync_api import Page, expect
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
     click_image,
+    confirm_submit,
     drag_image,
     goto_frame,
     object_pixels,
@@ -75,7 +76,7 @@ def test_object_task_picks_two_landmarks_tracks_them_and_submits(
     page.screenshot(path=str(output_dir / "object-annotated.png"))
 
     page.locator("#submit").click()
-    page.locator("#submit-dialog .submit-confirm").click()
+    confirm_submit(page.locator("#submit-dialog")).click()
     expect(page.locator("#banner")).to_have_text("Submitted. Thank you!")
     read = live_server.worker_get_task(link["token"])
     assert read["mode"] == "submitted"

@@ -16,6 +16,7 @@ from backend.market.questions import parse_answers
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
     READY,
+    confirm_submit,
     drag_image,
     goto_frame,
     place_joints,
@@ -90,7 +91,7 @@ def _submit(page: Page, frame: Frame) -> None:
     frame.locator("#submit").click()
     dialog = frame.locator("#submit-dialog")
     expect(dialog).to_contain_text("Every point is placed or marked occluded")
-    dialog.locator(".submit-confirm").click()
+    confirm_submit(dialog).click()
     expect(page.locator("#notice")).to_contain_text("Submitted")
     expect(page.locator("#hits-view")).to_be_visible()
 
