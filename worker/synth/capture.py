@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -141,20 +143,27 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
     """
     _check_args(seed, frames, views, objects, width, height)
     out = Path(out).resolve()
+    with written_whole(out) as partial:
+        return _generate(partial, out, seed, frames, views, objects, width, height, workers)
+
+
+@contextmanager
+def written_whole(out: Path) -> Iterator[Path]:
+    """A sibling ``.partial`` folder to write the folder ``out`` into, moved into place when the
+    block ends and removed on any error, so ``out`` is never half-written. ``out`` must not
+    exist or be an empty folder (FileExistsError otherwise)."""
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise FileExistsError(f"{out} exists and is not an empty folder")
     partial = out.with_name(out.name + ".partial")
-    if partial.exists():
-        shutil.rmtree(partial)
+    shutil.rmtree(partial, ignore_errors=True)
     try:
-        summary = _generate(partial, out, seed, frames, views, objects, width, height, workers)
+        yield partial
         if out.exists():
             out.rmdir()
         partial.rename(out)
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise
-    return summary
 
 
 def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects: int,

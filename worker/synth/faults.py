@@ -39,6 +39,7 @@ import yaml
 from worker.formats import dexycb
 from worker.formats.files import encode_image, write_yaml
 from worker.geometry.transforms import axis_angle_to_matrix
+from worker.synth.capture import written_whole
 
 FAULT_FILE = "fault.yml"
 KINDS = ("extrinsics", "late", "depth-scale", "depth-shift", "betas")
@@ -313,23 +314,13 @@ def inject_faults(src: Path, out: Path, faults: Sequence[Fault], seed: int = 0) 
         raise ValueError(f"seed must be >= 0, got {seed}")
     if (src / FAULT_FILE).exists():
         raise ValueError(f"{src} already has faults ({FAULT_FILE}); inject into a clean capture")
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise FileExistsError(f"{out} exists and is not an empty folder")
-    partial = out.with_name(out.name + ".partial")
-    shutil.rmtree(partial, ignore_errors=True)
-    try:
+    with written_whole(out) as partial:
         _link_tree(src, partial)
         copy = _open_copy(partial)
         copy.record.update(faults=[f.name for f in faults], seed=int(seed), source=str(src))
         for i, fault in enumerate(faults):
             _apply(copy, fault, np.random.default_rng([seed, i]))
         write_yaml(partial / FAULT_FILE, copy.record)
-        if out.exists():
-            out.rmdir()
-        partial.rename(out)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
     return copy.record
 
 
