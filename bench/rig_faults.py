@@ -7,9 +7,12 @@ noise per frame; landmarks likewise) and one fault is applied to what the produc
 truth unchanged: `ext0.2_2` / `ext0.5_5` (every camera but the master rotated by 0.2 / 0.5
 degrees about a random axis and moved 2 / 5 mm), `late1` / `late2` (cameras 1 / 1-2 one frame
 late: labels, landmarks and depth), `scale` (camera 3's depth 1 % long), `shift` (camera 5's
-depth moved 3 px right, 2 px down against colour) or `none`. The rig is estimated from the
+depth moved 3 px right, 2 px down against colour), `betas` (the subject's hand shape replaced by
+betas drawn from N(0, 0.6^2), another subject's) or `none`. The rig is estimated from the
 faulty inputs (worker.rig.estimate_rig, with three colour frames per view), its corrections
-applied as an adopted version would be (backend/solve/calibrated.py), and both are solved.
+applied as an adopted version would be (backend/solve/calibrated.py), the hand shape checked
+against the labels' bones (worker.hand.calibrate.check_shape: the fitted betas are adopted
+where the shape is named off), and both are solved.
 One JSON object per run on the last line.
 
     python bench/rig_faults.py --capture DIR --fault late1 [--crowd-seed 11] [--cache DIR]
@@ -35,11 +38,15 @@ from solve import build_cache, load_inputs  # noqa: E402
 
 from backend.captures.layout import read_sequence  # noqa: E402
 from worker.geometry.transforms import axis_angle_to_matrix, make_pose  # noqa: E402
+from worker.hand.calibrate import check_shape, triangulate_joints  # noqa: E402
+from worker.hand.model import load_hand_model  # noqa: E402
 from worker.rig import apply_depth_correction, apply_time_offsets, estimate_rig  # noqa: E402
 from worker.rig.common import shift_frames  # noqa: E402
 from worker.solver import SolveSettings, solve  # noqa: E402
 
-FAULTS = ("none", "ext0.2_2", "ext0.5_5", "late1", "late2", "scale", "shift")
+FAULTS = ("none", "ext0.2_2", "ext0.5_5", "late1", "late2", "scale", "shift", "betas")
+# Another subject's hand shape: betas drawn from the shape space (worker.synth.faults' default).
+BETAS_SIGMA = 0.6
 
 
 def _perturb(cam, deg, mm, rng):
@@ -74,6 +81,9 @@ def inject(inp, fault, rng):
     if fault.startswith("late"):
         late = range(1, 1 + int(fault[4:]))
         return _shift_views(inp, [-1 if v in late else 0 for v in range(views)])
+    if fault == "betas":
+        betas = rng.normal(0.0, BETAS_SIGMA, np.shape(inp.hand.betas))
+        return replace(inp, hand=replace(inp.hand, betas=betas))
     depth = [np.asarray(d) for d in inp.depth]
     if fault == "scale":
         depth[3] = np.clip(np.rint(depth[3] * 1.01), 0, 65535).astype(np.uint16)
@@ -124,6 +134,12 @@ def main() -> None:
         apply_depth_correction(np.asarray(d), 0, h.depth_scale or 1.0, h.depth_shift_px or (0, 0))
         for d, h in zip(fixed.depth, est.health, strict=True)])
     out["named"] = {h.view: h.faults for h in est.health if h.faults}
+    shape = check_shape(triangulate_joints(est.cameras, fixed.hand.keypoints, fixed.hand.visible),
+                        fixed.hand.betas, load_hand_model("right"))
+    out["shape_bone_diff_mm"] = round(shape.median_diff_mm, 2)
+    if shape.fault() is not None:
+        out["named"]["hand"] = [shape.fault()]
+        fixed = replace(fixed, hand=replace(fixed.hand, betas=shape.fit.betas))
     out["mpjpe_refined_mm"] = mpjpe_mm(fixed, truth)
     out["seconds"] = round(time.time() - started, 1)
     print(json.dumps(out))

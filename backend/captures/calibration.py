@@ -5,8 +5,10 @@ A refinement (from the rig-health estimate, backend.rig) is a new numbered versi
 camera serial, its camera-to-world extrinsics (3x4, metres), time offset (whole frames: the
 camera's frame ``f`` shows world time ``f - k``), depth scale and depth shift (px: the depth
 map's pixel ``q + shift`` holds the depth of colour pixel ``q``), with the report it came from.
-At most one version per sequence is in use; none in use means the imported calibration. Every
-reader of camera models (solve, QC, export) takes them through :func:`calibrated_models`.
+A version may also hold a hand's shape (MANO betas) fitted to the labels where the imported one
+was named off. At most one version per sequence is in use; none in use means the imported
+calibration. Every reader of camera models (solve, QC, export) takes them through
+:func:`calibrated_models`, and the solve takes a hand's shape through :func:`hand_betas`.
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ class CalibrationVersion(TimestampMixin, Base):
     cameras: Mapped[dict[str, Any]] = mapped_column(JSON)
     # The rig-health report the version came from (backend.rig.schemas.RigHealthRead).
     report: Mapped[dict[str, Any]] = mapped_column(JSON)
+    # {str(hand index): {"betas": [10 floats]}} for hands whose shape the version refines.
+    hands: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, default=None)
 
 
 def version_in_use(session: Session, sequence_id: int) -> CalibrationVersion | None:
@@ -96,6 +100,14 @@ def calibrated_models(session: Session, cameras: list[Camera]) -> list[CameraMod
                                   T_cam_to_world=np.asarray(entry["extrinsics"], float),
                                   width=model.width, height=model.height))
     return models
+
+
+def hand_betas(version: CalibrationVersion | None, hand_index: int,
+               imported: list[float] | None) -> list[float] | None:
+    """A hand's betas under ``version``: its refined shape where the version has one, else the
+    imported betas (mano.yml or calibrate-hand)."""
+    refined = None if version is None or not version.hands else version.hands.get(str(hand_index))
+    return imported if refined is None else [float(b) for b in refined["betas"]]
 
 
 def time_offsets(session: Session, cameras: list[Camera]) -> list[int]:

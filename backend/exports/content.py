@@ -18,7 +18,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation.accepted import INCLUDE_STATUSES, labelled_work, sequence_tasks
-from backend.captures.calibration import calibrated_models
+from backend.captures.calibration import calibrated_models, hand_betas, version_in_use
 from backend.captures.models import Frame, Sequence
 from backend.captures.service import sequence_cameras
 from backend.quality.models import QCReport
@@ -231,7 +231,9 @@ def load_sequence(session: Session, sequence_id: int, include: str = "accepted",
         views=views,
         objects=[ObjectContent(o.index, o.ycb_id, o.name, o.grasped, o.mesh_key)
                  for o in seq.objects],
-        hands=[HandContent(h.index, h.side, h.calib_name, list(h.betas) if h.betas else None)
+        hands=[HandContent(h.index, h.side, h.calib_name,
+                           hand_betas(version_in_use(session, seq.id), h.index,
+                                      list(h.betas) if h.betas else None))
                for h in seq.hands])
     content.work = _work(session, sequence_id, {c.id: i for i, c in enumerate(cameras)},
                          seq.num_frames, include)

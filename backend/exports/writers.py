@@ -177,7 +177,9 @@ class DexYCBExporter(Exporter):
         for hand in content.hands:
             name = hand.calib_name or f"{calib}_{hand.side}"
             calibs.append(name)
-            betas = hand.betas or solve.arrays["betas"].tolist()
+            # The shape the poses were solved with (a refined calibration may change it).
+            solved = solve.arrays["betas"]
+            betas = solved.tolist() if solved.size else (hand.betas or [])
             self._once(dexycb.mano_file(name), yaml_text(dexycb.mano_doc(betas)).encode())
         self._models(content)
         grasped = next((o.index for o in content.objects if o.grasped), 0)

@@ -57,6 +57,11 @@ def health_command(
     for row in report["cameras"]:
         typer.echo(_line(row))
     typer.echo("cameras off: " + (", ".join(report["faulty"]) or "none"))
+    for hand in report["hands"]:
+        typer.echo(f"hand {hand['index']} ({hand['side']}) shape: bones "
+                   f"{hand['bone_diff_median_mm']:.2f} mm off (median), "
+                   f"{hand['bone_diff_max_mm']:.2f} mm at most, over {hand['frames']} frames: "
+                   + ("; ".join(hand["faults"]) or "ok"))
 
 
 @rig_app.command("adopt")

@@ -25,7 +25,8 @@ def run_rig_health(sequence_id: int) -> dict[str, Any]:
         version = store_version(session, sequence_id, cameras, report)
         number = version.number
     faulty = ", ".join(report["faulty"]) or "none"
-    log.info("rig health of sequence %d: version %d, faulty cameras: %s", sequence_id,
-             number, faulty)
+    shape = "; hand shape off" if any(h["faults"] for h in report["hands"]) else ""
+    log.info("rig health of sequence %d: version %d, faulty cameras: %s%s", sequence_id,
+             number, faulty, shape)
     return {"sequence_id": sequence_id, "version": number, "faulty": report["faulty"],
-            "message": f"calibration version {number}; cameras off: {faulty}"}
+            "message": f"calibration version {number}; cameras off: {faulty}{shape}"}

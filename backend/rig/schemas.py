@@ -29,6 +29,22 @@ class CameraHealthRead(BaseModel):
     faults: list[str]
 
 
+class HandShapeRead(BaseModel):
+    """One hand's imported shape (betas) against the bones of its labels, triangulated under
+    the refined rig. bone_diff_*_mm: |model bone - labelled bone| over the 20 bones, median and
+    largest; frames: frames with every joint triangulated; fitted_betas: the shape the labels
+    call for (the version carries it when ``faults`` names the shape off)."""
+
+    index: int
+    side: str
+    calib_name: str | None
+    frames: int
+    bone_diff_median_mm: float
+    bone_diff_max_mm: float
+    fitted_betas: list[float]
+    faults: list[str]
+
+
 class RigHealthRead(BaseModel):
     """The rig-health report of one calibration version."""
 
@@ -40,6 +56,7 @@ class RigHealthRead(BaseModel):
     thresholds: dict[str, float]
     cameras: list[CameraHealthRead]
     faulty: list[str]
+    hands: list[HandShapeRead] = []
     seconds: float | None = None
 
 

@@ -3,6 +3,8 @@
 The estimate reads the accepted hand labels through the solve's read path (backend.solve.inputs:
 the approved assignments of every view, merged per view) and every view's aligned depth, and
 always starts from the imported calibration, so each version is a refinement of the import.
+The subject's hand shape (the imported betas) is checked against the bones of the labels
+triangulated under the refined rig; where it is off, the version carries the fitted betas.
 The computation itself (worker.rig) runs outside any unit of work (backend.rig.flows).
 """
 
@@ -23,11 +25,12 @@ from backend.captures.service import get_sequence_or_raise, sequence_cameras
 from backend.errors import Conflict, NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
-from backend.rig.schemas import CameraHealthRead, RigHealthRead, RigHealthStatus
-from backend.solve.inputs import approved_labels, hand_target, load_depth
+from backend.rig.schemas import CameraHealthRead, HandShapeRead, RigHealthRead, RigHealthStatus
+from backend.solve.inputs import approved_labels, hand_model_for, hand_target, load_depth
 from backend.storage import get_storage
 from worker.geometry.cameras import CameraModel
-from worker.rig import RigEstimate, RigThresholds, estimate_rig
+from worker.hand.calibrate import SHAPE_BONE_MM, check_shape, triangulate_joints
+from worker.rig import RigEstimate, RigThresholds, apply_time_offsets, estimate_rig
 
 JOB_KIND = "rig_health"
 # Colour frames per view the depth registration looks at (edges of a few frames suffice).
@@ -43,7 +46,8 @@ class RigInputs:
     """One sequence's rig as imported and its accepted hand labels: V serials and cameras,
     keypoints (V, F, 21, 2) px, visible (V, F, 21), depth V x (F, H, W) uint16 mm or None,
     color V x {frame: (H, W, 3) uint8} of COLOR_FRAMES frames, the master's view (the world
-    frame) and how many accepted assignments there were."""
+    frame), how many accepted assignments there were, and the hand: its side, calibration name
+    and imported betas (None: no shape to check)."""
 
     sequence_id: int
     serials: list[str]
@@ -54,6 +58,9 @@ class RigInputs:
     color: list[dict[int, np.ndarray]]
     master_view: int
     assignments: int
+    hand_side: str = "right"
+    hand_calib: str | None = None
+    betas: list[float] | None = None
 
 
 def _color_frames(frames: list[Frame]) -> dict[int, np.ndarray]:
@@ -89,17 +96,41 @@ def read_inputs(session: Session, sequence_id: int) -> RigInputs:
     color = [_color_frames(f) for f in frames]
     serials = [c.serial for c in cameras]
     master = serials.index(seq.master_serial) if seq.master_serial in serials else 0
+    plan = next(h for h in seq.hands if h.index == 0)
     return RigInputs(sequence_id, serials, [imported_model(c) for c in cameras],
                      hand.keypoints, hand.visible, depth, color, master,
-                     count_accepted(session, sequence_id))
+                     count_accepted(session, sequence_id), plan.side, plan.calib_name,
+                     list(plan.betas) if plan.betas else None)
 
 
 def _num(x: float) -> float | None:
     return None if not np.isfinite(x) else round(float(x), 3)
 
 
+def _hand_shape(inputs: RigInputs, est: RigEstimate) -> list[dict[str, Any]]:
+    """The hand row of the report: the imported shape against the labels' bones, triangulated
+    under the refined rig in world time ([] when the hand has no betas or too few frames)."""
+    if not inputs.betas:
+        return []
+    keypoints, visible = apply_time_offsets(inputs.keypoints, inputs.visible,
+                                            [h.time_offset_frames for h in est.health])
+    try:
+        check = check_shape(triangulate_joints(est.cameras, keypoints, visible),
+                            np.asarray(inputs.betas), hand_model_for(inputs.hand_side))
+    except ValueError:  # a bone seen in too few frames: nothing to judge the shape by
+        return []
+    fault = check.fault()
+    return [HandShapeRead(
+        index=0, side=inputs.hand_side, calib_name=inputs.hand_calib, frames=check.frames,
+        bone_diff_median_mm=round(check.median_diff_mm, 2),
+        bone_diff_max_mm=round(check.max_diff_mm, 2),
+        fitted_betas=[round(float(b), 5) for b in check.fit.betas],
+        faults=[] if fault is None else [fault]).model_dump()]
+
+
 def estimate(inputs: RigInputs) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(cameras entry of a new version, its report) from the inputs; pure computation."""
+    """(cameras entry of a new version, its report) from the inputs; pure computation. The
+    report's ``hands`` rows carry the fitted betas (store_version keeps those named off)."""
     limits = RigThresholds()
     est: RigEstimate = estimate_rig(inputs.cameras, inputs.keypoints, inputs.visible,
                                     inputs.depth, inputs.color, fixed=(inputs.master_view,),
@@ -120,19 +151,25 @@ def estimate(inputs: RigInputs) -> tuple[dict[str, Any], dict[str, Any]]:
             else round(100.0 * (h.depth_scale - 1.0), 2),
             depth_shift_px=None if h.depth_shift_px is None else list(h.depth_shift_px),
             faults=h.faults).model_dump())
-    report = {"labels": inputs.assignments, "thresholds": asdict(limits),
-              "cameras": rows, "faulty": [inputs.serials[v] for v in est.faulty_views]}
+    report = {"labels": inputs.assignments,
+              "thresholds": {**asdict(limits), "hand_bone_mm": SHAPE_BONE_MM},
+              "cameras": rows, "faulty": [inputs.serials[v] for v in est.faulty_views],
+              "hands": _hand_shape(inputs, est)}
     return cameras, report
 
 
 def store_version(session: Session, sequence_id: int, cameras: dict[str, Any],
                   report: dict[str, Any]) -> CalibrationVersion:
-    """A new numbered version (not in use) of the sequence's calibration."""
+    """A new numbered version (not in use) of the sequence's calibration; it refines the
+    shape of each hand the report names off."""
     get_sequence_or_raise(session, sequence_id)
     number = int(session.scalar(select(func.max(CalibrationVersion.number)).where(
         CalibrationVersion.sequence_id == sequence_id)) or 0) + 1
+    hands = {str(h["index"]): {"betas": h["fitted_betas"]}
+             for h in report.get("hands", []) if h["faults"]}
     version = CalibrationVersion(sequence_id=sequence_id, number=number, source="rig-health",
-                                 in_use=False, cameras=cameras, report=report)
+                                 in_use=False, cameras=cameras, report=report,
+                                 hands=hands or None)
     session.add(version)
     session.flush()
     return version

@@ -20,13 +20,13 @@ from backend.solve.inputs import (
     hand_target,
 )
 from backend.solve.service import SolveNotReady
-from worker.geometry.cameras import CameraModel
-from worker.geometry.triangulate import triangulate_points
-from worker.hand.calibrate import fit_betas, median_bone_lengths
-from worker.hand.joints import NUM_JOINTS
+from worker.hand.calibrate import (
+    LABELLED_RIDGE,
+    fit_betas,
+    median_bone_lengths,
+    triangulate_joints,
+)
 
-# A joint is triangulated only from observations that agree within this many pixels.
-OUTLIER_PX = 15.0
 # Bones measured in fewer frames than this give no trustworthy median.
 MIN_FRAMES = 3
 
@@ -40,20 +40,6 @@ class Calibration:
     betas: list[float]
     max_residual_mm: float
     frames_used: int
-
-
-def triangulated_joints(cameras: list[CameraModel], keypoints: np.ndarray,
-                        visible: np.ndarray) -> np.ndarray:
-    """Joints (F, 21, 3) world metres from labels (V, F, 21, 2) px and (V, F, 21) bool."""
-    views, frames = keypoints.shape[:2]
-    pixels = np.where(visible[..., None], keypoints, np.nan)
-    pixels = pixels.transpose(1, 2, 0, 3).reshape(frames * NUM_JOINTS, views, 2)
-    observed = np.isfinite(pixels).all(axis=-1).sum(axis=1) >= 2
-    points = np.full((frames * NUM_JOINTS, 3), np.nan)
-    if observed.any():
-        points[observed] = triangulate_points(cameras, pixels[observed],
-                                              outlier_px=OUTLIER_PX).points
-    return points.reshape(frames, NUM_JOINTS, 3)
 
 
 def calibrate_hand(session: Session, sequence_id: int, *, force: bool = False,
@@ -73,14 +59,14 @@ def calibrate_hand(session: Session, sequence_id: int, *, force: bool = False,
     target = hand_target(seq, cameras, labels, hand_index)
     if target is None:  # for the type checker: the hand was found above
         raise NotFound(f"sequence {sequence_id} has no hand {hand_index}")
-    joints = triangulated_joints([camera_model(c) for c in cameras], target.keypoints,
+    joints = triangulate_joints([camera_model(c) for c in cameras], target.keypoints,
                                  target.visible)
     try:
         lengths = median_bone_lengths(joints, min_frames=MIN_FRAMES)
     except ValueError as exc:
         raise SolveNotReady(f"cannot calibrate hand {hand_index} of sequence {sequence_id} "
                             f"from its accepted tracks: {exc}") from None
-    fit = fit_betas(lengths, hand_model_for(hand.side))
+    fit = fit_betas(lengths, hand_model_for(hand.side), ridge=LABELLED_RIDGE)
     hand.betas = [float(b) for b in fit.betas]
     session.flush()
     used = int(np.isfinite(joints).all(axis=(1, 2)).sum())

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,12 @@ from sqlalchemy.orm import Session
 from backend.annotation.accepted import count_accepted, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment
 from backend.annotation.proposals import grey_frames
-from backend.captures.calibration import calibrated_models, camera_entry, version_in_use
+from backend.captures.calibration import (
+    calibrated_models,
+    camera_entry,
+    hand_betas,
+    version_in_use,
+)
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import sequence_cameras
 from backend.config import get_settings
@@ -223,6 +228,10 @@ def gather_inputs(session: Session, sequence_id: int, with_depth: bool = True) -
     evidence: dict[tuple[int, str], np.ndarray] = {}
     labels = approved_labels(session, sequence_id, seq.num_frames, evidence)
     hand = hand_in_world_time(hand_target(seq, cameras, labels, evidence=evidence), entries)
+    if hand is not None:
+        imported = next(h.betas for h in seq.hands if h.index == 0)
+        betas = hand_betas(version, 0, imported)
+        hand = replace(hand, betas=np.asarray(betas if betas is not None else [], np.float64))
     depth: list[np.ndarray | None] = []
     for camera in cameras:
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)

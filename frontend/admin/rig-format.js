@@ -48,10 +48,31 @@ export function rigSummary(status) {
       ? "Estimating the rig from the accepted labels…"
       : "No rig-health estimate yet.";
   }
-  const off = report.faulty.length ? `cameras off: ${report.faulty.join(", ")}.`
-    : "no camera is off.";
+  const shape = (report.hands || []).some((/** @type {any} */ h) => h.faults.length)
+    ? " The hand's shape is off." : "";
+  const off = (report.faulty.length ? `cameras off: ${report.faulty.join(", ")}.`
+    : "no camera is off.") + shape;
   const use = status.version_in_use === 0 ? "the imported calibration is in use"
     : `version ${status.version_in_use} is in use`;
   return `Version ${report.version} from ${report.labels} accepted assignments; ${off} ` +
     `(${use}.)`;
+}
+
+/**
+ * One line per hand: how far the imported hand shape's bones are from the labelled ones, and
+ * the verdict. A shape named off is refined in the version (its fitted betas).
+ * @param {any} report
+ * @returns {{ text: string, faulty: boolean }[]}
+ */
+export function rigHandLines(report) {
+  return (report.hands || []).map((/** @type {any} */ h) => {
+    const calib = h.calib_name ? ` (mano_${h.calib_name})` : "";
+    const figures = `bones ${fixed(h.bone_diff_median_mm, 1)} mm off the labelled ones ` +
+      `(median of 20, at most ${fixed(h.bone_diff_max_mm, 1)} mm) over ${h.frames} frames`;
+    const verdict = h.faults.length
+      ? `${h.faults.join("; ")}. This version uses the shape fitted to the labels.`
+      : "ok.";
+    return { text: `Hand ${h.index} ${h.side}${calib}: ${figures}: ${verdict}`,
+      faulty: h.faults.length > 0 };
+  });
 }

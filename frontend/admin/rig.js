@@ -5,7 +5,7 @@
  * imported one.
  */
 
-import { rigRows, rigSummary } from "./rig-format.js";
+import { rigHandLines, rigRows, rigSummary } from "./rig-format.js";
 import { el } from "./views.js";
 
 const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
@@ -21,6 +21,10 @@ function render() {
   $("rig-rows").replaceChildren(...(report ? rigRows(report) : []).map((row) =>
     el("tr", { class: row.faulty ? "rig-faulty" : "" },
       row.cells.map((text, i) => el("td", i > 0 && i < 7 ? { class: "num" } : {}, [text])))));
+  const hands = report ? rigHandLines(report) : [];
+  $("rig-hands").hidden = hands.length === 0;
+  $("rig-hands").replaceChildren(...hands.map((line) =>
+    el("li", { class: line.faulty ? "rig-faulty" : "" }, [line.text])));
   const adopt = /** @type {HTMLButtonElement} */ ($("rig-adopt"));
   adopt.hidden = !report || report.version === status.version_in_use;
   if (report) adopt.textContent = `Adopt version ${report.version} and re-solve`;

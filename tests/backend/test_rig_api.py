@@ -16,11 +16,13 @@ from typer.testing import CliRunner
 import worker.tasks  # noqa: F401  (registers the rig-health and solve job handlers)
 from backend.captures.calibration import CalibrationVersion, calibrated_models
 from backend.captures.flows import import_path
+from backend.captures.models import Hand
 from backend.captures.service import sequence_cameras
 from backend.cli import app as cli_app
 from backend.db import session_scope
 from backend.jobs.service import execute
 from backend.rig.service import job_key
+from backend.solve.inputs import gather_inputs
 from tests.backend.test_solve_api import _approve_from_truth
 
 pytestmark = pytest.mark.slow
@@ -58,6 +60,9 @@ def test_rig_health_is_estimated_stored_and_adopted(client: TestClient, admin_he
     assert report["faulty"] == [] and all(c["time_offset_frames"] == 0
                                           for c in report["cameras"])
     assert all(c["residual_px_after"] < 1.0 for c in report["cameras"])
+    # The imported hand shape is the subject's: its bones match the labelled ones.
+    [hand] = report["hands"]
+    assert hand["faults"] == [] and hand["bone_diff_median_mm"] < 0.5 and hand["frames"] >= 3
     assert _imported_extrinsics(sequence) == imported
     # A version in use changes the models every reader takes; the imported rows stay.
     with session_scope() as s:
@@ -84,6 +89,45 @@ def test_rig_health_is_estimated_stored_and_adopted(client: TestClient, admin_he
     with session_scope() as s:
         models = calibrated_models(s, sequence_cameras(s, sequence))
     assert np.allclose(models[0].T_cam_to_world, imported[0])
+
+
+def _rest_bones(betas: list[float]) -> np.ndarray:
+    from worker.hand.calibrate import bone_lengths, rest_joint_map
+    from worker.hand.model import load_hand_model
+
+    base, basis = rest_joint_map(load_hand_model("right"))
+    return bone_lengths(base + basis @ np.asarray(betas))
+
+
+def test_a_wrong_hand_shape_is_named_and_refined_in_the_version(
+        client: TestClient, admin_headers: dict, sequence: int, small_capture: Path) -> None:
+    _approve_from_truth(small_capture, sequence)
+    with session_scope() as s:
+        hand = s.scalars(select(Hand).where(Hand.sequence_id == sequence)).one()
+        true_betas = list(hand.betas)
+        # Another subject's shape in the calibration: every bone a few mm off.
+        hand.betas = [b + (1.5 if i == 0 else 0.0) for i, b in enumerate(true_betas)]
+    off_mm = np.abs(_rest_bones(true_betas) - _rest_bones(
+        [b + (1.5 if i == 0 else 0.0) for i, b in enumerate(true_betas)])) * 1000.0
+    assert np.median(off_mm) > 1.5
+    url = f"/api/sequences/{sequence}/rig-health"
+    client.post(url, headers=admin_headers)
+    execute(job_key(sequence))
+    report = client.get(url, headers=admin_headers).json()["report"]
+    [row] = report["hands"]
+    assert row["faults"] and row["faults"][0].startswith("hand shape off")
+    assert abs(row["bone_diff_median_mm"] - float(np.median(off_mm))) < 0.5
+    assert report["faulty"] == []  # the cameras are fine
+    # The version carries the fitted shape; in use, the solve reads it (the import is kept).
+    adopted = client.post(f"/api/sequences/{sequence}/calibrations/1/adopt",
+                          json={"solve": False}, headers=admin_headers)
+    assert adopted.status_code == 200, adopted.text
+    with session_scope() as s:
+        betas = gather_inputs(s, sequence, with_depth=False).inputs.hand.betas
+        imported = s.scalars(select(Hand).where(Hand.sequence_id == sequence)).one().betas
+    assert imported[0] == pytest.approx(true_betas[0] + 1.5)
+    fitted_off = np.abs(_rest_bones(list(betas)) - _rest_bones(true_betas)) * 1000.0
+    assert np.median(fitted_off) < 0.5, fitted_off
 
 
 def test_rig_health_refuses_bad_ids_and_non_admins(client: TestClient, admin_headers: dict,

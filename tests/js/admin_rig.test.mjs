@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { rigRows, rigSummary } from "../../frontend/admin/rig-format.js";
+import { rigHandLines, rigRows, rigSummary } from "../../frontend/admin/rig-format.js";
 
 const report = {
   version: 2, labels: 48, faulty: ["cam-3"],
@@ -40,4 +40,21 @@ test("rigSummary says which version, what is off and what is in use", () => {
   assert.equal(rigSummary({ report: null, job_status: "queued" }),
     "Estimating the rig from the accepted labels…");
   assert.equal(rigSummary({ report: null, job_status: null }), "No rig-health estimate yet.");
+});
+
+test("rigHandLines says how far the hand shape is off and what the version does about it", () => {
+  const hands = [{ index: 0, side: "right", calib_name: "20200709_subject_01", frames: 24,
+    bone_diff_median_mm: 2.04, bone_diff_max_mm: 5.42, fitted_betas: [],
+    faults: ["hand shape off: its bones differ from the labelled ones by 2.0 mm"] }];
+  const [line] = rigHandLines({ ...report, hands });
+  assert.equal(line.faulty, true);
+  assert.equal(line.text, "Hand 0 right (mano_20200709_subject_01): bones 2.0 mm off the " +
+    "labelled ones (median of 20, at most 5.4 mm) over 24 frames: hand shape off: its bones " +
+    "differ from the labelled ones by 2.0 mm. This version uses the shape fitted to the labels.");
+  const ok = rigHandLines({ ...report, hands: [{ ...hands[0], calib_name: null, faults: [] }] });
+  assert.equal(ok[0].faulty, false);
+  assert.match(ok[0].text, /^Hand 0 right: bones .* over 24 frames: ok\.$/);
+  assert.deepEqual(rigHandLines(report), []);
+  assert.match(rigSummary({ report: { ...report, hands }, version_in_use: 0 }),
+    /cameras off: cam-3\. The hand's shape is off\. \(the imported/);
 });

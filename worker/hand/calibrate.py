@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from worker.geometry.cameras import CameraModel
+from worker.geometry.triangulate import triangulate_points
 from worker.hand.joints import JOINT_PARENTS, NUM_JOINTS
 from worker.hand.layer import HandLayer
 from worker.hand.params import HandModel
@@ -25,6 +27,18 @@ from worker.hand.params import HandModel
 # Ridge weight (m^2 per unit beta^2): 1e-8 is (0.1 mm)^2, small beside the bone-length residuals,
 # enough to keep directions the bones cannot see at zero.
 DEFAULT_RIDGE = 1e-8
+# Ridge for bones measured from labels: the per-bone median of careful labels triangulated over
+# a short clip is off by about 0.5 mm, so (0.55 mm)^2 is the prior's weight. With the exact
+# ridge above, that noise moves the surface by up to 2.7 mm in shape directions the bones
+# barely see (on 8-view captures of seed 7311); with this one by 0.3-1.1 mm.
+LABELLED_RIDGE = 3e-7
+# A joint is triangulated only from observations that agree within this many pixels.
+OUTLIER_PX = 15.0
+# The calibration's hand shape is named off when its bones differ from the labels' by more than
+# this, as the median over the 20 bones. Label noise alone (2 px careful labels, 4-8 views,
+# 24 frames) leaves the median under about 0.5 mm; another subject's betas (drawn from the
+# shape space, sigma 0.6) differ by 1.5-4 mm (bench/rig_faults.py --fault betas).
+SHAPE_BONE_MM = 1.0
 _BONES = np.array([(j, p) for j, p in enumerate(JOINT_PARENTS) if p >= 0])  # (20, 2)
 NUM_BONES = len(_BONES)
 
@@ -111,3 +125,61 @@ def fit_betas(target_lengths: np.ndarray, model: HandModel, *, ridge: float = DE
     lengths = np.linalg.norm(d + D @ betas, axis=1)
     return BetaFit(betas=betas, lengths=lengths, residual_mm=(lengths - target) * 1000.0,
                   iterations=steps)
+
+
+@dataclass
+class ShapeCheck:
+    """A hand shape (betas) checked against the labels' triangulated bones.
+
+    fit: the betas the labels call for. bone_diff_mm: (20,) the checked shape's rest-pose bone
+    lengths minus the labels' median bone lengths. frames: frames with every joint triangulated.
+    """
+
+    fit: BetaFit
+    bone_diff_mm: np.ndarray
+    frames: int
+
+    @property
+    def median_diff_mm(self) -> float:
+        return float(np.median(np.abs(self.bone_diff_mm)))
+
+    @property
+    def max_diff_mm(self) -> float:
+        return float(np.abs(self.bone_diff_mm).max())
+
+    def fault(self, limit_mm: float = SHAPE_BONE_MM) -> str | None:
+        """One sentence when the checked shape is off, else None."""
+        if self.median_diff_mm <= limit_mm:
+            return None
+        longer = int((self.bone_diff_mm > 0).sum())
+        return (f"hand shape off: its bones differ from the labelled ones by "
+                f"{self.median_diff_mm:.1f} mm (median of 20), up to {self.max_diff_mm:.1f} mm; "
+                f"{longer} of 20 are longer")
+
+
+def triangulate_joints(cameras: list[CameraModel], keypoints: np.ndarray,
+                       visible: np.ndarray, outlier_px: float = OUTLIER_PX) -> np.ndarray:
+    """Joints (F, 21, 3) world metres from labels (V, F, 21, 2) px and (V, F, 21) bool; NaN
+    where fewer than two views saw a joint. Occluded labels are guesses and are left out."""
+    keypoints, visible = np.asarray(keypoints, float), np.asarray(visible, bool)
+    views, frames = keypoints.shape[:2]
+    pixels = np.where(visible[..., None], keypoints, np.nan)
+    pixels = pixels.transpose(1, 2, 0, 3).reshape(frames * NUM_JOINTS, views, 2)
+    seen = np.isfinite(pixels).all(axis=-1).sum(axis=1) >= 2
+    points = np.full((frames * NUM_JOINTS, 3), np.nan)
+    if seen.any():
+        points[seen] = triangulate_points(cameras, pixels[seen], outlier_px=outlier_px).points
+    return points.reshape(frames, NUM_JOINTS, 3)
+
+
+def check_shape(joints: np.ndarray, betas: np.ndarray, model: HandModel,
+                min_frames: int = 3) -> ShapeCheck:
+    """``betas`` (K,) against triangulated joints (F, 21, 3) metres: the bone-length difference
+    and the betas that fit the labels. Raises ValueError when a bone is seen in fewer than
+    ``min_frames`` frames."""
+    target = median_bone_lengths(joints, min_frames=min_frames)
+    base, basis = rest_joint_map(model)
+    current = bone_lengths(base + basis @ np.asarray(betas, dtype=np.float64))
+    frames = int(np.isfinite(np.asarray(joints)).all(axis=(1, 2)).sum())
+    return ShapeCheck(fit=fit_betas(target, model, ridge=LABELLED_RIDGE),
+                      bone_diff_mm=(current - target) * 1000.0, frames=frames)
