@@ -67,12 +67,14 @@ export function rigSummary(status) {
 export function rigHandLines(report) {
   return (report.hands || []).map((/** @type {any} */ h) => {
     const calib = h.calib_name ? ` (mano_${h.calib_name})` : "";
-    const figures = `bones ${fixed(h.bone_diff_median_mm, 1)} mm off the labelled ones ` +
-      `(median of 20, at most ${fixed(h.bone_diff_max_mm, 1)} mm) over ${h.frames} frames`;
-    const verdict = h.faults.length
-      ? `${h.faults.join("; ")}. This version uses the shape fitted to the labels.`
-      : "ok.";
-    return { text: `Hand ${h.index} ${h.side}${calib}: ${figures}: ${verdict}`,
-      faulty: h.faults.length > 0 };
+    const faulty = h.faults.length > 0;
+    const figures = `${fixed(h.bone_diff_median_mm, 1)} mm (median of 20 bones, at most ` +
+      `${fixed(h.bone_diff_max_mm, 1)} mm) over ${h.frames} frames`;
+    const text = faulty
+      ? `Hand ${h.index} ${h.side}${calib}: shape off. Its bones differ from the labelled ` +
+        `ones by ${figures}; this version uses the shape fitted to the labels.`
+      : `Hand ${h.index} ${h.side}${calib}: shape ok. Its bones are within ${figures} of ` +
+        "the labelled ones.";
+    return { text, faulty };
   });
 }

@@ -1,5 +1,5 @@
 """Rig health on the admin page in a real browser: the newest estimate's table names the camera
-that is off (its row marked), adopting the refined version says what became of the re-solve,
+that is off (its row marked) and a hand shape that is off, adopting the refined version says what became of the re-solve,
 and the imported calibration can be put back; screenshots at 1024x700 and 1440x900.
 
 The version is stored directly with a report in the estimate's own form (backend/rig), so the
@@ -40,7 +40,13 @@ def _store_version(server: LiveServer) -> list[str]:
                                "depth shifted by (2, -3) px against colour"])
         store_version(s, server.sequence_id, entries, {
             "labels": 2, "thresholds": {"image_shift_px": 0.8}, "cameras": rows,
-            "faulty": [serials[1]]})
+            "faulty": [serials[1]],
+            "hands": [{"index": 0, "side": "right", "calib_name": "subject_01_right",
+                       "frames": 6, "bone_diff_median_mm": 2.04, "bone_diff_max_mm": 5.42,
+                       "fitted_betas": [0.1] * 10,
+                       "faults": ["hand shape off: its bones differ from the labelled ones "
+                                  "by 2.0 mm (median of 20), up to 5.4 mm; 15 of 20 are "
+                                  "longer"]}]})
     return serials
 
 
@@ -61,6 +67,12 @@ def test_rig_panel_names_the_camera_and_adopts_the_version(page: Page, live_serv
     expect(faulty).to_contain_text("1 frame late")
     expect(faulty).to_contain_text("+1.00 %")
     expect(page.locator("#rig-rows tr").first.locator("td").last).to_have_text("ok")
+    hand = page.locator("#rig-hands li.rig-faulty")
+    expect(hand).to_have_count(1)
+    expect(hand).to_contain_text("Hand 0 right (mano_subject_01_right): shape off. Its bones "
+                                 "differ from the labelled ones by 2.0 mm")
+    expect(hand).to_contain_text("this version uses the shape fitted to the labels.")
+    expect(page.locator("#rig-summary")).to_contain_text("The hand's shape is off.")
     page.locator("#rig-section").scroll_into_view_if_needed()
     for width, height in ((1024, 700), (1440, 900)):
         page.set_viewport_size({"width": width, "height": height})

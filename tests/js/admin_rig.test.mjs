@@ -48,12 +48,12 @@ test("rigHandLines says how far the hand shape is off and what the version does 
     faults: ["hand shape off: its bones differ from the labelled ones by 2.0 mm"] }];
   const [line] = rigHandLines({ ...report, hands });
   assert.equal(line.faulty, true);
-  assert.equal(line.text, "Hand 0 right (mano_20200709_subject_01): bones 2.0 mm off the " +
-    "labelled ones (median of 20, at most 5.4 mm) over 24 frames: hand shape off: its bones " +
-    "differ from the labelled ones by 2.0 mm. This version uses the shape fitted to the labels.");
+  assert.equal(line.text, "Hand 0 right (mano_20200709_subject_01): shape off. Its bones " +
+    "differ from the labelled ones by 2.0 mm (median of 20 bones, at most 5.4 mm) over 24 " +
+    "frames; this version uses the shape fitted to the labels.");
   const ok = rigHandLines({ ...report, hands: [{ ...hands[0], calib_name: null, faults: [] }] });
   assert.equal(ok[0].faulty, false);
-  assert.match(ok[0].text, /^Hand 0 right: bones .* over 24 frames: ok\.$/);
+  assert.match(ok[0].text, /^Hand 0 right: shape ok\. Its bones are within 2\.0 mm .* the labelled ones\.$/);
   assert.deepEqual(rigHandLines(report), []);
   assert.match(rigSummary({ report: { ...report, hands }, version_in_use: 0 }),
     /cameras off: cam-3\. The hand's shape is off\. \(the imported/);
