@@ -1,6 +1,7 @@
 """Rig health on the admin page in a real browser: the newest estimate's table names the camera
-that is off (its row marked) and a hand shape that is off, adopting the refined version says what became of the re-solve,
-and the imported calibration can be put back; screenshots at 1024x700 and 1440x900.
+that is off (its row marked) and a hand shape that is off, adopting the refined version says
+what became of the re-solve, and the imported calibration can be put back; screenshots at
+1024x700 and 1440x900.
 
 The version is stored directly with a report in the estimate's own form (backend/rig), so the
 page is checked without waiting for an estimate on the live capture."""
@@ -44,9 +45,9 @@ def _store_version(server: LiveServer) -> list[str]:
             "hands": [{"index": 0, "side": "right", "calib_name": "subject_01_right",
                        "frames": 6, "bone_diff_median_mm": 2.04, "bone_diff_max_mm": 5.42,
                        "fitted_betas": [0.1] * 10,
-                       "faults": ["hand shape off: its bones differ from the labelled ones "
-                                  "by 2.0 mm (median of 20), up to 5.4 mm; 15 of 20 are "
-                                  "longer"]}]})
+                       "faults": [("hand shape off: its bones differ from the labelled ones "
+                                   "by 2.0 mm (median of 20), up to 5.4 mm; 15 of 20 are "
+                                   "longer")]}]})
     return serials
 
 
