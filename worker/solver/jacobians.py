@@ -20,7 +20,7 @@ from torch.func import jvp
 
 from worker.solver.energies import MM_PER_M, DepthData, HandData
 from worker.solver.hand_fk import SubjectHand
-from worker.solver.lm import jacobian
+from worker.solver.lm import FORWARD_AD_LOCK, jacobian
 from worker.solver.projection import Rig
 
 
@@ -30,7 +30,8 @@ def _projection_derivative(rig: Rig, joints: torch.Tensor) -> torch.Tensor:
     for axis in range(3):
         tangent = torch.zeros_like(joints)
         tangent[..., axis] = 1.0
-        columns.append(jvp(rig.project, (joints,), (tangent,))[1])
+        with FORWARD_AD_LOCK:
+            columns.append(jvp(rig.project, (joints,), (tangent,))[1])
     return torch.stack(columns, dim=-1)
 
 

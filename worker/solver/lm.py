@@ -9,6 +9,7 @@ keeps its own damping and accepts a step only if its own cost went down.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import numpy as np
@@ -16,6 +17,11 @@ import torch
 from torch.func import jvp, vmap
 
 ResidualFn = Callable[[torch.Tensor], torch.Tensor]
+
+# PyTorch's forward-mode autodiff keeps its levels in process-wide state: two threads inside
+# jvp at once (two solves in one worker process) pull the level from under each other ("no
+# level exists"). Every forward-mode product of the solver holds this lock.
+FORWARD_AD_LOCK = threading.RLock()
 
 
 def cauchy_weights(errors: np.ndarray, scale: float) -> np.ndarray:
@@ -32,7 +38,8 @@ def jacobian(residual_fn: ResidualFn, params: torch.Tensor) -> torch.Tensor:
     def directional(tangent: torch.Tensor) -> torch.Tensor:
         return jvp(residual_fn, (params,), (tangent,))[1]
 
-    return vmap(directional)(tangents).permute(1, 2, 0)
+    with FORWARD_AD_LOCK:
+        return vmap(directional)(tangents).permute(1, 2, 0)
 
 
 def levenberg_marquardt(residual_fn: ResidualFn, params: torch.Tensor, iterations: int,
