@@ -15,6 +15,7 @@ the marketplace forgot the token (24 h) nothing is paid twice.
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,6 +59,28 @@ def _decision(session: Session, assignment: Assignment) -> CrowdPayment | None:
 def _market_status(client: MTurkClient, assignment: Assignment) -> str:
     reply = call(client, "get_assignment", AssignmentId=assignment.external_id)
     return str(reply["Assignment"]["AssignmentStatus"])
+
+
+# The most a marketplace takes as a decision's feedback (MTurk's RequesterFeedback: 1024).
+FEEDBACK_LIMIT = 1024
+_SENTENCE_END = re.compile(r"(?<=[.!?:])\s+(?=[A-Z(])")
+
+
+def fit_feedback(text: str, limit: int = FEEDBACK_LIMIT) -> str:
+    """``text`` cut to at most ``limit`` characters at a sentence's end (the first sentences
+    are the ones that say what to fix), with " ..." where sentences were left out; a first
+    sentence longer than the limit is cut at a word."""
+    if len(text) <= limit:
+        return text
+    kept = ""
+    for sentence in _SENTENCE_END.split(text):
+        joined = f"{kept} {sentence}" if kept else sentence
+        if len(joined) + 4 > limit:
+            break
+        kept = joined
+    if not kept:
+        kept = text[: limit - 4].rsplit(" ", 1)[0]
+    return f"{kept} ..."
 
 
 def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str,

@@ -104,7 +104,8 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
                 return "approved"
             report.action_detail, follow_up = GRANT_PENDING, _grant
         else:
-            decisions.reject(session, client, assignment_id, report.feedback)
+            decisions.reject(session, client, assignment_id,
+                             decisions.fit_feedback(report.feedback))
             report.action, report.action_detail = "rejected", REOPEN_PENDING
             follow_up = _reopen
     follow_up(client, report_id, assignment_id)
