@@ -98,6 +98,9 @@ QUICK: dict[str, Run] = {
                            "--paper-frames", "2"),
                  ("runs.run.mpjpe_mm", "runs.run.seconds", "speed.speed_ratio_same_frames",
                   "default_total_seconds")),
+    # Skips (ok) unless DEXYCB_TOOLKIT / BOP_TOOLKIT (and TOOLKIT_PYTHON) name the checkouts.
+    "toolkit_readers": Run("toolkit_readers", ("--demo", "12,3,1", "--seed", "7"),
+                           ("dexycb", "bop"), equal={"ok": True}),
 }
 
 
