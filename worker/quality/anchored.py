@@ -48,6 +48,15 @@ MESH_MARGIN_M = 0.004
 # The depth camera hides a point when it reads a surface this much nearer (metres): a hand
 # over the object reads 1-3 cm nearer; sensor noise at 0.7 m is ~1 mm.
 DEPTH_MARGIN_M = 0.012
+# The depth camera hides a point only when every reading within this many px of its pixel
+# (a square) is that much nearer: a rig whose calibration or depth registration is a few
+# pixels off (a camera turned by 0.5 degrees or moved by 5 mm shows 3-8 px, less what the
+# view's offset takes out; depth images 2-3 px off their colour images) reads a point near an
+# edge, or on a slope of its own surface, at a neighbouring pixel that is nearer, while a
+# hand over the point covers the whole square.
+DEPTH_WINDOW_PX = 3
+_WINDOW = np.array([(dy, dx) for dy in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)
+                    for dx in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)])
 # A click this close to the object's outline (px) is on it: a careful click lands within ~2 px,
 # and a landmark near the silhouette may miss by that much.
 SNAP_PX = 4.0
@@ -204,15 +213,25 @@ def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
                 shown[f] = False
                 break
     if depth is not None:
-        rows, cols = np.rint(pix[:, 1]), np.rint(pix[:, 0])
         at = np.flatnonzero(shown)
         if at.size:
-            reading = depth[(at, rows[at].astype(int).clip(0, camera.height - 1),
-                             cols[at].astype(int).clip(0, camera.width - 1))] / 1000.0
-            hidden = (reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)
-            shown[at[hidden]] = False
+            shown[at[covered(depth, camera, at, pix[at], z[at])]] = False
     assert shown.shape == (frames,)
     return shown
+
+
+def covered(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
+            z: np.ndarray) -> np.ndarray:
+    """(N,) whether the depth camera reads something well in front of each point: the reading
+    at its pixel and every other within DEPTH_WINDOW_PX (those with a reading) more than
+    DEPTH_MARGIN_M nearer than its depth. frames (N,) int; pix (N, 2) px; z (N,) metres."""
+    rows = np.rint(pix[:, 1]).astype(int)[:, None] + _WINDOW[:, 0]
+    cols = np.rint(pix[:, 0]).astype(int)[:, None] + _WINDOW[:, 1]
+    reading = depth[(np.broadcast_to(frames[:, None], rows.shape),
+                     rows.clip(0, camera.height - 1), cols.clip(0, camera.width - 1))] / 1000.0
+    nearer = z[:, None] - reading > DEPTH_MARGIN_M
+    centre = len(_WINDOW) // 2
+    return (reading[:, centre] > 0) & nearer[:, centre] & (nearer | (reading <= 0)).all(axis=1)
 
 
 def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
@@ -241,10 +260,7 @@ def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
                 shown &= ~(ray_hits(origin, dirs, tri)[0] < reach - MESH_MARGIN_M)
         at = np.flatnonzero(shown)
         if depth is not None and at.size:
-            rows = np.rint(pix[at, 1]).astype(int).clip(0, camera.height - 1)
-            cols = np.rint(pix[at, 0]).astype(int).clip(0, camera.width - 1)
-            reading = depth[(np.full(at.size, f), rows, cols)] / 1000.0
-            shown[at[(reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)]] = False
+            shown[at[covered(depth, camera, np.full(at.size, f), pix[at], z[at])]] = False
         out[f] = shown.mean()
     return out
 

@@ -494,7 +494,7 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
         # the corrected views, it is the camera's own.
         again = _camera_offsets(cameras, sent, first, frames, lags, fit)[0]
         if any(o.applied for o in again.values()):
-            offsets = again
+            offsets = {view: again[view] if o.applied else o for view, o in offsets.items()}
             labels = [_offset_corrected(lab, offsets[lab.view], lags[lab.view])
                       for lab in sent]
             report, fit = _score(cameras, labels, labels, depth, opts)
