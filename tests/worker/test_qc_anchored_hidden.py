@@ -17,6 +17,7 @@ from worker.quality.anchored import (
     DEPTH_WINDOW_PX,
     SHOWN_SHARE,
     SolvedObjects,
+    at_depth_edge,
     covered,
     object_shown,
     score_anchored,
@@ -123,6 +124,14 @@ class TestCoveredByDepth:
         # calibration a few px off), the point itself is in plain view beside it.
         assert not self._covered(322)
         assert self._covered(322 + DEPTH_WINDOW_PX)
+
+    def test_a_hand_edge_across_the_square_is_neither_plainly_shown_nor_hidden(self):
+        for hand_to_col, edge in ((310, False), (322, True), (318, True),
+                                  (322 + DEPTH_WINDOW_PX, False)):
+            depth = np.full((1, HEIGHT, WIDTH), 700, np.uint16)
+            depth[0, :, :hand_to_col + 1] = 650
+            assert at_depth_edge(depth, camera(), np.array([0]), np.array([[320.0, 240.0]]),
+                                 np.array([0.7]))[0] == edge, hand_to_col
 
     def test_no_reading_hides_nothing(self):
         depth = np.zeros((1, HEIGHT, WIDTH), np.uint16)
