@@ -13,7 +13,15 @@ import pytest
 
 from tests.worker.test_qc_anchored import FRAMES, HEIGHT, WIDTH, box, poses
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.anchored import SHOWN_SHARE, SolvedObjects, object_shown, score_anchored
+from worker.quality.anchored import (
+    DEPTH_WINDOW_PX,
+    SHOWN_SHARE,
+    SolvedObjects,
+    at_depth_edge,
+    covered,
+    object_shown,
+    score_anchored,
+)
 from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
@@ -95,3 +103,37 @@ class TestLabelMarkedHiddenThroughout:
 
 def test_shown_share_is_a_fraction():
     assert 0.0 < SHOWN_SHARE < 1.0
+
+
+class TestCoveredByDepth:
+    """A point 0.7 m away at pixel (320, 240): the depth camera hides it only where the
+    whole square around its pixel reads well in front of it."""
+
+    @staticmethod
+    def _covered(hand_to_col: int) -> bool:
+        depth = np.full((1, HEIGHT, WIDTH), 700, np.uint16)
+        depth[0, :, :hand_to_col + 1] = 650  # a hand 5 cm in front, up to that column
+        return bool(covered(depth, camera(), np.array([0]), np.array([[320.0, 240.0]]),
+                            np.array([0.7]))[0])
+
+    def test_a_hand_over_the_whole_square_hides_the_point(self):
+        assert self._covered(320 + DEPTH_WINDOW_PX + 5)
+
+    def test_a_hand_edge_a_few_pixels_off_does_not(self):
+        # The reading at the pixel is the hand's (a depth image 2 px off its colour image, or a
+        # calibration a few px off), the point itself is in plain view beside it.
+        assert not self._covered(322)
+        assert self._covered(322 + DEPTH_WINDOW_PX)
+
+    def test_a_hand_edge_across_the_square_is_neither_plainly_shown_nor_hidden(self):
+        for hand_to_col, edge in ((310, False), (322, True), (318, True),
+                                  (322 + DEPTH_WINDOW_PX, False)):
+            depth = np.full((1, HEIGHT, WIDTH), 700, np.uint16)
+            depth[0, :, :hand_to_col + 1] = 650
+            assert at_depth_edge(depth, camera(), np.array([0]), np.array([[320.0, 240.0]]),
+                                 np.array([0.7]))[0] == edge, hand_to_col
+
+    def test_no_reading_hides_nothing(self):
+        depth = np.zeros((1, HEIGHT, WIDTH), np.uint16)
+        assert not covered(depth, camera(), np.array([0]), np.array([[320.0, 240.0]]),
+                           np.array([0.7]))[0]

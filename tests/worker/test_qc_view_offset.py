@@ -142,3 +142,29 @@ def test_a_late_camera_is_found_and_its_careful_worker_not_charged() -> None:
     ref = report.replay["careful-5"]["reference"]
     ok = np.isfinite(ref[1:-1]).all(axis=-1)
     assert np.median(np.linalg.norm(ref[1:-1][ok] - late[5, 1:-1][ok], axis=-1)) < 2.0
+
+
+@pytest.mark.parametrize("seed", [3, 7, 11])
+def test_four_views_three_of_them_off_charge_no_careful_worker(seed: int) -> None:
+    # With every camera but the first off, each view's references come mostly from other
+    # faulty views: the maps are fitted again once those are corrected.
+    true_cams = camera_ring(4)
+    truth_xy = truth_pixels(true_cams, moving_hand())
+    cams = _off(true_cams, 0.5, 5.0, seed=seed)
+    labels = [make_label(f"careful-{v}", v, truth_xy, "careful", 70 + v) for v in range(4)]
+    report = score_hand(cams, labels)
+    for qc in report.assignments.values():
+        assert qc.metrics["median_error_px"] < 2.5, qc.metrics
+        assert qc.metrics["p90_error_px"] < 4.5, qc.metrics
+
+
+@pytest.mark.parametrize("profile", ["sloppy", "lazy"])
+def test_four_views_three_of_them_off_still_catch_bad_work(profile: str) -> None:
+    true_cams = camera_ring(4)
+    truth_xy = truth_pixels(true_cams, moving_hand())
+    cams = _off(true_cams, 0.5, 5.0, seed=3)
+    labels = [make_label(f"careful-{v}", v, truth_xy, "careful", 80 + v) for v in range(4)]
+    labels[2] = make_label("bad", 2, truth_xy, profile, 90)
+    report = score_hand(cams, labels)
+    assert report.assignments["bad"].metrics["median_error_px"] > 3.5, \
+        report.assignments["bad"].metrics

@@ -48,6 +48,15 @@ MESH_MARGIN_M = 0.004
 # The depth camera hides a point when it reads a surface this much nearer (metres): a hand
 # over the object reads 1-3 cm nearer; sensor noise at 0.7 m is ~1 mm.
 DEPTH_MARGIN_M = 0.012
+# The depth camera hides a point only when every reading within this many px of its pixel
+# (a square) is that much nearer: a rig whose calibration or depth registration is a few
+# pixels off (a camera turned by 0.5 degrees or moved by 5 mm shows 3-8 px, less what the
+# view's offset takes out; depth images 2-3 px off their colour images) reads a point near an
+# edge, or on a slope of its own surface, at a neighbouring pixel that is nearer, while a
+# hand over the point covers the whole square.
+DEPTH_WINDOW_PX = 3
+_WINDOW = np.array([(dy, dx) for dy in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)
+                    for dx in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)])
 # A click this close to the object's outline (px) is on it: a careful click lands within ~2 px,
 # and a landmark near the silhouette may miss by that much.
 SNAP_PX = 4.0
@@ -185,6 +194,15 @@ def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
     solved mesh nearer along its ray, and no depth reading well in front of it. image_map:
     where the camera truly shows a projected pixel (a camera offset, worker.quality.
     view_offset), so the depth map is read where the point is seen."""
+    return point_visibility(camera, world, scene, depth, image_map)[0]
+
+
+def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
+                     depth: DepthMaps | None, image_map: PixelMap | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) shown as ``point_visible`` says, and (F,) the shown frames where the point sits at
+    the edge of something in front of it (``at_depth_edge``): its visibility there says
+    nothing of the worker."""
     frames = len(world)
     pix = camera.project(world)
     if image_map is not None:
@@ -203,16 +221,47 @@ def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
             if np.isfinite(tri).all() and ray_hits(origin, dirs, tri)[0][0] < reach - MESH_MARGIN_M:
                 shown[f] = False
                 break
+    edge = np.zeros(frames, bool)
     if depth is not None:
-        rows, cols = np.rint(pix[:, 1]), np.rint(pix[:, 0])
         at = np.flatnonzero(shown)
         if at.size:
-            reading = depth[(at, rows[at].astype(int).clip(0, camera.height - 1),
-                             cols[at].astype(int).clip(0, camera.width - 1))] / 1000.0
-            hidden = (reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)
-            shown[at[hidden]] = False
+            edge[at[at_depth_edge(depth, camera, at, pix[at], z[at])]] = True
+            shown[at[covered(depth, camera, at, pix[at], z[at])]] = False
     assert shown.shape == (frames,)
-    return shown
+    return shown, edge
+
+
+def _readings_nearer(depth: DepthMaps, camera: CameraModel, frames: np.ndarray,
+                     pix: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Over the square of DEPTH_WINDOW_PX around each point's pixel: (N, S) whether the reading
+    is more than DEPTH_MARGIN_M nearer than the point, and (N, S) whether there is a reading;
+    the square's centre is column S // 2."""
+    rows = np.rint(pix[:, 1]).astype(int)[:, None] + _WINDOW[:, 0]
+    cols = np.rint(pix[:, 0]).astype(int)[:, None] + _WINDOW[:, 1]
+    reading = depth[(np.broadcast_to(frames[:, None], rows.shape),
+                     rows.clip(0, camera.height - 1), cols.clip(0, camera.width - 1))] / 1000.0
+    read = reading > 0
+    return read & (z[:, None] - reading > DEPTH_MARGIN_M), read
+
+
+def covered(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
+            z: np.ndarray) -> np.ndarray:
+    """(N,) whether the depth camera reads something well in front of each point: the reading
+    at its pixel and every other within DEPTH_WINDOW_PX (those with a reading) more than
+    DEPTH_MARGIN_M nearer than its depth. frames (N,) int; pix (N, 2) px; z (N,) metres."""
+    nearer, read = _readings_nearer(depth, camera, frames, pix, z)
+    centre = len(_WINDOW) // 2
+    return nearer[:, centre] & (nearer | ~read).all(axis=1)
+
+
+def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
+                  z: np.ndarray) -> np.ndarray:
+    """(N,) whether something in front of each point covers part of the square around its
+    pixel but not the point (``covered``): the edge of a hand or another object, where a rig
+    a few pixels off cannot say which side the point is on."""
+    nearer, read = _readings_nearer(depth, camera, frames, pix, z)
+    centre = len(_WINDOW) // 2
+    return nearer.any(axis=1) & ~(nearer[:, centre] & (nearer | ~read).all(axis=1))
 
 
 def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
@@ -241,10 +290,7 @@ def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
                 shown &= ~(ray_hits(origin, dirs, tri)[0] < reach - MESH_MARGIN_M)
         at = np.flatnonzero(shown)
         if depth is not None and at.size:
-            rows = np.rint(pix[at, 1]).astype(int).clip(0, camera.height - 1)
-            cols = np.rint(pix[at, 0]).astype(int).clip(0, camera.width - 1)
-            reading = depth[(np.full(at.size, f), rows, cols)] / 1000.0
-            shown[at[(reading > 0) & (z[at] - reading > DEPTH_MARGIN_M)]] = False
+            shown[at[covered(depth, camera, np.full(at.size, f), pix[at], z[at])]] = False
         out[f] = shown.mean()
     return out
 
@@ -299,6 +345,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     errors = np.full((frames, points), np.nan)
     reprojection = np.full((frames, points, 2), np.nan)
     shown = np.zeros((frames, points), bool)
+    edge = np.zeros((frames, points), bool)
     # Frames without a solved pose of the object judge nothing.
     known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
     found: dict[int, np.ndarray] = {}
@@ -309,7 +356,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
             continue
         found[p] = point
         world = _track_of(camera, point, scene.poses[target])
-        shown[:, p] = point_visible(camera, world, scene, depth, image_map)
+        shown[:, p], edge[:, p] = point_visibility(camera, world, scene, depth, image_map)
         cosine = facing(camera, point, world, shown[:, p], scene, target)
         if cosine is not None:
             faced.append(cosine)
@@ -318,8 +365,9 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         errors[both, p] = np.linalg.norm(reprojection[both, p] - xy[both, p], axis=1)
     anchored = len(found)
     judged = np.isfinite(errors)
-    hidden = ~shown & known[:, None] & decided
-    seen = shown & decided
+    # Visibility is judged where the views say plainly whether the point shows.
+    hidden = ~shown & known[:, None] & decided & ~edge
+    seen = shown & decided & ~edge
     # Landmarks the worker shows somewhere: only these can be anchored.
     placed = int((visible & np.isfinite(xy).all(axis=2)).any(axis=0).sum())
     metrics: dict[str, float | None] = {

@@ -485,8 +485,19 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
     # is the camera's, taken out before anyone is scored (worker.quality.view_offset).
     offsets, lags = _camera_offsets(cameras, labels, fit, frames)
     if any(o.applied for o in offsets.values()) or any(lags.values()):
-        labels = [_offset_corrected(lab, offsets[lab.view], lags[lab.view]) for lab in labels]
+        sent, first = labels, fit
+        labels = [_offset_corrected(lab, offsets[lab.view], lags[lab.view]) for lab in sent]
         report, fit = _score(cameras, labels, labels, depth, opts)
+        # Each view's map was fitted against references from other views still off by their
+        # own faults (with all but one camera off, a view's references carry most of the
+        # others' errors); fitted again, from the labels as sent, against the references of
+        # the corrected views, it is the camera's own.
+        again = _camera_offsets(cameras, sent, first, frames, lags, fit)[0]
+        if any(o.applied for o in again.values()):
+            offsets = {view: again[view] if o.applied else o for view, o in offsets.items()}
+            labels = [_offset_corrected(lab, offsets[lab.view], lags[lab.view])
+                      for lab in sent]
+            report, fit = _score(cameras, labels, labels, depth, opts)
     for _ in range(opts.swap_refits):
         corrections = swap_corrections(
             {k: a.swaps for k, a in report.assignments.items()}, report.consensus)
@@ -503,19 +514,35 @@ def score_hand(cameras: list[CameraModel], labels: list[ViewLabels],
 
 
 def _camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: _Fit,
-                    frames: int) -> tuple[dict[int, ViewOffset], dict[int, int]]:
+                    frames: int, lags: dict[int, int] | None = None,
+                    corrected: _Fit | None = None
+                    ) -> tuple[dict[int, ViewOffset], dict[int, int]]:
     """Per view, its lag (whole frames) and the map fitted to (leave-one-out reference,
     observation) of every label of the view over every point it is judged on (two other
-    views fix it), the label shifted by the lag."""
-    judged = np.isfinite(fit.spread).all(axis=(-1, -2)) & np.isfinite(fit.loo).all(axis=-1)
+    views fix it), the label shifted by the lag.
+
+    fit: the labels as sent (``fit.pixels`` their observations). lags: given, they are
+    taken as found. corrected: the fit of the labels already corrected (shifted by ``lags``
+    and taken back through a first map): the references are then its leave-one-out ones
+    (which the view's own correction does not touch), the observations still those sent."""
+    source = fit if corrected is None else corrected
+    judged = np.isfinite(source.spread).all(axis=(-1, -2)) & np.isfinite(source.loo).all(axis=-1)
     pairs: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
     for col, lab in enumerate(labels):
-        obs = np.where(judged[:, col, None], fit.pixels[:, col], np.nan)
-        pairs.setdefault(lab.view, []).append(((obs - fit.loo[:, col]).reshape(frames, -1, 2),
+        if corrected is None:
+            obs = np.where(judged[:, col, None], fit.pixels[:, col], np.nan)
+            ref = obs - fit.loo[:, col]
+        else:
+            ref = np.where(judged[:, col, None], corrected.pixels[:, col] - corrected.loo[:, col],
+                           np.nan)
+            obs = fit.pixels[:, col]
+        pairs.setdefault(lab.view, []).append((ref.reshape(frames, -1, 2),
                                                obs.reshape(frames, -1, 2)))
-    lags = {view: fit_view_lag(found) for view, found in pairs.items()}
-    offsets = {view: fit_view_offset(view, [(r, shift_frames(o, lags[view])) for r, o in found],
-                                     cameras[view].K[:2, 2])
+    if lags is None:
+        lags = {view: fit_view_lag(found) for view, found in pairs.items()}
+    # The corrected fit's references are already in the frames the view's images show.
+    offsets = {view: fit_view_offset(view, [(r, shift_frames(o, lags.get(view, 0)))
+                                            for r, o in found], cameras[view].K[:2, 2])
                for view, found in pairs.items()}
     return offsets, lags
 
