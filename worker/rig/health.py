@@ -17,7 +17,7 @@ import numpy as np
 
 from worker.geometry.cameras import CameraModel
 from worker.rig.common import align_views, check_tracks, observed, shift_frames
-from worker.rig.depth import DepthFit, correct_depth, fit_depth
+from worker.rig.depth import DepthFit, correct_depth, fit_depth, registration_shift
 from worker.rig.extrinsics import ExtrinsicCorrection, describe_corrections, refine_extrinsics
 from worker.rig.surface import refine_with_depth, world_time_maps
 from worker.rig.timing import TimeOffset, estimate_time_offsets
@@ -85,17 +85,24 @@ def _depth_pass(cameras: list[CameraModel], corrections: list[ExtrinsicCorrectio
                 color: list[dict[int, np.ndarray]] | None, free: tuple[int, ...],
                 limits: RigThresholds) -> list[ExtrinsicCorrection]:
     """The free views' label-refined poses re-posed against the whole scene's depth
-    (:mod:`worker.rig.surface`). Every view's depth scale and shift are estimated first and
-    applied, so a depth fault is not taken for a pose fault. pixels: (V, F, P, 2) px."""
+    (:mod:`worker.rig.surface`). Every view's depth shift and the depth scale of the views that
+    stay in place are estimated first and applied, so a depth fault is not taken for a pose
+    fault. pixels: (V, F, P, 2) px."""
     refined = [c.camera for c in corrections]
-    fits = fit_depth(refined, depth, offsets, color, passes=1)
-    # A scale is applied only where it is a fault and only to the views that stay in place: one
-    # fitted against a pose still off by a few mm is off by a few tenths of a percent, which
-    # would itself move the view along its axis (the final fit after the move finds it).
+    # The scales are judged among the views that stay in place only: against views whose
+    # poses are still off by a few mm a scale is off by a few tenths of a percent (at 4 views,
+    # the master alone against three moved views reads 0.5 %), and applied to a view that
+    # stays in place it would move every free view along with it. A scale of a free view is
+    # never applied here: it would itself move the view along its axis (the final fit after
+    # the move finds it).
+    fits = fit_depth(refined, [None if v in free else d for v, d in enumerate(depth)], offsets,
+                     color, passes=1)
+    shifts = [f.shift_px if f is not None else
+              registration_shift(d, color[v]) if d is not None and color and color[v]
+              else (0, 0) for v, (f, d) in enumerate(zip(fits, depth, strict=True))]
     maps = world_time_maps(depth, offsets, [
-        (1.0, (0, 0)) if f is None else
-        (f.scale if v not in free and abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent
-         else 1.0, f.shift_px) for v, f in enumerate(fits)])
+        (f.scale if f is not None and abs(f.scale - 1.0) * 100.0 > limits.depth_scale_percent
+         else 1.0, shift) for f, shift in zip(fits, shifts, strict=True)])
     if not maps:
         return corrections
     moved = refine_with_depth(refined, cameras, free, maps, pixels)

@@ -3,10 +3,13 @@
 The hand alone is too small a volume to pin a view's whole pose (a small rotation and a
 translation that undoes it look alike in its pixels). The depth maps cover the whole scene
 (table, objects, hand), so each free view is re-posed by robust point-to-plane ICP of its own
-back-projected depth against the other views' merged surface, jointly with the pixel error of
-its labels against the other views' triangulated points (as :mod:`worker.rig.extrinsics`) and
-the same prior on the move away from the imported pose. A few sweeps over the free views let
-them settle together; the fixed views (the master) pin the world frame.
+back-projected depth against the other views' surfaces (each point paired with the surface at
+the pixel it projects to in every other view), jointly with the pixel error of its labels
+against the other views' triangulated points (as :mod:`worker.rig.extrinsics`) and the same
+prior on the move away from the imported pose; the ICP pose is then finished on the depth
+differences along the other views' rays, which have no bias at the true pose. A few sweeps
+over the free views let them settle together; the fixed views (the master) pin the world
+frame.
 
 Depth must already be corrected for its scale and pixel shift (:mod:`worker.rig.depth`):
 otherwise a view's scale fault would be taken for a move along its optical axis.
@@ -21,11 +24,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from worker.geometry.cameras import CameraModel, camera_to_world, pixels_to_rays
 from worker.rig.common import leave_one_out_points, reprojection_px
-from worker.rig.depth import correct_depth
+from worker.rig.depth import _bilinear, correct_depth
 from worker.rig.extrinsics import (
     CAUCHY_PX,
     INLIER_FACTOR,
@@ -36,9 +38,8 @@ from worker.rig.extrinsics import (
     posed,
 )
 
-# Sample grids (px): the moving view's points, and the denser merged surface of the others.
+# Sample grid (px) of the moving view's points; the other views' maps are used at every pixel.
 SOURCE_STEP_PX = 8
-TARGET_STEP_PX = 4
 # Normals from neighbours this far apart on the depth grid (px); a jump beyond EDGE_JUMP_MM
 # between them means an occluding edge, where no normal is taken.
 NORMAL_REACH_PX = 2
@@ -54,6 +55,10 @@ MIN_PAIRS = 200
 SIGMA_MM = 2.0
 HUBER_MM = 3.0
 ICP_ITERATIONS = 25
+# The finish: depth differences along the other views' rays, pairs gated at
+# max(MIN_RAY_GATE_MM, GATE_FACTOR x their median).
+RAY_ITERATIONS = 20
+MIN_RAY_GATE_MM = 10.0
 SWEEPS = 3
 
 
@@ -76,6 +81,12 @@ def depth_surface(camera: CameraModel, depth: np.ndarray, step: int,
     """Camera-frame points (m) and normals (facing the camera) of one depth map (H, W) mm,
     on a grid of ``step`` px; pixels without depth or next to an occluding edge left out.
     rays: the camera's :func:`ray_image` if already computed."""
+    return _sampled(camera, depth, step, rays)[2]
+
+
+def _sampled(camera: CameraModel, depth: np.ndarray, step: int, rays: np.ndarray | None
+             ) -> tuple[np.ndarray, np.ndarray, Surface]:
+    """:func:`depth_surface` with the rows (N,) and columns (N,) of its points."""
     if depth.shape != (camera.height, camera.width):
         raise ValueError(f"depth map must have shape ({camera.height}, {camera.width}), "
                          f"got {depth.shape}")
@@ -96,19 +107,29 @@ def depth_surface(camera: CameraModel, depth: np.ndarray, step: int,
     normals = normals[good] / length[good, None]
     centre = pts[0][good]
     normals *= -np.sign(np.einsum("ij,ij->i", normals, centre))[:, None]
-    return Surface(centre, normals)
+    return gy[ok][good], gx[ok][good], Surface(centre, normals)
 
 
-def world_surface(cameras: list[CameraModel], maps: list[np.ndarray | None],
-                  rays: list[np.ndarray]) -> Surface:
-    """The merged world-frame surface of the given views' depth maps (None: left out);
-    rays: their :func:`ray_image`."""
-    parts = [(cam, depth_surface(cam, m, TARGET_STEP_PX, r))
-             for cam, m, r in zip(cameras, maps, rays, strict=True) if m is not None]
-    if not parts:
-        return Surface(np.zeros((0, 3)), np.zeros((0, 3)))
-    return Surface(np.concatenate([camera_to_world(s.points, c.T_cam_to_world) for c, s in parts]),
-                   np.concatenate([s.normals @ c.T_cam_to_world[:, :3].T for c, s in parts]))
+@dataclass(frozen=True)
+class SurfaceImage:
+    """One view's depth map as world points (H, W, 3) m and unit normals (H, W, 3), NaN where
+    :func:`depth_surface` takes none, with the camera that sees them and the map (H, W) mm."""
+
+    camera: CameraModel
+    points: np.ndarray
+    normals: np.ndarray
+    depth: np.ndarray
+
+
+def surface_image(camera: CameraModel, depth: np.ndarray, rays: np.ndarray) -> SurfaceImage:
+    """Every pixel's world point and normal of one depth map (H, W) mm; rays: the camera's
+    :func:`ray_image`."""
+    ys, xs, surf = _sampled(camera, depth, 1, rays)
+    points = np.full(depth.shape + (3,), np.nan)
+    normals = np.full(depth.shape + (3,), np.nan)
+    points[ys, xs] = camera_to_world(surf.points, camera.T_cam_to_world)
+    normals[ys, xs] = surf.normals @ camera.T_cam_to_world[:, :3].T
+    return SurfaceImage(camera, points, normals, depth)
 
 
 def params_of(anchor: CameraModel, camera: CameraModel) -> np.ndarray:
@@ -120,32 +141,45 @@ def params_of(anchor: CameraModel, camera: CameraModel) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Terms:
-    """One view's data: its own surfaces (camera frame) with the others' (world frame) and
-    their search trees, one pair per sample frame; label points (N, 3) m and pixels (N, 2)."""
+    """One view's data: its own surfaces (camera frame) with the other views' surface images,
+    one pair per sample frame; label points (N, 3) m and pixels (N, 2)."""
 
     own: list[Surface]
-    others: list[tuple[Surface, cKDTree]]
+    others: list[list[SurfaceImage]]
     points: np.ndarray
     pixels: np.ndarray
 
 
 def _pairs(camera: CameraModel, terms: _Terms, gate_mm: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Matched source points (M, 3) camera frame, target points and normals (M, 3) world."""
+    """Matched source points (M, 3) camera frame, target points and normals (M, 3) world.
+
+    Each source point is matched in every other view to the surface at the pixel it projects
+    to there (projective association): the pair is where that view's depth puts the point,
+    so pairs do not slide along the surfaces from one iteration to the next the way nearest
+    neighbours among sparse noisy samples do."""
     src, tgt, nrm = [], [], []
     rot = camera.T_cam_to_world[:, :3]
-    for own, (other, tree) in zip(terms.own, terms.others, strict=True):
-        if len(own.points) == 0 or len(other.points) == 0:
+    for own, others in zip(terms.own, terms.others, strict=True):
+        if len(own.points) == 0:
             continue
         world = camera_to_world(own.points, camera.T_cam_to_world)
-        dist, found = tree.query(world, distance_upper_bound=gate_mm / 1000.0)
-        hit = np.isfinite(dist)
-        idx = np.asarray(found)[hit]
-        agree = np.einsum("ij,ij->i", own.normals[hit] @ rot.T, other.normals[idx]) \
-            > MIN_NORMAL_COS
-        src.append(own.points[hit][agree])
-        tgt.append(other.points[idx[agree]])
-        nrm.append(other.normals[idx[agree]])
+        facing = own.normals @ rot.T
+        for other in others:
+            h, w = other.points.shape[:2]
+            with np.errstate(invalid="ignore"):
+                uv = np.rint(other.camera.project(world))
+                inside = (other.camera.depth_of(world) > 0) & (uv[:, 0] >= 0) \
+                    & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            idx = np.flatnonzero(inside)
+            x, y = uv[idx, 0].astype(int), uv[idx, 1].astype(int)
+            t, n = other.points[y, x], other.normals[y, x]
+            with np.errstate(invalid="ignore"):
+                hit = (np.linalg.norm(world[idx] - t, axis=1) < gate_mm / 1000.0) \
+                    & (np.einsum("ij,ij->i", facing[idx], n) > MIN_NORMAL_COS)
+            src.append(own.points[idx[hit]])
+            tgt.append(t[hit])
+            nrm.append(n[hit])
     if not src:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     return np.concatenate(src), np.concatenate(tgt), np.concatenate(nrm)
@@ -197,7 +231,62 @@ def _repose(camera: CameraModel, anchor: CameraModel, terms: _Terms) -> CameraMo
         params = new
         if moved < 1e-7:
             break
-    return posed(anchor, params)
+    return posed(anchor, _finish(anchor, params, terms))
+
+
+def _ray_residuals(camera: CameraModel, terms: _Terms) -> np.ndarray:
+    """(M,) mm: for every own point and other view, its depth in that view minus the depth
+    that view sees where it projects (bilinear); NaN where that view has none."""
+    out = []
+    for own, others in zip(terms.own, terms.others, strict=True):
+        world = camera_to_world(own.points, camera.T_cam_to_world)
+        for other in others:
+            with np.errstate(invalid="ignore"):
+                z = other.camera.depth_of(world) * 1000.0
+                seen = _bilinear(other.depth, other.camera.project(world))
+            out.append(np.where((seen > 0) & (z > 0), z - seen, np.nan))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _finish(anchor: CameraModel, params: np.ndarray, terms: _Terms) -> np.ndarray:
+    """The ICP result refined on depth differences along the other views' rays, with the
+    labels and the prior. Point-to-plane pairs leave a bias of a few mm along the scene's
+    weakly curved directions (a table plane with a few objects: noisy normals and pairs at
+    occluding edges pull the pose along the surfaces); the depth each view sees where the
+    point projects has none at the true pose, as :mod:`worker.rig.depth` relies on."""
+    gate = START_GATE_MM
+    prior = np.repeat([1.0 / PRIOR_RAD, 1.0 / PRIOR_M], 3) ** 2
+    for _ in range(RAY_ITERATIONS):
+        cam = posed(anchor, params)
+        ray = _ray_residuals(cam, terms)
+        keep = np.isfinite(ray)
+        keep[keep] = np.abs(ray[keep]) < gate
+        if keep.sum() < MIN_PAIRS:
+            return params
+        gate = max(MIN_RAY_GATE_MM, GATE_FACTOR * float(np.median(np.abs(ray[keep]))))
+        pix = (cam.project(terms.points) - terms.pixels).ravel()
+        res = np.concatenate([ray[keep], pix])
+        jac = np.empty((len(res), 6))
+        for i in range(6):
+            step = np.zeros(6)
+            step[i] = 1e-6
+            moved = posed(anchor, params + step)
+            jac[:, i] = (np.concatenate([_ray_residuals(moved, terms)[keep],
+                                         (moved.project(terms.points) - terms.pixels).ravel()])
+                         - res) / 1e-6
+        usable = np.isfinite(jac).all(axis=1)
+        jac[~usable] = 0.0
+        err = np.hypot(pix[0::2], pix[1::2])
+        w_pix = np.repeat(1.0 / (1.0 + (err / CAUCHY_PX) ** 2), 2) / SIGMA_PX ** 2
+        w_ray = np.minimum(1.0, HUBER_MM / np.maximum(np.abs(ray[keep]), 1e-9)) / SIGMA_MM ** 2
+        w = np.concatenate([w_ray, w_pix]) * usable
+        lhs = (jac * w[:, None]).T @ jac + np.diag(prior)
+        rhs = (jac * w[:, None]).T @ np.where(usable, res, 0.0) + prior * params
+        delta = np.linalg.solve(lhs, -rhs)
+        params = params + delta
+        if np.abs(delta).max() < 1e-7:
+            break
+    return params
 
 
 def _label_terms(camera: CameraModel, points: np.ndarray, pixels: np.ndarray
@@ -263,16 +352,16 @@ def _order(cameras: list[CameraModel], free: tuple[int, ...], settled: list[int]
 def _terms_of(cameras: list[CameraModel], view: int, rest: list[int],
               maps: list[list[np.ndarray | None]], pixels: np.ndarray,
               rays: list[np.ndarray]) -> _Terms:
-    """One view's data under the current poses: its own depth, the ``rest`` views' merged
+    """One view's data under the current poses: its own depth, the ``rest`` views'
     surface and its labels against the points of all other views; rays: per view (H, W, 3)."""
-    others = [world_surface([cameras[v] for v in rest], [frame[v] for v in rest],
-                            [rays[v] for v in rest]) for frame in maps]
+    others = [[surface_image(cameras[v], frame[v], rays[v])  # type: ignore[arg-type]
+               for v in rest if frame[v] is not None] for frame in maps]
     own = [depth_surface(cameras[view], frame[view], SOURCE_STEP_PX,  # type: ignore[arg-type]
                          rays[view]) for frame in maps]
     points, pix = _label_terms(
         cameras[view], leave_one_out_points(cameras, pixels, view).reshape(-1, 3),
         pixels[view].reshape(-1, 2))
-    return _Terms(own, [(s, cKDTree(s.points)) for s in others], points, pix)
+    return _Terms(own, others, points, pix)
 
 
 def world_time_maps(depth: list[np.ndarray | None], offsets: np.ndarray,
