@@ -103,6 +103,10 @@ def _hand(out_label: Any, truth_label: Any, K: np.ndarray, acc: dict[str, Any], 
         acc["over"].add(frame)
 
 
+# An object row trusted but further than this (ADD, mm) from the truth is listed by frame.
+OBJECT_LIMIT_MM = 10.0
+
+
 def _objects(out_label: Any, truth_label: Any, models: list[np.ndarray],
              acc: dict[str, Any], T: np.ndarray, frame: int) -> None:
     pose_y = out_label[dexycb.POSE_Y].astype(np.float64)
@@ -117,6 +121,8 @@ def _objects(out_label: Any, truth_label: Any, models: list[np.ndarray],
         add = float(np.linalg.norm(moved - (vertices @ true[:, :3].T + true[:, 3]), axis=1).mean())
         key = "trusted" if valid[o] else "flagged"
         acc["add"][o][key].append(add * 1000)
+        if valid[o] and add * 1000 > acc["trusted_limit_mm"]:
+            acc["trusted_over"][o].add(frame)
         world = np.concatenate([T[:, :3] @ R, (T[:, :3] @ pose[:, 3] + T[:, 3])[:, None]], axis=1)
         acc["world"].setdefault((o, frame), []).append((world, moved @ T[:, :3].T + T[:, 3]))
 
@@ -129,7 +135,9 @@ def _sequence(out: Path, truth: Path, seq: str, max_mm: float) -> dict[str, Any]
     hand: dict[str, Any] = {"truth_frames": 0, "labelled": 0, "mm": [], "px": [], "per_frame": {},
                             "unlabelled": set(), "over": set()}
     objects: dict[str, Any] = {"add": [{"trusted": [], "flagged": []} for _ in names],
-                               "world": {}, "rotation_error": 0.0}
+                               "world": {}, "rotation_error": 0.0,
+                               "trusted_over": [set() for _ in names],
+                               "trusted_limit_mm": OBJECT_LIMIT_MM}
     for serial in meta[dexycb.META_SERIALS]:
         K = _K(out, serial)
         T = np.asarray(extrinsics[dexycb.EXTRINSICS][serial], dtype=np.float64).reshape(3, 4)
@@ -162,6 +170,9 @@ def _sequence(out: Path, truth: Path, seq: str, max_mm: float) -> dict[str, Any]
         "labelled_frames_over_max": sorted(int(f) for f in hand["over"]),
         "object_add_mm": {n: {k: _stats(v) | {"rows": len(v)} for k, v in add.items()}
                           for n, add in zip(names, objects["add"], strict=True)},
+        # Frames where a trusted (pose_y_valid) row is more than OBJECT_LIMIT_MM ADD off.
+        "object_trusted_frames_over": {n: sorted(int(f) for f in over) for n, over in
+                                       zip(names, objects["trusted_over"], strict=True)},
         "pose_y_rotation_error": round(objects["rotation_error"], 6),
         "cross_camera_spread_mm": round(spread_mm * 1000, 4),
         "cross_camera_spread_deg": round(spread_deg, 4),
@@ -216,13 +227,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=7, help="--demo: the capture's seed")
     parser.add_argument("--fault", help="--demo: a rig fault for dexlabel synth --fault")
     parser.add_argument("--max-mm", type=float, default=5.0)
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="--demo: run it in this folder and keep it (instance, export)")
     args = parser.parse_args()
     if args.demo is None and (args.export is None or args.truth is None):
         parser.error("give --export and --truth, or --demo FRAMES,VIEWS,OBJECTS")
     with tempfile.TemporaryDirectory() as scratch:
         if args.demo is not None:
             args.export, args.truth = _demo(args.demo, args.seed, args.fault,
-                                            Path(scratch) / "demo")
+                                            args.keep or Path(scratch) / "demo")
         out = _unpacked(args.export, Path(scratch))
         sequences = sorted(str(p.parent.relative_to(out)) for p in out.glob(dexycb.META_GLOB))
         if not sequences:
@@ -238,7 +251,9 @@ def main() -> None:
                "labelled_share_min": min(r["labelled_share"] for r in results),
                "labelled_frames_over_max": sum(len(r["labelled_frames_over_max"])
                                                for r in results),
-               "cross_camera_spread_mm": max(r["cross_camera_spread_mm"] for r in results)}
+               "cross_camera_spread_mm": max(r["cross_camera_spread_mm"] for r in results),
+               "object_trusted_frames_over": sum(len(f) for r in results
+                                                 for f in r["object_trusted_frames_over"].values())}
     print(json.dumps({"max_mm": args.max_mm, "demo": args.demo, "seed": args.seed,
                       "fault": args.fault, "summary": summary, "sequences": results}))
 
