@@ -9,9 +9,10 @@ Evidence of object o at frame f under its solved pose:
   grip            for a held object, the distance from the pose its grip on the hand predicts
                   (the agreement with the other frames, through the hand).
 A frame at rest is trusted by the motion prior (an untouched object does not move) unless depth
-sees through it there. Any other frame is flagged, with the reason, when the evidence cannot pin
-it down: no landmark and at most one view of depth, the cameras seeing through it, landmarks far
-off, or a pose far from the grip. confidence (0..1) is the weakest of the factors, each scaled
+sees through it there; a frame at rest next to one in motion is judged by its evidence. Any
+other frame is flagged, with the reason, when the evidence cannot pin it down: no landmark and
+at most one view of depth, the cameras seeing through it, landmarks far off, or a pose far from
+the grip. confidence (0..1) is the weakest of the factors, each scaled
 so that 1 is well supported and 0 is the flag's threshold twice over. World frame; mm; px.
 """
 
@@ -72,13 +73,22 @@ def object_confidence(problem: Problem, state: SolveState) -> ObjectConfidence:
             grip_mm = corner_distance_mm(box_corners(np.asarray(obj.vertices, np.float64)),
                                          poses, motion.prior)
         role = "grasped object" if motion is not None and motion.held.any() else "object"
+        rest = np.zeros(frames, bool) if motion is None else np.asarray(motion.rest, bool)
         for f in range(frames):
-            at_rest = motion is not None and bool(motion.rest[f])
+            at_rest = bool(rest[f]) and not _next_to_motion(rest, f)
             out.confidence[o, f], out.flags[o][f] = judge(
                 f"{role} {obj.name!r}", at_rest, int(lm_views[f]), float(lm_px[f]),
                 int(depth_views[f]), float(through[f]), float(grip_mm[f]))
         out.landmark_views[o], out.depth_views[o], out.through[o] = lm_views, depth_views, through
     return out
+
+
+def _next_to_motion(rest: np.ndarray, frame: int) -> bool:
+    """Whether a frame at rest borders one that is not: where an object starts or stops moving,
+    the split between rest and motion is uncertain by a frame (in a fast clip the object may
+    already be centimetres away), so such a frame is judged by its evidence, not the prior."""
+    return bool((frame > 0 and not rest[frame - 1])
+                or (frame + 1 < len(rest) and not rest[frame + 1]))
 
 
 def _landmark_evidence(state: SolveState, index: int, errors: np.ndarray
