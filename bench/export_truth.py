@@ -32,12 +32,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
-import tarfile
 import tempfile
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -47,20 +43,10 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _demo_path import dexlabel, run_demo, unpacked  # noqa: E402
+
 from worker.formats import dexycb, dexycb_flags  # noqa: E402
 from worker.geometry.mesh_io import read_mesh  # noqa: E402
-
-
-def _unpacked(path: Path, scratch: Path) -> Path:
-    if path.is_dir():
-        return path
-    if path.suffix == ".zip":
-        with zipfile.ZipFile(path) as archive:
-            archive.extractall(scratch)
-    else:
-        with tarfile.open(path) as archive:
-            archive.extractall(scratch, filter="data")
-    return scratch
 
 
 def _yaml(path: Path) -> dict[str, Any]:
@@ -179,41 +165,13 @@ def _sequence(out: Path, truth: Path, seq: str, max_mm: float) -> dict[str, Any]
     }
 
 
-def _cli(var: Path, *args: str) -> None:
-    """One ``dexlabel`` command in the instance folder ``var``; its output goes to stderr."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DEXLABEL_")}
-    env.update(DEXLABEL_VAR_DIR=str(var), PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-m", "backend.cli", *args], cwd=ROOT, env=env,
-                          stdout=sys.stderr, stderr=sys.stderr)
-    if done.returncode != 0:
-        sys.exit(f"dexlabel {' '.join(args)} failed (exit {done.returncode})")
-
-
 def _demo(spec: str, seed: int, fault: str | None, scratch: Path) -> tuple[Path, Path]:
     """(export folder, truth capture) of the README's demo path in a new instance folder."""
-    try:
-        frames, views, objects = (int(part) for part in spec.split(","))
-    except ValueError:
-        sys.exit(f"--demo {spec!r}: expected FRAMES,VIEWS,OBJECTS, e.g. 24,4,2")
     var = scratch / "var"
-    truth = var / "demo-capture"
-    synth = ["synth", str(truth), "--seed", str(seed), "--frames", str(frames),
-             "--views", str(views), "--objects", str(objects)]
-    _cli(var, *synth, *(["--fault", fault] if fault else []))
-    _cli(var, "demo", "--no-serve", "--port", str(_free_port()), "--frames", str(frames),
-         "--views", str(views), "--objects", str(objects))
+    truth = run_demo(spec, seed, fault, var)
     out = scratch / "export"
-    _cli(var, "export", "--all", "--format", "dexycb", "--out", str(out))
+    dexlabel(var, "export", "--all", "--format", "dexycb", "--out", str(out))
     return out, truth
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def main() -> None:
@@ -236,7 +194,7 @@ def main() -> None:
         if args.demo is not None:
             args.export, args.truth = _demo(args.demo, args.seed, args.fault,
                                             args.keep or Path(scratch) / "demo")
-        out = _unpacked(args.export, Path(scratch))
+        out = unpacked(args.export, Path(scratch))
         sequences = sorted(str(p.parent.relative_to(out)) for p in out.glob(dexycb.META_GLOB))
         if not sequences:
             sys.exit(f"{args.export}: no {dexycb.META_FILE} in the DexYCB layout")

@@ -51,13 +51,11 @@ import json
 import os
 import subprocess
 import sys
-import tarfile
 import tempfile
-import zipfile
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[1]
+from _demo_path import dexlabel, run_demo, unpacked
 
 # Limits of the checks (float32 storage of poses and joints).
 ORTHO_TOL = 1e-4          # max |R^T R - I| of a pose_y / cam_R_m2c rotation
@@ -455,47 +453,13 @@ def read_bop(export: Path, toolkit: Path) -> dict[str, Any]:
 
 # --- orchestration (our interpreter) -----------------------------------------------------------
 
-def _unpacked(path: Path, scratch: Path) -> Path:
-    if path.is_dir():
-        return path
-    scratch.mkdir(parents=True)
-    if path.suffix == ".zip":
-        with zipfile.ZipFile(path) as archive:
-            archive.extractall(scratch)
-    else:
-        with tarfile.open(path) as archive:
-            archive.extractall(scratch, filter="data")
-    return scratch
-
-
-def _cli(var: Path, *args: str) -> None:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DEXLABEL_")}
-    env.update(DEXLABEL_VAR_DIR=str(var), PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-m", "backend.cli", *args], cwd=ROOT, env=env,
-                          stdout=sys.stderr, stderr=sys.stderr)
-    if done.returncode != 0:
-        sys.exit(f"dexlabel {' '.join(args)} failed (exit {done.returncode})")
-
-
 def _demo(spec: str, seed: int, fault: str | None, scratch: Path) -> tuple[Path, Path]:
     """(DexYCB export, BOP export) of the README's demo path in a new instance folder."""
-    import socket
-
-    try:
-        frames, views, objects = (int(part) for part in spec.split(","))
-    except ValueError:
-        sys.exit(f"--demo {spec!r}: expected FRAMES,VIEWS,OBJECTS, e.g. 12,3,1")
     var = scratch / "var"
-    size = ("--frames", str(frames), "--views", str(views), "--objects", str(objects))
-    _cli(var, "synth", str(var / "demo-capture"), "--seed", str(seed), *size,
-         *(["--fault", fault] if fault else []))
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    _cli(var, "demo", "--no-serve", "--port", str(port), *size)
+    run_demo(spec, seed, fault, var)
     out = scratch / "dexycb.tar", scratch / "bop.tar"
-    _cli(var, "export", "--all", "--format", "dexycb", "--frames", "--out", str(out[0]))
-    _cli(var, "export", "--all", "--format", "bop", "--frames", "--out", str(out[1]))
+    dexlabel(var, "export", "--all", "--format", "dexycb", "--frames", "--out", str(out[0]))
+    dexlabel(var, "export", "--all", "--format", "bop", "--frames", "--out", str(out[1]))
     return out
 
 
@@ -582,8 +546,8 @@ def main() -> None:
             if toolkit is None or export is None:
                 summary[name] = {"skipped": why}
                 continue
-            unpacked = _unpacked(export, scratch / f"{name}-export")
-            summary[name] = _run_reader(args.toolkit_python, name, unpacked, toolkit,
+            folder = unpacked(export, scratch / f"{name}-export")
+            summary[name] = _run_reader(args.toolkit_python, name, folder, toolkit,
                                         scratch / f"{name}-read")
     summary["ok"] = all(part.get("ok", "skipped" in part)
                         for part in (summary["dexycb"], summary["bop"]))
