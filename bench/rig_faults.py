@@ -6,9 +6,10 @@ careful labels (bench/solve.py's load_inputs: the true 2D joints with `--sigma` 
 noise per frame; landmarks likewise) and one fault is applied to what the product sees, the
 truth unchanged: `ext0.2_2` / `ext0.5_5` (every camera but the master rotated by 0.2 / 0.5
 degrees about a random axis and moved 2 / 5 mm), `late1` / `late2` (cameras 1 / 1-2 one frame
-late: labels, landmarks and depth), `scale` (camera 3's depth 1 % long), `shift` (camera 5's
-depth moved 3 px right, 2 px down against colour), `betas` (the subject's hand shape replaced by
-betas drawn from N(0, 0.6^2), another subject's) or `none`. The rig is estimated from the
+late: labels, landmarks and depth), `scale` (camera 3's depth 1 % long), `shift` (camera 5's,
+or the last one's with fewer than 6, depth moved 3 px right, 2 px down against colour),
+`betas` (the subject's hand shape replaced by betas drawn from N(0, 0.6^2), another
+subject's) or `none`. The rig is estimated from the
 faulty inputs (worker.rig.estimate_rig, with three colour frames per view), its corrections
 applied as an adopted version would be (backend/solve/calibrated.py), the hand shape checked
 against the labels' bones (worker.hand.calibrate.check_shape: the fitted betas are adopted
@@ -88,9 +89,10 @@ def inject(inp, fault, rng):
     if fault == "scale":
         depth[3] = np.clip(np.rint(depth[3] * 1.01), 0, 65535).astype(np.uint16)
     elif fault == "shift":
-        moved = np.zeros_like(depth[5])
-        moved[:, 2:, 3:] = depth[5][:, :-2, :-3]
-        depth[5] = moved
+        view = min(5, views - 1)
+        moved = np.zeros_like(depth[view])
+        moved[:, 2:, 3:] = depth[view][:, :-2, :-3]
+        depth[view] = moved
     return replace(inp, depth=depth)
 
 
