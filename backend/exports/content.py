@@ -219,6 +219,7 @@ def load_sequence(session: Session, sequence_id: int, include: str = "accepted",
     and the solve's arrays are read by :func:`fetch_solve` once the unit of work is over."""
     seq = session.get_one(Sequence, sequence_id)
     cameras = sequence_cameras(session, sequence_id)
+    version = version_in_use(session, sequence_id)
     views = []
     for camera, model in zip(cameras, calibrated_models(session, cameras), strict=True):
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)
@@ -232,8 +233,7 @@ def load_sequence(session: Session, sequence_id: int, include: str = "accepted",
         objects=[ObjectContent(o.index, o.ycb_id, o.name, o.grasped, o.mesh_key)
                  for o in seq.objects],
         hands=[HandContent(h.index, h.side, h.calib_name,
-                           hand_betas(version_in_use(session, seq.id), h.index,
-                                      list(h.betas) if h.betas else None))
+                           hand_betas(version, h.index, list(h.betas) if h.betas else None))
                for h in seq.hands])
     content.work = _work(session, sequence_id, {c.id: i for i, c in enumerate(cameras)},
                          seq.num_frames, include)

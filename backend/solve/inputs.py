@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 from collections import defaultdict
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,7 @@ from backend.annotation.accepted import count_accepted, labelled_work, sequence_
 from backend.annotation.models import Assignment
 from backend.annotation.proposals import grey_frames
 from backend.captures.calibration import (
+    CalibrationVersion,
     calibrated_models,
     camera_entry,
     hand_betas,
@@ -176,10 +177,12 @@ class GatheredInputs:
 
 
 def hand_target(seq: Sequence, cameras: list[Camera], labels: dict,
-                hand_index: int = 0, evidence: dict | None = None) -> HandTarget | None:
+                hand_index: int = 0, evidence: dict | None = None,
+                version: CalibrationVersion | None = None) -> HandTarget | None:
     """One hand's merged labels over all views (NaN in views nobody labelled), with each
-    view's evidence codes where ``evidence`` has them (approved_labels); the solver takes
-    one hand, DexYCB's sequences have one."""
+    view's evidence codes where ``evidence`` has them (approved_labels), and its betas under
+    the calibration ``version`` (None: the imported ones); the solver takes one hand,
+    DexYCB's sequences have one."""
     hand = next((h for h in seq.hands if h.index == hand_index), None)
     if hand is None:
         return None
@@ -192,7 +195,8 @@ def hand_target(seq: Sequence, cameras: list[Camera], labels: dict,
             keypoints[view], visible[view] = labels[(camera.id, key)]
         if codes is not None and evidence is not None and (camera.id, key) in evidence:
             codes[view] = evidence[(camera.id, key)]
-    betas = np.asarray(hand.betas if hand.betas is not None else [], dtype=np.float64)
+    shape = hand_betas(version, hand.index, hand.betas)
+    betas = np.asarray(shape if shape is not None else [], dtype=np.float64)
     return HandTarget(side=hand.side, betas=betas, keypoints=keypoints, visible=visible,
                       evidence=codes)
 
@@ -227,11 +231,8 @@ def gather_inputs(session: Session, sequence_id: int, with_depth: bool = True) -
     entries = [camera_entry(version, c) for c in cameras]
     evidence: dict[tuple[int, str], np.ndarray] = {}
     labels = approved_labels(session, sequence_id, seq.num_frames, evidence)
-    hand = hand_in_world_time(hand_target(seq, cameras, labels, evidence=evidence), entries)
-    if hand is not None:
-        imported = next(h.betas for h in seq.hands if h.index == 0)
-        betas = hand_betas(version, 0, imported)
-        hand = replace(hand, betas=np.asarray(betas if betas is not None else [], np.float64))
+    hand = hand_in_world_time(hand_target(seq, cameras, labels, evidence=evidence,
+                                          version=version), entries)
     depth: list[np.ndarray | None] = []
     for camera in cameras:
         frames = list(session.scalars(select(Frame).where(Frame.camera_id == camera.id)

@@ -225,23 +225,26 @@ def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObject
     if depth is not None:
         at = np.flatnonzero(shown)
         if at.size:
-            edge[at[at_depth_edge(depth, camera, at, pix[at], z[at])]] = True
-            shown[at[covered(depth, camera, at, pix[at], z[at])]] = False
+            hidden, near_edge = depth_cover(depth, camera, at, pix[at], z[at])
+            edge[at[near_edge]] = True
+            shown[at[hidden]] = False
     assert shown.shape == (frames,)
     return shown, edge
 
 
-def _readings_nearer(depth: DepthMaps, camera: CameraModel, frames: np.ndarray,
-                     pix: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Over the square of DEPTH_WINDOW_PX around each point's pixel: (N, S) whether the reading
-    is more than DEPTH_MARGIN_M nearer than the point, and (N, S) whether there is a reading;
-    the square's centre is column S // 2."""
+def depth_cover(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
+                z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From one read of the square of DEPTH_WINDOW_PX around each point's pixel: (N,) whether
+    the point is ``covered`` and (N,) whether it is ``at_depth_edge``. frames (N,) int; pix
+    (N, 2) px; z (N,) metres."""
     rows = np.rint(pix[:, 1]).astype(int)[:, None] + _WINDOW[:, 0]
     cols = np.rint(pix[:, 0]).astype(int)[:, None] + _WINDOW[:, 1]
     reading = depth[(np.broadcast_to(frames[:, None], rows.shape),
                      rows.clip(0, camera.height - 1), cols.clip(0, camera.width - 1))] / 1000.0
     read = reading > 0
-    return read & (z[:, None] - reading > DEPTH_MARGIN_M), read
+    nearer = read & (z[:, None] - reading > DEPTH_MARGIN_M)
+    hidden = nearer[:, len(_WINDOW) // 2] & (nearer | ~read).all(axis=1)
+    return hidden, nearer.any(axis=1) & ~hidden
 
 
 def covered(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
@@ -249,9 +252,7 @@ def covered(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.n
     """(N,) whether the depth camera reads something well in front of each point: the reading
     at its pixel and every other within DEPTH_WINDOW_PX (those with a reading) more than
     DEPTH_MARGIN_M nearer than its depth. frames (N,) int; pix (N, 2) px; z (N,) metres."""
-    nearer, read = _readings_nearer(depth, camera, frames, pix, z)
-    centre = len(_WINDOW) // 2
-    return nearer[:, centre] & (nearer | ~read).all(axis=1)
+    return depth_cover(depth, camera, frames, pix, z)[0]
 
 
 def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
@@ -259,9 +260,7 @@ def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix
     """(N,) whether something in front of each point covers part of the square around its
     pixel but not the point (``covered``): the edge of a hand or another object, where a rig
     a few pixels off cannot say which side the point is on."""
-    nearer, read = _readings_nearer(depth, camera, frames, pix, z)
-    centre = len(_WINDOW) // 2
-    return nearer.any(axis=1) & ~(nearer[:, centre] & (nearer | ~read).all(axis=1))
+    return depth_cover(depth, camera, frames, pix, z)[1]
 
 
 def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
