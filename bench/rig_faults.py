@@ -72,6 +72,12 @@ def _shift_views(inp, offsets):
                    objects=objects)
 
 
+def _late_offsets(fault: str, views: int) -> list[int]:
+    """Per view, the re-indexing a ``late`` fault applies (-1: one frame late), else 0."""
+    late = range(1, 1 + int(fault[4:])) if fault.startswith("late") else range(0)
+    return [-1 if v in late else 0 for v in range(views)]
+
+
 def inject(inp, fault, rng):
     """The inputs the product sees under ``fault``."""
     views = len(inp.cameras)
@@ -80,8 +86,7 @@ def inject(inp, fault, rng):
         return replace(inp, cameras=[inp.cameras[0]] + [_perturb(c, deg, mm, rng)
                                                         for c in inp.cameras[1:]])
     if fault.startswith("late"):
-        late = range(1, 1 + int(fault[4:]))
-        return _shift_views(inp, [-1 if v in late else 0 for v in range(views)])
+        return _shift_views(inp, _late_offsets(fault, views))
     if fault == "betas":
         betas = rng.normal(0.0, BETAS_SIGMA, np.shape(inp.hand.betas))
         return replace(inp, hand=replace(inp.hand, betas=betas))
@@ -132,9 +137,12 @@ def main() -> None:
     inputs, truth = load_inputs(cache, frames, args.sigma, 0.0, args.crowd_seed)
     seq_dir = next(p for p in args.capture.glob("*/*") if (p / "meta.yml").is_file())
     picks = sorted({0, frames // 2, frames - 1})
-    color = [{f: cv2.imread(str(seq_dir / c.serial / f"color_{f:06d}.jpg")) for f in picks}
-             for c in read_sequence(seq_dir).cameras]
     started = time.time()
+    # A late camera is late in colour too: its frame f shows what the others show at f - 1.
+    lag = _late_offsets(args.fault, len(inputs.cameras))
+    color = [{f: cv2.imread(str(seq_dir / c.serial / f"color_{f + o:06d}.jpg")) for f in picks
+              if 0 <= f + o < frames}
+             for c, o in zip(read_sequence(seq_dir).cameras, lag, strict=True)]
     faulty = inject(inputs, args.fault, np.random.default_rng(1000 + args.crowd_seed))
     before = hand_errors(faulty, truth)
     out = {"fault": args.fault, "views": len(inputs.cameras), "frames": frames,

@@ -84,9 +84,10 @@ def depth_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     return depth, np.repeat(grey.astype(np.uint8)[..., None], 3, axis=2)
 
 
-def make_scene(frames: int = 20, noise_px: float = 1.5, seed: int = 0) -> RigScene:
+def make_scene(frames: int = 20, noise_px: float = 1.5, seed: int = 0,
+               views: int = 8) -> RigScene:
     rng = np.random.default_rng(seed)
-    cameras = ring_cameras()
+    cameras = ring_cameras(views)
     points = moving_points(frames, rng)
     keypoints = np.stack([c.project(points) for c in cameras])
     keypoints += rng.normal(0.0, noise_px, keypoints.shape)

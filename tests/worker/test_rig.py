@@ -88,6 +88,17 @@ def test_late_cameras_are_named_with_their_offset() -> None:
     assert np.allclose(kp[2, 3], scene.keypoints[2, 4]) and not vis[2, -1].any()
 
 
+def test_half_of_a_small_rig_late_is_found_against_the_master() -> None:
+    # 4 views, 2 late: judged one view at a time, the others split two against two and the
+    # sound views look early; judged together, with the master's time held, they do not.
+    scene = make_scene(seed=5, views=4)
+    one_frame_late(scene, 1)
+    one_frame_late(scene, 2)
+    est = estimate_rig(scene.cameras, scene.keypoints, scene.visible)
+    assert [h.time_offset_frames for h in est.health] == [0, 1, 1, 0]
+    assert est.faulty_views == [1, 2]
+
+
 def test_depth_scale_and_shift_are_found() -> None:
     scene = make_scene(frames=12, seed=4)
     depth = list(scene.depth)

@@ -75,12 +75,13 @@ from worker.quality.swaps import (
     undo_swaps,
 )
 from worker.quality.view_offset import (
+    MAX_LAG_FRAMES,
     ViewOffset,
-    fit_view_lag,
     fit_view_offset,
     shift_frames,
     vacated_frames,
 )
+from worker.rig.timing import joint_offsets
 
 # Rayleigh median / sigma: the median pixel distance of isotropic 2-D noise with per-axis sigma.
 _RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
@@ -539,12 +540,41 @@ def _camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: _
         pairs.setdefault(lab.view, []).append((ref.reshape(frames, -1, 2),
                                                obs.reshape(frames, -1, 2)))
     if lags is None:
-        lags = {view: fit_view_lag(found) for view, found in pairs.items()}
+        lags = _view_lags(cameras, labels, frames)
     # The corrected fit's references are already in the frames the view's images show.
     offsets = {view: fit_view_offset(view, [(r, shift_frames(o, lags.get(view, 0)))
                                             for r, o in found], cameras[view].K[:2, 2])
                for view, found in pairs.items()}
     return offsets, lags
+
+
+# A view's lag is kept where its own cost there is below this share of the cost at 0: looser
+# than the rig's (worker.rig.timing.OFFSET_GAIN) because a QC view is often one worker's
+# clicks on a short clip, whose noise (2-3 px) is near one frame's motion; on a sound camera
+# the wrong lags cost 1.5-4x the right one.
+LAG_GAIN = 0.9
+
+
+def _view_lags(cameras: list[CameraModel], labels: list[ViewLabels],
+               frames: int) -> dict[int, int]:
+    """Per labelled view, the whole frames (|k| <= MAX_LAG_FRAMES) by which its images are out
+    of step (a camera one frame late: -1), chosen for all views together (worker.rig.timing)
+    with the lowest labelled view's time held: judged one view at a time against the others,
+    two late views of four split the references two against two and the sound ones look
+    early. Each view's observation is the median of its labels' decided visible positions."""
+    views = sorted({lab.view for lab in labels})
+    if len(views) < 3:
+        return dict.fromkeys(views, 0)
+    pixels = np.full((len(views), frames, labels[0].xy.shape[1], 2), np.nan)
+    for i, view in enumerate(views):
+        own = [np.where((lab.visible & decided_of(lab))[..., None], lab.xy, np.nan)
+               for lab in labels if lab.view == view]
+        with np.errstate(all="ignore"):
+            pixels[i] = np.nanmedian(np.stack(own), axis=0) if len(own) > 1 else own[0]
+    found = joint_offsets([cameras[v] for v in views], pixels, MAX_LAG_FRAMES, fixed=(0,),
+                          gain=LAG_GAIN)
+    # A late camera (offset k = 1: its frame f shows world time f - 1) has lag -1.
+    return {view: -int(k) for view, k in zip(views, found, strict=True)}
 
 
 def _offset_corrected(lab: ViewLabels, offset: ViewOffset, lag: int) -> ViewLabels:

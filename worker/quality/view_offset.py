@@ -165,42 +165,6 @@ def _share(params: np.ndarray, centre: np.ndarray, ref: np.ndarray, obs: np.ndar
 
 # A camera out of step by more than this many frames is no sync fault a correction should hide.
 MAX_LAG_FRAMES = 1
-# A lag is the camera's when shifting the view's labels by it cuts the median distance of
-# their pairs to this share of the unshifted one: the hand's motion in one frame (several px
-# where it moves) against a careful label's ~2.4 px median.
-LAG_GAIN = 0.8
-
-
-def _shifted(ref: np.ndarray, obs: np.ndarray, lag: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs (label at frame f, reference at frame f + lag) of (F, P, 2) arrays."""
-    frames = len(ref)
-    if lag >= 0:
-        return ref[lag:], obs[:frames - lag]
-    return ref[:frames + lag], obs[-lag:]
-
-
-def fit_view_lag(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> int:
-    """Whole frames k (|k| <= MAX_LAG_FRAMES) by which a view's images are out of step: its
-    labels at frame f show what the references place at frame f + k (a camera one frame late
-    has k = -1); 0 unless shifting every label of the view by k brings them clearly closer.
-
-    pairs: per label of the view, (reference (F, P, 2), observed (F, P, 2)) px, NaN where
-    the label is not judged.
-    """
-    cost, counts = {}, {}
-    for lag in range(-MAX_LAG_FRAMES, MAX_LAG_FRAMES + 1):
-        dist = [np.linalg.norm(o - r, axis=-1) for r, o in
-                (_shifted(np.asarray(r, np.float64), np.asarray(o, np.float64), lag)
-                 for r, o in pairs)]
-        found = np.concatenate([d[np.isfinite(d)] for d in dist]) if dist else np.zeros(0)
-        counts[lag] = found.size
-        cost[lag] = float(np.median(found)) if found.size >= MIN_PAIRS else np.inf
-    best = min(cost, key=lambda k: cost[k])
-    if best == 0 or not np.isfinite(cost[0]) or cost[best] >= LAG_GAIN * cost[0]:
-        return 0
-    return best
-
-
 def shift_frames(values: np.ndarray, lag: int) -> np.ndarray:
     """(F, ...) values of a view whose frame f shows frame f + lag, re-indexed to the frames
     they show: out[f + lag] = values[f]; frames nothing moves into keep their own values."""
