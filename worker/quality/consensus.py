@@ -59,7 +59,13 @@ from worker.quality.metrics import (
     surface_check,
     track_metrics,
 )
-from worker.quality.motion import TargetMotion, moved_with, others_motion, track_jitter
+from worker.quality.motion import (
+    TargetMotion,
+    expected_shake,
+    moved_with,
+    others_motion,
+    track_jitter,
+)
 from worker.quality.support import (
     MIN_VIEWS,
     normalised_errors,
@@ -444,12 +450,12 @@ def _assess(lab: ViewLabels, camera: CameraModel, consensus: np.ndarray, judged:
     provisional = bool(scored.sum() / max(int(shown.sum()), 1) < MIN_SCORED_FRACTION) \
         if shown.any() or not sent.any() else False
     # Where the views cannot decide, the track against the other views' own tracks: the
-    # same clip's motion shakes every view's track alike, what is left over is the worker's
-    # hand. (Views see the motion at different scales, so where a consensus judges the
+    # same clip's motion shakes every view's track alike (scaled by how far the hand travels
+    # in each view), what is left over is the worker's hand. (Where a consensus judges the
     # label, its errors and jitter_px say more.)
-    own = track_jitter(xy)
-    metrics["track_jitter_ratio"] = num(own / motion.jitter) if provisional and own \
-        is not None and motion is not None and motion.jitter else None
+    own, expected = track_jitter(xy), expected_shake(xy, motion)
+    metrics["track_jitter_ratio"] = num(own / expected) if provisional and own \
+        is not None and expected else None
     metrics["moved_with_hand"] = moved_with(xy, motion, HAND_MOVES_PX) \
         if motion is not None else None
     per_joint, per_frame = per_point_and_frame(errors)

@@ -63,8 +63,9 @@ def _bounds() -> dict[str, MetricBound]:
         "median_error_px": MetricBound("above", (2.8, 3.5), (12.0, 20.0)),
         "p90_error_px": MetricBound("above", (5.5, 7.0), (30.0, 60.0)),
         "outlier_fraction": MetricBound("above", (0.05, 0.15), (0.5, 0.7)),
-        # Against the consensus, whose own shake adds where few views fix it (3.2 px for a
-        # careful track at 4 views); the track's own shake is track_jitter_px.
+        # Hands: against the consensus, whose own shake adds where few views fix it (3.2 px
+        # for a careful track at 4 views); the track's own shake is track_jitter_px. Object
+        # landmarks: the track's shake beyond the other views' (worker.quality.landmarks).
         "jitter_px": MetricBound("above", (4.0, 6.0)),
         "motion_ratio": MetricBound("below", (0.4, 0.6), (0.1, 0.2)),
         "occluded_on_surface": MetricBound("above", (0.1, 0.2), (0.3, 0.45)),

@@ -22,7 +22,13 @@ from worker.quality.metrics import (
     per_point_and_frame,
     static_fraction,
 )
-from worker.quality.motion import TargetMotion, moved_with, others_motion
+from worker.quality.motion import (
+    TargetMotion,
+    expected_shake,
+    moved_with,
+    others_motion,
+    track_jitter,
+)
 
 # A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
 # at pixel centres and a careful click lands within ~2 px.
@@ -131,6 +137,16 @@ def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | 
     return num(label_path / object_path) if object_path > 1.0 else None
 
 
+def _own_shake(xy: np.ndarray, motion: ObjectMotion | None) -> float | None:
+    """The track's shake (px per frame^2) beyond what the object's own motion gives a track
+    that follows a turning, accelerating object (motion.expected_shake), taken out in
+    quadrature; without others to compare with, the track's whole shake."""
+    shake, expected = track_jitter(xy), expected_shake(xy, motion)
+    if shake is None or expected is None:
+        return shake
+    return num(np.sqrt(max(shake ** 2 - expected ** 2, 0.0)))
+
+
 def score_landmarks(camera: CameraModel, label: ViewLabels,
                     masks: dict[int, np.ndarray] | None = None,
                     motion: ObjectMotion | None = None) -> AssignmentQC:
@@ -173,8 +189,7 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
     metrics["max_step_ratio"] = num(np.nanmax(step) / max(typical, 0.5)) \
         if typical is not None else None
-    acc = np.linalg.norm(xy[2:] - 2.0 * xy[1:-1] + xy[:-2], axis=-1)
-    metrics["jitter_px"] = num(np.sqrt(np.nanmean(acc ** 2))) if np.isfinite(acc).any() else None
+    metrics["jitter_px"] = _own_shake(xy, motion)
     metrics["static_fraction"] = static_fraction(xy)
     metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())

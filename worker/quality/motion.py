@@ -90,3 +90,20 @@ def track_jitter(xy: np.ndarray) -> float | None:
     smoothly at 30 fps; random clicks leap by a good part of the image."""
     acc = np.linalg.norm(xy[2:] - 2.0 * xy[1:-1] + xy[:-2], axis=-1)
     return num(np.sqrt(np.nanmean(acc ** 2))) if np.isfinite(acc).any() else None
+
+
+# The other labels' shake is scaled by how far this track travels against theirs (views see the
+# target's motion at different scales: a nearer camera sees it move and turn more), within
+# these bounds.
+SHAKE_SCALE = (0.25, 3.0)
+
+
+def expected_shake(xy: np.ndarray, motion: TargetMotion | None) -> float | None:
+    """The shake (px per frame^2) the target's own motion gives a track (F, P, 2) px that
+    follows it in this view: the other labels' median (TargetMotion.jitter) scaled by this
+    track's reach against theirs; None where unknown."""
+    if motion is None or motion.jitter is None or motion.reach <= 0.0:
+        return None
+    _, reach = track_motion(xy)
+    return float(motion.jitter * np.clip(reach / motion.reach, *SHAKE_SCALE))
+

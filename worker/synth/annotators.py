@@ -40,7 +40,6 @@ import numpy as np
 
 from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
-from worker.hand.joints import JOINT_NAMES
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot"]
 # Every profile; PROFILES are those of hand work (same_spot is an object worker's mistake).
@@ -353,9 +352,9 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
 
     xy: (F, P, 2) true positions, image px (NaN where unknown: such keyframes carry no
     position); visible: (F, P) bool; size: (width, height) px. follow_motion: also key where
-    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION) on hand tracks
-    (21 points; object landmarks keep every ``key_step``-th frame, as their QC is tuned for),
-    False: every ``key_step``-th frame only (studies of keyframe spacing).
+    the path bends (`follow_path`); None: as the profile does (FOLLOWS_MOTION), hand joints
+    and object landmarks alike; False: every ``key_step``-th frame only (studies of keyframe
+    spacing).
     """
     if xy.ndim != 3 or xy.shape[2] != 2 or visible.shape != xy.shape[:2]:
         raise ValueError(f"expected xy (F, P, 2) and visible (F, P), got {xy.shape} and "
@@ -371,7 +370,7 @@ def annotate(xy: np.ndarray, visible: np.ndarray, size: tuple[int, int], profile
     tracks = []
     truth = np.asarray(xy, np.float64)
     if follow_motion is None:
-        follow_motion = profile in FOLLOWS_MOTION and xy.shape[1] == len(JOINT_NAMES)
+        follow_motion = profile in FOLLOWS_MOTION
     for p in range(xy.shape[1]):
         keys = keyframe_indices(xy.shape[0], key_step, vis[:, p], extra)
         placed = noisy[:, p]
