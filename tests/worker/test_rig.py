@@ -99,6 +99,22 @@ def test_half_of_a_small_rig_late_is_found_against_the_master() -> None:
     assert est.faulty_views == [1, 2]
 
 
+def test_a_depth_scale_is_not_taken_for_a_move_along_the_axis() -> None:
+    # 4 views; view 3's depth 1 % long and its labels 2 % too spread about the principal
+    # point (what a move along its axis would show): a move along the axis and the depth
+    # scale explain its depth alike, but the imported pose with the scale explains it at
+    # least as well, so the view keeps its pose and is named for its depth.
+    scene = make_scene(frames=12, seed=1, views=4)
+    centre = scene.cameras[3].K[:2, 2]
+    scene.keypoints[3] = centre + (scene.keypoints[3] - centre) * 1.02
+    depth = list(scene.depth)
+    depth[3] = np.clip(np.rint(depth[3] * 1.01), 0, 65535).astype(np.uint16)
+    est = estimate_rig(scene.cameras, scene.keypoints, scene.visible, depth, scene.color)
+    assert est.faulty_views == [3]
+    assert est.health[3].faults == ["depth scale +0.9 %"]
+    assert est.cameras[3] is scene.cameras[3]
+
+
 def test_depth_scale_and_shift_are_found() -> None:
     scene = make_scene(frames=12, seed=4)
     depth = list(scene.depth)

@@ -244,6 +244,19 @@ def fit_depth(cameras: list[CameraModel], depth: list[np.ndarray | None],
     return fits
 
 
+def view_scale_fit(view: int, cameras: list[CameraModel], depth: list[np.ndarray | None],
+                   offsets: np.ndarray, shift_px: tuple[int, int] = (0, 0)) -> DepthFit:
+    """One view's depth scale at a given shift under ``cameras``, against the other views'
+    maps as they are (see fit_depth); its ``cost_mm`` says how well that pose and scale
+    explain what the others see."""
+    own = depth[view]
+    if own is None:
+        raise ValueError(f"view {view} has no depth")
+    camera = cameras[view]
+    return _search(camera, _frames_of(view, cameras, own, depth, offsets), _grid(camera),
+                   shift_px)
+
+
 def correct_depth(maps: np.ndarray, scale: float, shift_px: tuple[int, int]) -> np.ndarray:
     """A view's depth maps (F, H, W) uint16 mm re-registered and re-scaled: out(q) =
     maps(q + shift) / scale; pixels whose source lies outside the image read 0 (no depth)."""
