@@ -294,8 +294,11 @@ def follow_path(path: np.ndarray, visible: np.ndarray, keys: Iterable[int],
     path: (F, 2) true positions, image px (NaN where unknown); visible: (F,) bool; keys: the
     frames keyed so far. Between two consecutive keys the frame (visible, with a position)
     where the true path is farthest from the straight line between them is keyed, while that
-    distance exceeds ``tolerance_px``; spans with an unknown position at either end are left
-    alone. Returns the sorted keyframes, ``keys`` included.
+    distance exceeds ``tolerance_px``. A span with an unknown position at one end (the point
+    goes out of sight or comes into it) first gets its frame nearest that end where the point
+    is still seen keyed: a careful worker marks where it was last (or first) seen, not a line
+    towards where it hides. Spans unknown at both ends are left alone. Returns the sorted
+    keyframes, ``keys`` included.
     """
     path = np.asarray(path, np.float64)
     known = np.isfinite(path).all(axis=1) & np.asarray(visible, bool)
@@ -303,7 +306,14 @@ def follow_path(path: np.ndarray, visible: np.ndarray, keys: Iterable[int],
     pending = list(itertools.pairwise(out))
     while pending:
         a, b = pending.pop()
-        if b - a < 2 or not (known[a] and known[b]):
+        if b - a < 2 or not (known[a] or known[b]):
+            continue
+        if known[a] != known[b]:
+            seen = np.flatnonzero(known[a + 1:b]) + a + 1
+            if seen.size:
+                edge = int(seen[-1] if known[a] else seen[0])
+                out.append(edge)
+                pending.append((a, edge) if known[a] else (edge, b))
             continue
         inner = np.arange(a + 1, b)
         t = ((inner - a) / (b - a))[:, None]
