@@ -106,4 +106,3 @@ def expected_shake(xy: np.ndarray, motion: TargetMotion | None) -> float | None:
         return None
     _, reach = track_motion(xy)
     return float(motion.jitter * np.clip(reach / motion.reach, *SHAKE_SCALE))
-

@@ -67,11 +67,25 @@ def _offset_costs(camera: CameraModel, points: np.ndarray, pixels: np.ndarray,
     return capped.mean(axis=1), int(usable.sum())
 
 
+def _aligned(pixels: np.ndarray, offsets: tuple[int, ...] | list[int]) -> np.ndarray:
+    """Observations (V, F, P, 2) px, NaN where unobserved, re-indexed to world time."""
+    return align_views(pixels, np.isfinite(pixels).all(axis=-1), np.asarray(offsets))[0]
+
+
+def _own_costs(cameras: list[CameraModel], pixels: np.ndarray, offsets: tuple[int, ...],
+               views: list[int], candidates: np.ndarray) -> dict[int, tuple[np.ndarray, int]]:
+    """Per view of ``views``: its own candidates' costs and samples (_offset_costs), on its
+    frames as recorded, against the points of the other views re-indexed by ``offsets``."""
+    aligned = _aligned(pixels, offsets)
+    return {view: _offset_costs(cameras[view], leave_one_out_points(cameras, aligned, view),
+                                pixels[view], candidates) for view in views}
+
+
 def _joint_cost(cameras: list[CameraModel], pixels: np.ndarray, offsets: tuple[int, ...],
                 common: np.ndarray) -> float:
     """Capped mean reprojection error (px) of all views re-indexed by ``offsets``, against the
     points triangulated from all of them, over the world frames ``common`` (F,) bool."""
-    aligned, _ = align_views(pixels, np.isfinite(pixels).all(axis=-1), np.asarray(offsets))
+    aligned = _aligned(pixels, offsets)
     points = triangulate_views(cameras, aligned, list(range(len(cameras))))
     errs = np.stack([reprojection_px(c, points, aligned[v]) for v, c in enumerate(cameras)])
     usable = np.isfinite(errs) & common[None, :, None]
@@ -122,27 +136,21 @@ def joint_offsets(cameras: list[CameraModel], pixels: np.ndarray, max_offset: in
     keep 0), chosen together from observations (V, F, P, 2) px, NaN where unobserved; a
     non-zero offset is kept where the view's own cost there is below ``gain`` x at 0."""
     candidates = np.arange(-max_offset, max_offset + 1)
-    start = []
-    for view, camera in enumerate(cameras):
-        k = 0
-        if view not in fixed:
-            points = leave_one_out_points(cameras, pixels, view)
-            cost, _ = _offset_costs(camera, points, pixels[view], candidates)
-            if np.isfinite(cost).all():
-                k = int(candidates[int(np.argmin(cost))])
-        start.append(k)
+    zero = (0,) * len(cameras)
+    start = list(zero)
+    free = [v for v in range(len(cameras)) if v not in fixed]
+    for view, (cost, _) in _own_costs(cameras, pixels, zero, free, candidates).items():
+        if np.isfinite(cost).all():
+            start[view] = int(candidates[int(np.argmin(cost))])
     best = _search(cameras, pixels, tuple(start), candidates, fixed)
     # Each view keeps a non-zero offset only where, against the others in world time, its own
     # cost at that offset is below ``gain`` x its cost at 0 (a joint figure dilutes one late
     # view among many).
-    aligned, _ = align_views(pixels, np.isfinite(pixels).all(axis=-1), np.asarray(best))
     kept = list(best)
-    for view, k in enumerate(best):
-        if k:
-            points = leave_one_out_points(cameras, aligned, view)
-            cost, _ = _offset_costs(cameras[view], points, pixels[view], candidates)
-            if not cost[candidates == k][0] < gain * cost[candidates == 0][0]:
-                kept[view] = 0
+    moved = [v for v, k in enumerate(best) if k]
+    for view, (cost, _) in _own_costs(cameras, pixels, best, moved, candidates).items():
+        if not cost[candidates == best[view]][0] < gain * cost[candidates == 0][0]:
+            kept[view] = 0
     return tuple(kept)
 
 
@@ -155,11 +163,6 @@ def estimate_time_offsets(cameras: list[CameraModel], keypoints: np.ndarray,
     pixels = observed(keypoints, visible)
     candidates = np.arange(-max_offset, max_offset + 1)
     chosen = joint_offsets(cameras, pixels, max_offset, fixed)
-    aligned, _ = align_views(pixels, np.isfinite(pixels).all(axis=-1), np.asarray(chosen))
-    out = []
-    for view, camera in enumerate(cameras):
-        points = leave_one_out_points(cameras, aligned, view)
-        # The view's own candidates, on its frames as recorded, against the others in world time.
-        cost, samples = _offset_costs(camera, points, pixels[view], candidates)
-        out.append(TimeOffset(int(chosen[view]), candidates, cost, samples))
-    return out
+    costs = _own_costs(cameras, pixels, chosen, list(range(len(cameras))), candidates)
+    return [TimeOffset(int(chosen[view]), candidates, cost, samples)
+            for view, (cost, samples) in costs.items()]
