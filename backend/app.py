@@ -25,6 +25,7 @@ from backend.accounts.router import router as auth_router
 from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.config import get_settings
+from backend.crowd.router import page_router as crowd_page_router
 from backend.crowd.router import router as crowd_router
 from backend.db import get_engine, install_request_limits
 from backend.errors import (
@@ -36,7 +37,10 @@ from backend.exports.router import router as exports_router
 from backend.jobs.router import router as jobs_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
+from backend.pipeline.router import page_router as pipeline_page_router
+from backend.pipeline.router import router as pipeline_router
 from backend.portal.router import router as portal_router
+from backend.progress.router import page_router as progress_page_router
 from backend.progress.router import router as progress_router
 from backend.quality.router import router as review_router
 from backend.queue import check_queue
@@ -63,7 +67,11 @@ def create_app() -> FastAPI:
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)
+    app.include_router(progress_page_router)
+    app.include_router(crowd_page_router)
+    app.include_router(pipeline_page_router)
     app.include_router(crowd_router)
+    app.include_router(pipeline_router)
     app.include_router(jobs_router)
     app.include_router(review_router)
     app.include_router(market_router)

@@ -1,6 +1,7 @@
-"""The demo's moving parts (`dexlabel demo` in backend/cli.py drives them): a server and a queue
-consumer in this process, ready logins kept in the instance, the published tasks, a simulated
-crowd that works until every task has accepted work, and the links printed for a first look.
+"""The demo's moving parts (`dexlabel demo` in backend/cli/__init__.py drives them): a server
+and a queue consumer in this process, ready logins kept in the instance, the published tasks, a
+simulated crowd that works until every task has accepted work, and the links printed for a
+first look.
 """
 
 from __future__ import annotations
@@ -63,10 +64,12 @@ class DemoServer:
         import uvicorn
 
         from backend.app import create_app
-        from backend.queue import start_inprocess_consumer
+        from backend.jobs.runner import start_inprocess_consumer
+        from worker.tasks import register_handlers
 
         settings = get_settings()
         if settings.inprocess_worker and not settings.redis_url:
+            register_handlers()
             self.consumer = start_inprocess_consumer(settings.worker_threads)
         config = uvicorn.Config(create_app(), host=self.host, port=self.port,
                                 log_level="warning", proxy_headers=False)

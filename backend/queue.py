@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 from huey import Huey, RedisHuey
-from huey.consumer import Consumer
 from huey.storage import SqliteStorage
 from sqlalchemy import event
 from sqlalchemy.orm import Session
@@ -124,31 +123,3 @@ def check_queue(timeout_s: float = 2.0) -> str | None:
     except Exception as exc:  # any failure to reach it is the answer
         return f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''}"
     return None
-
-
-def make_consumer(workers: int) -> Consumer:
-    import worker.tasks  # noqa: F401  (registers the tasks and job handlers on ``huey``)
-    from backend.jobs.service import requeue_stale
-
-    try:
-        reset = queue_lost_messages()
-    except Exception:
-        log.exception("the queue does not answer; jobs are sent once it does")
-        reset = True
-    try:  # queued jobs, and jobs whose worker died while no consumer ran, are picked up at once
-        requeue_stale(starting=True, queue_reset=reset)
-    except Exception:
-        log.exception("could not check the job table for stale jobs")
-    # periodic: the reaper (worker.tasks.reap_jobs) runs every minute in every consumer.
-    # max_delay: a worker thread that cannot read the queue (Redis down) tries again at least
-    # every QUEUE_RETRY_MAX_S, so it takes work within seconds of the queue coming back.
-    return huey.create_consumer(workers=workers, worker_type="thread", periodic=True,
-                                max_delay=QUEUE_RETRY_MAX_S)
-
-
-def start_inprocess_consumer(workers: int) -> Consumer:
-    """Start a consumer in background threads of this process (the embedded deployment)."""
-    consumer = make_consumer(workers)
-    consumer.start()  # spawns the scheduler and worker threads, then returns
-    log.info("in-process queue consumer started with %d workers", workers)
-    return consumer

@@ -5,7 +5,7 @@ target's QC job; QC approves, rejects or leaves work for review; once every task
 sequence has accepted work, the QC job queues the solve (default optimiser, the deployment's
 settings) of those accepted labels; the finished solve queues the landmark QC of every object
 target, which re-scores each object label against the solved objects. The queued jobs run
-here, one after another, through the job table (backend.jobs.service.execute), as an idle
+here, one after another, through the job table (backend.jobs.runner.run_queued), as an idle
 queue worker would run them.
 
 What a person does in the product is simulated as plainly as possible:
@@ -33,23 +33,12 @@ RIGHT = ("careful", "lazy-still", "unseen")
 
 
 def drain() -> list[str]:
-    """Run the queued jobs (QC, solve) until none is left; the keys run, in order."""
-    import worker.tasks  # noqa: F401  (registers the job handlers)
-    from backend.db import session_scope
-    from backend.jobs.models import Job
-    from backend.jobs.service import execute
+    """Run the queued jobs (QC, solve) here until none is left; the keys run, in order."""
+    from backend.jobs.runner import run_queued
+    from worker.tasks import register_handlers
 
-    ran: list[str] = []
-    for _ in range(200):
-        with session_scope() as session:
-            keys = list(session.scalars(select(Job.key).where(
-                Job.status.in_(("queued", "retrying"))).order_by(Job.id)))
-        if not keys:
-            return ran
-        for key in keys:
-            execute(key)
-            ran.append(key)
-    raise RuntimeError(f"the job queue never went idle: {ran[-10:]}")
+    register_handlers()
+    return run_queued()
 
 
 def request_qc_of(task_ids: list[int]) -> None:

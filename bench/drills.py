@@ -333,7 +333,7 @@ def _redis_under_load(database_url: str, redis: Any) -> dict[str, Any]:
 def worker_main(threads: int) -> None:
     """A `dexlabel worker` that also runs the redis drill's job."""
     from backend.cli import app
-    from backend.jobs.service import job_handler
+    from backend.jobs.runner import job_handler
 
     @job_handler("drill")
     def _drill(args: dict[str, Any]) -> dict[str, Any]:

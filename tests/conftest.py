@@ -36,6 +36,14 @@ def _unavailable(what: str, exc: Exception) -> None:
     pytest.skip(message)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def job_handlers() -> None:
+    """Every job kind can run here when a test runs a job, as in the commands that run jobs."""
+    from worker.tasks import register_handlers
+
+    register_handlers()
+
+
 @pytest.fixture(scope="session")
 def postgres_server_url() -> Iterator[str]:
     """A fresh, empty PostgreSQL database for this test session (dropped afterwards)."""

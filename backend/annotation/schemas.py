@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidatorFunctionWrapHandler, WrapValidator
 
-from backend.progress.schemas import TaskState
 from backend.validation import Count, Finite
+
+# Where a task's work stands (backend.progress derives it from its assignments, HITs and QC).
+TaskState = Literal["open", "published", "submitted", "in review", "accepted"]
+TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
 
 # A keyframe row: [frame, x, y, visible01] or [frame, x, y, visible01, source]; x and y in image
 # pixels or null when occluded; source (provenance) one of "placed" (the default, what a 4-element

@@ -1,5 +1,5 @@
 """Import as a whole unit of work: plan, copy, commit, then enqueue the frame-statistics job;
-and deleting a sequence with its files.
+and that job's work, each frame's statistics and thumbnail.
 
 Every sequence is its own transaction, and every import attempt writes its files under a
 storage prefix of its own, so no partial sequence survives and an import never removes files it
@@ -13,21 +13,22 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence as Seq
-from dataclasses import dataclass
 from pathlib import Path
 
-from sqlalchemy import select
+import cv2
+import numpy as np
+from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 
 from backend.captures import layout, service
-from backend.captures.models import Sequence
+from backend.captures.models import Camera, Frame, Sequence
 from backend.config import Settings
 from backend.db import session_scope
-from backend.errors import Forbidden, InvalidCapture, StorageError
+from backend.errors import Forbidden, InvalidCapture
 from backend.jobs.service import enqueue_job
 from backend.storage import Storage, get_storage
 
-# The job kind of a sequence's frame statistics and thumbnails (worker.tasks runs it).
+# The job kind of a sequence's frame statistics and thumbnails (compute_frame_stats).
 FRAME_STATS = "frame_stats"
 # A lost race (another import committed the same sequence or subject first) is retried this
 # many times; the next attempt sees the winner's rows.
@@ -151,38 +152,41 @@ def _remove_uncommitted_files(storage: Storage, uid: str) -> None:
         storage.delete_prefix(service.capture_prefix(uid))
 
 
-@dataclass
-class DeleteResult:
-    sequence: service.DeletedSequence
-    files: int
+def compute_frame_stats(sequence_id: int, storage: Storage | None = None) -> dict[str, object]:
+    """Statistics and a thumbnail for every frame of a sequence (the FRAME_STATS job).
 
-
-def delete_sequence(sequence_id: int, force: bool = False,
-                    storage: Storage | None = None) -> DeleteResult:
-    """Delete a sequence: its rows (and the work on it, with ``force``), then its stored frames,
-    models, thumbnails and solve results.
-
-    Its open HITs are expired on the marketplace first (a worker could otherwise still take
-    work that has nowhere to go); a marketplace that refuses or cannot be reached stops the
-    delete with its error, nothing deleted. The rows go next, in their own committed
-    transaction, so nothing ever refers to a removed file; files that cannot be removed then
-    are reported as a StorageError naming the prefix.
+    The frames' keys are read in one short unit of work, every file is read, measured and its
+    thumbnail written with no transaction open, and the results are stored in a second one
+    (idempotent: a retry computes and writes the same again).
     """
-    from backend.crowd.flows import expire_sequence_hits
+    from worker.quality.frame_stats import frame_statistics, thumbnail_jpeg
 
     storage = storage or get_storage()
-    with session_scope() as session:  # not found, or work and no force: refused before any HIT
-        service.delete_sequence(session, sequence_id, force, check_only=True)
-    expire_sequence_hits(sequence_id)
     with session_scope() as session:
-        deleted = service.delete_sequence(session, sequence_id, force)
-    prefixes = (service.capture_prefix(deleted.storage_uid),
-                service.solve_prefix(deleted.storage_uid))
-    try:
-        files = sum(storage.delete_prefix(prefix) for prefix in prefixes)
-    except (OSError, StorageError) as exc:
-        detail = exc.detail if isinstance(exc, StorageError) else str(exc)
-        raise StorageError(
-            f"sequence {sequence_id} is deleted but its files under {' and '.join(prefixes)} "
-            f"could not all be removed: {detail}") from exc
-    return DeleteResult(deleted, files)
+        frames = session.execute(
+            select(Frame.id, Frame.index, Frame.color_key, Frame.depth_key).join(Camera)
+            .where(Camera.sequence_id == sequence_id)
+            .order_by(Camera.view_index, Frame.index)).all()
+    results = []
+    for frame_id, index, color_key, depth_key in frames:
+        color = cv2.imdecode(np.frombuffer(storage.get_bytes(color_key), np.uint8),
+                             cv2.IMREAD_COLOR)
+        if color is None:
+            raise ValueError(f"{color_key}: not a decodable colour image")
+        depth = None
+        if depth_key:
+            depth = cv2.imdecode(np.frombuffer(storage.get_bytes(depth_key), np.uint8),
+                                 cv2.IMREAD_UNCHANGED)
+        thumb_key = color_key.rsplit("/", 1)[0] + f"/thumb_{index:06d}.jpg"
+        storage.put_bytes(thumb_key, thumbnail_jpeg(color), "image/jpeg")
+        results.append({"id": frame_id, "stats": frame_statistics(color, depth),
+                        "thumb_key": thumb_key})
+    with session_scope() as session:
+        for row in results:
+            session.execute(update(Frame).where(Frame.id == row["id"])
+                            .values(stats=row["stats"], thumb_key=row["thumb_key"])
+                            .execution_options(synchronize_session=False))
+    log.info("frame statistics for sequence %d: %d frames", sequence_id, len(results))
+    return {"frames": len(results),
+            "message": f"{len(results)} frames of sequence {sequence_id}: statistics and "
+                       "thumbnails"}

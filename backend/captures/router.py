@@ -17,7 +17,6 @@ from backend.captures.schemas import (
     ImportRequest,
     ImportResultRead,
     ObjectRead,
-    SequenceDeletedRead,
     SequenceRead,
     ViewTokenRead,
 )
@@ -68,20 +67,6 @@ def list_sequences(session: SessionDep, _: CurrentAdmin,
 @router.get("/sequences/{sequence_id}", response_model=SequenceRead)
 def get_sequence(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> SequenceRead:
     return _sequence_read(service.get_sequence_or_raise(session, sequence_id))
-
-
-@router.delete("/sequences/{sequence_id}", response_model=SequenceDeletedRead)
-async def delete_sequence(
-    sequence_id: Id, _: CurrentAdmin,
-    force: bool = Query(False, description="delete it even with submitted or approved work"),
-) -> SequenceDeletedRead:
-    """Delete a sequence: its rows, the tasks and work on it, and its stored files. 409 when it
-    has submitted or approved assignments, unless ``force=true``."""
-    done = await run_in_threadpool(flows.delete_sequence, sequence_id, force)
-    d = done.sequence
-    return SequenceDeletedRead(sequence_id=d.sequence_id, subject=d.subject, name=d.name,
-                               tasks=d.tasks, assignments=d.assignments,
-                               finished_assignments=d.finished_assignments, files=done.files)
 
 
 @router.post("/sequences/{sequence_id}/views/{serial}/token", response_model=ViewTokenRead)

@@ -10,7 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-from sqlalchemy import delete, func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
 from backend.captures.calibration import imported_model
@@ -22,8 +22,6 @@ from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel
 
 UPLOAD_THREADS = 8
-# Assignment states that hold a worker's finished work: deleting their sequence needs force.
-FINISHED_WORK = ("submitted", "approved")
 # Most missing file keys an error message lists.
 LISTED_KEYS = 5
 
@@ -290,57 +288,6 @@ def _put(storage: Storage, file: StoredFile) -> None:
         payload = file.path.read_bytes()
     storage.put_bytes(file.key, payload,
                       mimetypes.guess_type(file.key)[0] or "application/octet-stream")
-
-
-@dataclass
-class DeletedSequence:
-    sequence_id: int
-    subject: str
-    name: str
-    storage_uid: str
-    tasks: int
-    assignments: int
-    finished_assignments: int
-
-
-def delete_sequence(session: Session, sequence_id: int, force: bool = False,
-                    check_only: bool = False) -> DeletedSequence:
-    """Delete a sequence's rows and everything that hangs off them (cameras, frames, objects,
-    hands, tasks, assignments, HIT and QC records, solve runs: the foreign keys cascade); its
-    payment ledger is first summed into crowd_deleted_costs. Its stored files are the
-    caller's to remove, once this is committed. ``check_only``: raise as a delete would,
-    delete nothing.
-
-    Raises:
-        NotFound: no such sequence.
-        Conflict: it has submitted or approved work and ``force`` is not given.
-    """
-    from backend.annotation.models import Assignment, Task
-    from backend.crowd.costs import keep_deleted
-
-    seq = get_sequence_or_raise(session, sequence_id)
-    tasks = session.scalar(select(func.count()).select_from(Task)
-                           .where(Task.sequence_id == sequence_id)) or 0
-    rows = session.execute(select(Assignment.status, func.count()).join(Task)
-                           .where(Task.sequence_id == sequence_id)
-                           .group_by(Assignment.status)).all()
-    by_status: dict[str, int] = dict(rows)
-    finished = sum(by_status.get(status, 0) for status in FINISHED_WORK)
-    if finished and not force:
-        raise Conflict(
-            f"sequence {sequence_id} ({seq.subject.name}/{seq.name}) has {finished} submitted "
-            f"or approved assignment(s); deleting it deletes that work too: ask again with "
-            f"force (`--force`, `?force=true`) to delete it anyway")
-    deleted = DeletedSequence(sequence_id, seq.subject.name, seq.name, seq.storage_uid,
-                              tasks, sum(by_status.values()), finished)
-    if check_only:
-        return deleted
-    # The payment rows go with the assignments; the money they record stays in the cost report.
-    keep_deleted(session, sequence_id, f"{seq.subject.name}/{seq.name}")
-    session.execute(delete(Sequence).where(Sequence.id == sequence_id)
-                    .execution_options(synchronize_session=False))
-    session.expunge_all()
-    return deleted
 
 
 def sequence_cameras(session: Session, sequence_id: int) -> list[Camera]:

@@ -18,7 +18,7 @@ from backend.crowd.client import MarketplaceError, call, make_client
 from backend.crowd.models import CrowdSubmission
 from backend.crowd.sync import COLLECTED_STATUSES
 from backend.db import session_scope
-from backend.jobs.service import RetryLater
+from backend.jobs.runner import RetryLater
 
 
 class NotSubmittedYet(RetryLater):

@@ -5,16 +5,19 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
+from sqlalchemy import select
 
-from backend import pipeline
 from backend.accounts.deps import CurrentAdmin
+from backend.annotation import service as tasks
+from backend.annotation.models import Assignment
+from backend.annotation.schemas import StartRequest, TokenRead
+from backend.annotation.tokens import PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token
 from backend.config import get_settings
-from backend.crowd import actions, flows, pricing, workers
+from backend.crowd import actions, flows, holds, pricing, workers
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
 from backend.crowd.schemas import (
     AddAssignmentsRequest,
-    ApproveRequest,
     BlockRequest,
     BonusRequest,
     CostsRead,
@@ -25,12 +28,13 @@ from backend.crowd.schemas import (
     PublishRequest,
     PublishResult,
     QualificationRequest,
-    RejectRequest,
-    SyncResult,
     WorkerDetailRead,
     WorkerStatsRead,
 )
-from backend.db import SessionDep
+from backend.db import SessionDep, session_scope
+from backend.errors import Forbidden, Unauthorized
+from backend.middleware import JSONBodyRoute
+from backend.security import verify_token
 from backend.validation import Id, Key, Offset, QueryKey
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
@@ -57,23 +61,6 @@ def publish(body: PublishRequest, session: SessionDep, _: CurrentAdmin,
     if body.dry_run:
         return flows.plan(session, options, body.sequence_id)
     return flows.publish(session, client, options, body.sequence_id)
-
-
-@router.post("/sync", response_model=SyncResult)
-def sync_submissions(session: SessionDep, _: CurrentAdmin, client: MTurk) -> SyncResult:
-    return pipeline.sync(session, client)
-
-
-@router.post("/assignments/{assignment_id}/approve", response_model=PaymentRead)
-def approve(assignment_id: Id, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
-            client: MTurk) -> PaymentRead:
-    return pipeline.approve(session, client, assignment_id, body.feedback)
-
-
-@router.post("/assignments/{assignment_id}/reject", response_model=PaymentRead)
-def reject(assignment_id: Id, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
-           client: MTurk) -> PaymentRead:
-    return pipeline.reject(session, client, assignment_id, body.feedback)
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)
@@ -155,3 +142,51 @@ def notify(body: NotifyRequest, _: CurrentAdmin, client: MTurk) -> dict[str, Any
 @router.get("/costs", response_model=CostsRead)
 def read_costs(session: SessionDep, _: CurrentAdmin) -> CostsRead:
     return costs(session)
+
+
+# ----- the annotation page's start: a HIT's assignment, confirmed by the marketplace --------
+
+# Its routes answer the worker's page, under /api like the page's other routes.
+page_router = APIRouter(prefix="/api", tags=["annotation"], route_class=JSONBodyRoute)
+
+
+def _opened_before(task_id: int, body: StartRequest) -> bool:
+    """Whether the assignment was opened here before (then for this task, worker and HIT);
+    read in a unit of work of its own, closed before the marketplace is asked."""
+    with session_scope() as session:
+        tasks.get_task_or_raise(session, task_id)
+        ours = session.scalars(select(Assignment).where(
+            Assignment.external_id == body.assignment_id)).one_or_none()
+        if ours is None:
+            return False
+        if (ours.task_id, ours.worker_id, ours.hit_id) != (task_id, body.worker_id,
+                                                           body.hit_id):
+            raise Forbidden(f"assignment {body.assignment_id} belongs to another task, worker "
+                            "or HIT")
+        return True
+
+
+@page_router.post("/annotate/start", response_model=TokenRead)
+def start(body: StartRequest, session: SessionDep) -> TokenRead:
+    """Exchange a HIT's task token and the marketplace's ids for an assignment token.
+
+    Only a marketplace assignment is started here, and only one the marketplace confirms
+    (backend.crowd.holds): its HIT shows this task and a worker holds an assignment of it, or
+    the marketplace's record of the assignment names that HIT and worker. A direct link
+    (no HIT) is made by an admin only (POST /api/tasks/{id}/assignments). 403/404 say why an
+    assignment is refused; 503 when the marketplace cannot be reached.
+    """
+    if body.assignment_id == PREVIEW_ASSIGNMENT_ID:
+        raise Unauthorized("the HIT is not accepted yet (preview)")
+    claims = verify_token(body.task_token, get_settings().signing_key, TASK_SCOPE)
+    task_id = int(claims["task_id"])
+    if not body.hit_id:
+        raise Forbidden("no HIT id: an assignment starts here only from its marketplace HIT "
+                        "(hitId, assignmentId and workerId in the page address); a direct "
+                        "link is made by an admin (POST /api/tasks/{id}/assignments)")
+    if not _opened_before(task_id, body):
+        holds.confirm_held(task_id, body.hit_id, body.assignment_id, body.worker_id)
+    task = tasks.get_task_or_raise(session, task_id)
+    assignment = tasks.start_assignment(session, task, body.assignment_id, body.worker_id,
+                                          body.hit_id)
+    return TokenRead(token=assignment_token(task, assignment))

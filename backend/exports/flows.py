@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.exports.service import archive_path, run_export
-from backend.jobs.service import current_job_id, report_progress
+from backend.jobs.runner import current_job_id, report_progress
 
 
 def export_job(args: dict[str, Any]) -> dict[str, Any]:

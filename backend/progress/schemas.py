@@ -1,12 +1,12 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Literal, get_args
+from typing import Literal
 
 from pydantic import BaseModel
 
-TaskState = Literal["open", "published", "submitted", "in review", "accepted"]
-TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
+from backend.annotation.schemas import TaskState
+
 SequenceState = Literal["no tasks", "open", "in progress", "accepted", "solved"]
 
 

@@ -21,18 +21,17 @@ from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
+from backend.annotation.schemas import TASK_STATES, TaskState
 from backend.captures.models import Camera, Sequence
 from backend.crowd.models import CrowdHit
 from backend.errors import NotFound
 from backend.pipeline import accepted_digests
 from backend.progress.schemas import (
-    TASK_STATES,
     AssignmentCounts,
     SequenceProgress,
     SequenceState,
     SolveProgress,
     TaskProgress,
-    TaskState,
 )
 from backend.quality.models import QCReport
 from backend.solve.models import SolveRun

@@ -22,7 +22,7 @@ from backend.crowd.client import MarketplaceError, MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
-from backend.jobs.service import RetryLater, check_lease, checkpoint
+from backend.jobs.runner import RetryLater, check_lease, checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
 

@@ -6,11 +6,10 @@ from typing import Annotated
 
 from fastapi import APIRouter, Path
 
-from backend import pipeline
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
 from backend.rig import service
-from backend.rig.schemas import AdoptRequest, AdoptResult, RigHealthStatus
+from backend.rig.schemas import RigHealthStatus
 from backend.validation import Id
 
 router = APIRouter(prefix="/api", tags=["rig"])
@@ -33,13 +32,3 @@ def estimate_rig_health(sequence_id: Id, session: SessionDep,
     (not in use) with its report."""
     service.request_health(session, sequence_id)
     return service.health_status(session, sequence_id)
-
-
-@router.post("/sequences/{sequence_id}/calibrations/{number}/adopt",
-             response_model=AdoptResult)
-def adopt_calibration(sequence_id: Id, number: VersionNumber, session: SessionDep,
-                      _: CurrentAdmin, body: AdoptRequest | None = None) -> AdoptResult:
-    """Put a calibration version in use (0: the imported one) and re-solve with it."""
-    body = body or AdoptRequest()
-    solve = pipeline.adopt_calibration(session, sequence_id, number, body.solve)
-    return AdoptResult(sequence_id=sequence_id, version_in_use=number, solve=solve)

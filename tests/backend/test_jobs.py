@@ -12,14 +12,8 @@ from sqlalchemy import select, update
 
 from backend.db import session_scope
 from backend.jobs.models import Job
-from backend.jobs.service import (
-    _retry_delay,
-    checkpoint,
-    enqueue_job,
-    execute,
-    job_handler,
-    requeue_stale,
-)
+from backend.jobs.runner import _retry_delay, checkpoint, execute, job_handler, requeue_stale
+from backend.jobs.service import enqueue_job
 from backend.queue import huey
 
 CALLS: list[dict] = []
@@ -316,9 +310,9 @@ def test_a_job_the_queue_did_not_take_is_sent_by_the_next_reaper_pass(
         app_env: dict, monkeypatch: pytest.MonkeyPatch) -> None:
     """The queue was down when the unit of work committed: the job's row says so, and the
     reaper's next pass (every minute) sends it, not only job_requeue_after_s later."""
-    from backend.jobs import service
+    from backend.jobs import runner
 
-    monkeypatch.setattr(service, "run_job", _QueueDown())
+    monkeypatch.setattr(runner, "run_job", _QueueDown())
     _queue("test-echo", "echo:unsent", 4)  # committed all the same
     job = _job("echo:unsent")
     assert job.status == "queued" and job.lease_until is not None
@@ -333,11 +327,11 @@ def test_a_job_the_queue_did_not_take_is_sent_by_the_next_reaper_pass(
 
 def test_a_retry_the_queue_did_not_take_is_sent_when_it_is_due(
         app_env: dict, monkeypatch: pytest.MonkeyPatch) -> None:
-    from backend.jobs import service
+    from backend.jobs import runner
 
     _queue("test-broken", "broken:unsent", 1)
     huey.flush()
-    monkeypatch.setattr(service, "run_job", _QueueDown())
+    monkeypatch.setattr(runner, "run_job", _QueueDown())
     execute("broken:unsent")  # fails; its retry (due in 5 s) cannot be scheduled
     monkeypatch.undo()
     job = _job("broken:unsent")

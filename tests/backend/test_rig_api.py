@@ -13,14 +13,13 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select
 from typer.testing import CliRunner
 
-import worker.tasks  # noqa: F401  (registers the rig-health and solve job handlers)
 from backend.captures.calibration import CalibrationVersion, calibrated_models
 from backend.captures.flows import import_path
 from backend.captures.models import Hand
 from backend.captures.service import sequence_cameras
 from backend.cli import app as cli_app
 from backend.db import session_scope
-from backend.jobs.service import execute
+from backend.jobs.runner import execute
 from backend.rig.service import job_key
 from backend.solve.inputs import gather_inputs
 from tests.backend.test_solve_api import _approve_from_truth

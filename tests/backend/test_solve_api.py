@@ -18,15 +18,14 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select
 from typer.testing import CliRunner
 
-import worker.tasks  # noqa: F401  (registers the solve job handler)
 from backend.annotation.models import Task, Track
 from backend.annotation.service import create_assignment
 from backend.captures.flows import import_path
 from backend.captures.models import Camera, Hand, SceneObject
+from backend.cli.solve import calibrate_hand_command, solve_command
 from backend.crowd.simulate import CaptureTruth
 from backend.db import session_scope
-from backend.jobs.service import execute
-from backend.solve.cli import calibrate_hand_command, solve_command
+from backend.jobs.runner import execute
 from backend.solve.inputs import load_mesh, merge_labels
 from backend.solve.service import job_key
 from backend.storage import get_storage

@@ -121,7 +121,7 @@ def test_a_bonus_amount_is_checked_before_any_ledger_row(instance: Path, cli: Cl
 
 def test_jobs_list_status_takes_only_the_job_tables_statuses(instance: Path,
                                                              cli: CliRunner) -> None:
-    from backend.jobs.cli import JobStatus
+    from backend.cli.jobs import JobStatus
     from backend.jobs.models import JOB_STATUSES
 
     assert tuple(s.value for s in JobStatus) == JOB_STATUSES
@@ -161,7 +161,7 @@ def test_synth_refuses_a_folder_in_use_and_reports_its_timing(tmp_path: Path,
 def test_progress_prints_a_plain_line_per_step_off_a_terminal(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from backend.console import progress
+    from backend.cli.console import progress
 
     with progress("publishing 2 HITs", total=2) as step:
         step("task 1")

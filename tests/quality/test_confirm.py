@@ -26,7 +26,7 @@ def test_submit_in_the_page_is_confirmed_without_a_sync(crowd_url: str,
                                                         training_capture: Path) -> None:
     from backend.annotation.models import Assignment
     from backend.crowd.models import CrowdSubmission
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.quality.service import qc_key
 
     sequence_id, _ = publish_hand_tasks(training_capture, max_assignments=1)
@@ -52,7 +52,7 @@ def test_confirm_retries_until_the_marketplace_has_the_submission(crowd_url: str
     from backend.annotation.schemas import TracksSave
     from backend.annotation.service import start_assignment
     from backend.crowd.models import CrowdHit
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.pipeline import submit
     from tests.market.helpers import accept
     from tests.market.helpers import submit as market_submit

@@ -20,7 +20,7 @@ def test_a_finished_solve_checks_each_workers_landmarks_against_the_solved_objec
     from backend.captures.flows import import_path
     from backend.crowd.simulate import CaptureTruth
     from backend.jobs.models import Job
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.pipeline import run_solve
     from backend.quality.models import QCReport
     from backend.storage import get_storage

@@ -50,7 +50,7 @@ def _job(key: str):
 def _confirm(outcomes: list) -> None:
     """Run the confirm job the page's submit queued for each outcome's assignment."""
     from backend.annotation.models import Assignment
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.pipeline import confirm_key
 
     with session_scope() as session:
@@ -62,26 +62,15 @@ def _confirm(outcomes: list) -> None:
 
 def _drain() -> list[str]:
     """Run queued jobs here until none is left (what an idle queue means); the keys run."""
-    from backend.jobs.models import Job
-    from backend.jobs.service import execute
+    from backend.jobs.runner import run_queued
 
-    ran: list[str] = []
-    for _ in range(50):
-        with session_scope() as session:
-            keys = list(session.scalars(select(Job.key).where(
-                Job.status.in_(("queued", "retrying"))).order_by(Job.id)))
-        if not keys:
-            return ran
-        for key in keys:
-            execute(key)
-            ran.append(key)
-    raise AssertionError(f"the queue never went idle: {ran[-10:]}")
+    return run_queued(max_rounds=50)
 
 
 def test_work_submitted_during_its_qc_run_is_scored_by_the_next_run(
         crowd_url: str, qc_capture: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from backend.annotation.models import Assignment
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.quality import flows
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key

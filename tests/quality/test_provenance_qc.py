@@ -80,7 +80,7 @@ def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: di
     from backend.app import create_app
     from backend.captures.flows import import_path
     from backend.crowd.simulate import CaptureTruth
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key, request_qc
     from backend.storage import get_storage

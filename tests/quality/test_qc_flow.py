@@ -41,7 +41,8 @@ def test_qc_job_pays_careful_work_and_rejects_spam_once(crowd_url: str, qc_captu
     monkeypatch.setenv("DEXLABEL_QC_BLOCK_AFTER_FAILURES", "1")
     get_settings.cache_clear()
     from backend.jobs.models import Job
-    from backend.jobs.service import enqueue_job, execute
+    from backend.jobs.runner import execute
+    from backend.jobs.service import enqueue_job
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key
 
@@ -102,7 +103,7 @@ def test_qc_job_pays_careful_work_and_rejects_spam_once(crowd_url: str, qc_captu
 
 def test_admin_reads_reports_and_worker_quality(crowd_url: str, qc_capture: Path) -> None:
     from backend.app import create_app
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.quality.service import qc_key
 
     sequence_id, _ = publish_hand_tasks(qc_capture, max_assignments=1)

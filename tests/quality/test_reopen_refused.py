@@ -59,7 +59,7 @@ def test_a_refused_reopen_is_recorded_as_refused_with_its_reason(
     crowd_url: str, qc_capture: Path
 ) -> None:
     from backend.app import create_app
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
 
     sequence_id, hit_ids, outcomes, key = _score(crowd_url, qc_capture, seed=0)
     _spend_the_balance(crowd_url)
@@ -96,7 +96,7 @@ def test_a_reopen_the_marketplace_did_not_answer_is_retried(
 
     _, hit_ids, outcomes, key = _score(crowd_url, qc_capture, seed=1)
     protocol.inject_faults("CreateAdditionalAssignmentsForHIT", 1000)
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
 
     execute(key)
     with session_scope() as session:

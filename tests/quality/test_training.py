@@ -63,7 +63,7 @@ def _visible_hits(base: str, index: int) -> list[str]:
 def test_passing_the_training_clip_grants_the_qualification(crowd_url: str,
                                                             training_capture: Path) -> None:
     from backend.crowd.models import CrowdWorkerAction
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key
 

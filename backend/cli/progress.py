@@ -6,8 +6,9 @@ from typing import Annotated
 
 import typer
 
-from backend.console import refusing_bad_input, resolve_sequence
-from backend.progress.schemas import TASK_STATES, SequenceProgress
+from backend.annotation.schemas import TASK_STATES
+from backend.cli.console import refusing_bad_input, resolve_sequence
+from backend.progress.schemas import SequenceProgress
 
 
 def _solve_line(p: SequenceProgress) -> str:

@@ -1,4 +1,4 @@
-"""CLI of rig health, registered on the main app by backend/cli.py:
+"""CLI of rig health, registered on the main app by backend/cli/__init__.py:
 
     dexlabel rig health SEQUENCE [--json]    estimate here, store a new calibration version
     dexlabel rig adopt SEQUENCE VERSION [--no-solve]   put a version in use (0: imported)
@@ -13,7 +13,7 @@ from typing import Annotated
 
 import typer
 
-from backend.console import SequenceArg, progress, refusing_bad_input, resolve_sequence
+from backend.cli.console import SequenceArg, progress, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
 rig_app = typer.Typer(help="Rig health: cameras whose calibration, sync or depth is off, and "

@@ -3,7 +3,7 @@
 Every command but ``migrate``, ``synth`` and ``demo`` works on an instance: before it runs, a
 migrated database must be where the settings point (``DEXLABEL_VAR_DIR``), or the command
 stops with one line saying so, creating nothing. Bad input is refused the same way everywhere
-(backend.console: ``error: ...``, exit 2), and sequences are named by id or SUBJECT/NAME.
+(backend.cli.console: ``error: ...``, exit 2), and sequences are named by id or SUBJECT/NAME.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
+from backend.cli.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
 from backend.config import get_settings
-from backend.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
 from backend.instance import (
     adopt_recorded_server,
     client_url,
@@ -189,7 +189,8 @@ def serve(
     the writers of one process wait their turn (the others would fail on a locked file)."""
     import uvicorn
 
-    from backend.queue import start_inprocess_consumer
+    from backend.jobs.runner import start_inprocess_consumer
+    from worker.tasks import register_handlers
 
     settings = serve_at(host, port)
     if workers > 1 and settings.is_sqlite:
@@ -198,6 +199,7 @@ def serve(
              "without --workers, or point DEXLABEL_DATABASE_URL at PostgreSQL")
     consumer = None
     if settings.inprocess_worker and not settings.redis_url:
+        register_handlers()
         consumer = start_inprocess_consumer(settings.worker_threads)
     record_server(settings, client_url(host, port))
     # uvicorn stops on SIGINT/SIGTERM, then raises the signal again for the handler it found:
@@ -226,9 +228,11 @@ def worker(
     workers: Annotated[int, typer.Option(min=1, max=64, help="worker threads")] = 2,
 ) -> None:
     """Run a queue consumer (one per machine when scaling out)."""
-    from backend.queue import make_consumer
+    from backend.jobs.runner import make_consumer
+    from worker.tasks import register_handlers
 
     settings = get_settings()
+    register_handlers()
     typer.echo(f"queue consumer on {'redis' if settings.redis_url else settings.queue_path}")
     make_consumer(workers).run()
 
@@ -475,13 +479,13 @@ def crowd_simulate(
 
 
 def _register_domain_commands() -> None:
-    from backend.captures.cli import sequences_app
-    from backend.exports.cli import export_command
-    from backend.jobs.cli import jobs_app
-    from backend.progress.cli import status_command
-    from backend.quality.cli import qc_app, training_app
-    from backend.rig.cli import rig_app
-    from backend.solve.cli import calibrate_hand_command, solve_command
+    from backend.cli.captures import sequences_app
+    from backend.cli.exports import export_command
+    from backend.cli.jobs import jobs_app
+    from backend.cli.progress import status_command
+    from backend.cli.quality import qc_app, training_app
+    from backend.cli.rig import rig_app
+    from backend.cli.solve import calibrate_hand_command, solve_command
 
     app.command("status")(status_command)
     app.command("solve")(solve_command)

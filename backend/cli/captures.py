@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 
-from backend.console import SequenceArg, refusing_bad_input, resolve_sequence
+from backend.cli.console import SequenceArg, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
 sequences_app = typer.Typer(help="Imported sequences.", no_args_is_help=True)
@@ -20,7 +20,7 @@ def sequences_delete(
 ) -> None:
     """Delete a sequence: its rows, the tasks and work on it, and its stored files (refused
     while it has submitted or approved work, unless --force)."""
-    from backend.captures.flows import delete_sequence
+    from backend.pipeline.deletion import delete_sequence
 
     with refusing_bad_input():
         with session_scope() as session:

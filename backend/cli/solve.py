@@ -1,4 +1,4 @@
-"""Command-line functions of the solve, registered on the main app by backend/cli.py:
+"""Command-line functions of the solve, registered on the main app by backend/cli/__init__.py:
 
     dexlabel solve SEQUENCE [--optimiser paper|default] [--wait]
     dexlabel calibrate-hand SEQUENCE [--force]
@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 import typer
 
-from backend.console import (
+from backend.cli.console import (
     EXIT_FAILED,
     SequenceArg,
     progress,
@@ -36,8 +36,7 @@ def solve_command(
         "--wait", help="run the solve in this process and print its summary")] = False,
 ) -> None:
     """Queue a solve of the sequence's accepted labels (or run it here with --wait)."""
-    import worker.tasks  # noqa: F401  (registers the solve job handler for --wait)
-    from backend.jobs.service import execute
+    from backend.jobs.runner import execute
     from backend.solve.models import SolveRun
     from backend.solve.service import job_key, request_solve
 
@@ -47,6 +46,9 @@ def solve_command(
     typer.echo(f"solve run {run_id} queued ({chosen} optimiser)")
     if not wait:
         return
+    from worker.tasks import register_handlers
+
+    register_handlers()
     with progress(f"solve run {run_id}") as step:
         execute(job_key(run_id))  # a no-op when a queue consumer claimed the job first
         while True:

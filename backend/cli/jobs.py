@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from backend.console import refusing_bad_input
+from backend.cli.console import refusing_bad_input
 from backend.db import session_scope
 
 jobs_app = typer.Typer(help="Queue jobs: status, attempts, results and errors.",

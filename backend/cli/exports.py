@@ -1,4 +1,4 @@
-"""The export command, registered on the main app by backend/cli.py:
+"""The export command, registered on the main app by backend/cli/__init__.py:
 
     dexlabel export SEQUENCE... | --all --format F --out PATH [--include accepted|submitted]
                     [--frames] [--link-frames] [--split s0|s1|s2|s3] [--labels 2d|3d]
@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 
 import typer
 
-from backend.console import fail, progress, refusing_bad_input, resolve_sequence
+from backend.cli.console import fail, progress, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 from backend.errors import DexlabelError
 

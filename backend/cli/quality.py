@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from sqlalchemy import select
 
-from backend.console import EXIT_FAILED, SequenceArg, refusing_bad_input, resolve_sequence
+from backend.cli.console import EXIT_FAILED, SequenceArg, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
 qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True)
@@ -24,14 +24,17 @@ def qc_run(
                                       help="run here and wait, or queue for a worker")] = True,
 ) -> None:
     """Score the submitted work of a sequence's targets and act on the decisions."""
-    import worker.tasks  # noqa: F401  (registers the job handlers, so --now runs here)
     from backend.jobs.models import Job
-    from backend.jobs.service import describe, execute
+    from backend.jobs.runner import execute
+    from backend.jobs.service import describe
     from backend.quality.service import request_qc_for
+    from worker.tasks import register_handlers
 
     with refusing_bad_input(), session_scope() as session:
         sequence_id = resolve_sequence(session, sequence)
         keys = [job.key for job in request_qc_for(session, sequence_id, target)]
+    if now:
+        register_handlers()
     failed = False
     for key in keys:
         if now:
