@@ -21,12 +21,12 @@ from backend.annotation.models import Assignment, Task, Track
 from backend.captures.flows import import_path
 from backend.captures.layout import read_sequence
 from backend.captures.models import Camera, Frame, Sequence, Subject
-from backend.pipeline.deletion import delete_sequence_rows as delete_sequence
 from backend.cli import app
 from backend.config import get_settings
 from backend.db import session_scope
 from backend.jobs.models import Job
 from backend.jobs.runner import execute
+from backend.pipeline.deletion import delete_sequence_rows as delete_sequence
 from backend.solve.results import decode_result, hand_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage
