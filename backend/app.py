@@ -35,6 +35,7 @@ from backend.errors import (
 )
 from backend.exports.router import router as exports_router
 from backend.jobs.router import router as jobs_router
+from backend.labels.router import page_router as labels_page_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
 from backend.pipeline.router import page_router as pipeline_page_router
@@ -42,6 +43,7 @@ from backend.pipeline.router import router as pipeline_router
 from backend.portal.router import router as portal_router
 from backend.progress.router import page_router as progress_page_router
 from backend.progress.router import router as progress_router
+from backend.quality.router import records_router as worker_records_router
 from backend.quality.router import router as review_router
 from backend.queue import check_queue
 from backend.rig.router import router as rig_router
@@ -68,12 +70,14 @@ def create_app() -> FastAPI:
     app.include_router(captures_router)
     app.include_router(annotation_router)
     app.include_router(progress_page_router)
+    app.include_router(labels_page_router)
     app.include_router(crowd_page_router)
     app.include_router(pipeline_page_router)
     app.include_router(crowd_router)
     app.include_router(pipeline_router)
     app.include_router(jobs_router)
     app.include_router(review_router)
+    app.include_router(worker_records_router)
     app.include_router(market_router)
     app.include_router(portal_router)
     app.include_router(solve_router)

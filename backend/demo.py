@@ -228,9 +228,9 @@ def approve_reviewed(sequence_id: int) -> int:
     """The demo's admin at work: for each task still without accepted work, approve the
     assignment QC left for review with the smallest error (as the admin page's Approve does),
     saying which; the number approved."""
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment
     from backend.crowd.client import make_client
+    from backend.labels import ACCEPTED
     from backend.pipeline import approve
     from backend.quality.models import QCReport
 
@@ -316,8 +316,8 @@ def _hits(sequence_id: int, kind: str) -> int:
 
 def _unaccepted(sequence_id: int) -> tuple[int, int]:
     """(tasks without approved work, tasks) of the sequence."""
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment, Task
+    from backend.labels import ACCEPTED
 
     with session_scope() as session:
         tasks = set(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
@@ -329,12 +329,12 @@ def _unaccepted(sequence_id: int) -> tuple[int, int]:
 def _open_slots(sequence_id: int, extend: bool) -> int:
     """Assignments the marketplace still offers on the sequence's HITs; with ``extend``,
     first one more on each HIT whose task has no accepted work and nothing left on offer."""
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment, Task
     from backend.crowd.actions import add_assignments
     from backend.crowd.client import make_client, paginate
     from backend.crowd.models import CrowdHit
     from backend.crowd.pricing import LARGE_HIT_ASSIGNMENTS
+    from backend.labels import ACCEPTED
 
     client = make_client(get_settings())
     with session_scope() as session:

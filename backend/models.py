@@ -1,7 +1,7 @@
 """Every ORM model, imported in one place so Alembic and the app see the whole schema."""
 
 from backend.accounts.models import Admin
-from backend.annotation.models import Assignment, Task, Track
+from backend.annotation.models import Assignment, Task, Track, TrainingClip
 from backend.captures.calibration import CalibrationVersion
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.crowd import models as crowd
@@ -9,7 +9,7 @@ from backend.db import Base
 from backend.jobs.models import Job
 from backend.market import models as market
 from backend.portal import models as portal
-from backend.quality.models import QCReport, TrainingClip
+from backend.quality.models import QCReport
 from backend.solve.models import SolveRun
 
 __all__ = [

@@ -104,7 +104,7 @@ def _grey(view_dir: Path, frames: int) -> np.ndarray:
 
 
 def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, Any]:
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from worker.formats import dexycb
     from worker.synth.annotators import annotate, hand_visibility
     from worker.tracking.lk import propose
@@ -163,8 +163,8 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
     from backend.annotation.tokens import assignment_token
     from backend.app import create_app
     from backend.captures.flows import import_path
+    from backend.captures.truth import CaptureTruth
     from backend.config import get_settings
-    from backend.crowd.simulate import CaptureTruth
     from backend.db import session_scope
     from backend.migrate import upgrade
     from backend.storage import get_storage
@@ -228,7 +228,7 @@ class _Capture:
 def _load(capture: Path) -> _Capture:
     """Every view of the capture's first sequence, in the order the views are labelled."""
     from backend.captures.layout import read_sequence
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from worker.formats import dexycb
     from worker.geometry.cameras import CameraModel, intrinsics_matrix
     from worker.synth.annotators import hand_visibility

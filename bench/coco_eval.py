@@ -59,9 +59,9 @@ def _hand_tasks(sequence_id: int) -> list[dict[str, Any]]:
 def _unaccepted(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
     from sqlalchemy import select
 
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment
     from backend.db import session_scope
+    from backend.labels import ACCEPTED
 
     with session_scope() as session:
         done = set(session.scalars(select(Assignment.task_id).where(
@@ -89,7 +89,7 @@ def _submit(task: dict[str, Any], profile: str, worker: str, truth: Any,
 
 def crowd(sequence_id: int, capture: Path, rounds: int, seed: int) -> dict[str, Any]:
     """Rounds of simulated workers and QC, then the admin's approvals; who accepted what."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.quality.flows import run_qc
     from worker.synth.annotators import draw_profiles
 
@@ -146,9 +146,9 @@ def _approve_reviewed(sequence_id: int) -> int:
 def _accepted_workers() -> list[str]:
     from sqlalchemy import select
 
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment
     from backend.db import session_scope
+    from backend.labels import ACCEPTED
 
     with session_scope() as session:
         return list(session.scalars(select(Assignment.worker_id).where(

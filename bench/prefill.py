@@ -51,13 +51,13 @@ def _setup(capture: Path, every: int, seed: int) -> dict[str, Any]:
     """Import, create the tasks, accept one careful worker's tracks of every hand task; the
     hand tasks (id, serial, size) in view order and their truth."""
     from backend.accounts.service import create_admin
-    from backend.annotation.accepted import ACCEPTED
     from backend.annotation.models import Assignment, Track
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
+    from backend.captures.truth import CaptureTruth
     from backend.config import get_settings
-    from backend.crowd.simulate import CaptureTruth
     from backend.db import session_scope
+    from backend.labels import ACCEPTED
     from backend.migrate import upgrade
     from backend.storage import get_storage
     from worker.synth.annotators import annotate, hand_visibility
@@ -140,9 +140,9 @@ def _accuracy(client: Any, tasks: list[dict]) -> dict[str, Any]:
 
 def _pure_ms(capture: Path, sequence_id: int, runs: int) -> float:
     """The pure function for view 0 from the other views' stored work, depth decoded."""
-    from backend.annotation.accepted import labelled_work, sequence_tasks
     from backend.captures.service import camera_model, sequence_cameras
     from backend.db import session_scope
+    from backend.labels import labelled_work, sequence_tasks
     from worker.formats import dexycb
     from worker.quality.prefill import prefill, view_work
 

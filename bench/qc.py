@@ -187,7 +187,7 @@ def _run_qc(sequence_id: int, target_key: str) -> tuple[float, dict[str, float]]
 def _store_true_solve(capture: Path, sequence_id: int) -> None:
     """A finished solve run of the sequence whose object poses are the capture's ground truth
     (the landmark check after the solve then judges the workers, not the solver)."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.db import session_scope
     from backend.solve.service import store_object_poses
 
@@ -297,7 +297,7 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
     mixed profile weights, every target's QC job run; the summed confusion table. Object
     landmarks are judged against the capture's true object poses (``object_poses`` "truth")
     or after the product's own solve of each crowd's accepted work ("solved")."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from worker.synth.annotators import draw_profiles
 
     _fresh_setup(f"qc-{kind}")
@@ -425,7 +425,7 @@ class _SolvedCrowd:
 def pool(capture: Path, rounds: int, crowd_seed: int) -> dict:
     """Each round, every view gets one careful worker and one of a bad profile (taken in
     turn); one QC job scores them all."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
 
     _fresh_setup("qc-pool")
     sequence_id, every = _setup(capture)
@@ -447,7 +447,7 @@ def pool(capture: Path, rounds: int, crowd_seed: int) -> dict:
 
 def timing(capture: Path, repeats: int, crowd_seed: int) -> dict:
     """One hand target, one careful worker per view: the QC job's seconds and its parts."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
 
     _fresh_setup("qc-timing")
     sequence_id, every = _setup(capture)

@@ -738,11 +738,10 @@ def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
     from backend.db import session_scope
     from backend.exports.content import load_sequence
     from backend.exports.service import check_request
-    from backend.pipeline import accepted_digest
+    from backend.labels import accepted_digest, approved_labels, count_accepted
     from backend.progress.service import sequence_progress
     from backend.quality.inputs import target_inputs
     from backend.quality.service import _population, worker_quality
-    from backend.solve.inputs import approved_labels, count_approved
 
     def run(fn: Callable[[Any], int]) -> Callable[[], int]:
         def call() -> int:
@@ -770,7 +769,7 @@ def read_queries(sequence_id: int) -> dict[str, Callable[[], int]]:
         "qc_population_hand": run(lambda s: len(_population(s, "hand", {}))),
         "qc_worker_quality": run(lambda s: len(worker_quality(s))),
         "solve_approved_labels": run(lambda s: len(approved_labels(s, seq, frames))),
-        "solve_count_approved": run(lambda s: count_approved(s, seq)),
+        "solve_count_accepted": run(lambda s: count_accepted(s, seq)),
         "export_load_sequence": run(lambda s: len(load_sequence(s, seq).work)),
         "export_check_project": run(
             lambda s: len(check_request(s, "json", None, "accepted", {}).ids)),

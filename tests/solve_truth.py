@@ -16,10 +16,10 @@ import numpy as np
 import torch
 from sqlalchemy import select
 
+from backend.captures.assets import hand_model_for
 from backend.captures.models import Hand
 from backend.captures.service import get_sequence_or_raise
 from backend.db import session_scope
-from backend.solve.inputs import hand_model_for
 from backend.solve.service import store_result
 from worker.formats import dexycb
 from worker.geometry.transforms import quaternion_to_matrix

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from backend.captures.models import Camera, SceneObject
-from backend.crowd.titles import object_label
+from backend.captures.service import object_label
 from backend.storage import Storage
 from worker.geometry.cameras import project_points
 from worker.geometry.mesh_io import read_mesh

@@ -1,4 +1,5 @@
-"""Annotation: tasks (sequence x view x target), assignments (one worker's go at a task), tracks.
+"""Annotation: tasks (sequence x view x target), assignments (one worker's go at a task), tracks,
+and training clips (tasks whose labels are known).
 
 Track keyframes are stored in image pixels (x right, y down) with a frame index, as compact
 rows ``[frame, x, y, visible]`` (x and y may be null on an occluded keyframe).
@@ -17,6 +18,7 @@ from sqlalchemy import (
     Index,
     Integer,
     String,
+    Text,
     UniqueConstraint,
 )
 from sqlalchemy.orm import Mapped, mapped_column, relationship
@@ -101,3 +103,17 @@ class Track(Base):
     assignment: Mapped[Assignment] = relationship(
         "backend.annotation.models.Assignment", back_populates="tracks"
     )
+
+
+class TrainingClip(TimestampMixin, Base):
+    """A task whose labels are known (gold): new workers label it to earn the qualification."""
+
+    __tablename__ = "training_clips"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), unique=True)
+    # "truth" (a synthetic capture's ground truth) or "assignment:<id>" (accepted labels).
+    source: Mapped[str] = mapped_column(String(64))
+    # P tracks of keyframe rows [frame, x, y, visible01], as the annotation page saves them.
+    tracks: Mapped[list[Any]] = mapped_column(JSON)
+    note: Mapped[str | None] = mapped_column(Text)

@@ -11,11 +11,11 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter
 
 from backend.accounts.deps import CurrentAdmin
-from backend.annotation import proposals, service, stretch_warnings, suggestions
-from backend.annotation.deps import WorkerClaims, WriterClaims, assignment_id_of, assignment_of
+from backend.annotation import proposals, service, stretch_warnings
+from backend.annotation.deps import WriterClaims, assignment_id_of, assignment_of
 from backend.annotation.points import point_names
 from backend.annotation.schemas import (
     MAX_SAVE_BYTES,
@@ -38,7 +38,7 @@ from backend.config import get_settings
 from backend.db import SessionDep
 from backend.middleware import JSONBodyRoute, body_limit
 from backend.storage import get_storage
-from backend.validation import MAX_INT32, Id
+from backend.validation import Id
 
 # Its JSON bodies (a track save is the most frequent request) are parsed by msgspec.
 router = APIRouter(prefix="/api", tags=["annotation"], route_class=JSONBodyRoute)
@@ -126,22 +126,6 @@ def interpolation_check(body: proposals.ProposalsRequest, claims: WriterClaims,
     names bad keyframes."""
     return stretch_warnings.stretch_warnings(session, get_storage(),
                                              assignment_of(session, claims), body)
-
-
-@router.get("/annotate/suggestions", response_model=suggestions.SuggestionsRead)
-def prefill_suggestions(claims: WorkerClaims, session: SessionDep,
-                        first_frame: int | None = Query(None, ge=0, le=MAX_INT32),
-                        last_frame: int | None = Query(None, ge=0, le=MAX_INT32)
-                        ) -> suggestions.SuggestionsRead:
-    """Pre-fill suggestions for the assignment's view once its target has accepted work in 2
-    other views: per point and frame (``first_frame``..``last_frame``, default the whole
-    clip) a position triangulated from that work and a visibility from this view's depth,
-    and per labelled view a fundamental matrix and its labels for epipolar lines. Nothing is
-    stored; a review link may read them, a preview link may not (401). 422 names a frame
-    outside the clip."""
-    return suggestions.suggestions(session, get_storage(),
-                                   suggestions.assignment_of(session, claims), first_frame,
-                                   last_frame)
 
 
 @router.put("/annotate/tracks", response_model=SaveResult,

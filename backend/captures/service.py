@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import mimetypes
+import re
 import secrets
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -301,3 +302,12 @@ def camera_model(camera: Camera) -> CameraModel:
     camera-to-world metres); :func:`backend.captures.calibration.calibrated_models` gives the
     version in use."""
     return imported_model(camera)
+
+
+_YCB_PREFIX = re.compile(r"^\d+_")
+
+
+def object_label(name: str) -> str:
+    """A YCB object name for people: "006_mustard_bottle" -> "mustard bottle"."""
+    label = _YCB_PREFIX.sub("", name).replace("_", " ").strip()
+    return label or name

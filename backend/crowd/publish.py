@@ -16,7 +16,7 @@ from xml.sax.saxutils import escape
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.annotation.models import Task
+from backend.annotation.models import Task, TrainingClip
 from backend.annotation.tokens import task_token
 from backend.config import get_settings
 from backend.crowd import pricing
@@ -143,8 +143,6 @@ def _recovered_hit_id(exc: MarketplaceError) -> str:
 
 
 def _is_training_clip(session: Session, task_id: int) -> bool:
-    from backend.quality.models import TrainingClip
-
     return session.scalar(select(TrainingClip.id).where(TrainingClip.task_id == task_id)) \
         is not None
 

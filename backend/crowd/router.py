@@ -13,7 +13,7 @@ from backend.annotation.models import Assignment
 from backend.annotation.schemas import StartRequest, TokenRead
 from backend.annotation.tokens import PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token
 from backend.config import get_settings
-from backend.crowd import actions, flows, holds, pricing, workers
+from backend.crowd import actions, flows, holds, pricing
 from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
 from backend.crowd.schemas import (
@@ -28,14 +28,12 @@ from backend.crowd.schemas import (
     PublishRequest,
     PublishResult,
     QualificationRequest,
-    WorkerDetailRead,
-    WorkerStatsRead,
 )
 from backend.db import SessionDep, session_scope
 from backend.errors import Forbidden, Unauthorized
 from backend.middleware import JSONBodyRoute
 from backend.security import verify_token
-from backend.validation import Id, Key, Offset, QueryKey
+from backend.validation import Id, Key, QueryKey
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
@@ -87,21 +85,6 @@ def add_assignments(hit_id: Key, body: AddAssignmentsRequest, session: SessionDe
                     _: CurrentAdmin, client: MTurk) -> dict[str, Any]:
     hit = actions.add_assignments(session, client, hit_id, body.count, body.allow_large_hits)
     return _hit_read(hit)
-
-
-@router.get("/workers", response_model=list[WorkerStatsRead])
-def list_workers(session: SessionDep, _: CurrentAdmin, limit: int = Query(200, ge=1, le=1000),
-                 offset: Offset = 0) -> list[WorkerStatsRead]:
-    """Workers by id, ``limit`` (200, at most 1,000) from ``offset`` on: approval rate, median
-    error, working time, earnings, block, and their newest QC reports by date."""
-    return workers.list_workers(session, limit, offset)
-
-
-@router.get("/workers/{worker_id}", response_model=WorkerDetailRead)
-def read_worker(worker_id: Key, session: SessionDep, _: CurrentAdmin) -> WorkerDetailRead:
-    """One worker's stats, every QC report by date and their newest assignments (404 for a
-    worker with no work and no block here)."""
-    return workers.get_worker_or_raise(session, worker_id)
 
 
 @router.post("/workers/{worker_id}/qualifications")

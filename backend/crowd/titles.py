@@ -3,17 +3,16 @@ HITs tells one task from another ("Track the right hand · view 800007060125 · 
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
 from backend.captures.models import Hand, SceneObject
+from backend.captures.service import object_label
 
 # MTurk rejects a CreateHIT whose Title is longer than this.
 MAX_TITLE_CHARS = 128
-_YCB_PREFIX = re.compile(r"^\d+_")
 
 
 @dataclass(frozen=True)
@@ -25,12 +24,6 @@ class TaskFacts:
     serial: str  # the camera serial of the view
     num_frames: int
     sequence_id: int
-
-
-def object_label(name: str) -> str:
-    """A YCB object name for people: "006_mustard_bottle" -> "mustard bottle"."""
-    label = _YCB_PREFIX.sub("", name).replace("_", " ").strip()
-    return label or name
 
 
 def task_facts(session: Session, task: Task) -> TaskFacts:

@@ -17,12 +17,12 @@ import torch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import INCLUDE_STATUSES, labelled_work, sequence_tasks
+from backend.captures.assets import hand_model_for
 from backend.captures.calibration import calibrated_models, hand_betas, version_in_use
 from backend.captures.models import Frame, Sequence
 from backend.captures.service import sequence_cameras
+from backend.labels import INCLUDE_STATUSES, labelled_work, merge_labels, sequence_tasks
 from backend.quality.models import QCReport
-from backend.solve.inputs import hand_model_for, merge_labels
 from backend.solve.results import decode_result, hand_trust, object_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage

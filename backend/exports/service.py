@@ -13,7 +13,6 @@ from typing import Any, NamedTuple
 from sqlalchemy import exists, select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import INCLUDE_STATUSES
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Sequence, Subject
 from backend.config import get_settings
@@ -24,6 +23,7 @@ from backend.exports.content import fetch_solve, load_sequence
 from backend.exports.formats import EXPORTERS
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job, get_job_or_raise
+from backend.labels import INCLUDE_STATUSES
 from backend.solve.models import SolveRun
 from worker.formats import FORMATS, SOLVE_FORMATS
 from worker.formats.dexycb import SPLIT_SETUPS

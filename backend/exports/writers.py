@@ -14,10 +14,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from backend.captures.assets import load_mesh
 from backend.exports import trust
 from backend.exports.archive import ExportArchive
 from backend.exports.content import SequenceContent, ViewContent
-from backend.solve.inputs import load_mesh
 from backend.solve.results import frame_payload
 from backend.storage import LocalStorage, Storage, get_storage
 from worker.formats import cvat, dexycb, dexycb_flags, jsonfmt, offimage

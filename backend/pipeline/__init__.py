@@ -14,14 +14,12 @@ command); the job bodies (``confirm``, ``run_qc``) open their own.
 
 from __future__ import annotations
 
-import hashlib
 from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation import service as annotation
-from backend.annotation.accepted import accepted_ids_by_task
 from backend.annotation.models import Assignment, Task
 from backend.annotation.schemas import TracksSave
 from backend.crowd import confirm as crowd_confirm
@@ -32,6 +30,7 @@ from backend.crowd.schemas import PaymentRead, SyncResult
 from backend.db import session_scope
 from backend.errors import DexlabelError
 from backend.jobs.service import enqueue_job, mark_waiting
+from backend.labels import accepted_digest
 from backend.quality import flows as quality_flows
 from backend.quality.service import record_decision, request_landmark_qc, request_qc
 from backend.rig.service import adopt
@@ -142,34 +141,6 @@ def _qc_message(target_key: str, result: dict[str, Any]) -> str:
     if acted:
         line += "; acted: " + ", ".join(f"{n} {what}" for what, n in sorted(acted.items()))
     return f"{line}; {result['solve']}"
-
-
-def accepted_digest(session: Session, sequence_id: int) -> tuple[str | None, int]:
-    """(digest of the accepted assignments, tasks still without one); the digest is None
-    while any task of the sequence lacks accepted work."""
-    return accepted_digests(session, [sequence_id])[sequence_id]
-
-
-def accepted_digests(session: Session, sequence_ids: list[int]
-                     ) -> dict[int, tuple[str | None, int]]:
-    """:func:`accepted_digest` of each sequence, in two statements whatever their number."""
-    task_sequence = dict(session.execute(
-        select(Task.id, Task.sequence_id).where(Task.sequence_id.in_(sequence_ids))).all())
-    tasks: dict[int, set[int]] = {i: set() for i in sequence_ids}
-    for task_id, seq_id in task_sequence.items():
-        tasks[seq_id].add(task_id)
-    accepted: dict[int, list[tuple[int, int]]] = {i: [] for i in sequence_ids}
-    for task_id, assignment_id in accepted_ids_by_task(session, task_sequence):
-        accepted[task_sequence[task_id]].append((task_id, assignment_id))
-    out: dict[int, tuple[str | None, int]] = {}
-    for seq_id in sequence_ids:
-        missing = len(tasks[seq_id] - {task_id for task_id, _ in accepted[seq_id]})
-        if not tasks[seq_id] or missing:
-            out[seq_id] = (None, missing)
-            continue
-        ids = ",".join(str(assignment_id) for _, assignment_id in accepted[seq_id])
-        out[seq_id] = (hashlib.sha256(ids.encode()).hexdigest(), 0)
-    return out
 
 
 def solve_if_ready(session: Session, sequence_id: int) -> str:

@@ -19,13 +19,12 @@ from collections.abc import Iterable
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
 
-from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
 from backend.annotation.schemas import TASK_STATES, TaskState
 from backend.captures.models import Camera, Sequence
 from backend.crowd.models import CrowdHit
 from backend.errors import NotFound
-from backend.pipeline import accepted_digests
+from backend.labels import ACCEPTED, accepted_digests
 from backend.progress.schemas import (
     AssignmentCounts,
     SequenceProgress,

@@ -13,11 +13,10 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import ACCEPTED
-from backend.annotation.models import Task
+from backend.annotation.models import Task, TrainingClip
 from backend.annotation.service import get_assignment_or_raise, get_task_or_raise
 from backend.errors import Conflict, DexlabelError, NotFound
-from backend.quality.models import TrainingClip
+from backend.labels import ACCEPTED
 from backend.quality.schemas import TrainingClipCreate
 from worker.tracks import completeness, validate_keyframes
 
@@ -85,7 +84,7 @@ def truth_tracks(session: Session, task_id: int, capture: Path) -> list[list[lis
     """Gold tracks of a task from a synthetic capture's ground truth (a keyframe per frame)."""
     import numpy as np
 
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
 
     task = get_task_or_raise(session, task_id)
     if task.kind != "hand":

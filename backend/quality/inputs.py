@@ -14,14 +14,14 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.annotation.models import Assignment, Task
 from backend.annotation.proposals import grey_frames
+from backend.captures.assets import load_mesh
 from backend.captures.calibration import calibrated_models
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.service import sequence_cameras
 from backend.config import get_settings
-from backend.solve.inputs import load_mesh
+from backend.labels import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage

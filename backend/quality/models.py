@@ -1,4 +1,5 @@
-"""Quality control results: one report per scored assignment, and gold clips for training.
+"""Quality control results: one report per scored assignment (training clips, the gold tasks,
+are rows of backend.annotation.models).
 
 A report is overwritten each time its target is scored again (more views came in); the action
 taken on it (approve, reject, re-open) is recorded once and never repeated, so a re-run of a
@@ -53,17 +54,3 @@ class QCReport(TimestampMixin, Base):
     action: Mapped[str | None] = mapped_column(String(16))
     action_detail: Mapped[str | None] = mapped_column(Text)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
-
-
-class TrainingClip(TimestampMixin, Base):
-    """A task whose labels are known (gold): new workers label it to earn the qualification."""
-
-    __tablename__ = "training_clips"
-
-    id: Mapped[int] = mapped_column(primary_key=True)
-    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), unique=True)
-    # "truth" (a synthetic capture's ground truth) or "assignment:<id>" (accepted labels).
-    source: Mapped[str] = mapped_column(String(64))
-    # P tracks of keyframe rows [frame, x, y, visible01], as the annotation page saves them.
-    tracks: Mapped[list[Any]] = mapped_column(JSON)
-    note: Mapped[str | None] = mapped_column(Text)

@@ -7,9 +7,10 @@ from typing import Literal
 from fastapi import APIRouter, Query
 
 from backend.accounts.deps import CurrentAdmin
+from backend.crowd.schemas import WorkerDetailRead, WorkerStatsRead
 from backend.db import SessionDep
 from backend.jobs.schemas import JobRead
-from backend.quality import gold, review, service
+from backend.quality import gold, review, service, worker_records
 from backend.quality.schemas import (
     QCReportDetail,
     QCReportRead,
@@ -18,7 +19,7 @@ from backend.quality.schemas import (
     TrainingClipRead,
     WorkerQualityRead,
 )
-from backend.validation import Id, Offset, QueryId, QueryKey
+from backend.validation import Id, Key, Offset, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/qc", tags=["quality"])
 router.include_router(review.router)
@@ -58,3 +59,24 @@ def workers(session: SessionDep, _: CurrentAdmin, limit: int = Query(500, ge=1, 
 def create_training_clip(body: TrainingClipCreate, session: SessionDep,
                          _: CurrentAdmin) -> TrainingClipRead:
     return TrainingClipRead.model_validate(gold.create_clip(session, body))
+
+
+# ----- each crowd worker's record (quality over time, approval, earnings), under the crowd's
+# paths with the admin's other worker actions
+
+records_router = APIRouter(prefix="/api/crowd", tags=["crowd"])
+
+
+@records_router.get("/workers", response_model=list[WorkerStatsRead])
+def list_workers(session: SessionDep, _: CurrentAdmin, limit: int = Query(200, ge=1, le=1000),
+                 offset: Offset = 0) -> list[WorkerStatsRead]:
+    """Workers by id, ``limit`` (200, at most 1,000) from ``offset`` on: approval rate, median
+    error, working time, earnings, block, and their newest QC reports by date."""
+    return worker_records.list_workers(session, limit, offset)
+
+
+@records_router.get("/workers/{worker_id}", response_model=WorkerDetailRead)
+def read_worker(worker_id: Key, session: SessionDep, _: CurrentAdmin) -> WorkerDetailRead:
+    """One worker's stats, every QC report by date and their newest assignments (404 for a
+    worker with no work and no block here)."""
+    return worker_records.get_worker_or_raise(session, worker_id)

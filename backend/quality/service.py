@@ -26,14 +26,14 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import SCORED_STATUSES
-from backend.annotation.models import Assignment, Task
+from backend.annotation.models import Assignment, Task, TrainingClip
 from backend.annotation.points import point_names
 from backend.config import get_settings
 from backend.crowd.models import CrowdHit, CrowdSubmission, CrowdWorkerAction
 from backend.errors import NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
+from backend.labels import SCORED_STATUSES
 from backend.quality import gold
 from backend.quality.camera_offsets import camera_notes, landmark_offsets, rescored
 from backend.quality.inputs import (
@@ -45,7 +45,7 @@ from backend.quality.inputs import (
     stretch_checks,
     target_inputs,
 )
-from backend.quality.models import QCReport, TrainingClip
+from backend.quality.models import QCReport
 
 if TYPE_CHECKING:
     from worker.quality.decide import QCThresholds

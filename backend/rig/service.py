@@ -18,15 +18,16 @@ import numpy as np
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from backend.annotation.accepted import count_accepted
+from backend.captures.assets import hand_model_for, load_depth
 from backend.captures.calibration import CalibrationVersion, imported_model, version_in_use
 from backend.captures.models import Frame
 from backend.captures.service import get_sequence_or_raise, sequence_cameras
 from backend.errors import Conflict, NotFound
 from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
+from backend.labels import approved_labels, count_accepted
 from backend.rig.schemas import CameraHealthRead, HandShapeRead, RigHealthRead, RigHealthStatus
-from backend.solve.inputs import approved_labels, hand_model_for, hand_target, load_depth
+from backend.solve.inputs import hand_target
 from backend.storage import get_storage
 from worker.geometry.cameras import CameraModel
 from worker.hand.calibrate import SHAPE_BONE_MM, check_shape, triangulate_joints

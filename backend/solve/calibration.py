@@ -12,13 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session
 
+from backend.captures.assets import hand_model_for
 from backend.captures.service import camera_model, get_sequence_or_raise, sequence_cameras
 from backend.errors import Conflict, NotFound
-from backend.solve.inputs import (
-    approved_labels,
-    hand_model_for,
-    hand_target,
-)
+from backend.labels import approved_labels
+from backend.solve.inputs import hand_target
 from backend.solve.service import SolveNotReady
 from worker.hand.calibrate import (
     LABELLED_RIDGE,

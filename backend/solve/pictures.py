@@ -10,10 +10,10 @@ import torch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from backend.captures.assets import hand_model_for, load_mesh
 from backend.captures.models import Camera, Frame, SceneObject
 from backend.captures.service import camera_model, sequence_cameras
 from backend.errors import Conflict, StorageError
-from backend.solve.inputs import hand_model_for, load_mesh
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, frame_payload, object_trust
 from backend.solve.service import check_frame, resolve_view

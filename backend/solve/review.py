@@ -17,9 +17,9 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from backend.captures.assets import load_mesh
 from backend.captures.models import SceneObject
 from backend.errors import DexlabelError
-from backend.solve.inputs import load_mesh
 from backend.solve.models import SolveRun
 from backend.solve.pictures import run_arrays
 from backend.solve.results import object_trust

@@ -23,7 +23,7 @@ from backend.config import get_settings
 from backend.db import utcnow
 from backend.errors import Conflict, DexlabelError, NotFound
 from backend.jobs.service import enqueue_job
-from backend.solve.inputs import count_approved
+from backend.labels import count_accepted
 from backend.solve.models import SolveRun
 from backend.solve.results import encode_result, result_key
 from backend.storage import get_storage
@@ -64,7 +64,7 @@ def check_ready(session: Session, seq: Sequence) -> None:
             raise SolveNotReady(
                 f"hand {hand.index} ({hand.side}) has no betas; run `dexlabel calibrate-hand "
                 f"{seq.id}` or give them in the capture's mano.yml", hand_index=hand.index)
-    if count_approved(session, seq.id) == 0:
+    if count_accepted(session, seq.id) == 0:
         raise SolveNotReady(f"sequence {seq.id} has no accepted (approved) tracks to solve from")
 
 

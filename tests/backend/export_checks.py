@@ -18,9 +18,9 @@ from pycocotools.cocoeval import COCOeval
 from sqlalchemy import select
 
 from backend.annotation.models import Assignment, Task
+from backend.captures.assets import load_mesh
 from backend.captures.models import Camera, SceneObject
 from backend.db import session_scope
-from backend.solve.inputs import load_mesh
 from backend.solve.results import decode_result
 from backend.solve.service import current_run
 from backend.storage import get_storage

@@ -262,9 +262,8 @@ def test_accepted_labels_reads_use_indexes(filled: str, sequence_id: int) -> Non
     """The accepted-labels reads of the pipeline, the QC job and the solve."""
     from backend.annotation.models import Assignment, Task
     from backend.captures.models import Sequence
-    from backend.pipeline import accepted_digest
+    from backend.labels import accepted_digest, approved_labels, count_accepted
     from backend.quality.inputs import target_inputs
-    from backend.solve.inputs import approved_labels, count_approved
 
     seq = sequence_id
 
@@ -277,7 +276,7 @@ def test_accepted_labels_reads_use_indexes(filled: str, sequence_id: int) -> Non
     assert _no_seq_scans(lambda s: target_inputs(s, seq, "hand:0")) <= 6
     assert _no_seq_scans(lambda s: target_inputs(s, seq, "object:2")) <= 6
     assert _no_seq_scans(lambda s: approved_labels(s, seq, frames(s))) <= 4
-    assert _no_seq_scans(lambda s: count_approved(s, seq)) == 2
+    assert _no_seq_scans(lambda s: count_accepted(s, seq)) == 2
 
     # A view's depth maps as the QC job's visibility check finds them.
     from backend.captures.service import sequence_cameras
@@ -411,9 +410,9 @@ def test_crowd_worker_medians_taken_by_the_database_match_the_rows(filled: str) 
     from collections import defaultdict
 
     from backend.annotation.models import Assignment
-    from backend.crowd import workers
     from backend.crowd.models import CrowdPayment, CrowdSubmission, CrowdWorkerAction
     from backend.db import session_scope
+    from backend.quality import worker_records as workers
     from backend.quality.models import QCReport
 
     with session_scope() as session:

@@ -20,13 +20,14 @@ from typer.testing import CliRunner
 
 from backend.annotation.models import Task, Track
 from backend.annotation.service import create_assignment
+from backend.captures.assets import load_mesh
 from backend.captures.flows import import_path
 from backend.captures.models import Camera, Hand, SceneObject
+from backend.captures.truth import CaptureTruth
 from backend.cli.solve import calibrate_hand_command, solve_command
-from backend.crowd.simulate import CaptureTruth
 from backend.db import session_scope
 from backend.jobs.runner import execute
-from backend.solve.inputs import load_mesh, merge_labels
+from backend.labels import merge_labels
 from backend.solve.service import job_key
 from backend.storage import get_storage
 from worker.formats.dexycb import HAND_SEG_VALUE

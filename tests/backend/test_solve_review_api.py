@@ -12,10 +12,10 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import select
 
+from backend.captures.assets import load_mesh
 from backend.captures.flows import import_path
 from backend.captures.models import SceneObject
 from backend.db import session_scope
-from backend.solve.inputs import load_mesh
 from backend.solve.pictures import run_arrays
 from backend.solve.service import get_run_or_raise
 from backend.storage import get_storage

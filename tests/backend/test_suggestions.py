@@ -24,7 +24,7 @@ def _bearer(token: str) -> dict[str, str]:
 
 
 def _truth(capture: Path, serial: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from worker.synth.annotators import hand_visibility
 
     joint_2d, seg = CaptureTruth(capture).view(serial, frames)

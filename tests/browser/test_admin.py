@@ -25,7 +25,8 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
-from backend.crowd.simulate import WORKER_PASSWORD, CaptureTruth, simulate
+from backend.captures.truth import CaptureTruth
+from backend.crowd.simulate import WORKER_PASSWORD, simulate
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
 from tests.browser.helpers import wait_overlay_shows
 from worker.synth.annotators import annotate

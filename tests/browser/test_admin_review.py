@@ -108,7 +108,8 @@ def review_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
 def reviewed(live_server: LiveServer, review_capture: tuple[Path, int, list[str]],
              review_worker: None) -> dict[str, Any]:
     """The simulated crowd's work on the capture, scored; profile -> an assignment id."""
-    from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
+    from backend.captures.truth import CaptureTruth
+    from backend.crowd.simulate import WorkerClient, _work_one, admin_token
 
     # Only this capture's HITs: others left open by earlier tests in the session are not ours.
     capture, sequence_id, hit_ids = review_capture

@@ -304,8 +304,8 @@ def test_a_re_run_with_other_settings_is_queued_with_them(
 
 
 def _accepted(server: LiveServer) -> int:
-    from backend.annotation.accepted import count_accepted
     from backend.db import session_scope
+    from backend.labels import count_accepted
 
     with server_settings(server), session_scope() as session:
         return count_accepted(session, server.sequence_id)

@@ -212,7 +212,7 @@ def prefill_capture(live_server: LiveServer, tmp_path_factory: pytest.TempPathFa
     and view 0's truth."""
     from backend.annotation.models import Assignment, Track
     from backend.captures.flows import import_path
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.db import session_scope, utcnow
     from worker.synth import generate_capture
     from worker.synth.annotators import hand_visibility

@@ -62,7 +62,7 @@ def _submit_careful_work(sequence_id: int, capture: Path) -> None:
     from backend.annotation.models import Task
     from backend.annotation.schemas import TracksSave
     from backend.annotation.service import create_assignment, create_tasks
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.db import session_scope
     from backend.pipeline import submit
     from backend.storage import get_storage

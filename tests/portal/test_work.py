@@ -77,7 +77,7 @@ def test_hits_the_worker_does_not_qualify_for_are_not_listed(portal: Portal, mtu
     assert len(portal.ok("GET", "/hits", dan["access_token"])) == 1
 
 
-def test_earnings_count_approved_rewards_and_bonuses_and_show_feedback(
+def test_earnings_count_accepted_rewards_and_bonuses_and_show_feedback(
     portal: Portal, mturk: MTurk
 ) -> None:
     paid_hit, waiting_hit = _hit(mturk, Reward="0.50"), _hit(mturk, Reward="0.30")

@@ -43,7 +43,8 @@ def crowd_submits(base: str, capture: Path, profiles: list[str], seed: int = 0,
                   first_worker: int = 1) -> list:
     """Simulated workers first_worker.. with these profiles, in order, each taking the first
     HIT on offer."""
-    from backend.crowd.simulate import CaptureTruth, WorkerClient, _work_one, admin_token
+    from backend.captures.truth import CaptureTruth
+    from backend.crowd.simulate import WorkerClient, _work_one, admin_token
 
     rng = np.random.default_rng(seed)
     truth = CaptureTruth(capture)

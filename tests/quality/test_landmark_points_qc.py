@@ -51,7 +51,7 @@ def _object_tasks(capture: Path) -> tuple[int, dict[str, list[tuple]], dict[str,
 def _crowd(capture: Path, tasks: list[tuple], target: str, seed: int) -> dict[int, str]:
     """Careful workers on every view but the last, one-spot work on the last:
     {assignment id: profile}."""
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from worker.synth.annotators import annotate
 
     truth, rng = CaptureTruth(capture), np.random.default_rng(seed)
@@ -105,7 +105,7 @@ def test_qc_rejects_two_landmarks_on_one_spot_of_a_static_object_before_any_solv
 
 def test_after_a_solve_one_spot_is_rejected_on_every_object(
         market_env: dict[str, str], two_object_capture: Path) -> None:
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.quality.flows import run_qc
 
     sequence_id, tasks, _ = _object_tasks(two_object_capture)

@@ -18,7 +18,7 @@ def test_a_finished_solve_checks_each_workers_landmarks_against_the_solved_objec
     from backend.annotation.models import Task
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.jobs.models import Job
     from backend.jobs.runner import execute
     from backend.pipeline import run_solve

@@ -79,7 +79,7 @@ def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: di
     from backend.annotation.service import create_tasks
     from backend.app import create_app
     from backend.captures.flows import import_path
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.jobs.runner import execute
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key, request_qc

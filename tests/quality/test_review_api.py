@@ -36,7 +36,7 @@ def scored(market_env: dict[str, str], qc_capture: Path) -> dict:
     from backend.annotation.service import create_tasks
     from backend.app import create_app
     from backend.captures.flows import import_path
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.quality.service import score_target
     from backend.storage import get_storage
     from worker.synth.annotators import annotate

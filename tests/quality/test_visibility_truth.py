@@ -32,7 +32,7 @@ def test_hand_visibility_metrics_follow_the_true_flags(app_env: dict,
                                                        visibility_capture: Path) -> None:
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
-    from backend.crowd.simulate import CaptureTruth
+    from backend.captures.truth import CaptureTruth
     from backend.quality.models import QCReport
     from backend.quality.service import score_target
     from backend.storage import get_storage

@@ -166,7 +166,7 @@ class TestSimulatedObjectWorkers:
 def test_careful_workers_pick_distinct_points_in_plain_view_on_a_rendered_box():
     import cv2
 
-    from backend.crowd.simulate import surface_points
+    from backend.captures.truth import surface_points
     from worker.synth.annotators import PLAIN_VIEW_COS, mesh_landmarks, vertex_normals
 
     cam = camera()

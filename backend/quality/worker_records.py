@@ -17,7 +17,6 @@ from typing import Any
 from sqlalchemy import ColumnElement, Select, func, select, union
 from sqlalchemy.orm import InstrumentedAttribute, Session
 
-from backend.annotation.accepted import ACCEPTED
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Sequence, Subject
 from backend.crowd import pricing
@@ -29,6 +28,7 @@ from backend.crowd.schemas import (
     WorkerStatsRead,
 )
 from backend.errors import NotFound
+from backend.labels import ACCEPTED
 from backend.quality.models import QCReport
 from backend.quality.service import qc_score
 

@@ -1,7 +1,7 @@
 """Pre-fill suggestions for the annotation page: where the target's accepted work in other views
 places each point in this view, and the epipolar lines of those labels.
 
-Once a target (a hand or an object of a sequence) has accepted work (backend.annotation.accepted)
+Once a target (a hand or an object of a sequence) has accepted work (backend.labels)
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
 from them and projected into this view (worker.quality.prefill), with a visibility suggested
 from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
@@ -28,13 +28,13 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.annotation import service
-from backend.annotation.accepted import labelled_work, sequence_tasks, work_query
 from backend.annotation.models import Assignment, Task
 from backend.annotation.tokens import TASK_SCOPE
 from backend.captures.models import Camera, Frame
 from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
+from backend.labels import labelled_work, sequence_tasks, work_query
 from backend.storage import Storage
 from worker.quality.prefill import (
     MIN_ACCEPTED_VIEWS,
