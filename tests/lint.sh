@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Lint and type checks: ruff over the Python sources and mypy over the product packages, with
-# the rules and strictness in pyproject.toml. Exits non-zero on any finding.
+# Lint and type checks: ruff over the Python sources, mypy over the product packages, and the
+# import contracts (domains import downwards only; worker/ reaches backend/ only through
+# worker/tasks.py), with the rules in pyproject.toml. Exits non-zero on any finding.
 # Needs the test extras installed in the virtualenv (tests/run.sh installs them).
 # Usage: bash tests/lint.sh
 set -euo pipefail
@@ -12,4 +13,6 @@ echo "ruff check backend worker bench migrations tests"
 "$VENV/bin/ruff" check --no-cache backend worker bench migrations tests || status=1
 echo "mypy backend worker"
 "$VENV/bin/mypy" backend worker || status=1
+echo "lint-imports (the layer contracts in pyproject.toml)"
+"$VENV/bin/lint-imports" --no-cache || status=1
 exit "$status"
