@@ -131,10 +131,10 @@ def _save_logins(path: Path, logins: dict[str, Login]) -> None:
 def demo_logins() -> dict[str, Login]:
     """The demo's admin and portal worker, ready to sign in; their passwords are made once
     and kept in ``{var_dir}/demo-logins.json``, so a re-run prints the same ones."""
-    from backend.accounts.service import create_admin
+    from backend.accounts.models import PortalAccount
+    from backend.accounts.service import change_password, create_admin
     from backend.market.clock import now
-    from backend.portal.accounts import change_password, create_account
-    from backend.portal.models import PortalAccount
+    from backend.portal.accounts import create_account
     from backend.security import verify_password
 
     path = get_settings().var_dir / LOGINS_FILE
@@ -356,8 +356,8 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
 
 
 def _simulated_accounts() -> int:
+    from backend.accounts.models import PortalAccount
     from backend.crowd.simulate import WORKER_EMAIL
-    from backend.portal.models import PortalAccount
 
     pattern = WORKER_EMAIL.split("{", 1)[0] + "%"
     with session_scope() as session:

@@ -1,6 +1,6 @@
 """Every ORM model, imported in one place so Alembic and the app see the whole schema."""
 
-from backend.accounts.models import Admin
+from backend.accounts.models import Admin, PortalAccount, PortalInvite
 from backend.annotation.models import Assignment, Task, Track, TrainingClip
 from backend.captures.calibration import CalibrationVersion
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
@@ -8,12 +8,11 @@ from backend.crowd import models as crowd
 from backend.db import Base
 from backend.jobs.models import Job
 from backend.market import models as market
-from backend.portal import models as portal
 from backend.quality.models import QCReport
 from backend.solve.models import SolveRun
 
 __all__ = [
     "Admin", "Assignment", "Base", "CalibrationVersion", "Camera", "Frame", "Hand", "Job",
-    "QCReport", "SceneObject", "Sequence", "SolveRun", "Subject", "Task", "Track",
-    "TrainingClip", "crowd", "market", "portal",
+    "PortalAccount", "PortalInvite", "QCReport", "SceneObject", "Sequence", "SolveRun",
+    "Subject", "Task", "Track", "TrainingClip", "crowd", "market",
 ]

@@ -1,4 +1,5 @@
-"""Request authorisation: admins by bearer token; frame viewers by bearer or a view token."""
+"""Request authorisation: admins and portal workers by bearer token (backend.accounts.service);
+frame viewers by an admin's bearer token or a view token."""
 
 from __future__ import annotations
 
@@ -6,15 +7,14 @@ from typing import Annotated
 
 from fastapi import Depends, Query, Request
 
-from backend.accounts.models import Admin
-from backend.accounts.service import get_active_admin
+from backend.accounts.models import Admin, PortalAccount
+from backend.accounts.service import ADMIN, WORKER, signed_in_account
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.errors import Forbidden, Unauthorized
 from backend.security import sign_token, verify_token
 from backend.validation import Id, Key
 
-ADMIN_SCOPE = "admin"
 VIEW_SCOPE = "view"
 # The only tokens a frame URL (?token=) may carry: read-only view tokens of one sequence and
 # camera. The write-capable assignment token is sent as a header only, never in a URL, where
@@ -28,13 +28,6 @@ def bearer_token(request: Request) -> str | None:
     return token.strip() if scheme.lower() == "bearer" and token.strip() else None
 
 
-def admin_token(admin_id: int, token_epoch: int, ttl_s: int) -> str:
-    """An admin's bearer token, valid until ``ttl_s`` or until the admin's token epoch moves
-    on (logout, password change or reset)."""
-    payload = {"scope": ADMIN_SCOPE, "sub": admin_id, "epoch": token_epoch}
-    return sign_token(payload, get_settings().signing_key, ttl_s)
-
-
 def view_token(sequence_id: int, serial: str, ttl_s: int) -> str:
     """A read-only token for one view's frames, the only token fit for a URL."""
     payload = {"scope": VIEW_SCOPE, "sequence_id": sequence_id, "serial": serial}
@@ -42,14 +35,17 @@ def view_token(sequence_id: int, serial: str, ttl_s: int) -> str:
 
 
 def current_admin(request: Request, session: SessionDep) -> Admin:
-    token = bearer_token(request)
-    if token is None:
-        raise Unauthorized("admin login required: send 'Authorization: Bearer <token>'")
-    payload = verify_token(token, get_settings().signing_key, ADMIN_SCOPE)
-    return get_active_admin(session, int(payload["sub"]), payload.get("epoch"))
+    account: Admin = signed_in_account(ADMIN, session, bearer_token(request))
+    return account
+
+
+def current_worker(request: Request, session: SessionDep) -> PortalAccount:
+    account: PortalAccount = signed_in_account(WORKER, session, bearer_token(request))
+    return account
 
 
 CurrentAdmin = Annotated[Admin, Depends(current_admin)]
+CurrentWorker = Annotated[PortalAccount, Depends(current_worker)]
 
 
 ViewTokenQuery = Annotated[str | None, Query(

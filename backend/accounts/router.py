@@ -2,17 +2,14 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel, Field
-from starlette.concurrency import run_in_threadpool
 
 from backend.accounts import service
-from backend.accounts.deps import CurrentAdmin, admin_token
-from backend.accounts.login import password_check, password_login
+from backend.accounts.deps import CurrentAdmin
+from backend.accounts.service import ADMIN
 from backend.db import SessionDep
 
 router = APIRouter(prefix="/api/auth", tags=["auth"])
 
-ADMIN_TOKEN_TTL_S = 12 * 3600
-ADMIN_REALM = "admin"
 
 
 class LoginRequest(BaseModel):
@@ -37,16 +34,15 @@ class AdminRead(BaseModel):
 
 
 def _token_read(admin_id: int, token_epoch: int) -> TokenRead:
-    return TokenRead(access_token=admin_token(admin_id, token_epoch, ADMIN_TOKEN_TTL_S),
-                     expires_in=ADMIN_TOKEN_TTL_S)
+    return TokenRead(access_token=service.account_token(ADMIN, admin_id, token_epoch),
+                     expires_in=ADMIN.ttl_s)
 
 
 @router.post("/token", response_model=TokenRead)
 async def login(body: LoginRequest, request: Request) -> TokenRead:
     """A bearer token for 12 hours. Failed logins are limited per account and per client
     address: past the limit every login answers 429 with Retry-After."""
-    record = await password_login(request, ADMIN_REALM, body.email, body.password,
-                                  service.login_record)
+    record = await service.sign_in(request, ADMIN, body.email, body.password)
     return _token_read(record.account_id, record.token_epoch)
 
 
@@ -61,9 +57,8 @@ def logout(admin: CurrentAdmin, session: SessionDep) -> Response:
 async def change_password(body: PasswordChange, request: Request, admin: CurrentAdmin,
                           session: SessionDep) -> TokenRead:
     """A new password: every token issued before ends; the reply is a new token."""
-    await password_check(request, ADMIN_REALM, admin.email, body.current_password,
-                         admin.password_hash)
-    await run_in_threadpool(service.change_password, session, admin, body.new_password)
+    await service.new_password(request, ADMIN, session, admin, body.current_password,
+                               body.new_password)
     return _token_read(admin.id, admin.token_epoch)
 
 

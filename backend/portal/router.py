@@ -6,10 +6,11 @@ from datetime import timedelta
 
 from fastapi import APIRouter, Query, Request, Response
 from sqlalchemy.orm import Session
-from starlette.concurrency import run_in_threadpool
 
-from backend.accounts.deps import CurrentAdmin
-from backend.accounts.login import password_check, password_login
+from backend.accounts import service as account_service
+from backend.accounts.deps import CurrentAdmin, CurrentWorker
+from backend.accounts.models import PortalAccount
+from backend.accounts.service import WORKER
 from backend.config import get_settings
 from backend.crowd.titles import TaskFacts
 from backend.db import SessionDep
@@ -19,8 +20,6 @@ from backend.market.models import MarketAssignment
 from backend.market.money import format_amount
 from backend.market.workers import WorkerHit
 from backend.portal import accounts, service, tasks
-from backend.portal.deps import PORTAL_TOKEN_TTL_S, CurrentWorker, portal_token
-from backend.portal.models import PortalAccount
 from backend.portal.schemas import (
     AccountCreate,
     AccountRead,
@@ -41,12 +40,11 @@ from backend.portal.schemas import (
 from backend.validation import Key
 
 router = APIRouter(prefix="/api/portal", tags=["worker portal"])
-PORTAL_REALM = "portal"
 
 
 def _token_read(account_id: int, worker_id: str, token_epoch: int) -> TokenRead:
-    return TokenRead(access_token=portal_token(account_id, worker_id, token_epoch),
-                     expires_in=PORTAL_TOKEN_TTL_S, worker_id=worker_id)
+    token = account_service.account_token(WORKER, account_id, token_epoch, worker_id=worker_id)
+    return TokenRead(access_token=token, expires_in=WORKER.ttl_s, worker_id=worker_id)
 
 
 def _account_read(account: PortalAccount) -> AccountRead:
@@ -115,8 +113,7 @@ def register(body: Register, session: SessionDep) -> AccountRead:
 async def login(body: Login, request: Request) -> TokenRead:
     """A bearer token for 12 hours. Failed logins are limited per account and per client
     address: past the limit every login answers 429 with Retry-After."""
-    record = await password_login(request, PORTAL_REALM, body.email, body.password,
-                                  accounts.login_record)
+    record = await account_service.sign_in(request, WORKER, body.email, body.password)
     assert record.worker_id is not None
     return _token_read(record.account_id, record.worker_id, record.token_epoch)
 
@@ -124,7 +121,7 @@ async def login(body: Login, request: Request) -> TokenRead:
 @router.post("/logout", status_code=204, response_class=Response)
 def logout(worker: CurrentWorker, session: SessionDep) -> Response:
     """Ends every token of this worker account (on every device)."""
-    accounts.sign_out(session, worker)
+    account_service.sign_out(session, worker)
     return Response(status_code=204)
 
 
@@ -132,9 +129,8 @@ def logout(worker: CurrentWorker, session: SessionDep) -> Response:
 async def change_password(body: PasswordChange, request: Request, worker: CurrentWorker,
                           session: SessionDep) -> TokenRead:
     """A new password: every token issued before ends; the reply is a new token."""
-    await password_check(request, PORTAL_REALM, worker.email, body.current_password,
-                         worker.password_hash)
-    await run_in_threadpool(accounts.change_password, session, worker, body.new_password)
+    await account_service.new_password(request, WORKER, session, worker, body.current_password,
+                                       body.new_password)
     return _token_read(worker.id, worker.worker_id, worker.token_epoch)
 
 
