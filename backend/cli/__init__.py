@@ -499,6 +499,3 @@ def _register_domain_commands() -> None:
 
 
 _register_domain_commands()
-
-if __name__ == "__main__":
-    app()
