@@ -34,7 +34,7 @@ RIGHT = ("careful", "lazy-still", "unseen")
 
 def drain() -> list[str]:
     """Run the queued jobs (QC, solve) here until none is left; the keys run, in order."""
-    from backend.jobs.runner import run_queued
+    from backend.jobs.consumer import run_queued
     from worker.tasks import register_handlers
 
     register_handlers()

@@ -22,6 +22,7 @@ from sqlalchemy.exc import IntegrityError
 
 from backend.captures import layout, service
 from backend.captures.models import Camera, Frame, Sequence
+from backend.captures.plans import SequencePlan
 from backend.config import Settings
 from backend.db import session_scope
 from backend.errors import Forbidden, InvalidCapture
@@ -109,7 +110,7 @@ def _require_inside(path: Path, roots: Seq[Path], what: str) -> None:
             "folder in DEXLABEL_CAPTURE_ROOTS")
 
 
-def _import_plan(storage: Storage, plan: layout.SequencePlan) -> service.ImportResult:
+def _import_plan(storage: Storage, plan: SequencePlan) -> service.ImportResult:
     for attempt in range(1, IMPORT_ATTEMPTS + 1):
         try:
             return _import_once(storage, plan)
@@ -123,7 +124,7 @@ def _import_plan(storage: Storage, plan: layout.SequencePlan) -> service.ImportR
     raise AssertionError("unreachable")
 
 
-def _import_once(storage: Storage, plan: layout.SequencePlan) -> service.ImportResult:
+def _import_once(storage: Storage, plan: SequencePlan) -> service.ImportResult:
     result: service.ImportResult | None = None
     try:
         with session_scope() as session:

@@ -21,152 +21,21 @@ file (relative to the root) and the field or frame at fault.
 
 from __future__ import annotations
 
-import hashlib
-import os
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from backend.captures.imagefiles import check_jpeg, check_png16
+from backend.captures.frame_files import attach_frames
+from backend.captures.plans import CameraPlan, HandPlan, ObjectPlan, SequencePlan
+from backend.captures.reader import CaptureReader
 from backend.errors import InvalidCapture
 from worker.formats import dexycb
-from worker.formats.dexycb import VIDEO_SUFFIXES, YCB_CLASSES
+from worker.formats.dexycb import YCB_CLASSES
 
 # The longest import path taken (Linux's PATH_MAX).
 MAX_PATH_CHARS = 4096
 MESH_SUFFIXES = dexycb.MODEL_SUFFIXES
-# Threads that decode a capture's colour and depth frames while it is checked (OpenCV decodes
-# without holding the GIL).
-DECODE_THREADS = min(8, os.cpu_count() or 1)
-
-
-@dataclass
-class FramePlan:
-    index: int
-    color_path: Path
-    depth_path: Path | None
-
-
-@dataclass
-class CameraPlan:
-    serial: str
-    width: int
-    height: int
-    fx: float
-    fy: float
-    ppx: float
-    ppy: float
-    distortion: list[float]
-    extrinsics: list[list[float]]
-    frames: list[FramePlan] = field(default_factory=list)
-    video_path: Path | None = None
-    video_frames: list[bytes] = field(default_factory=list)  # JPEG bytes, decoded from video_path
-
-
-@dataclass
-class ObjectPlan:
-    index: int
-    ycb_id: int
-    name: str
-    mesh_path: Path
-    model_files: list[Path]
-    num_vertices: int
-    num_faces: int
-    grasped: bool
-    initial_pose: list[list[float]] | None
-
-
-@dataclass
-class HandPlan:
-    index: int
-    side: str
-    calib_name: str | None
-    betas: list[float] | None
-
-
-@dataclass
-class SequencePlan:
-    root: Path
-    seq_dir: Path
-    subject: str
-    name: str
-    num_frames: int
-    master_serial: str | None
-    cameras: list[CameraPlan]
-    objects: list[ObjectPlan]
-    hands: list[HandPlan]
-    fingerprint: str
-
-    @property
-    def source_kind(self) -> str:
-        return "video" if any(c.video_path for c in self.cameras) else "images"
-
-
-class _Reader:
-    """Reads files under one root, naming them relative to it in every error."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = root
-        self.digest = hashlib.sha256()
-
-    def rel(self, path: Path) -> str:
-        try:
-            return path.relative_to(self.root).as_posix()
-        except ValueError:
-            return str(path)
-
-    def fail(self, path: Path, problem: str) -> InvalidCapture:
-        return InvalidCapture(self.rel(path), problem)
-
-    def yaml(self, path: Path) -> dict[str, Any]:
-        if not path.is_file():
-            raise self.fail(path, "file is missing")
-        data = path.read_bytes()
-        self.digest.update(self.rel(path).encode() + b"\0" + data)
-        try:
-            doc = yaml.safe_load(data)
-        except yaml.YAMLError as exc:
-            where = getattr(exc, "problem_mark", None)
-            line = f" at line {where.line + 1}" if where is not None else ""
-            raise self.fail(path, f"not valid YAML{line}: {getattr(exc, 'problem', exc)}") from None
-        if not isinstance(doc, dict):
-            raise self.fail(path, "expected a mapping at the top level")
-        return doc
-
-    def field(
-        self, doc: dict[str, Any], path: Path, name: str, kind: type | tuple[type, ...]
-    ) -> Any:
-        if name not in doc:
-            raise self.fail(path, f"field '{name}' is missing")
-        value = doc[name]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-            raise self.fail(path, f"field '{name}' must be {_kind_name(kind)}, got {value!r:.60}")
-        return value
-
-    def numbers(self, value: Any, path: Path, name: str, count: int) -> list[float]:
-        try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise self.fail(path, f"field '{name}' must be a list of {count} numbers") from None
-        if arr.size != count or arr.ndim > 2:
-            raise self.fail(
-                path, f"field '{name}' must hold {count} numbers, got shape {list(arr.shape)}"
-            )
-        if not np.all(np.isfinite(arr)):
-            raise self.fail(path, f"field '{name}' holds a non-finite number")
-        return [float(v) for v in arr.ravel()]
-
-
-def _kind_name(kind: type | tuple[type, ...]) -> str:
-    kinds = kind if isinstance(kind, tuple) else (kind,)
-    names = {list: "a list", dict: "a mapping", str: "a string", int: "an integer",
-             float: "a number"}
-    return " or ".join(names.get(k, k.__name__) for k in kinds)
 
 
 def find_sequence_dirs(path: Path) -> list[Path]:
@@ -192,7 +61,7 @@ def capture_root_of(seq_dir: Path) -> Path:
 def read_sequence(seq_dir: Path) -> SequencePlan:
     """Parse and check one sequence and everything it refers to; touches nothing."""
     root = capture_root_of(seq_dir)
-    rd = _Reader(root)
+    rd = CaptureReader(root)
     meta_path = seq_dir / dexycb.META_FILE
     meta = rd.yaml(meta_path)
     serials = [str(s) for s in rd.field(meta, meta_path, dexycb.META_SERIALS, list)]
@@ -205,7 +74,7 @@ def read_sequence(seq_dir: Path) -> SequencePlan:
     extr_name = str(rd.field(meta, meta_path, dexycb.META_EXTRINSICS, (str, int)))
     extrinsics, master = _read_extrinsics(rd, root, extr_name, serials)
     cameras = [_read_camera(rd, root, seq_dir, s, extrinsics[s]) for s in serials]
-    num_frames = _attach_frames(rd, seq_dir, cameras, num_frames)
+    num_frames = attach_frames(rd, seq_dir, cameras, num_frames)
     objects = _read_objects(rd, root, seq_dir, meta, meta_path, num_frames)
     hands = _read_hands(rd, root, meta, meta_path)
     return SequencePlan(
@@ -216,7 +85,7 @@ def read_sequence(seq_dir: Path) -> SequencePlan:
 
 
 def _read_extrinsics(
-    rd: _Reader, root: Path, name: str, serials: list[str]
+    rd: CaptureReader, root: Path, name: str, serials: list[str]
 ) -> tuple[dict[str, list[list[float]]], str | None]:
     path = root / dexycb.extrinsics_file(name)
     doc = rd.yaml(path)
@@ -236,7 +105,7 @@ def _read_extrinsics(
 
 
 def _read_camera(
-    rd: _Reader, root: Path, seq_dir: Path, serial: str, extrinsics: list[list[float]]
+    rd: CaptureReader, root: Path, seq_dir: Path, serial: str, extrinsics: list[list[float]]
 ) -> CameraPlan:
     candidates = sorted((root / dexycb.INTRINSICS_DIR).glob(dexycb.intrinsics_glob(serial)))
     if not candidates:
@@ -263,112 +132,9 @@ def _read_camera(
                       ppx=vals["ppx"], ppy=vals["ppy"], distortion=dist, extrinsics=extrinsics)
 
 
-def _attach_frames(
-    rd: _Reader, seq_dir: Path, cameras: list[CameraPlan], num_frames: int | None
-) -> int:
-    for cam in cameras:
-        folder = seq_dir / cam.serial
-        if folder.is_dir():
-            count = (num_frames if num_frames is not None
-                     else len(list(folder.glob(dexycb.COLOR_GLOB))))
-            cam.frames = [_check_frame(rd, folder, cam, i) for i in range(count)]
-        else:
-            videos = [seq_dir / f"{cam.serial}{s}" for s in VIDEO_SUFFIXES]
-            video = next((v for v in videos if v.is_file()), None)
-            if video is None:
-                raise rd.fail(folder, "camera folder (or <serial>.mp4 video) is missing")
-            cam.video_path = video
-            cam.video_frames = _decode_video(rd, cam)
-            rd.digest.update(f"{rd.rel(video)}:{video.stat().st_size}".encode())
-    counts = {len(c.frames) if c.video_path is None else len(c.video_frames) for c in cameras}
-    if len(counts) > 1 or (num_frames is not None and counts != {num_frames}):
-        raise rd.fail(seq_dir / dexycb.META_FILE,
-                      f"num_frames is {num_frames} but the views hold {sorted(counts)} frames")
-    num_frames = counts.pop()
-    if num_frames <= 0:
-        raise rd.fail(seq_dir / dexycb.META_FILE, "the views hold no frames")
-    _decode_frames(rd, cameras)
-    return num_frames
-
-
-def _decode_frames(rd: _Reader, cameras: list[CameraPlan]) -> None:
-    """Decode every colour and depth frame in full: a header can be whole while the data after
-    it is truncated or corrupt. The first bad file, in camera and frame order, is refused."""
-    files: list[tuple[Path, bool]] = []
-    for cam in cameras:
-        for fr in cam.frames:
-            files.append((fr.color_path, False))
-            if fr.depth_path is not None:
-                files.append((fr.depth_path, True))
-    with ThreadPoolExecutor(DECODE_THREADS) as pool:
-        problems = pool.map(lambda f: _decode_problem(*f), files)
-        for (path, _), problem in zip(files, problems, strict=True):
-            if problem:
-                raise rd.fail(path, problem)
-
-
-def _decode_problem(path: Path, depth: bool) -> str | None:
-    """None if the image file decodes in full (depth: to 16-bit values), else what is wrong."""
-    import cv2
-
-    try:
-        data = np.fromfile(path, np.uint8)
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED if depth else cv2.IMREAD_COLOR)
-    except (OSError, cv2.error) as exc:
-        return f"cannot be decoded: {exc}"
-    if image is None:
-        what = "PNG depth image" if depth else "JPEG image"
-        return f"{what} does not decode (truncated or corrupt data)"
-    if depth and image.dtype != np.uint16:
-        return "depth must be a 16-bit single-channel PNG (millimetres)"
-    return None
-
-
-def _decode_video(rd: _Reader, cam: CameraPlan) -> list[bytes]:
-    """Every frame of a camera's video, re-encoded as JPEG (the stored frame format)."""
-    import cv2
-
-    assert cam.video_path is not None
-    cap = cv2.VideoCapture(str(cam.video_path))
-    if not cap.isOpened():
-        raise rd.fail(cam.video_path, "video cannot be opened by OpenCV")
-    frames = []
-    try:
-        while True:
-            ok, img = cap.read()
-            if not ok:
-                break
-            if img.shape[1] != cam.width or img.shape[0] != cam.height:
-                raise rd.fail(cam.video_path, f"video is {img.shape[1]}x{img.shape[0]}, "
-                                              f"the intrinsics say {cam.width}x{cam.height}")
-            frames.append(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes())
-    finally:
-        cap.release()
-    if not frames:
-        raise rd.fail(cam.video_path, "video has no decodable frames")
-    return frames
-
-
-def _check_frame(rd: _Reader, folder: Path, cam: CameraPlan, index: int) -> FramePlan:
-    color = folder / dexycb.color_file(index)
-    depth = folder / dexycb.depth_file(index)
-    if not color.is_file():
-        raise rd.fail(color, f"frame {index} is missing")
-    problem = check_jpeg(color, cam.width, cam.height)
-    if problem:
-        raise rd.fail(color, problem)
-    rd.digest.update(f"{rd.rel(color)}:{color.stat().st_size}".encode())
-    if not depth.is_file():
-        raise rd.fail(depth, f"depth of frame {index} is missing")
-    problem = check_png16(depth, cam.width, cam.height)
-    if problem:
-        raise rd.fail(depth, problem)
-    rd.digest.update(f"{rd.rel(depth)}:{depth.stat().st_size}".encode())
-    return FramePlan(index=index, color_path=color, depth_path=depth)
-
-
 def _read_objects(
-    rd: _Reader, root: Path, seq_dir: Path, meta: dict[str, Any], meta_path: Path, num_frames: int
+    rd: CaptureReader, root: Path, seq_dir: Path, meta: dict[str, Any], meta_path: Path,
+    num_frames: int,
 ) -> list[ObjectPlan]:
     from worker.geometry.mesh_io import read_mesh
 
@@ -403,7 +169,7 @@ def _read_objects(
 
 
 def _initial_poses(
-    rd: _Reader, path: Path, num_objects: int, num_frames: int
+    rd: CaptureReader, path: Path, num_objects: int, num_frames: int
 ) -> list[list[list[float]]] | None:
     """Object-to-world 3x4 poses at frame 0 from pose.npz (qx, qy, qz, qw, tx, ty, tz)."""
     from scipy.spatial.transform import Rotation
@@ -427,7 +193,8 @@ def _initial_poses(
     return out
 
 
-def _read_hands(rd: _Reader, root: Path, meta: dict[str, Any], meta_path: Path) -> list[HandPlan]:
+def _read_hands(rd: CaptureReader, root: Path, meta: dict[str, Any],
+                meta_path: Path) -> list[HandPlan]:
     sides = meta.get(dexycb.META_MANO_SIDES) or []
     calibs = meta.get(dexycb.META_MANO_CALIB) or []
     if not isinstance(sides, list) or not isinstance(calibs, list):

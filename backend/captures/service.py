@@ -15,8 +15,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
 from backend.captures.calibration import imported_model
-from backend.captures.layout import SequencePlan
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
+from backend.captures.plans import SequencePlan
 from backend.errors import Conflict, NotFound
 from backend.storage import Storage
 from worker.formats import dexycb

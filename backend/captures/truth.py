@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from backend.captures.layout import SequencePlan, read_sequence
+from backend.captures.layout import read_sequence
+from backend.captures.plans import SequencePlan
 from backend.errors import NotFound
 from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel, intrinsics_matrix

@@ -16,7 +16,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
-from backend.cli.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
+from backend.cli.console import fail, progress, refusing_bad_input
 from backend.config import get_settings
 from backend.instance import (
     adopt_recorded_server,
@@ -189,7 +189,7 @@ def serve(
     the writers of one process wait their turn (the others would fail on a locked file)."""
     import uvicorn
 
-    from backend.jobs.runner import start_inprocess_consumer
+    from backend.jobs.consumer import start_inprocess_consumer
     from worker.tasks import register_handlers
 
     settings = serve_at(host, port)
@@ -228,7 +228,7 @@ def worker(
     workers: Annotated[int, typer.Option(min=1, max=64, help="worker threads")] = 2,
 ) -> None:
     """Run a queue consumer (one per machine when scaling out)."""
-    from backend.jobs.runner import make_consumer
+    from backend.jobs.consumer import make_consumer
     from worker.tasks import register_handlers
 
     settings = get_settings()
@@ -260,33 +260,22 @@ def demo(
     import time
 
     from backend import demo as d
-    from backend import migrate as m
+    from backend.demo import report
 
     started = time.perf_counter()
     settings = serve_at(host, port)
-    m.upgrade(settings.database_url)
-    capture = settings.var_dir / "demo-capture"
-    if not any(capture.glob("*/*/meta.yml")):
-        synth(capture, seed=7, frames=frames, views=views, objects=objects)
-    seq = _import(capture)[0]
+    seq, capture = _demo_capture(settings.var_dir / "demo-capture", settings.database_url,
+                                 frames, views, objects)
     with refusing_bad_input():
         logins = d.demo_logins()
         annotate = d.demo_annotation_link(seq.sequence_id, settings.public_url)
     server = d.DemoServer(host, port)
     try:
         with refusing_bad_input():
-            server.start()
-            d.demo_publish(seq.sequence_id, assignments)
-            if simulate_:
-                d.demo_crowd(seq.sequence_id, capture, logins["admin"], workers,
-                             server.has_consumer)
-            if server.has_consumer:
-                d.wait_for_jobs()
-                d.wait_for_solve(seq.sequence_id)
-            else:
-                typer.echo("no queue consumer here: quality checks wait for `dexlabel worker`")
-            d.demo_print(seq, settings.public_url, logins, annotate)
-            typer.echo(f"{d.demo_summary(seq.sequence_id)} (demo ready in "
+            _demo_work(server, seq.sequence_id, capture, logins["admin"], assignments,
+                       workers, simulate_)
+            report.demo_print(seq, settings.public_url, logins, annotate)
+            typer.echo(f"{report.demo_summary(seq.sequence_id)} (demo ready in "
                        f"{time.perf_counter() - started:.0f} s)")
         if serve_:
             typer.echo(f"serving at {settings.public_url}; Ctrl+C stops")
@@ -299,183 +288,44 @@ def demo(
         server.stop()
 
 
-tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).", no_args_is_help=True)
-app.add_typer(tasks_app, name="tasks")
+def _demo_capture(capture: Path, database_url: str, frames: int, views: int,
+                  objects: int) -> tuple[Any, Path]:
+    """The demo's migrated database and imported capture (synthesised first if there is
+    none): (the import's result, the capture's folder)."""
+    from backend import migrate as m
+
+    m.upgrade(database_url)
+    if not any(capture.glob("*/*/meta.yml")):
+        synth(capture, seed=7, frames=frames, views=views, objects=objects)
+    return _import(capture)[0], capture
 
 
-@tasks_app.command("create")
-def tasks_create(sequence: SequenceArg) -> None:
-    """Create one task per view and target of a sequence (idempotent)."""
-    from backend.annotation.service import create_tasks
-    from backend.db import session_scope
-    from backend.storage import get_storage
+def _demo_work(server: Any, sequence_id: int, capture: Path, admin_login: Any,
+               assignments: int, workers: int | None, simulate: bool) -> None:
+    """Start the demo's server, publish, let the simulated crowd work, wait for the quality
+    checks and the solve (when this process runs a queue consumer)."""
+    from backend import demo as d
 
-    with refusing_bad_input(), session_scope() as session:
-        tasks = create_tasks(session, get_storage(), resolve_sequence(session, sequence))
-        hands = sum(t.kind == "hand" for t in tasks)
-        typer.echo(f"{len(tasks)} tasks: {hands} hand, {len(tasks) - hands} object "
-                   f"(ids {tasks[0].id}-{tasks[-1].id})")
-
-
-def _publish_options(  # type: ignore[no-untyped-def]
-    reward: str, assignments: int, allow_large_hits: bool, round_: int,
-    min_approval_rate: int | None, require_training: bool,
-):
-    from pydantic import ValidationError
-
-    from backend.crowd.schemas import PublishOptions
-
-    try:
-        return PublishOptions(reward=reward, max_assignments=assignments,
-                              allow_large_hits=allow_large_hits, round=round_,
-                              min_approval_rate=min_approval_rate,
-                              require_training=require_training)
-    except ValidationError as exc:
-        fail("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()))
+    server.start()
+    d.demo_publish(sequence_id, assignments)
+    if simulate:
+        d.demo_crowd(sequence_id, capture, admin_login, workers, server.has_consumer)
+    if server.has_consumer:
+        d.wait_for_jobs()
+        d.wait_for_solve(sequence_id)
+    else:
+        typer.echo("no queue consumer here: quality checks wait for `dexlabel worker`")
 
 
-@app.command()
-def publish(
-    sequence: Annotated[str | None, typer.Option(help="sequence id or SUBJECT/NAME")] = None,
-    dry_run: Annotated[bool, typer.Option(
-        "--dry-run", help="print the cost, publish nothing")] = False,
-    reward: Annotated[str, typer.Option(help="reward per assignment in US dollars")] = "0.50",
-    assignments: Annotated[int, typer.Option(min=1, help="assignments per HIT")] = 1,
-    allow_large_hits: Annotated[bool, typer.Option(
-        "--allow-large-hits",
-        help="allow 10+ assignments per HIT (MTurk fee 40%, not 20%)")] = False,
-    round_: Annotated[int, typer.Option("--round", min=1, help="publishing round")] = 1,
-    min_approval_rate: Annotated[int | None, typer.Option(min=0, max=100)] = 95,
-    require_training: Annotated[bool, typer.Option(
-        help="require our training qualification")] = False,
-) -> None:
-    """Publish one HIT per task not yet published in this round (safe to re-run)."""
-    from backend.crowd import flows
-    from backend.crowd.client import make_client
-    from backend.db import session_scope
+def _register_crowd_commands() -> None:
+    from backend.cli.crowd import crowd_app, publish_command, tasks_app
 
-    options = _publish_options(reward, assignments, allow_large_hits, round_, min_approval_rate,
-                               require_training)
-    with refusing_bad_input():
-        with session_scope() as session:
-            sequence_id = resolve_sequence(session, sequence) if sequence else None
-            plan = flows.plan(session, options, sequence_id)
-        c = plan.cost
-        typer.echo(f"{c.hits} HITs x {c.assignments_per_hit} assignment(s) at ${c.reward} "
-                   f"(+ ${c.fee_per_assignment} fee each): rewards ${c.rewards} + fees ${c.fees}"
-                   f" = ${c.total}")
-        if dry_run:
-            typer.echo("dry run: nothing published")
-            return
-        with progress(f"publishing {c.hits} HITs") as step:
-            result = flows.publish_each(make_client(get_settings()), options, sequence_id)
-            step(f"{result.created} created")
-        typer.echo(f"published: {result.created} created, {result.recovered} recovered, "
-                   f"{result.already_published} already published")
+    app.add_typer(tasks_app, name="tasks")
+    app.command("publish")(publish_command)
+    app.add_typer(crowd_app, name="crowd")
 
 
-crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.", no_args_is_help=True)
-app.add_typer(crowd_app, name="crowd")
-
-
-@crowd_app.command("sync")
-def crowd_sync() -> None:
-    """Collect submitted assignments, check them against the requester API's records, and
-    queue the quality check of each new one."""
-    from backend.crowd.client import make_client
-    from backend.db import session_scope
-    from backend.pipeline import sync
-
-    with refusing_bad_input(), session_scope() as session:
-        result = sync(session, make_client(get_settings()))
-    typer.echo(f"{result.hits} HITs: {result.accepted} new submissions accepted, "
-               f"{result.already_accepted} known, {len(result.mismatched)} refused "
-               f"(HIT or worker mismatch), {len(result.unknown)} unknown")
-    for assignment_id in result.mismatched:
-        typer.echo(f"refused {assignment_id}: HIT or worker differs from our record")
-
-
-_COST_COLUMNS = ("spent_rewards", "spent_bonuses", "spent_fees", "spent",
-                 "committed_rewards", "committed_bonuses", "committed_fees", "committed")
-
-
-def _cost_row(label: str, line: Any) -> str:
-    return f"{label:<32}" + "".join(f"{getattr(line, c):>10}" for c in _COST_COLUMNS)
-
-
-@crowd_app.command("costs")
-def crowd_costs() -> None:
-    """Spend so far and money committed (US dollars): rewards, bonuses and fees apart, for the
-    project, per sequence and per worker."""
-    from backend.crowd.costs import costs
-    from backend.db import session_scope
-
-    with session_scope() as session:
-        report = costs(session)
-    typer.echo(f"{'':<32}{'--- spent ---':>40}{'--- committed ---':>40}")
-    typer.echo(f"{'':<32}" + "".join(f"{h:>10}" for h in ("rewards", "bonuses", "fees",
-                                                           "total") * 2))
-    typer.echo(_cost_row("project", report.total))
-    for line in report.by_sequence:
-        named = f" {line.name}" if line.name and line.name != f"sequence {line.key}" else ""
-        typer.echo(_cost_row(f"sequence {line.key}{named}", line))
-    for line in report.by_worker:
-        typer.echo(_cost_row(f"worker {line.key}", line))
-
-
-@crowd_app.command("bonus")
-def crowd_bonus(
-    assignment: Annotated[int, typer.Argument(help="our assignment id")],
-    amount: Annotated[str, typer.Argument(help="US dollars, more than 0, e.g. 1.00")],
-    reason: Annotated[str, typer.Option(help="what the worker reads")],
-    key: Annotated[str, typer.Option(help="names this bonus: one key pays once")] = "1",
-) -> None:
-    """Pay a bonus once (ledger row committed before the payment; safe to re-run)."""
-    from backend.crowd import flows, pricing
-    from backend.crowd.client import make_client
-
-    try:
-        cents = pricing.dollars_to_cents(amount)
-    except (ValueError, ArithmeticError):  # decimal's InvalidOperation for "abc"
-        cents = -1
-    if cents <= 0:
-        fail(f"a bonus is a dollar amount in whole cents above 0, like 1.00 (got {amount!r})")
-    with refusing_bad_input():
-        paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
-    state = "already paid" if paid.already_done else "paid"
-    typer.echo(f"bonus {key!r} of assignment {assignment} {state}: ${paid.amount} "
-               f"(+ ${paid.fee} fee) to {paid.worker_id}")
-
-
-@crowd_app.command("simulate")
-def crowd_simulate(
-    capture: Annotated[Path, typer.Option(help="synthetic capture with the ground truth")],
-    workers: Annotated[int, typer.Option(min=1, max=1000)] = 5,
-    profile: Annotated[str, typer.Option(
-        help="mixed, careful, sloppy, swapper, lazy, spammer or occluder")] = "mixed",
-    base: Annotated[str | None, typer.Option(
-        help="the app's URL (default: PUBLIC_URL, or this instance's running server)")] = None,
-    admin_email: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_EMAIL")] = None,
-    admin_password: Annotated[str | None, typer.Option(envvar="DEXLABEL_ADMIN_PASSWORD")] = None,
-    seed: Annotated[int, typer.Option(help="random seed of profiles and labels")] = 0,
-    first: Annotated[int, typer.Option(min=1, help="number of the first simulated worker")] = 1,
-) -> None:
-    """Simulated workers accept, label and submit HITs through the portal, over HTTP."""
-    from backend.crowd.simulate import simulate
-
-    if not admin_email or not admin_password:
-        fail("give --admin-email and --admin-password (an admin of the app)")
-    try:
-        with refusing_bad_input():
-            outcomes = simulate(base or get_settings().public_url, capture, workers, profile,
-                                admin_email, admin_password, seed, first_index=first)
-    except ValueError as exc:
-        fail(str(exc))
-    for o in outcomes:
-        typer.echo(f"{o.worker_id} {o.profile:9s} {o.status:17s} HIT {o.hit_id or '-'} "
-                   f"assignment {o.assignment_id or '-'} task {o.task_id or '-'}")
-    done = sum(o.status == "submitted" for o in outcomes)
-    typer.echo(f"{done} of {len(outcomes)} simulated workers submitted")
+_register_crowd_commands()
 
 
 def _register_domain_commands() -> None:

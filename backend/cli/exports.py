@@ -47,20 +47,7 @@ def export_command(
     from backend.exports.archive import kind_of
     from backend.exports.service import check_request, run_export
 
-    if not fmt:
-        fail("give --format (dexycb, coco, bop, cvat or json)")
-    if out is None:
-        fail("give --out PATH (an archive .zip or .tar, or a folder)")
-    if bool(sequences) == all_sequences:
-        fail("give one or more sequences, or --all")
-    if out.exists() or out.is_symlink():
-        fail(f"{out} exists; give a path that does not")
-    if not out.parent.is_dir():
-        fail(f"the folder {out.parent} does not exist; create it or give a path in an existing "
-             "folder")
-    if out.suffix.lower() in _FILE_SUFFIXES:
-        fail(f"{out.name}: an export is written as .zip, .tar or a folder (a path without one "
-             f"of those suffixes); {out.suffix} is none of them")
+    out = _checked_out(fmt, out, bool(sequences), all_sequences)
     options: dict[str, Any] = {"frames": "link" if link_frames else ("copy" if frames else None),
                                "split": split, "labels": labels}
     options = {k: v for k, v in options.items() if v is not None}
@@ -84,3 +71,23 @@ def export_command(
         raise typer.Exit(1) from None
     typer.echo(f"{out}: {result['sequences']} sequence(s), {result['frames']} frames, "
                f"{result['files']} files, {result['bytes'] / 1e6:.1f} MB")
+
+
+def _checked_out(fmt: str, out: Path | None, named: bool, all_sequences: bool) -> Path:
+    """The export's output path, once the command's arguments are whole and the path is free
+    (else the command stops naming what to give)."""
+    if not fmt:
+        fail("give --format (dexycb, coco, bop, cvat or json)")
+    if out is None:
+        fail("give --out PATH (an archive .zip or .tar, or a folder)")
+    if named == all_sequences:
+        fail("give one or more sequences, or --all")
+    if out.exists() or out.is_symlink():
+        fail(f"{out} exists; give a path that does not")
+    if not out.parent.is_dir():
+        fail(f"the folder {out.parent} does not exist; create it or give a path in an existing "
+             "folder")
+    if out.suffix.lower() in _FILE_SUFFIXES:
+        fail(f"{out.name}: an export is written as .zip, .tar or a folder (a path without one "
+             f"of those suffixes); {out.suffix} is none of them")
+    return out

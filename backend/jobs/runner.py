@@ -1,5 +1,5 @@
 """Running queued jobs: the handler registry; claim with a lease, finish or retry with
-backoff; reap the dead; the queue consumers.
+backoff (the reaper and the queue consumers are backend.jobs.consumer's).
 
 Every state change is one short committed statement, guarded by a compare-and-set on the
 status (and on the attempt when renewing or finishing), so two consumers never run the same
@@ -9,7 +9,7 @@ the attempt's lease; an attempt that lost its job anyway (its heartbeat could no
 database for a whole lease) stops at its next checkpoint without acting (``LeaseLost``).
 
 A message the queue could not take (the queue was down) is recorded on the job's row, and the
-reaper, which runs every minute in every consumer, sends it again once the queue answers.
+reaper sends it again once the queue answers.
 """
 
 from __future__ import annotations
@@ -24,14 +24,12 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar, cast
 
-from huey import crontab
-from huey.consumer import Consumer
 from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
 
 from backend.config import get_settings
 from backend.db import session_scope
 from backend.jobs.models import Job
-from backend.queue import QUEUE_RETRY_MAX_S, huey, queue_lost_messages
+from backend.queue import huey
 
 log = logging.getLogger(__name__)
 
@@ -106,12 +104,12 @@ def send(key: str, delay: float | None = None) -> bool:
         return True
     except Exception as exc:  # any queue failure: the row keeps the job
         log.warning("job %s: the queue did not take its message (%s); it is sent again once "
-                    "the queue answers", key, _one_line(exc))
-        _mark_unsent([key], utc_now() + timedelta(seconds=delay or 0))
+                    "the queue answers", key, one_line(exc))
+        mark_unsent([key], utc_now() + timedelta(seconds=delay or 0))
         return False
 
 
-def _mark_unsent(keys: list[str], due: datetime) -> None:
+def mark_unsent(keys: list[str], due: datetime) -> None:
     if not keys:
         return
     try:
@@ -120,10 +118,10 @@ def _mark_unsent(keys: list[str], due: datetime) -> None:
                             .values(lease_until=due)
                             .execution_options(synchronize_session=False))
     except Exception as exc:  # the database is down too: the reaper's slower pass finds it
-        log.warning("could not record jobs %s as unsent: %s", ", ".join(keys), _one_line(exc))
+        log.warning("could not record jobs %s as unsent: %s", ", ".join(keys), one_line(exc))
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     return "".join(traceback.format_exception_only(type(exc), exc)).strip().splitlines()[-1]
 
 
@@ -224,7 +222,7 @@ class _Heartbeat:
                     return
             except Exception as exc:  # the database did not answer: try again next beat
                 log.warning("job %s attempt %d: could not renew its lease: %s",
-                            self._attempt.key, self._attempt.number, _one_line(exc))
+                            self._attempt.key, self._attempt.number, one_line(exc))
 
 
 def check_lease() -> None:
@@ -299,7 +297,7 @@ def _finish(attempt: Attempt, **values: Any) -> bool:
     return True
 
 
-def _retry_delay(attempt: int) -> float:
+def retry_delay(attempt: int) -> float:
     base = get_settings().job_retry_base_s
     return min(base * 2 ** (attempt - 1), 3600.0)
 
@@ -347,128 +345,9 @@ def _after_failure(attempt: Attempt, exc: Exception) -> None:
         _finish(attempt, status="failed", error=error, finished_at=utc_now())
         return
     if _finish(attempt, status="retrying", error=error):
-        send(attempt.key, delay=_retry_delay(attempt.number))
-
-
-# --- the reaper ------------------------------------------------------------------------------
-
-
-def requeue_stale(now: datetime | None = None, starting: bool = False,
-                  queue_reset: bool = False) -> list[str]:
-    """Queue again the jobs whose worker died (lease ran out) or whose message was lost.
-
-    A message known lost (the queue did not take it, see ``send``) is sent at its due time; one
-    that vanished unnoticed is sent again after job_requeue_after_s. A consumer ``starting``
-    also re-sends every queued job at once: its message may have gone to a queue no consumer
-    reads (a command run with other queue settings) or been lost while none ran. After a
-    ``queue_reset`` (the queue's store lost what it held, see backend.queue) every queued job
-    is sent again at once and every retrying one at its retry time. A duplicate message is
-    harmless, the claim runs a job once.
-    """
-    settings = get_settings()
-    now = now or utc_now()
-    lost_before = now - timedelta(seconds=settings.job_requeue_after_s)
-    with session_scope() as session:
-        stale: list[ColumnElement[bool]] = [
-            (Job.status == "running") & (Job.lease_until < now),
-            Job.status.in_(CLAIMABLE) & (Job.lease_until <= now),
-            Job.status.in_(CLAIMABLE) & (Job.updated_at < lost_before)]
-        if starting:
-            stale.append(Job.status == "queued")
-        if queue_reset:
-            stale.append(Job.status.in_(CLAIMABLE))
-        rows = session.execute(select(Job.key, Job.status, Job.updated_at, Job.lease_until,
-                                      Job.attempts).where(or_(*stale))).all()
-        for key, *_ in rows:
-            # Touch the row so a lost message is re-sent once per interval, not every minute,
-            # and clear its unsent mark (a send that fails again sets it again).
-            session.execute(update(Job).where(Job.key == key, Job.status.in_(CLAIMABLE))
-                            .values(updated_at=now, lease_until=None)
-                            .execution_options(synchronize_session=False))
-    for n, (key, status, updated_at, lease_until, attempts) in enumerate(rows):
-        delay = None
-        if status == "running":
-            log.warning("job %s: its worker stopped before the lease ran out; queued again", key)
-        elif lease_until is not None and lease_until <= now:
-            log.warning("job %s: the queue did not take its message; sent again", key)
-        elif updated_at < lost_before:
-            log.warning("job %s: queued for over %.0f s with no worker taking it; its message "
-                        "is sent again", key, settings.job_requeue_after_s)
-        elif queue_reset:
-            if starting:  # a new queue, or one emptied while no worker ran: routine here
-                log.info("job %s: sent to this worker as it starts", key)
-            else:
-                log.warning("job %s: the queue lost its messages; sent again", key)
-            if status == "retrying":  # at the time its retry was due
-                due = updated_at + timedelta(seconds=_retry_delay(attempts))
-                delay = max((due - now).total_seconds(), 0.0)
-        else:  # queued recently, before this consumer started: routine, not a fault
-            log.info("job %s: queued before this worker started; sent to it", key)
-        if not send(key, delay=delay):
-            # The queue is down: the rest are marked unsent at once rather than each waiting
-            # for the queue to refuse it.
-            _mark_unsent([k for k, *_ in rows[n + 1:]], now)
-            break
-    return [key for key, *_ in rows]
-
+        send(attempt.key, delay=retry_delay(attempt.number))
 
 
 @huey.task()
 def run_job(key: str) -> None:
     execute(key)
-
-
-# --- consumers -------------------------------------------------------------------------------
-
-
-@huey.periodic_task(crontab(minute="*"))
-def reap_jobs() -> None:
-    """Every minute: re-queue jobs whose worker died or whose queue message was lost (all of
-    them at once when the queue's store lost its messages, e.g. a Redis restarted empty)."""
-    requeue_stale(queue_reset=queue_lost_messages())
-
-
-def run_queued(max_rounds: int = 200) -> list[str]:
-    """Run here, one after another, every job queued or waiting to retry, and the jobs they
-    queue, until none is left (what an idle queue comes to); the keys run, in order.
-    RuntimeError naming the last keys when the queue is still not idle after ``max_rounds``
-    passes."""
-    ran: list[str] = []
-    for _ in range(max_rounds):
-        with session_scope() as session:
-            keys = list(session.scalars(select(Job.key).where(Job.status.in_(CLAIMABLE))
-                                        .order_by(Job.id)))
-        if not keys:
-            return ran
-        for key in keys:
-            execute(key)
-            ran.append(key)
-    raise RuntimeError(f"the job queue never went idle: {ran[-10:]}")
-
-
-def make_consumer(workers: int) -> Consumer:
-    """A queue consumer for this process (its threads not started yet), after sending again
-    the jobs that lost their worker or message while none ran. The job handlers must be
-    registered first (register_handlers)."""
-    try:
-        reset = queue_lost_messages()
-    except Exception:
-        log.exception("the queue does not answer; jobs are sent once it does")
-        reset = True
-    try:  # queued jobs, and jobs whose worker died while no consumer ran, are picked up at once
-        requeue_stale(starting=True, queue_reset=reset)
-    except Exception:
-        log.exception("could not check the job table for stale jobs")
-    # periodic: the reaper (reap_jobs, below) runs every minute in every consumer.
-    # max_delay: a worker thread that cannot read the queue (Redis down) tries again at least
-    # every QUEUE_RETRY_MAX_S, so it takes work within seconds of the queue coming back.
-    return huey.create_consumer(workers=workers, worker_type="thread", periodic=True,
-                                max_delay=QUEUE_RETRY_MAX_S)
-
-
-def start_inprocess_consumer(workers: int) -> Consumer:
-    """Start a consumer in background threads of this process (the embedded deployment)."""
-    consumer = make_consumer(workers)
-    consumer.start()  # spawns the scheduler and worker threads, then returns
-    log.info("in-process queue consumer started with %d workers", workers)
-    return consumer

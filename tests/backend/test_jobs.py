@@ -11,8 +11,9 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select, update
 
 from backend.db import session_scope
+from backend.jobs.consumer import requeue_stale
 from backend.jobs.models import Job
-from backend.jobs.runner import _retry_delay, checkpoint, execute, job_handler, requeue_stale
+from backend.jobs.runner import checkpoint, execute, job_handler, retry_delay
 from backend.jobs.service import enqueue_job
 from backend.queue import huey
 
@@ -94,8 +95,8 @@ def test_failing_job_is_retried_with_backoff_then_failed(app_env: dict,
     assert len(CALLS) == 2
 
 
-def test_retry_delay_doubles_from_the_base(app_env: dict) -> None:
-    assert [_retry_delay(a) for a in (1, 2, 3, 4)] == [5.0, 10.0, 20.0, 40.0]
+def testretry_delay_doubles_from_the_base(app_env: dict) -> None:
+    assert [retry_delay(a) for a in (1, 2, 3, 4)] == [5.0, 10.0, 20.0, 40.0]
 
 
 def test_reaper_requeues_the_job_of_a_dead_worker(app_env: dict) -> None:

@@ -62,7 +62,7 @@ def _confirm(outcomes: list) -> None:
 
 def _drain() -> list[str]:
     """Run queued jobs here until none is left (what an idle queue means); the keys run."""
-    from backend.jobs.runner import run_queued
+    from backend.jobs.consumer import run_queued
 
     return run_queued(max_rounds=50)
 

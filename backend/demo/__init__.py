@@ -64,7 +64,7 @@ class DemoServer:
         import uvicorn
 
         from backend.app import create_app
-        from backend.jobs.runner import start_inprocess_consumer
+        from backend.jobs.consumer import start_inprocess_consumer
         from worker.tasks import register_handlers
 
         settings = get_settings()
@@ -201,7 +201,7 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
     from backend.crowd.simulate import simulate
 
     for round_ in range(1, MAX_ROUNDS + 1):
-        missing, _ = _unaccepted(sequence_id)
+        missing, _ = unaccepted(sequence_id)
         slots = _open_slots(sequence_id, extend=round_ > 1)
         if not missing or not slots:
             return
@@ -314,7 +314,7 @@ def _hits(sequence_id: int, kind: str) -> int:
                    CrowdHit.hit_id.is_not(None))) or 0)
 
 
-def _unaccepted(sequence_id: int) -> tuple[int, int]:
+def unaccepted(sequence_id: int) -> tuple[int, int]:
     """(tasks without approved work, tasks) of the sequence."""
     from backend.annotation.models import Assignment, Task
     from backend.labels import ACCEPTED
@@ -363,55 +363,3 @@ def _simulated_accounts() -> int:
     with session_scope() as session:
         return int(session.scalar(select(func.count()).select_from(PortalAccount)
                                   .where(PortalAccount.email.like(pattern))) or 0)
-
-
-# --- what the demo prints ----------------------------------------------------------------
-
-
-def demo_summary(sequence_id: int) -> str:
-    """"16 submitted, 16 scored: 9 approved, 7 rejected; solve 1 done in 41 s"."""
-    from backend.annotation.models import Assignment, Task
-    from backend.quality.models import QCReport
-    from backend.solve.models import SolveRun
-
-    with session_scope() as session:
-        statuses = dict(session.execute(
-            select(Assignment.status, func.count()).join(Task, Task.id == Assignment.task_id)
-            .where(Task.sequence_id == sequence_id).group_by(Assignment.status)).all())
-        scored = session.scalar(select(func.count(func.distinct(QCReport.assignment_id)))
-                                .where(QCReport.sequence_id == sequence_id)) or 0
-        run = session.scalar(select(SolveRun).where(SolveRun.sequence_id == sequence_id)
-                             .order_by(SolveRun.id.desc()))
-        solve = _solve_words(run)
-    approved, rejected = statuses.get("approved", 0), statuses.get("rejected", 0)
-    pending = statuses.get("submitted", 0)
-    line = (f"{approved + rejected + pending} submitted, {scored} scored: {approved} approved, "
-            f"{rejected} rejected")
-    if pending:
-        line += f", {pending} awaiting a decision"
-    if run is None:
-        missing, total = _unaccepted(sequence_id)
-        solve = f"no solve yet: {missing} of {total} tasks without accepted work"
-    return f"{line}; {solve}"
-
-
-def _solve_words(run) -> str:  # type: ignore[no-untyped-def]
-    if run is None:
-        return ""
-    if run.status == "done":
-        return f"solve {run.id} done in {float((run.timings or {}).get('total_s', 0.0)):.0f} s"
-    if run.status == "failed":
-        last = (run.error or "").strip().splitlines()
-        return f"solve {run.id} failed: {last[-1] if last else 'see dexlabel jobs list'}"
-    return f"solve {run.id} {run.status}"
-
-
-def demo_print(seq, base: str, logins: dict[str, Login],  # type: ignore[no-untyped-def]
-               annotate: str) -> None:
-    base = base.rstrip("/")
-    admin, worker = logins["admin"], logins["worker"]
-    typer.echo(f"\nsequence {seq.subject}/{seq.name} (id {seq.sequence_id}): "
-               f"{seq.num_cameras} cameras x {seq.num_frames} frames")
-    typer.echo(f"annotate:      {annotate}")
-    typer.echo(f"worker portal: {base}/market/  email {worker.email}  password {worker.password}")
-    typer.echo(f"admin page:    {base}/admin/  email {admin.email}  password {admin.password}")
