@@ -235,7 +235,7 @@ def test_status_lists_every_sequence_page_by_page(filled: str,
     from typer.testing import CliRunner
 
     from backend.cli import app
-    from backend.cli import progress as progress_cli
+    from backend.cli import status as progress_cli
 
     monkeypatch.setattr(progress_cli, "STATUS_PAGE", 30)  # 100 sequences: 4 pages
     runner = CliRunner()
