@@ -5,13 +5,15 @@
  * (each confirmed first); the job table's filters and whole results.
  */
 
-import { ApiError } from "./api.js";
+import { ApiError } from "../common/api.js";
+import { $, el } from "../common/dom.js";
+import { dollars } from "../common/format.js";
+import { errorText } from "../common/notice.js";
 import { JOB_STATUSES, costLine, jobQuery } from "./project-format.js";
-import { el, progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
+import { progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ ($(id));
 
 const state = {
@@ -60,7 +62,7 @@ function failed(id, what, err) {
     state.fail(err);
     return;
   }
-  const why = err instanceof Error ? err.message : String(err);
+  const why = errorText(err);
   const status = err instanceof ApiError ? ` (${err.status})` : "";
   say(id, `${what} failed${status}: ${why}`, "error");
 }
@@ -289,7 +291,7 @@ function askBonus() {
       + "reads.", "error");
     return;
   }
-  const dollarsText = `$${Number(amount).toFixed(2)}`;
+  const dollarsText = dollars(amount);
   confirmFirst(`Pay ${worker} a bonus of ${dollarsText} (plus the marketplace's fee) on `
     + `assignment ${assignment}?`, async () => {
     try {

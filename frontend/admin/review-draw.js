@@ -4,7 +4,7 @@
  * Each function draws what it is given and keeps no state.
  */
 
-import { svg } from "./views.js";
+import { svg } from "../common/dom.js";
 import {
   NO_ERROR, errorColour, heatFontPx, pointAt, spanRows, spansOf, viewport,
 } from "./replay.js";

@@ -5,7 +5,9 @@
  * the metrics. Drawing only: what to draw comes from replay.js and the review endpoint.
  */
 
-import { el, renderFacts, svg } from "./views.js";
+import { el, svg } from "../common/dom.js";
+import { errorText } from "../common/notice.js";
+import { renderFacts } from "./views.js";
 import {
   NO_ERROR, cellAt, followView, heatLayout, legendStops, stepFrame, zoomAt,
 } from "./replay.js";
@@ -307,7 +309,7 @@ export class ReviewPanel {
       this.readonly.disabled = true;
       this.readonly.title = status === 404 || status === 405
         ? "The server does not offer read-only annotation links yet"
-        : `No read-only link: ${err instanceof Error ? err.message : String(err)}`;
+        : `No read-only link: ${errorText(err)}`;
     }
   }
 

@@ -5,11 +5,11 @@
  * differences.
  */
 
+import { $, el } from "../common/dom.js";
+import { errorText } from "../common/notice.js";
 import { differenceChart } from "./solve-charts.js";
 import { parseSettings } from "./solve-core.js";
-import { el } from "./views.js";
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const select = (/** @type {string} */ id) => /** @type {HTMLSelectElement} */ ($(id));
 /** How often the runs are read again while one is queued or running, ms. */
 const POLL_MS = 2000;
@@ -101,7 +101,7 @@ async function submitRerun(event) {
       ? `; ${names.map((n) => `${n} ${changed[n]}`).join(", ")})` : "; default settings)"));
     await tools.hooks.reload();
   } catch (err) {
-    say(status, err instanceof Error ? err.message : String(err), "error");
+    say(status, errorText(err), "error");
   }
 }
 
@@ -201,7 +201,7 @@ export function initTools(api, fail, hooks) {
   $("compare-runs").addEventListener("click", () => {
     say($("compare-error"), "");
     compare().catch((err) =>
-      say($("compare-error"), err instanceof Error ? err.message : String(err), "error"));
+      say($("compare-error"), errorText(err), "error"));
   });
   $("compare-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-frame]");

@@ -11,6 +11,7 @@
  * Positions are image px mapped through the editor's Transform; marker sizes are screen px.
  */
 
+import { $ } from "../common/dom.js";
 import { Assist, clipLine } from "./assist.js";
 import { addSceneLayer } from "./render.js";
 
@@ -180,10 +181,10 @@ export function assistKey(assist, e) {
 /**
  * Binds the panel's buttons; returns the function that brings the panel up to date.
  * @param {import("./assist.js").Assist} assist
- * @param {(id: string) => HTMLElement} $ @param {() => boolean} editable
+ * @param {() => boolean} editable
  * @returns {() => void}
  */
-export function wireAssistPanel(assist, $, editable) {
+export function wireAssistPanel(assist, editable) {
   const on = (id, fn) => $(id).addEventListener("click", (e) => {
     fn(e);
     if (e.currentTarget instanceof HTMLElement) e.currentTarget.blur();
@@ -217,10 +218,9 @@ export function wireAssistPanel(assist, $, editable) {
  * Starts the assistance of a page: the canvas layer, the timeline marks, the panel and the
  * keys. Writes only while `page` is in edit mode and not locked.
  * @param {any} page  app.js's page object
- * @param {(id: string) => HTMLElement} $
  * @returns {Assist}
  */
-export function startAssist(page, $) {
+export function startAssist(page) {
   const { editor, timeline, task } = page;
   const editable = () => page.data.mode === "edit" && !editor.readOnly && !page.stopped;
   let updatePanel = () => {};
@@ -240,7 +240,7 @@ export function startAssist(page, $) {
       { width: scene.cssWidth, height: scene.cssHeight });
   });
   timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
-  updatePanel = wireAssistPanel(assist, $, editable);
+  updatePanel = wireAssistPanel(assist, editable);
   page.refreshHooks.push(updatePanel);
   window.addEventListener("keydown", (e) => {
     const t = e.target;
