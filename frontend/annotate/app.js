@@ -12,17 +12,17 @@ import { ApiError } from "../common/api.js";
 import { $ } from "../common/dom.js";
 import { AnnotateApi, postExternalSubmit, readPageParams } from "./api.js";
 import { startAssist } from "./assist-draw.js";
+import { loadBundle } from "./core/loader.js";
 import { AnnotationStore } from "./core/store.js";
+import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./core/sync.js";
+import { WorkClock } from "./core/worktime.js";
 import { Editor } from "./editor.js";
 import { pointLabels, renderInstructions, renderShortcuts } from "./instructions.js";
 import { bindKeys } from "./keys.js";
-import { loadBundle } from "./loader.js";
 import { PointList, showBanner, showLoadProgress, showSaveStatus } from "./panels.js";
 import { bindPointer } from "./pointer.js";
 import { openSubmitDialog } from "./submit.js";
-import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./sync.js";
 import { Timeline } from "./timeline.js";
-import { WorkClock } from "./worktime.js";
 import { wireControls, wireObjectSteps } from "./wiring.js";
 
 const PREVIEW_TEXT = "Preview: accept the HIT to start annotating. You can look at the clip " +

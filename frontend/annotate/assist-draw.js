@@ -12,7 +12,8 @@
  */
 
 import { $ } from "../common/dom.js";
-import { Assist, clipLine } from "./assist.js";
+import { Assist } from "./core/assist.js";
+import { clipLine } from "./core/epipolar.js";
 import { addSceneLayer } from "./render.js";
 
 export const TRACK_GHOST = "#35d0ff";
@@ -26,7 +27,7 @@ const OUTLINE = "rgba(0, 0, 0, 0.8)";
  * @typedef {import("./core/transform.js").Transform} Transform
  * @typedef {{ghosts: Array<{point: number, xy: number[]|null, path: number[][][]}>,
  *            suggestion: {point: number, xy: number[], visible: boolean}|null,
- *            lines: import("./assist.js").EpipolarLine[]}} Layer
+ *            lines: import("./core/epipolar.js").EpipolarLine[]}} Layer
  */
 
 /**
@@ -164,7 +165,7 @@ export function drawTimelineMarks(ctx, timeline, marks) {
  * The assistance key of a keydown, run; false when the key is not one of ours.
  *   T / Shift+T  track the active point here / every point     Enter  accept   (Esc: discard)
  *   U / Shift+U  use suggestions for the active point / all     E      epipolar lines
- * @param {import("./assist.js").Assist} assist @param {KeyboardEvent} e
+ * @param {import("./core/assist.js").Assist} assist @param {KeyboardEvent} e
  */
 export function assistKey(assist, e) {
   if (e.ctrlKey || e.metaKey || e.altKey) return false;
@@ -180,7 +181,7 @@ export function assistKey(assist, e) {
 
 /**
  * Binds the panel's buttons; returns the function that brings the panel up to date.
- * @param {import("./assist.js").Assist} assist
+ * @param {import("./core/assist.js").Assist} assist
  * @param {() => boolean} editable
  * @returns {() => void}
  */

@@ -76,7 +76,7 @@ function frameProblemText(p, names) {
  * @typedef {Object} SubmitContext
  * @property {HTMLDialogElement} dialog
  * @property {import("./core/store.js").AnnotationStore} store
- * @property {import("./sync.js").AutoSaver} saver
+ * @property {import("./core/sync.js").AutoSaver} saver
  * @property {import("./api.js").AnnotateApi} api
  * @property {{num_frames: number, point_names: string[]}} task
  * @property {(frame: number, point: number) => void} show   go to a problem
