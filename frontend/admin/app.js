@@ -6,10 +6,10 @@
 
 import { ApiError } from "../common/api.js";
 import { $ } from "../common/dom.js";
-import { errorText, noticeLine } from "../common/notice.js";
+import { errorText, noticeLine, showNotice } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { AdminApi } from "./api.js";
-import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
+import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import {
@@ -136,12 +136,8 @@ async function showReport(assignmentId) {
 async function decide(kind) {
   const assignmentId = Number($("approve").dataset.assignment);
   const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback")).value.trim();
-  const result = $("decision-result");
-  const say = (/** @type {string} */ text, /** @type {string} */ cls) => {
-    result.textContent = text;
-    result.className = `notice ${cls}`;
-    result.hidden = false;
-  };
+  const say = (/** @type {string} */ text, /** @type {"info"|"error"} */ kind) =>
+    showNotice($("decision-result"), text, kind);
   if (kind === "reject" && !feedback) {
     say("A rejection needs feedback: tell the worker what was wrong.", "error");
     return;

@@ -8,8 +8,8 @@
 import { ApiError } from "../common/api.js";
 import { $, el } from "../common/dom.js";
 import { dollars } from "../common/format.js";
-import { errorText } from "../common/notice.js";
-import { JOB_STATUSES, costLine, jobQuery } from "./project-format.js";
+import { errorText, showNotice } from "../common/notice.js";
+import { JOB_STATUSES, costLine, jobQuery } from "./core/project-format.js";
 import { progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
@@ -47,10 +47,7 @@ function api() {
  * @param {string} id  @param {string} text  @param {"info"|"error"} [kind]
  */
 function say(id, text, kind = "info") {
-  const line = $(id);
-  line.textContent = text;
-  line.className = `notice ${kind}`;
-  line.hidden = !text;
+  showNotice($(id), text, kind);
 }
 
 /**

@@ -8,8 +8,8 @@
 
 import { ApiError } from "../common/api.js";
 import { $, el } from "../common/dom.js";
-import { errorText } from "../common/notice.js";
-import { evidenceFeedback } from "./replay.js";
+import { errorText, showNotice } from "../common/notice.js";
+import { evidenceFeedback } from "./core/replay.js";
 import { ReviewPanel } from "./review.js";
 import { badge } from "./views.js";
 
@@ -35,10 +35,7 @@ export function createQueue(api, fail) {
 
   /** @param {string} text @param {"info"|"error"} kind */
   function say(text, kind) {
-    const result = $("queue-result");
-    result.textContent = text;
-    result.className = `notice ${kind}`;
-    result.hidden = !text;
+    showNotice($("queue-result"), text, kind);
   }
 
   function renderList() {

@@ -6,7 +6,7 @@
  */
 
 import { $, el } from "../common/dom.js";
-import { rigHandLines, rigRows, rigSummary } from "./rig-format.js";
+import { rigHandLines, rigRows, rigSummary } from "./core/rig-format.js";
 
 
 /** @type {{ api: any, fail: (err: unknown) => void, sequence: number|null, status: any }} */

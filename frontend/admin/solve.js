@@ -6,9 +6,9 @@
  */
 
 import { $, el } from "../common/dom.js";
-import { when } from "./format.js";
+import { when } from "./core/format.js";
 import { residualChart } from "./solve-charts.js";
-import { LatestLoader, overlayPath, stepFrame, tickPercent } from "./solve-core.js";
+import { LatestLoader, overlayPath, stepFrame, tickPercent } from "./core/solve-core.js";
 import { initTools, showTools } from "./solve-tools.js";
 
 const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ ($(id));

@@ -6,10 +6,10 @@ import { metricRows } from "./metrics.js";
 import {
   COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, jobOutcome, percent,
   px, when,
-} from "./format.js";
+} from "./core/format.js";
 import {
   jobDetail, progressLine, progressSegments, solveLine, sparkline, taskCounts,
-} from "./project-format.js";
+} from "./core/project-format.js";
 
 /** @param {string} text @param {string} [kind] */
 export function badge(text, kind = text) {

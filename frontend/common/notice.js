@@ -15,6 +15,17 @@ export function errorText(err) {
 }
 
 /**
+ * Shows a message in a notice element (the page's line, or a result line under a form).
+ * @param {HTMLElement} line  @param {string} text  "" hides it  @param {"info"|"error"} [kind]
+ */
+export function showNotice(line, text, kind = "info") {
+  line.textContent = text;
+  line.className = `notice ${kind}`;
+  line.hidden = !text;
+}
+
+/**
+ * The page's notice line, with notify and fail.
  * @param {HTMLElement} line  the notice element
  * @param {() => void} signIn  shows the page's sign-in form
  */
@@ -29,9 +40,7 @@ export function noticeLine(line, signIn) {
    */
   function notify(text, kind = "info", acrossNavigation = false) {
     kept = acrossNavigation;
-    line.textContent = text;
-    line.className = `notice ${kind}`;
-    line.hidden = !text;
+    showNotice(line, text, kind);
   }
 
   /** @param {unknown} err */

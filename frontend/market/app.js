@@ -7,7 +7,7 @@ import { $ } from "../common/dom.js";
 import { errorText, noticeLine } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { PortalApi } from "./api.js";
-import { parseRoute } from "./format.js";
+import { parseRoute } from "./core/route.js";
 import { renderEarnings, renderHits, taskFrame } from "./views.js";
 
 const api = new PortalApi(window.sessionStorage);

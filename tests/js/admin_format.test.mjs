@@ -6,7 +6,7 @@ import { test } from "node:test";
 import {
   HAND_JOINTS, barLayout, canRetry, costCells, jobOutcome, orderReports,
   pageOf, parseRoute, percent, pointNames, px, tallyReports, when,
-} from "../../frontend/admin/format.js";
+} from "../../frontend/admin/core/format.js";
 
 test("px writes pixels with one decimal and a dash where unknown", () => {
   assert.equal(px(3.14159), "3.1 px");

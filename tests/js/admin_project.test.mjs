@@ -3,11 +3,11 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { costCells } from "../../frontend/admin/format.js";
+import { costCells } from "../../frontend/admin/core/format.js";
 import {
   TASK_STATES, costLine, jobDetail, jobQuery, progressLine, progressSegments, solveLine,
   sparkline, taskCounts,
-} from "../../frontend/admin/project-format.js";
+} from "../../frontend/admin/core/project-format.js";
 
 test("progressLine counts accepted tasks of all, then the rest from the furthest state", () => {
   const counts = { open: 1, published: 2, submitted: 0, "in review": 1, accepted: 3 };

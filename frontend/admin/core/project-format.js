@@ -1,7 +1,7 @@
 /** Pure helpers of the admin page's project control: task states and progress, publish costs,
  * worker quality over time and the job table's details and filters (no DOM). */
 
-import { dollars, isNumber } from "../common/format.js";
+import { dollars, isNumber } from "../../common/format.js";
 
 /** The states of a task, from untouched to done (backend/progress/schemas.py TaskState). */
 export const TASK_STATES = ["open", "published", "submitted", "in review", "accepted"];

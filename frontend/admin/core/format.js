@@ -1,7 +1,7 @@
 /** Pure helpers of the admins' review page: numbers, point names, report order, chart layout
  * and the routes of its hash (no DOM). */
 
-import { NONE, dollars, isNumber } from "../common/format.js";
+import { NONE, dollars, isNumber } from "../../common/format.js";
 
 const FINGERS = ["thumb", "index", "middle", "ring", "little"];
 const JOINT_SUFFIXES = ["mcp", "pip", "dip", "tip"];

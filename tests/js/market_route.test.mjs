@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { parseRoute } from "../../frontend/market/format.js";
+import { parseRoute } from "../../frontend/market/core/route.js";
 
 test("parseRoute maps each hash to its view and id", () => {
   assert.deepEqual(parseRoute(""), { view: "hits", id: null });
