@@ -3,31 +3,13 @@
  * sessionStorage, never in a cookie.
  */
 
-import { ApiError, BearerClient } from "../common/bearer.js";
-
-export { ApiError };
+import { BearerClient } from "../common/api.js";
 
 export class AdminApi extends BearerClient {
   /** @param {Storage} storage */
   constructor(storage) {
-    super(storage, "dexlabel.admin.token", "/api");
-  }
-
-  /** @param {string} email @param {string} password */
-  async login(email, password) {
-    const data = await this.request("POST", "/auth/token", { email, password });
-    this.setToken(data.access_token);
-    return data;
-  }
-
-  /** Revoke every token of this account on the server, then forget it here (also when the
-   * server cannot be reached: signing out never fails on this page). */
-  async logout() {
-    try {
-      if (this.token) await this.request("POST", "/auth/logout");
-    } finally {
-      this.setToken(null);
-    }
+    super(storage, "dexlabel.admin.token", "/api",
+      { login: "/auth/token", logout: "/auth/logout" });
   }
 
   me() { return this.request("GET", "/auth/me"); }

@@ -4,8 +4,12 @@
  * the job table with retries, costs, and the overlays of finished solve runs.
  */
 
-import { AdminApi, ApiError } from "./api.js";
-import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./format.js";
+import { ApiError } from "../common/api.js";
+import { $ } from "../common/dom.js";
+import { errorText, noticeLine, showNotice } from "../common/notice.js";
+import { startSession } from "../common/session.js";
+import { AdminApi } from "./api.js";
+import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import {
@@ -19,10 +23,11 @@ import {
 } from "./views.js";
 
 const api = new AdminApi(window.sessionStorage);
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
   "costs-view", "queue-view"];
 
+const notice = noticeLine($("notice"), () => show("login-view"));
+const { notify, fail } = notice;
 const queue = createQueue(api, fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
@@ -38,24 +43,6 @@ const state = {
 function show(id) {
   for (const view of VIEWS) $(view).hidden = view !== id;
   $("nav").hidden = id === "login-view";
-}
-
-/** @param {string} text @param {"info"|"error"} [kind] */
-function notify(text, kind = "info") {
-  const notice = $("notice");
-  notice.textContent = text;
-  notice.className = `notice ${kind}`;
-  notice.hidden = !text;
-}
-
-/** @param {unknown} err */
-function fail(err) {
-  if (err instanceof ApiError && err.status === 401) {
-    show("login-view");
-    notify("Please sign in again.", "error");
-    return;
-  }
-  notify(err instanceof Error ? err.message : String(err), "error");
 }
 
 const body = (/** @type {string} */ id) => /** @type {HTMLTableSectionElement} */ ($(id));
@@ -149,12 +136,8 @@ async function showReport(assignmentId) {
 async function decide(kind) {
   const assignmentId = Number($("approve").dataset.assignment);
   const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback")).value.trim();
-  const result = $("decision-result");
-  const say = (/** @type {string} */ text, /** @type {string} */ cls) => {
-    result.textContent = text;
-    result.className = `notice ${cls}`;
-    result.hidden = false;
-  };
+  const say = (/** @type {string} */ text, /** @type {"info"|"error"} */ kind) =>
+    showNotice($("decision-result"), text, kind);
   if (kind === "reject" && !feedback) {
     say("A rejection needs feedback: tell the worker what was wrong.", "error");
     return;
@@ -172,7 +155,7 @@ async function decide(kind) {
       "info");
   } catch (err) {
     if (err instanceof ApiError && err.status === 401) fail(err);
-    else say(err instanceof Error ? err.message : String(err), "error");
+    else say(errorText(err), "error");
   } finally {
     for (const button of buttons) button.disabled = false;
   }
@@ -236,20 +219,6 @@ async function route() {
   }
 }
 
-/** @param {SubmitEvent} event */
-async function onLogin(event) {
-  event.preventDefault();
-  const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
-  try {
-    await api.login(String(data.get("email")), String(data.get("password")));
-    notify("");
-    await loadMe();
-    await route();
-  } catch (err) {
-    notify(err instanceof Error ? err.message : String(err), "error");
-  }
-}
-
 async function loadMe() {
   const me = await api.me();
   $("who").textContent = me.email;
@@ -295,19 +264,7 @@ async function exportLabels(sequenceId) {
   status.title = skipped.join("\n");
 }
 
-async function signOut() {
-  try {
-    await api.logout();
-  } catch {
-    // The token is forgotten here either way; the server lets it expire.
-  }
-  notify("");
-  show("login-view");
-}
-
 function start() {
-  $("login").addEventListener("submit", (e) => onLogin(/** @type {SubmitEvent} */ (e)));
-  $("sign-out").addEventListener("click", signOut);
   queue.bind();
   $("outcome-filter").addEventListener("change", renderReportList);
   $("approve").addEventListener("click", () => decide("approve"));
@@ -324,12 +281,7 @@ function start() {
   initSolve(api, fail);
   initRig(api, fail);
   initProject(api, fail, route);
-  window.addEventListener("hashchange", () => {
-    notify("");
-    route();
-  });
-  if (api.token) loadMe().catch(fail);
-  route();
+  startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route });
 }
 
 start();

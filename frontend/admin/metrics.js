@@ -8,6 +8,8 @@
  * The thresholds are the report's own (worker/quality/decide.py): keys
  * "<metric>.<review|reject>_<above|below>", crossed when the value is beyond them. */
 
+import { NONE, isNumber } from "../common/format.js";
+
 /**
  * @typedef {Object} MetricRow
  * @property {string} name       the metric's key in report.metrics
@@ -32,8 +34,6 @@
  * @property {"px"|"mm"|"%"|"s"|"px/frame²"|"×"|""} unit
  * @property {string | Partial<Record<Basis, string>> & {any?: string}} explain
  */
-
-const NONE = "–";
 
 /** @type {Record<string, MetricInfo>} in the order the rows are listed */
 const METRICS = {
@@ -160,7 +160,7 @@ const METRICS = {
  * @param {string} unit
  */
 function formatted(value, unit) {
-  if (typeof value !== "number" || !Number.isFinite(value)) return NONE;
+  if (!isNumber(value)) return NONE;
   switch (unit) {
     case "px": return `${value.toFixed(1)} px`;
     case "mm": return `${value.toFixed(1)} mm`;

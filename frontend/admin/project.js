@@ -5,13 +5,15 @@
  * (each confirmed first); the job table's filters and whole results.
  */
 
-import { ApiError } from "./api.js";
-import { JOB_STATUSES, costLine, jobQuery } from "./project-format.js";
-import { el, progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
+import { ApiError } from "../common/api.js";
+import { $, el } from "../common/dom.js";
+import { dollars } from "../common/format.js";
+import { errorText, showNotice } from "../common/notice.js";
+import { JOB_STATUSES, costLine, jobQuery } from "./core/project-format.js";
+import { progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ ($(id));
 
 const state = {
@@ -45,10 +47,7 @@ function api() {
  * @param {string} id  @param {string} text  @param {"info"|"error"} [kind]
  */
 function say(id, text, kind = "info") {
-  const line = $(id);
-  line.textContent = text;
-  line.className = `notice ${kind}`;
-  line.hidden = !text;
+  showNotice($(id), text, kind);
 }
 
 /**
@@ -60,7 +59,7 @@ function failed(id, what, err) {
     state.fail(err);
     return;
   }
-  const why = err instanceof Error ? err.message : String(err);
+  const why = errorText(err);
   const status = err instanceof ApiError ? ` (${err.status})` : "";
   say(id, `${what} failed${status}: ${why}`, "error");
 }
@@ -289,7 +288,7 @@ function askBonus() {
       + "reads.", "error");
     return;
   }
-  const dollarsText = `$${Number(amount).toFixed(2)}`;
+  const dollarsText = dollars(amount);
   confirmFirst(`Pay ${worker} a bonus of ${dollarsText} (plus the marketplace's fee) on `
     + `assignment ${assignment}?`, async () => {
     try {

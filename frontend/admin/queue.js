@@ -6,17 +6,18 @@
  * while typing in a field. After a decision the next waiting report opens.
  */
 
-import { ApiError } from "./api.js";
-import { evidenceFeedback } from "./replay.js";
+import { ApiError } from "../common/api.js";
+import { $, el } from "../common/dom.js";
+import { errorText, showNotice } from "../common/notice.js";
+import { evidenceFeedback } from "./core/replay.js";
 import { ReviewPanel } from "./review.js";
-import { badge, el } from "./views.js";
+import { badge } from "./views.js";
 
 /** Reports a queue page lists. */
 const QUEUE_PAGE = 200;
 /** Names the bonus the queue pays, so that a second press never pays twice. */
 const BONUS_KEY = "review";
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 
 /**
  * @param {import("./api.js").AdminApi} api
@@ -34,10 +35,7 @@ export function createQueue(api, fail) {
 
   /** @param {string} text @param {"info"|"error"} kind */
   function say(text, kind) {
-    const result = $("queue-result");
-    result.textContent = text;
-    result.className = `notice ${kind}`;
-    result.hidden = !text;
+    showNotice($("queue-result"), text, kind);
   }
 
   function renderList() {
@@ -129,7 +127,7 @@ export function createQueue(api, fail) {
         + `${done.already_done ? " (already done)" : ""}.`, "info");
     } catch (err) {
       if (err instanceof ApiError && err.status === 401) fail(err);
-      else say(err instanceof Error ? err.message : String(err), "error");
+      else say(errorText(err), "error");
     } finally {
       busy = false;
       for (const b of buttons()) b.disabled = false;

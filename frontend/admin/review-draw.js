@@ -4,10 +4,10 @@
  * Each function draws what it is given and keeps no state.
  */
 
-import { svg } from "./views.js";
+import { svg } from "../common/dom.js";
 import {
   NO_ERROR, errorColour, heatFontPx, pointAt, spanRows, spansOf, viewport,
-} from "./replay.js";
+} from "./core/replay.js";
 
 /** A heat map cell without an error where the worker marked the point occluded. */
 export const MARKED_OCCLUDED = "#7d8793";
@@ -167,7 +167,7 @@ function drawReference(ctx, at, shown) {
  * left. The layout is written on the canvas' data attributes (left, top, cell, row).
  * @param {HTMLCanvasElement} canvas
  * @param {any} review
- * @param {ReturnType<typeof import("./replay.js").heatLayout>} layout
+ * @param {ReturnType<typeof import("./core/replay.js").heatLayout>} layout
  */
 export function drawHeat(canvas, review, layout) {
   const { ctx, size } = context(canvas);
@@ -197,7 +197,7 @@ export function drawHeat(canvas, review, layout) {
  * map's columns (each bar's group carries data-kind, data-first, data-last).
  * @param {SVGSVGElement} timeline
  * @param {any} review
- * @param {ReturnType<typeof import("./replay.js").heatLayout>} layout
+ * @param {ReturnType<typeof import("./core/replay.js").heatLayout>} layout
  * @param {number} width  CSS px
  */
 export function drawTimeline(timeline, review, layout, width) {
@@ -232,7 +232,7 @@ export function drawTimeline(timeline, review, layout, width) {
 
 /**
  * Move the timeline's cursor to a frame.
- * @param {SVGSVGElement} timeline @param {ReturnType<typeof import("./replay.js").heatLayout>} layout
+ * @param {SVGSVGElement} timeline @param {ReturnType<typeof import("./core/replay.js").heatLayout>} layout
  * @param {number} frame
  */
 export function moveCursor(timeline, layout, frame) {

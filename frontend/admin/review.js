@@ -2,13 +2,15 @@
  * The assignment review panel: the worker's points replayed over the view's frames beside the
  * reference they are judged against (a line between each pair, coloured by the error), a
  * joint x frame heat map of the errors, a timeline of swap and issue spans, the reasons and
- * the metrics. Drawing only: what to draw comes from replay.js and the review endpoint.
+ * the metrics. Drawing only: what to draw comes from core/replay.js and the review endpoint.
  */
 
-import { el, renderFacts, svg } from "./views.js";
+import { el, svg } from "../common/dom.js";
+import { errorText } from "../common/notice.js";
+import { renderFacts } from "./views.js";
 import {
   NO_ERROR, cellAt, followView, heatLayout, legendStops, stepFrame, zoomAt,
-} from "./replay.js";
+} from "./core/replay.js";
 import { MARKED_OCCLUDED, drawFrame, drawHeat, drawTimeline, moveCursor } from "./review-draw.js";
 
 /** Replay speed, frames per second. */
@@ -307,7 +309,7 @@ export class ReviewPanel {
       this.readonly.disabled = true;
       this.readonly.title = status === 404 || status === 405
         ? "The server does not offer read-only annotation links yet"
-        : `No read-only link: ${err instanceof Error ? err.message : String(err)}`;
+        : `No read-only link: ${errorText(err)}`;
     }
   }
 

@@ -5,10 +5,9 @@
  * imported one.
  */
 
-import { rigHandLines, rigRows, rigSummary } from "./rig-format.js";
-import { el } from "./views.js";
+import { $, el } from "../common/dom.js";
+import { rigHandLines, rigRows, rigSummary } from "./core/rig-format.js";
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 
 /** @type {{ api: any, fail: (err: unknown) => void, sequence: number|null, status: any }} */
 const state = { api: null, fail: () => {}, sequence: null, status: null };

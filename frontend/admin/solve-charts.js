@@ -1,10 +1,10 @@
 /**
  * SVG charts of solve review: one frame's reprojection error per joint and view, and the
- * per-frame differences between two runs. Thin: the layouts come from solve-core.js.
+ * per-frame differences between two runs. Thin: the layouts come from core/solve-core.js.
  */
 
-import { HAND_JOINTS } from "./format.js";
-import { residualBars, seriesLines } from "./solve-core.js";
+import { HAND_JOINTS } from "./core/format.js";
+import { residualBars, seriesLines } from "./core/solve-core.js";
 
 const SVG = "http://www.w3.org/2000/svg";
 /** One colour per view / series (colour-blind safe, Okabe-Ito). */

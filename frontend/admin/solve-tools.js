@@ -5,11 +5,11 @@
  * differences.
  */
 
+import { $, el } from "../common/dom.js";
+import { errorText, showNotice } from "../common/notice.js";
 import { differenceChart } from "./solve-charts.js";
-import { parseSettings } from "./solve-core.js";
-import { el } from "./views.js";
+import { parseSettings } from "./core/solve-core.js";
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const select = (/** @type {string} */ id) => /** @type {HTMLSelectElement} */ ($(id));
 /** How often the runs are read again while one is queued or running, ms. */
 const POLL_MS = 2000;
@@ -29,13 +29,6 @@ const tools = {
   /** @type {any} */ base: null,
   /** @type {ReturnType<typeof setTimeout>|null} */ poll: null,
 };
-
-/** @param {HTMLElement} node @param {string} text @param {"info"|"error"} kind */
-function say(node, text, kind = "info") {
-  node.textContent = text;
-  node.className = `notice ${kind}`;
-  node.hidden = !text;
-}
 
 /** Counts re-run form fills: a fill that is no longer the newest draws nothing. */
 let fills = 0;
@@ -97,11 +90,11 @@ async function submitRerun(event) {
     const run = await tools.api.request("POST", `/sequences/${sequence}/solve`,
       { optimiser, params: changed });
     const names = Object.keys(changed);
-    say(status, `Run #${run.id} is ${run.status} (${optimiser}` + (names.length
+    showNotice(status, `Run #${run.id} is ${run.status} (${optimiser}` + (names.length
       ? `; ${names.map((n) => `${n} ${changed[n]}`).join(", ")})` : "; default settings)"));
     await tools.hooks.reload();
   } catch (err) {
-    say(status, err instanceof Error ? err.message : String(err), "error");
+    showNotice(status, errorText(err), "error");
   }
 }
 
@@ -199,9 +192,9 @@ export function initTools(api, fail, hooks) {
       .catch(fail);
   });
   $("compare-runs").addEventListener("click", () => {
-    say($("compare-error"), "");
+    showNotice($("compare-error"), "");
     compare().catch((err) =>
-      say($("compare-error"), err instanceof Error ? err.message : String(err), "error"));
+      showNotice($("compare-error"), errorText(err), "error"));
   });
   $("compare-rows").addEventListener("click", (e) => {
     const button = /** @type {HTMLElement} */ (e.target).closest("button[data-frame]");

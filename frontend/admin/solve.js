@@ -5,13 +5,12 @@
  * solve-tools.js.
  */
 
-import { when } from "./format.js";
+import { $, el } from "../common/dom.js";
+import { when } from "./core/format.js";
 import { residualChart } from "./solve-charts.js";
-import { LatestLoader, overlayPath, stepFrame, tickPercent } from "./solve-core.js";
+import { LatestLoader, overlayPath, stepFrame, tickPercent } from "./core/solve-core.js";
 import { initTools, showTools } from "./solve-tools.js";
-import { el } from "./views.js";
 
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ ($(id));
 /** Pause between frames while playing, ms; the next frame also waits for the last to show. */
 const PLAY_MS = 350;

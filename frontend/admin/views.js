@@ -1,39 +1,15 @@
 /** Thin renderers of the review page: they build DOM from API replies, nothing more. */
 
+import { el, svg } from "../common/dom.js";
+import { dollars, duration } from "../common/format.js";
 import { metricRows } from "./metrics.js";
 import {
-  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, dollars, jobOutcome, percent,
+  COST_COLUMNS, awaitsAdmin, barLayout, canRetry, costCells, jobOutcome, percent,
   px, when,
-} from "./format.js";
+} from "./core/format.js";
 import {
-  duration, jobDetail, progressLine, progressSegments, solveLine, sparkline, taskCounts,
-} from "./project-format.js";
-
-const SVG = "http://www.w3.org/2000/svg";
-
-/**
- * @param {string} tag
- * @param {Record<string, string>} [attrs]
- * @param {(Node|string)[]} [children]
- */
-export function el(tag, attrs = {}, children = []) {
-  const node = document.createElement(tag);
-  for (const [name, value] of Object.entries(attrs)) node.setAttribute(name, value);
-  node.append(...children);
-  return node;
-}
-
-/**
- * @param {string} tag
- * @param {Record<string, string|number>} [attrs]
- * @param {(Node|string)[]} [children]
- */
-export function svg(tag, attrs = {}, children = []) {
-  const node = document.createElementNS(SVG, tag);
-  for (const [name, value] of Object.entries(attrs)) node.setAttribute(name, String(value));
-  node.append(...children);
-  return node;
-}
+  jobDetail, progressLine, progressSegments, solveLine, sparkline, taskCounts,
+} from "./core/project-format.js";
 
 /** @param {string} text @param {string} [kind] */
 export function badge(text, kind = text) {

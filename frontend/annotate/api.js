@@ -6,31 +6,13 @@
  * cookies are blocked.
  */
 
+import { ApiError, jsonOrNull, requestInit } from "../common/api.js";
+
 /** Marketplace placeholder for an assignment that has not been accepted yet (preview). */
 export const PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE";
 
 /** A save or read that the network never answered gets this long (ms) before it counts as lost. */
 const REQUEST_TIMEOUT_MS = 15000;
-
-/** An HTTP error answer; `status` is 0 when the network failed (offline, timeout). */
-export class ApiError extends Error {
-  /**
-   * @param {number} status  HTTP status, 0 for a network failure
-   * @param {{error?: string, detail?: string}} body  the server's JSON error, if any
-   */
-  constructor(status, body) {
-    const detail = body && body.detail ? body.detail : `request failed (${status || "network"})`;
-    super(typeof detail === "string" ? detail : JSON.stringify(detail));
-    this.status = status;
-    this.body = body || {};
-    this.code = this.body.error || (status === 0 ? "network" : "http");
-  }
-
-  /** True when retrying later may succeed (offline, timeout, server overloaded). */
-  get retryable() {
-    return this.status === 0 || this.status === 408 || this.status === 429 || this.status >= 500;
-  }
-}
 
 /**
  * @typedef {Object} PageParams
@@ -97,18 +79,9 @@ export class AnnotateApi {
    * @param {string} method @param {string} path @param {object} [body]
    */
   async request(method, path, body) {
-    const headers = { Accept: "application/json" };
-    if (this.token) headers.Authorization = `Bearer ${this.token}`;
-    if (body !== undefined) headers["Content-Type"] = "application/json";
-    const init = { method, headers, credentials: "omit", cache: "no-store" };
-    if (body !== undefined) init.body = JSON.stringify(body);
+    const init = requestInit(method, this.token, body);
     const resp = await fetchOrNetworkError(this._fetch, this.base + path, init);
-    let data = null;
-    try {
-      data = await resp.json();
-    } catch {
-      data = null;
-    }
+    const data = await jsonOrNull(resp);
     if (!resp.ok) throw new ApiError(resp.status, data);
     return data;
   }

@@ -8,22 +8,22 @@
  * live objects and load timings to the browser tests and the benchmark.
  */
 
-import { AnnotateApi, ApiError, postExternalSubmit, readPageParams } from "./api.js";
+import { ApiError } from "../common/api.js";
+import { $ } from "../common/dom.js";
+import { AnnotateApi, postExternalSubmit, readPageParams } from "./api.js";
 import { startAssist } from "./assist-draw.js";
+import { loadBundle } from "./core/loader.js";
 import { AnnotationStore } from "./core/store.js";
+import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./core/sync.js";
+import { WorkClock } from "./core/worktime.js";
 import { Editor } from "./editor.js";
 import { pointLabels, renderInstructions, renderShortcuts } from "./instructions.js";
 import { bindKeys } from "./keys.js";
-import { loadBundle } from "./loader.js";
 import { PointList, showBanner, showLoadProgress, showSaveStatus } from "./panels.js";
 import { bindPointer } from "./pointer.js";
 import { openSubmitDialog } from "./submit.js";
-import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./sync.js";
 import { Timeline } from "./timeline.js";
-import { WorkClock } from "./worktime.js";
 import { wireControls, wireObjectSteps } from "./wiring.js";
-
-const $ = (id) => document.getElementById(id);
 
 const PREVIEW_TEXT = "Preview: accept the HIT to start annotating. You can look at the clip " +
   "and the instructions; editing and submitting are disabled.";
@@ -249,7 +249,7 @@ function wireInput(page) {
   bindPointer(editor, { spaceHeld: keys.spaceHeld, onPan: keys.notePan, onActivity: activity });
   document.addEventListener("visibilitychange",
     () => clock.setVisible(document.visibilityState === "visible"));
-  wireControls(page, { $, requestSubmit: () => requestSubmit(page) });
+  wireControls(page, { requestSubmit: () => requestSubmit(page) });
   new ResizeObserver(() => {
     editor.resize();
     page.timeline.resize();
@@ -300,7 +300,7 @@ function enterMode(page) {
   else if (!page.stopped) {
     editor.readOnly = false;
     $("submit").disabled = false;
-    if (page.task.kind === "object") wireObjectSteps(page, { $ });
+    if (page.task.kind === "object") wireObjectSteps(page);
   }
   editor.render();
   refreshPanels(page, { frame: editor.frame, active: editor.active, tracks: true });
@@ -332,7 +332,7 @@ async function main() {
   Object.assign(window.__dexlabel, { page, editor: page.editor, store: page.store });
   if (data.mode === "review") showReview(data);
   wireInput(page);
-  page.assist = startAssist(page, $);
+  page.assist = startAssist(page);
   window.__dexlabel.assist = page.assist;
   if (data.mode === "edit") {
     startSaver(page);

@@ -11,7 +11,9 @@
  * Positions are image px mapped through the editor's Transform; marker sizes are screen px.
  */
 
-import { Assist, clipLine } from "./assist.js";
+import { $ } from "../common/dom.js";
+import { Assist } from "./core/assist.js";
+import { clipLine } from "./core/epipolar.js";
 import { addSceneLayer } from "./render.js";
 
 export const TRACK_GHOST = "#35d0ff";
@@ -25,7 +27,7 @@ const OUTLINE = "rgba(0, 0, 0, 0.8)";
  * @typedef {import("./core/transform.js").Transform} Transform
  * @typedef {{ghosts: Array<{point: number, xy: number[]|null, path: number[][][]}>,
  *            suggestion: {point: number, xy: number[], visible: boolean}|null,
- *            lines: import("./assist.js").EpipolarLine[]}} Layer
+ *            lines: import("./core/epipolar.js").EpipolarLine[]}} Layer
  */
 
 /**
@@ -163,7 +165,7 @@ export function drawTimelineMarks(ctx, timeline, marks) {
  * The assistance key of a keydown, run; false when the key is not one of ours.
  *   T / Shift+T  track the active point here / every point     Enter  accept   (Esc: discard)
  *   U / Shift+U  use suggestions for the active point / all     E      epipolar lines
- * @param {import("./assist.js").Assist} assist @param {KeyboardEvent} e
+ * @param {import("./core/assist.js").Assist} assist @param {KeyboardEvent} e
  */
 export function assistKey(assist, e) {
   if (e.ctrlKey || e.metaKey || e.altKey) return false;
@@ -179,11 +181,11 @@ export function assistKey(assist, e) {
 
 /**
  * Binds the panel's buttons; returns the function that brings the panel up to date.
- * @param {import("./assist.js").Assist} assist
- * @param {(id: string) => HTMLElement} $ @param {() => boolean} editable
+ * @param {import("./core/assist.js").Assist} assist
+ * @param {() => boolean} editable
  * @returns {() => void}
  */
-export function wireAssistPanel(assist, $, editable) {
+export function wireAssistPanel(assist, editable) {
   const on = (id, fn) => $(id).addEventListener("click", (e) => {
     fn(e);
     if (e.currentTarget instanceof HTMLElement) e.currentTarget.blur();
@@ -217,10 +219,9 @@ export function wireAssistPanel(assist, $, editable) {
  * Starts the assistance of a page: the canvas layer, the timeline marks, the panel and the
  * keys. Writes only while `page` is in edit mode and not locked.
  * @param {any} page  app.js's page object
- * @param {(id: string) => HTMLElement} $
  * @returns {Assist}
  */
-export function startAssist(page, $) {
+export function startAssist(page) {
   const { editor, timeline, task } = page;
   const editable = () => page.data.mode === "edit" && !editor.readOnly && !page.stopped;
   let updatePanel = () => {};
@@ -240,7 +241,7 @@ export function startAssist(page, $) {
       { width: scene.cssWidth, height: scene.cssHeight });
   });
   timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
-  updatePanel = wireAssistPanel(assist, $, editable);
+  updatePanel = wireAssistPanel(assist, editable);
   page.refreshHooks.push(updatePanel);
   window.addEventListener("keydown", (e) => {
     const t = e.target;

@@ -140,7 +140,7 @@ function examplesHtml(rows) {
 }
 
 /**
- * How the page's suggestions work (assist.js): tracking proposals, pre-fill from other views,
+ * How the page's suggestions work (core/assist.js): tracking proposals, pre-fill from other views,
  * epipolar lines; all of them are only ever suggestions the worker checks.
  */
 const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions between your " +

@@ -4,6 +4,7 @@
  * (core/tools.js pointForKey: 1-9, 0 = 10, Shift adds 10, W = wrist on hands).
  */
 
+import { $ } from "../common/dom.js";
 import { pointForKey } from "./core/tools.js";
 
 /**
@@ -94,7 +95,7 @@ function handleKey(editor, e) {
 
 /** Puts the cursor in the go-to-frame box (key G). @returns {boolean} whether there is one */
 function focusFrameInput() {
-  const input = document.getElementById("goto-frame");
+  const input = $("goto-frame");
   if (!(input instanceof HTMLInputElement)) return false;
   input.focus();
   input.select();

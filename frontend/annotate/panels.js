@@ -168,7 +168,7 @@ export function showSaveStatus(el, status) {
 
 /**
  * @param {HTMLElement} overlay  the loading overlay (holds a <progress> and a text line)
- * @param {import("./loader.js").LoadProgress} p
+ * @param {import("./core/loader.js").LoadProgress} p
  */
 export function showLoadProgress(overlay, p) {
   const bar = overlay.querySelector("progress");

@@ -1,69 +1,15 @@
 /**
- * Submitting: check the work (core completeness + suspicious, then the stretches between
- * keyframes against the view's images, from the server), say what is missing frame by
- * frame, and only then send it. Incomplete work cannot be submitted; suspicious work needs the
+ * Submitting: check the work (core/checks.js: completeness and suspicious tracks, then the
+ * stretches between keyframes against the view's images, from the server), say what is
+ * missing frame by frame, and only then send it. Incomplete work cannot be submitted; suspicious work needs the
  * worker to confirm. After the server accepts it, a marketplace HIT is completed by posting
  * {turkSubmitTo}/mturk/externalSubmit.
  */
 
-import { completeness, suspicious } from "./core/interpolate.js";
+import { checkWork, imageWarnings } from "./core/checks.js";
 import { displayName, escapeHtml } from "./instructions.js";
 
-/**
- * @typedef {{from: number, to: number, points: number[]}} FrameProblem
- *   consecutive frames [from, to] missing the same points
- */
-
-/**
- * Regroups per-point problems frame by frame: runs of consecutive frames with the same missing
- * points become one line ("frames 30-71: Thumb TIP, Index PIP").
- * @param {import("./core/interpolate.js").Problem[]} problems
- * @param {number} numFrames
- * @returns {FrameProblem[]}
- */
-export function problemsByFrame(problems, numFrames) {
-  const missing = Array.from({ length: numFrames }, () => []);
-  for (const problem of problems) {
-    for (const [a, b] of problem.frames) {
-      for (let f = a; f <= b; f++) missing[f].push(problem.point);
-    }
-  }
-  /** @type {FrameProblem[]} */
-  const out = [];
-  missing.forEach((points, f) => {
-    if (points.length === 0) return;
-    const last = out[out.length - 1];
-    if (last && last.to === f - 1 && last.points.join() === points.join()) last.to = f;
-    else out.push({ from: f, to: f, points });
-  });
-  return out;
-}
-
-/**
- * @param {import("./core/store.js").AnnotationStore} store
- * @param {{num_frames: number, point_names: string[]}} task
- */
-export function checkWork(store, task) {
-  const tracks = store.tracks();
-  const { complete, problems } = completeness(tracks, task.num_frames, task.point_names);
-  const warnings = suspicious(tracks, task.num_frames, task.point_names);
-  return { complete, problems, warnings, byFrame: problemsByFrame(problems, task.num_frames) };
-}
-
-/**
- * The server's image check as submit warnings: one per stretch the images say the track does
- * not follow, worst first.
- * @param {{warnings?: Array<{point: number, frame: number, message: string}>}|null} reply
- * @returns {Array<{kind: string, point: number, frame: number, message: string}>}
- */
-export function imageWarnings(reply) {
-  return (reply?.warnings ?? []).map((w) => ({
-    kind: "stretch", point: w.point, frame: w.frame,
-    message: `${w.message}: add a keyframe where it turns`,
-  }));
-}
-
-/** @param {FrameProblem} p @param {string[]} names */
+/** @param {import("./core/checks.js").FrameProblem} p @param {string[]} names */
 function frameProblemText(p, names) {
   const frames = p.from === p.to ? `Frame ${p.from}` : `Frames ${p.from}–${p.to}`;
   const who = p.points.length === names.length
@@ -76,7 +22,7 @@ function frameProblemText(p, names) {
  * @typedef {Object} SubmitContext
  * @property {HTMLDialogElement} dialog
  * @property {import("./core/store.js").AnnotationStore} store
- * @property {import("./sync.js").AutoSaver} saver
+ * @property {import("./core/sync.js").AutoSaver} saver
  * @property {import("./api.js").AnnotateApi} api
  * @property {{num_frames: number, point_names: string[]}} task
  * @property {(frame: number, point: number) => void} show   go to a problem

@@ -8,6 +8,7 @@
  * a preview), never sent to the server.
  */
 
+import { $ } from "../common/dom.js";
 import { parseFrame } from "./core/tools.js";
 import { PLAY_FPS } from "./editor.js";
 
@@ -17,9 +18,9 @@ const MESSAGE_MS = { info: 4000, error: 9000 };
 /**
  * Binds the toolbar, transport and point buttons.
  * @param {any} page  app.js's page object
- * @param {{$: (id: string) => HTMLElement, requestSubmit: () => void}} helpers
+ * @param {{requestSubmit: () => void}} hooks
  */
-export function wireControls(page, { $, requestSubmit }) {
+export function wireControls(page, { requestSubmit }) {
   const { editor } = page;
   const on = (id, fn) => $(id).addEventListener("click", (e) => {
     page.clock.activity();
@@ -39,7 +40,7 @@ export function wireControls(page, { $, requestSubmit }) {
   on("delete-keyframe", () => editor.deleteKeyframe());
   on("show-shortcuts", () => $("shortcuts").showModal());
   on("submit", () => {
-    if (refuseOffObject(page, $)) return;
+    if (refuseOffObject(page)) return;
     requestSubmit();
   });
   on("copy-pose", () => editor.copyPreviousPose());
@@ -62,7 +63,7 @@ export function wireControls(page, { $, requestSubmit }) {
     fps.blur();
   });
   window.__dexlabel.imageToClient = (x, y) => imageToClient(editor, x, y);
-  wireTools(page, { $ });
+  wireTools(page);
 }
 
 /**
@@ -88,7 +89,7 @@ export function showToolMessage(box, text, kind) {
  * Refuses to open the submit dialog while a landmark lies off the highlighted object, listing
  * them. @returns {boolean} whether it refused
  */
-function refuseOffObject(page, $) {
+function refuseOffObject(page) {
   const problems = page.editor.offObjectProblems();
   if (problems.length === 0) return false;
   showToolMessage($("tool-message"), [
@@ -105,7 +106,7 @@ function viewKey(page) {
 }
 
 /** Hide/lock toggles, their persistence, go to frame and the tool message. */
-function wireTools(page, { $ }) {
+function wireTools(page) {
   const { editor, pointList, storage } = page;
   const key = viewKey(page);
   try {
@@ -144,11 +145,11 @@ function wireTools(page, { $ }) {
   const box = $("tool-message");
   editor.onMessage = (text, kind) => showToolMessage(box, text, kind);
   box.addEventListener("click", () => { box.hidden = true; });
-  wireFrameInput(page, $);
+  wireFrameInput(page);
 }
 
 /** The go-to-frame box: Enter goes there, or says why not; Escape gives the keys back. */
-function wireFrameInput(page, $) {
+function wireFrameInput(page) {
   const { editor } = page;
   const input = /** @type {HTMLInputElement} */ ($("goto-frame"));
   const error = $("goto-error");
@@ -192,9 +193,9 @@ const TRACK_TEXT = "Step 2 of 2: track both landmarks through the clip. Step thr
 
 /**
  * Runs the object task's two steps; a task whose points are all placed resumes at step 2.
- * @param {any} page @param {{$: (id: string) => HTMLElement}} helpers
+ * @param {any} page
  */
-export function wireObjectSteps(page, { $ }) {
+export function wireObjectSteps(page) {
   const { store, editor } = page;
   const banner = $("step-banner");
   const button = /** @type {HTMLButtonElement} */ ($("start-tracking"));

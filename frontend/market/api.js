@@ -3,36 +3,18 @@
  * kept in sessionStorage, never in a cookie.
  */
 
-import { ApiError, BearerClient } from "../common/bearer.js";
-
-export { ApiError };
+import { BearerClient } from "../common/api.js";
 
 export class PortalApi extends BearerClient {
   /** @param {Storage} storage */
   constructor(storage) {
-    super(storage, "dexlabel.portal.token", "/api/portal");
-  }
-
-  /** @param {string} email @param {string} password */
-  async login(email, password) {
-    const data = await this.request("POST", "/login", { email, password });
-    this.setToken(data.access_token);
-    return data;
+    super(storage, "dexlabel.portal.token", "/api/portal",
+      { login: "/login", logout: "/logout" });
   }
 
   /** @param {string} invite @param {string} email @param {string} password */
   register(invite, email, password) {
     return this.request("POST", "/register", { invite, email, password });
-  }
-
-  /** Revoke every token of this account on the server, then forget it here (also when the
-   * server cannot be reached: signing out never fails on this page). */
-  async logout() {
-    try {
-      if (this.token) await this.request("POST", "/logout");
-    } finally {
-      this.setToken(null);
-    }
   }
 
   me() { return this.request("GET", "/me"); }

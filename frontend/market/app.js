@@ -3,15 +3,17 @@
  * the annotation page framed exactly as MTurk frames it, and see earnings and feedback.
  */
 
-import { ApiError, PortalApi } from "./api.js";
-import { parseRoute } from "./format.js";
+import { $ } from "../common/dom.js";
+import { errorText, noticeLine } from "../common/notice.js";
+import { startSession } from "../common/session.js";
+import { PortalApi } from "./api.js";
+import { parseRoute } from "./core/route.js";
 import { renderEarnings, renderHits, taskFrame } from "./views.js";
 
 const api = new PortalApi(window.sessionStorage);
-const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 const VIEWS = ["login-view", "hits-view", "preview-view", "work-view", "earnings-view"];
-/** A notice set just before a navigation survives it; any other navigation clears it. */
-let keepNotice = false;
+const notice = noticeLine($("notice"), () => show("login-view"));
+const { notify, fail } = notice;
 
 /** @param {string} id */
 function show(id) {
@@ -19,29 +21,6 @@ function show(id) {
   // The HIT pages keep their chrome compact so the framed page gets the window.
   document.body.dataset.view = id;
   $("nav").hidden = id === "login-view";
-}
-
-/**
- * @param {string} text
- * @param {"info"|"error"} [kind]
- * @param {boolean} [acrossNavigation]  the text survives the next hash change
- */
-function notify(text, kind = "info", acrossNavigation = false) {
-  keepNotice = acrossNavigation;
-  const notice = $("notice");
-  notice.textContent = text;
-  notice.className = `notice ${kind}`;
-  notice.hidden = !text;
-}
-
-/** @param {unknown} err */
-function fail(err) {
-  if (err instanceof ApiError && err.status === 401) {
-    show("login-view");
-    notify("Please sign in again.", "error");
-    return;
-  }
-  notify(err instanceof Error ? err.message : String(err), "error");
 }
 
 async function showHits() {
@@ -116,22 +95,6 @@ async function route() {
 }
 
 /** @param {SubmitEvent} event */
-async function onLogin(event) {
-  event.preventDefault();
-  const form = /** @type {HTMLFormElement} */ (event.target);
-  const data = new FormData(form);
-  try {
-    await api.login(String(data.get("email")), String(data.get("password")));
-    notify("");
-    await loadMe();
-    location.hash = "#/hits";
-    await route();
-  } catch (err) {
-    notify(err instanceof Error ? err.message : String(err), "error");
-  }
-}
-
-/** @param {SubmitEvent} event */
 async function onRegister(event) {
   event.preventDefault();
   const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
@@ -142,7 +105,7 @@ async function onRegister(event) {
     $("register").hidden = true;
     notify("Account created: sign in with your email and password.");
   } catch (err) {
-    notify(err instanceof Error ? err.message : String(err), "error");
+    notify(errorText(err), "error");
   }
 }
 
@@ -170,30 +133,12 @@ async function loadMe() {
   $("who").textContent = `${me.email} · ${me.worker_id}`;
 }
 
-async function signOut() {
-  try {
-    await api.logout();
-  } catch {
-    // The token is forgotten here either way; the server lets it expire.
-  }
-  notify("");
-  show("login-view");
-}
-
 function start() {
-  $("login").addEventListener("submit", (e) => onLogin(/** @type {SubmitEvent} */ (e)));
   $("register").addEventListener("submit", (e) => onRegister(/** @type {SubmitEvent} */ (e)));
   $("register").hidden = !new URLSearchParams(location.search).get("invite");
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
-  $("sign-out").addEventListener("click", signOut);
-  window.addEventListener("hashchange", () => {
-    if (!keepNotice) notify("");
-    keepNotice = false;
-    route();
-  });
-  if (api.token) loadMe().catch(fail);
-  route();
+  startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
 }
 
 start();

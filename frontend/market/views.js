@@ -1,18 +1,7 @@
 /** Thin renderers of the portal's lists: they build DOM from API replies, nothing more. */
 
-import { duration, money } from "./format.js";
-
-/**
- * @param {string} tag
- * @param {Record<string, string>} [attrs]
- * @param {(Node|string)[]} [children]
- */
-export function el(tag, attrs = {}, children = []) {
-  const node = document.createElement(tag);
-  for (const [name, value] of Object.entries(attrs)) node.setAttribute(name, value);
-  node.append(...children);
-  return node;
-}
+import { el } from "../common/dom.js";
+import { dollars, duration } from "../common/format.js";
 
 /**
  * What a HIT's row says about its task: "right hand · view 800007060125 · 72 frames".
@@ -60,8 +49,8 @@ export function renderHits(body, hits) {
         el("div", { class: "facts" }, [taskFacts(hit.task), ...(mark ? [" ", mark] : [])]),
         el("div", { class: "muted" }, [hit.description]),
       ]),
-      el("td", { class: "num" }, [money(hit.reward)]),
-      el("td", { class: "num" }, [duration(hit.assignment_duration_s)]),
+      el("td", { class: "num" }, [dollars(hit.reward)]),
+      el("td", { class: "num" }, [duration(hit.assignment_duration_s, "minute")]),
       el("td", { class: "num" }, [String(hit.available)]),
     ]);
     if (hit.mine) row.dataset.mine = hit.mine.status;
@@ -78,10 +67,10 @@ export function renderHits(body, hits) {
 export function renderEarnings(summary, body, data) {
   const { paid, pending, bonuses } = data.earnings;
   summary.replaceChildren(
-    el("div", { class: "stat", id: "earned-paid" }, [el("b", {}, [money(paid)]), " paid"]),
-    el("div", { class: "stat", id: "earned-pending" }, [el("b", {}, [money(pending)]),
+    el("div", { class: "stat", id: "earned-paid" }, [el("b", {}, [dollars(paid)]), " paid"]),
+    el("div", { class: "stat", id: "earned-pending" }, [el("b", {}, [dollars(pending)]),
       " awaiting review"]),
-    el("div", { class: "stat" }, [el("b", {}, [money(bonuses)]), " in bonuses"]),
+    el("div", { class: "stat" }, [el("b", {}, [dollars(bonuses)]), " in bonuses"]),
   );
   body.replaceChildren(...data.assignments.map((a) => el("tr", {
     "data-assignment": a.assignment_id, "data-status": a.status,
@@ -90,8 +79,8 @@ export function renderEarnings(summary, body, data) {
       ? el("a", { href: `#/work/${encodeURIComponent(a.assignment_id)}` }, [a.title])
       : a.title]),
     el("td", {}, [el("span", { class: `status status-${a.status.toLowerCase()}` }, [a.status])]),
-    el("td", { class: "num" }, [money(a.reward)]),
-    el("td", { class: "num" }, [Number(a.bonus) > 0 ? money(a.bonus) : "–"]),
+    el("td", { class: "num" }, [dollars(a.reward)]),
+    el("td", { class: "num" }, [Number(a.bonus) > 0 ? dollars(a.bonus) : "–"]),
     el("td", { class: "feedback" }, [a.feedback || ""]),
   ])));
 }

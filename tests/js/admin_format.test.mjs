@@ -4,9 +4,9 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import {
-  HAND_JOINTS, barLayout, canRetry, costCells, dollars, jobOutcome, orderReports,
+  HAND_JOINTS, barLayout, canRetry, costCells, jobOutcome, orderReports,
   pageOf, parseRoute, percent, pointNames, px, tallyReports, when,
-} from "../../frontend/admin/format.js";
+} from "../../frontend/admin/core/format.js";
 
 test("px writes pixels with one decimal and a dash where unknown", () => {
   assert.equal(px(3.14159), "3.1 px");
@@ -22,16 +22,6 @@ test("percent writes a fraction as a percentage with one decimal", () => {
   assert.equal(percent(1), "100.0%");
   assert.equal(percent(0), "0.0%");
   assert.equal(percent(null), "–");
-});
-
-test("dollars writes the API's decimal strings with two decimals", () => {
-  assert.equal(dollars("0.5"), "$0.50");
-  assert.equal(dollars("12.345"), "$12.35");
-  assert.equal(dollars(3), "$3.00");
-  assert.equal(dollars("-1.2"), "-$1.20");
-  assert.equal(dollars(""), "–");
-  assert.equal(dollars(null), "–");
-  assert.equal(dollars("abc"), "–");
 });
 
 test("when reads ISO times with or without a zone as UTC minutes", () => {

@@ -1,13 +1,13 @@
-// The admin page's project-control helpers: progress lines and bars, publish costs, durations,
+// The admin page's project-control helpers: progress lines and bars, publish costs,
 // worker sparklines and the job table's whole results and filters.
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { costCells } from "../../frontend/admin/format.js";
+import { costCells } from "../../frontend/admin/core/format.js";
 import {
-  TASK_STATES, costLine, duration, jobDetail, jobQuery, progressLine, progressSegments, solveLine,
+  TASK_STATES, costLine, jobDetail, jobQuery, progressLine, progressSegments, solveLine,
   sparkline, taskCounts,
-} from "../../frontend/admin/project-format.js";
+} from "../../frontend/admin/core/project-format.js";
 
 test("progressLine counts accepted tasks of all, then the rest from the furthest state", () => {
   const counts = { open: 1, published: 2, submitted: 0, "in review": 1, accepted: 3 };
@@ -48,14 +48,6 @@ test("costLine writes the HIT count and the cost before anything is published", 
   assert.equal(costLine({ cost: { ...cost, hits: 1, assignments_per_hit: 3 } }).slice(0, 18),
     "1 HIT × 3 assignme");
   assert.match(costLine({ cost: { ...cost, hits: 0 } }), /^Nothing to publish/);
-});
-
-test("duration writes seconds, minutes and hours for people", () => {
-  assert.equal(duration(45.4), "45 s");
-  assert.equal(duration(125), "2 min 05 s");
-  assert.equal(duration(3720), "1 h 02 min");
-  assert.equal(duration(null), "–");
-  assert.equal(duration(Number.NaN), "–");
 });
 
 test("sparkline puts the largest error at the top, unmeasured reports on the base", () => {

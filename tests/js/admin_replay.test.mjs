@@ -4,7 +4,7 @@ import { test } from "node:test";
 import {
   ERROR_MAX_PX, NO_ERROR, cellAt, errorColour, evidenceFeedback, followView, heatFontPx,
   heatLayout, pointAt, spanRows, spansOf, stepFrame, viewport, zoomAt,
-} from "../../frontend/admin/replay.js";
+} from "../../frontend/admin/core/replay.js";
 
 const hue = (/** @type {string} */ colour) => Number(/hsl\((\d+)/.exec(colour)?.[1]);
 

@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { rigHandLines, rigRows, rigSummary } from "../../frontend/admin/rig-format.js";
+import { rigHandLines, rigRows, rigSummary } from "../../frontend/admin/core/rig-format.js";
 
 const report = {
   version: 2, labels: 48, faulty: ["cam-3"],

@@ -2,7 +2,8 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { AnnotateApi, ApiError, readPageParams } from "../../frontend/annotate/api.js";
+import { AnnotateApi, readPageParams } from "../../frontend/annotate/api.js";
+import { ApiError } from "../../frontend/common/api.js";
 
 test("an MTurk preview link is recognised and its parameters read", () => {
   const p = readPageParams("?task=T.sig&assignmentId=ASSIGNMENT_ID_NOT_AVAILABLE&hitId=H");

@@ -3,10 +3,12 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
+import { Assist } from "../../frontend/annotate/core/assist.js";
+import { clipLine, epipolarLines } from "../../frontend/annotate/core/epipolar.js";
 import {
-  Assist, allSpans, anchorRows, clipLine, countTracked, epipolarLines, prefillEntries,
-  proposalEntries, retrackSpans, spanAround, trackedText,
-} from "../../frontend/annotate/assist.js";
+  allSpans, anchorRows, countTracked, prefillEntries, proposalEntries, retrackSpans, spanAround,
+  trackedText,
+} from "../../frontend/annotate/core/proposals.js";
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
 
 const kf = (frame, x, y, source = "placed", visible = true) => ({ frame, x, y, visible, source });

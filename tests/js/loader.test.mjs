@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { BundleReader, loadBundle } from "../../frontend/annotate/loader.js";
+import { BundleReader, loadBundle } from "../../frontend/annotate/core/loader.js";
 
 /** A bundle as backend/captures/frames.py writes it. @param {Uint8Array[]} files */
 function makeBundle(files, { magic = "DXLF", version = 1 } = {}) {

@@ -6,7 +6,7 @@ import { test } from "node:test";
 import {
   LatestLoader, niceTop, overlayPath, parseSettings, residualBars, seriesLines, stepFrame,
   tickPercent,
-} from "../../frontend/admin/solve-core.js";
+} from "../../frontend/admin/core/solve-core.js";
 
 /** A load whose replies the test releases one by one. */
 function deferredLoads() {

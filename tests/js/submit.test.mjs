@@ -3,7 +3,7 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
-import { checkWork, imageWarnings, problemsByFrame } from "../../frontend/annotate/submit.js";
+import { checkWork, imageWarnings, problemsByFrame } from "../../frontend/annotate/core/checks.js";
 
 test("runs of frames missing the same points become one line each", () => {
   const problems = [

@@ -5,7 +5,7 @@ import { test } from "node:test";
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
 import {
   AutoSaver, CONFLICT_TEXT, SAVE_DELAY_MS, chooseStart, localKey, readLocal,
-} from "../../frontend/annotate/sync.js";
+} from "../../frontend/annotate/core/sync.js";
 
 /** Manually advanced timers. */
 class FakeTimers {

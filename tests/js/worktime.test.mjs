@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { WorkClock } from "../../frontend/annotate/worktime.js";
+import { WorkClock } from "../../frontend/annotate/core/worktime.js";
 
 test("active time accrues from the base while the worker keeps going", () => {
   let now = 1000;

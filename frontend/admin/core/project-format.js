@@ -1,14 +1,7 @@
 /** Pure helpers of the admin page's project control: task states and progress, publish costs,
- * worker quality over time, durations and the job table's details and filters (no DOM). */
+ * worker quality over time and the job table's details and filters (no DOM). */
 
-import { dollars } from "./format.js";
-
-const NONE = "–";
-
-/** @param {unknown} value @returns {value is number} */
-function isNumber(value) {
-  return typeof value === "number" && Number.isFinite(value);
-}
+import { dollars, isNumber } from "../../common/format.js";
 
 /** The states of a task, from untouched to done (backend/progress/schemas.py TaskState). */
 export const TASK_STATES = ["open", "published", "submitted", "in review", "accepted"];
@@ -82,18 +75,6 @@ export function costLine(plan) {
   const each = `${c.assignments_per_hit} assignment${c.assignments_per_hit === 1 ? "" : "s"}`;
   return `${hits} × ${each} at ${dollars(c.reward)} + ${dollars(c.fee_per_assignment)} fee: `
     + `rewards ${dollars(c.rewards)} + fees ${dollars(c.fees)} = ${dollars(c.total)}`;
-}
-
-/**
- * Seconds for people: "45 s", "2 min 05 s", "1 h 02 min"; a dash where unknown.
- * @param {number|null|undefined} value
- */
-export function duration(value) {
-  if (!isNumber(value)) return NONE;
-  const s = Math.round(value);
-  if (s < 60) return `${s} s`;
-  if (s < 3600) return `${Math.floor(s / 60)} min ${String(s % 60).padStart(2, "0")} s`;
-  return `${Math.floor(s / 3600)} h ${String(Math.floor((s % 3600) / 60)).padStart(2, "0")} min`;
 }
 
 /**

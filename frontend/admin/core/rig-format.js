@@ -1,5 +1,5 @@
 /**
- * Rig health as table cells: DOM-free, tested with node --test (tests/js/rig-format.test.js).
+ * Rig health as table cells: DOM-free, tested with node --test (tests/js/admin_rig.test.mjs).
  * The report is GET /api/sequences/{id}/rig-health's `report` (backend/rig/schemas.py).
  */
 

@@ -91,7 +91,7 @@ export const CONFLICT_TEXT = "This assignment was changed in another tab — rel
 export class AutoSaver {
   /**
    * @param {Object} o
-   * @param {import("./core/store.js").AnnotationStore} o.store
+   * @param {import("./store.js").AnnotationStore} o.store
    * @param {{saveTracks: (body: object) => Promise<{version: number}>}} o.api
    * @param {Storage|null} o.storage   localStorage, or null where the browser refuses it
    * @param {string} o.key             localKey(assignment id)

@@ -1,6 +1,8 @@
 /** Pure helpers of the admins' review page: numbers, point names, report order, chart layout
  * and the routes of its hash (no DOM). */
 
+import { NONE, dollars, isNumber } from "../../common/format.js";
+
 const FINGERS = ["thumb", "index", "middle", "ring", "little"];
 const JOINT_SUFFIXES = ["mcp", "pip", "dip", "tip"];
 
@@ -10,8 +12,6 @@ export const HAND_JOINTS = ["wrist",
 
 /** The outcomes of a QC report, from clear pass to clear fail. */
 export const OUTCOMES = ["approve", "review", "reject"];
-
-const NONE = "–";
 
 /**
  * An image distance: "3.2 px", or a dash where unknown.
@@ -30,18 +30,6 @@ export function percent(value) {
 }
 
 /**
- * US dollars with two decimals; the API writes amounts as decimal strings ("1.5").
- * @param {string|number|null|undefined} amount
- */
-export function dollars(amount) {
-  const value = Number(amount);
-  if (amount === null || amount === undefined || amount === "" || !Number.isFinite(value)) {
-    return NONE;
-  }
-  return `${value < 0 ? "-" : ""}$${Math.abs(value).toFixed(2)}`;
-}
-
-/**
  * A date and time as the API writes it (ISO 8601, UTC when no zone) for people: "2026-11-23 14:05".
  * @param {string|null|undefined} iso
  */
@@ -51,11 +39,6 @@ export function when(iso) {
   const date = new Date(text);
   if (Number.isNaN(date.getTime())) return NONE;
   return date.toISOString().slice(0, 16).replace("T", " ");
-}
-
-/** @param {unknown} value @returns {value is number} */
-function isNumber(value) {
-  return typeof value === "number" && Number.isFinite(value);
 }
 
 /**

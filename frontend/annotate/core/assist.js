@@ -17,217 +17,28 @@
  *   Use suggestions  writes GET /api/annotate/suggestions' positions as "prefilled"
  *           keyframes, never over a keyframe the worker set by hand.
  *
- * Keyframe sources: "placed" (set by hand; a keyframe without source), "edited" (a
- * suggestion the worker changed), "tracked" and "prefilled" (suggestions taken unchanged).
- * Anchors are the keyframes that are not "tracked": tracking runs between them.
- *
- * DOM-free: the page passes the store, the API client and callbacks in.
+ * The keyframe arithmetic is in proposals.js, the epipolar geometry in epipolar.js. DOM-free:
+ * the page passes the store, the API client and callbacks in (assist-draw.js draws it).
  */
+
+import { epipolarLines } from "./epipolar.js";
+import {
+  HAND_SOURCES, allSpans, countTracked, heldFrames, heldRuns, prefillEntries, proposalEntries,
+  proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, trackedText,
+} from "./proposals.js";
 
 /** Quiet time (ms) after the last edit of a drag before a re-track is asked for. */
 const RETRACK_DELAY_MS = 300;
-/** Sources of keyframes the worker set by hand, which suggestions never replace. */
-const HAND_SOURCES = ["placed", "edited"];
 
 /**
- * @typedef {{frame: number, x: number|null, y: number|null, visible: boolean,
- *            source?: string}} SourcedKeyframe
- * @typedef {{frame: number, x?: number, y?: number, visible?: boolean, source?: string,
- *            remove?: boolean}} Entry  one write of a store batch
- * @typedef {{point: number, first: number, last: number, spans: number[][],
- *            xy: Array<number[]|null>, ok: boolean[]}} PointProposal
- *   first..last: the frames xy/ok cover (xy[i] is frame first + i); spans: [k0, k1] anchor
- *   pairs whose inner frames the proposal decides
- * @typedef {{serial: string, a: number, b: number, c: number}} EpipolarLine
- *   a x + b y + c = 0 in this view's image px, a^2 + b^2 = 1
+ * @typedef {import("./proposals.js").PointProposal} PointProposal
+ * @typedef {import("./proposals.js").SourcedKeyframe} SourcedKeyframe
+ * @typedef {import("./proposals.js").Entry} Entry
  */
 
-/** @param {SourcedKeyframe} k */
-export function sourceOf(k) {
-  return k.source || "placed";
-}
-
-/** @param {SourcedKeyframe} k  a keyframe tracking may start or end at */
-function isAnchor(k) {
-  return sourceOf(k) !== "tracked";
-}
-
-/** @param {SourcedKeyframe} k */
-function trackable(k) {
-  return k.visible && k.x !== null && k.y !== null;
-}
-
-/**
- * The anchor pairs around `frame` (a keyframe, or between two): [[k0, k1]] of the nearest
- * anchors on each side, the span after the frame when it is an anchor itself (the one before
- * at the last anchor). [] when there is no anchor on one side or one of them is occluded.
- * @param {SourcedKeyframe[]} keyframes  sorted by frame @param {number} frame
- * @returns {number[][]}
- */
-export function spanAround(keyframes, frame) {
-  const anchors = keyframes.filter(isAnchor);
-  let i = anchors.findIndex((k) => k.frame > frame);
-  if (i < 0) i = anchors.length;
-  let before = anchors[i - 1];
-  let after = anchors[i];
-  if (before && before.frame === frame && !after) {
-    after = before;
-    before = anchors[i - 2];
-  }
-  if (!before || !after || !trackable(before) || !trackable(after)) return [];
-  return after.frame - before.frame >= 2 ? [[before.frame, after.frame]] : [];
-}
-
-/**
- * Every anchor pair of a track worth tracking (both visible, at least 2 frames apart).
- * @param {SourcedKeyframe[]} keyframes @returns {number[][]}
- */
-export function allSpans(keyframes) {
-  const anchors = keyframes.filter(isAnchor);
-  const spans = [];
-  for (let i = 1; i < anchors.length; i++) {
-    const [a, b] = [anchors[i - 1], anchors[i]];
-    if (trackable(a) && trackable(b) && b.frame - a.frame >= 2) spans.push([a.frame, b.frame]);
-  }
-  return spans;
-}
-
-/**
- * The anchors as saved rows [frame, x, y, visible01] (what the proposals route tracks from).
- * @param {SourcedKeyframe[]} keyframes @returns {any[][]}
- */
-export function anchorRows(keyframes) {
-  return keyframes.filter(isAnchor).map((k) => [k.frame, k.x, k.y, k.visible ? 1 : 0]);
-}
-
-/**
- * The store writes that take a proposal: inside each span, a "tracked" keyframe where the
- * proposal holds, and the removal of an older tracked keyframe where it does not. Frames that
- * hold an anchor now (the worker keyed them meanwhile) are left alone.
- * @param {SourcedKeyframe[]} keyframes  the point's keyframes now
- * @param {PointProposal} proposal @returns {Entry[]}
- */
-export function proposalEntries(keyframes, proposal) {
-  const byFrame = new Map(keyframes.map((k) => [k.frame, k]));
-  const entries = [];
-  for (const [k0, k1] of proposal.spans) {
-    for (let f = k0 + 1; f < k1; f++) {
-      const existing = byFrame.get(f);
-      if (existing && isAnchor(existing)) continue;
-      const i = f - proposal.first;
-      const xy = proposal.ok[i] ? proposal.xy[i] : null;
-      if (xy) entries.push({ frame: f, x: xy[0], y: xy[1], visible: true, source: "tracked" });
-      else if (existing) entries.push({ frame: f, remove: true });
-    }
-  }
-  return entries;
-}
-
-/**
- * How many inner span frames a set of proposals holds at.
- * @param {PointProposal[]} proposals @returns {{tracked: number, total: number}}
- */
-export function countTracked(proposals) {
-  let tracked = 0;
-  let total = 0;
-  for (const p of proposals) {
-    for (const [k0, k1] of p.spans) {
-      for (let f = k0 + 1; f < k1; f++) {
-        total += 1;
-        if (p.ok[f - p.first] && p.xy[f - p.first]) tracked += 1;
-      }
-    }
-  }
-  return { tracked, total };
-}
-
-/** "12 of 14 frames tracked; 2 left to interpolation". @param {{tracked: number, total: number}} c */
-export function trackedText({ tracked, total }) {
-  const unit = total === 1 ? "frame" : "frames";
-  const left = total - tracked;
-  return `${tracked} of ${total} ${unit} tracked; ${left} left to interpolation`;
-}
-
-/**
- * The anchor pairs a hand-set keyframe at `frame` re-tracks: each side (the nearest anchor
- * before it to it, it to the nearest anchor after it) that holds tracked keyframes.
- * @param {SourcedKeyframe[]} keyframes @param {number} frame @returns {number[][]}
- */
-export function retrackSpans(keyframes, frame) {
-  const here = keyframes.find((k) => k.frame === frame);
-  if (!here || !isAnchor(here)) return [];
-  const anchors = keyframes.filter(isAnchor);
-  const i = anchors.indexOf(here);
-  const sides = [[anchors[i - 1], here], [here, anchors[i + 1]]];
-  return sides
-    .filter(([a, b]) => a && b && keyframes.some(
-      (k) => !isAnchor(k) && k.frame > a.frame && k.frame < b.frame))
-    .map(([a, b]) => [a.frame, b.frame]);
-}
-
-/**
- * The store writes that use one point's suggestions: a "prefilled" keyframe at every frame
- * with a suggested position (occluded where the suggestion says so), except at keyframes the
- * worker set by hand.
- * @param {SourcedKeyframe[]} keyframes
- * @param {{xy: Array<number[]|null>, visible: Array<boolean|null>}} suggestion  per frame
- * @returns {Entry[]}
- */
-export function prefillEntries(keyframes, suggestion) {
-  const byFrame = new Map(keyframes.map((k) => [k.frame, k]));
-  const entries = [];
-  suggestion.xy.forEach((xy, f) => {
-    const existing = byFrame.get(f);
-    if (!xy || (existing && HAND_SOURCES.includes(sourceOf(existing)))) return;
-    const visible = suggestion.visible[f] !== false;
-    entries.push({ frame: f, x: xy[0], y: xy[1], visible, source: "prefilled" });
-  });
-  return entries;
-}
-
-/**
- * Epipolar lines in this view of one point at one frame, one per labelled view.
- * @param {Array<{serial: string, F: number[][], xy: Array<Array<number[]|null>>}>} epipolar
- * @param {number} point @param {number} frame @returns {EpipolarLine[]}
- */
-export function epipolarLines(epipolar, point, frame) {
-  const lines = [];
-  for (const view of epipolar || []) {
-    const p = view.xy && view.xy[point] ? view.xy[point][frame] : null;
-    if (!p) continue;
-    const [a, b, c] = view.F.map((row) => row[0] * p[0] + row[1] * p[1] + row[2]);
-    const norm = Math.hypot(a, b);
-    if (!(norm > 0)) continue;
-    lines.push({ serial: view.serial, a: a / norm, b: b / norm, c: c / norm });
-  }
-  return lines;
-}
-
-/**
- * The part of a line inside the image [0, width] x [0, height], or null when it misses.
- * @param {{a: number, b: number, c: number}} line @param {number} width @param {number} height
- * @returns {number[][]|null} [[x0, y0], [x1, y1]] image px
- */
-export function clipLine({ a, b, c }, width, height) {
-  const hits = [];
-  const inside = (x, y) => x >= -1e-9 && x <= width + 1e-9 && y >= -1e-9 && y <= height + 1e-9;
-  if (Math.abs(b) > 1e-12) {
-    for (const x of [0, width]) hits.push([x, -(a * x + c) / b]);
-  }
-  if (Math.abs(a) > 1e-12) {
-    for (const y of [0, height]) hits.push([-(b * y + c) / a, y]);
-  }
-  const kept = hits.filter(([x, y]) => inside(x, y));
-  if (kept.length < 2) return null;
-  // The two hits farthest apart (a line through a corner hits it twice).
-  let best = null;
-  for (let i = 0; i < kept.length; i++) {
-    for (let j = i + 1; j < kept.length; j++) {
-      const d = Math.hypot(kept[i][0] - kept[j][0], kept[i][1] - kept[j][1]);
-      if (!best || d > best.d) best = { d, ends: [kept[i], kept[j]] };
-    }
-  }
-  return best && best.d > 0 ? best.ends : null;
+/** Why a request failed, for the status line. @param {any} err */
+function reason(err) {
+  return err && err.message ? err.message : err;
 }
 
 /**
@@ -237,7 +48,7 @@ export function clipLine({ a, b, c }, width, height) {
 export class Assist {
   /**
    * @param {Object} o
-   * @param {import("./core/store.js").AnnotationStore} o.store
+   * @param {import("./store.js").AnnotationStore} o.store
    * @param {{proposals: (body: object) => Promise<any>, suggestions: () => Promise<any>}} o.api
    * @param {() => boolean} o.editable  whether the page may write now (edit mode, not locked)
    * @param {() => {frame: number, active: number}} o.where  the editor's frame and point
@@ -301,26 +112,18 @@ export class Assist {
           "at least 2 frames apart.");
       return false;
     }
-    const all = [...spans.values()].flat();
-    const body = {
-      tracks: [...spans.keys()].map((p) => ({ point: p, keyframes: anchorRows(this.store.keyframes(p)) })),
-      first_frame: Math.min(...all.map((s) => s[0])),
-      last_frame: Math.max(...all.map((s) => s[1])),
-    };
     this._tracking = true;
     this._say("busy", "Tracking…");
     try {
-      const answer = await this.api.proposals(body);
-      const shown = answer.points.filter((p) => spans.has(p.point)).map((p) => ({
-        point: p.point, first: answer.first_frame, last: answer.last_frame,
-        spans: spans.get(p.point), xy: p.xy, ok: p.ok,
-      }));
+      const answer = await this.api.proposals(
+        proposalRequest(spans, (p) => this.store.keyframes(p)));
+      const shown = proposalsFrom(answer, spans);
       const counts = countTracked(shown);
       this.proposals = { points: shown, counts };
       this._say("info", `${trackedText(counts)} (cyan rings). Enter accepts, Esc discards.`);
       return true;
     } catch (err) {
-      this._say("error", `Tracking failed: ${err && err.message ? err.message : err}`);
+      this._say("error", `Tracking failed: ${reason(err)}`);
       return false;
     } finally {
       this._tracking = false;
@@ -406,18 +209,15 @@ export class Assist {
       if (spans.length) asked.set(point, { keyframes, spans });
     }
     if (!asked.size) return;
-    const all = [...asked.values()].flatMap((a) => a.spans);
-    const [first, last] = [Math.min(...all.map((s) => s[0])), Math.max(...all.map((s) => s[1]))];
+    const spans = new Map([...asked].map(([point, a]) => [point, a.spans]));
+    const body = proposalRequest(spans, (point) => asked.get(point).keyframes);
     const editCount = this.store.editCount;
     this._inFlight += 1;
     let answer;
     try {
-      answer = await this.api.proposals({
-        tracks: [...asked].map(([point, a]) => ({ point, keyframes: anchorRows(a.keyframes) })),
-        first_frame: first, last_frame: last,
-      });
+      answer = await this.api.proposals(body);
     } catch (err) {
-      this._say("error", `Re-tracking failed: ${err && err.message ? err.message : err}`);
+      this._say("error", `Re-tracking failed: ${reason(err)}`);
       return;
     } finally {
       this._inFlight -= 1;
@@ -429,15 +229,12 @@ export class Assist {
       if (again.size) this._scheduleRetrack(again);
       return;
     }
-    const proposals = answer.points.filter((p) => asked.has(p.point)).map((found) => ({
-      point: found.point, first: answer.first_frame, last: answer.last_frame,
-      spans: asked.get(found.point).spans, xy: found.xy, ok: found.ok,
-    }));
+    const proposals = proposalsFrom(answer, spans);
     this._write(proposals.map((p) => [p.point, proposalEntries(asked.get(p.point).keyframes, p)]),
       "re-track");
     const around = asked.size === 1
       ? "your correction" : `your corrections of ${asked.size} points`;
-    this._say("ok", `Re-tracked frames ${first}-${last} around ${around}: ` +
+    this._say("ok", `Re-tracked frames ${body.first_frame}-${body.last_frame} around ${around}: ` +
       `${trackedText(countTracked(proposals))}.`);
   }
 
@@ -449,7 +246,7 @@ export class Assist {
     try {
       answer = await this.api.suggestions();
     } catch (err) {
-      this.suggestNote = `No suggestions: ${err && err.message ? err.message : err}`;
+      this.suggestNote = `No suggestions: ${reason(err)}`;
       this.onChange();
       return;
     }
@@ -523,7 +320,7 @@ export class Assist {
   /** Per point with proposals shown, the frames they hold at (for the timeline). */
   timelineMarks() {
     return (this.proposals ? this.proposals.points : [])
-      .map((p) => ({ point: p.point, frames: okFrames(p) }));
+      .map((p) => ({ point: p.point, frames: heldFrames(p) }));
   }
 
   // ---- internals --------------------------------------------------------------------------
@@ -549,25 +346,4 @@ export class Assist {
     this.status = { kind, text };
     this.onChange();
   }
-}
-
-/** The frames inside a proposal's spans where it holds. @param {PointProposal} p */
-/** A proposal's held positions in runs of consecutive frames (image px), for its path. */
-function heldRuns(p) {
-  const runs = [];
-  let previous = null;
-  for (const f of okFrames(p)) {
-    if (previous === null || f !== previous + 1) runs.push([]);
-    runs[runs.length - 1].push(p.xy[f - p.first]);
-    previous = f;
-  }
-  return runs;
-}
-
-function okFrames(p) {
-  const frames = [];
-  for (const [a, b] of p.spans) {
-    for (let f = a + 1; f < b; f++) if (p.ok[f - p.first] && p.xy[f - p.first]) frames.push(f);
-  }
-  return frames;
 }

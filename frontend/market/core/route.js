@@ -1,0 +1,14 @@
+/** The portal page's routes (no DOM). */
+
+/**
+ * The page's place from its hash: #/hits, #/hits/<HITId>, #/work/<AssignmentId>, #/earnings.
+ * @param {string} hash
+ * @returns {{view: "hits"|"preview"|"work"|"earnings", id: string|null}}
+ */
+export function parseRoute(hash) {
+  const [, view = "", id = ""] = hash.replace(/^#/, "").split("/");
+  if (view === "hits" && id) return { view: "preview", id: decodeURIComponent(id) };
+  if (view === "work" && id) return { view: "work", id: decodeURIComponent(id) };
+  if (view === "earnings") return { view: "earnings", id: null };
+  return { view: "hits", id: null };
+}
