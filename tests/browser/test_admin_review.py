@@ -35,11 +35,11 @@ FRAMES = 12
 # Simulated marketplace workers of this module (accounts of their own).
 FIRST_WORKER = 71
 QC_TIMEOUT_S = 150.0
-ERROR_MAX_PX = 20.0  # replay.js: an error this large is drawn full red
+ERROR_MAX_PX = 20.0  # admin/core/replay.js: an error this large is drawn full red
 
 
 def _rgb(error: float) -> np.ndarray:
-    """replay.js errorColour(error) as 0-255 RGB."""
+    """admin/core/replay.js errorColour(error) as 0-255 RGB."""
     t = min(max(error / ERROR_MAX_PX, 0.0), 1.0)
     r, g, b = colorsys.hls_to_rgb(round(120 * (1 - t)) / 360, 0.42, 0.85)
     return np.array([r, g, b]) * 255
