@@ -10,7 +10,7 @@ from fastapi import Depends, Request
 from backend.accounts.deps import bearer_token
 from backend.annotation import service
 from backend.annotation.models import Assignment
-from backend.annotation.tokens import ASSIGNMENT_SCOPE, REVIEW_SCOPE, TASK_SCOPE
+from backend.annotation.tokens import ASSIGNMENT_SCOPE, READONLY_SCOPE, TASK_SCOPE
 from backend.config import get_settings
 from backend.db import SessionDep
 from backend.errors import Forbidden, Unauthorized
@@ -23,13 +23,13 @@ async def worker_claims(request: Request) -> dict[str, Any]:
     if token is None:
         raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")
     return verify_token(token, get_settings().signing_key,
-                        (ASSIGNMENT_SCOPE, TASK_SCOPE, REVIEW_SCOPE))
+                        (ASSIGNMENT_SCOPE, TASK_SCOPE, READONLY_SCOPE))
 
 
 async def writer_claims(claims: Annotated[dict[str, Any], Depends(worker_claims)]
                    ) -> dict[str, Any]:
     """The claims of a token that may change labels (checked before the body is read)."""
-    if claims["scope"] == REVIEW_SCOPE:
+    if claims["scope"] == READONLY_SCOPE:
         raise Forbidden("a read-only review link cannot save or submit labels")
     return claims
 

@@ -28,10 +28,10 @@ from backend.annotation.schemas import (
 )
 from backend.annotation.tokens import (
     PREVIEW_ASSIGNMENT_ID,
-    REVIEW_TOKEN_TTL_S,
+    READONLY_TOKEN_TTL_S,
     assignment_token,
     page_url,
-    review_token,
+    readonly_token,
     task_token,
 )
 from backend.config import get_settings
@@ -77,8 +77,8 @@ def create_readonly_link(assignment_id: Id, session: SessionDep,
     and submit (403) and expires in an hour."""
     assignment = service.get_assignment_or_raise(session, assignment_id)
     task = service.get_task_or_raise(session, assignment.task_id)
-    token = review_token(task, assignment)
-    expires_at = datetime.now(UTC) + timedelta(seconds=REVIEW_TOKEN_TTL_S)
+    token = readonly_token(task, assignment)
+    expires_at = datetime.now(UTC) + timedelta(seconds=READONLY_TOKEN_TTL_S)
     url = page_url("", token, mode="review", assignmentId=assignment.external_id,
                    workerId=assignment.worker_id)
     return ReadonlyLink(url=url, expires_at=expires_at)

@@ -332,10 +332,10 @@ def _register_domain_commands() -> None:
     from backend.cli.captures import sequences_app
     from backend.cli.exports import export_command
     from backend.cli.jobs import jobs_app
-    from backend.cli.status import status_command
     from backend.cli.quality import qc_app, training_app
     from backend.cli.rig import rig_app
     from backend.cli.solve import calibrate_hand_command, solve_command
+    from backend.cli.status import status_command
 
     app.command("status")(status_command)
     app.command("solve")(solve_command)

@@ -23,7 +23,7 @@ from backend.annotation.schemas import (
     TaskState,
     TracksPayload,
 )
-from backend.annotation.tokens import REVIEW_SCOPE, TASK_SCOPE, frame_token
+from backend.annotation.tokens import READONLY_SCOPE, TASK_SCOPE, frame_token
 from backend.captures.models import Sequence
 from backend.db import SessionDep
 from backend.progress.schemas import SequenceProgress
@@ -118,7 +118,7 @@ def read_task(claims: WorkerClaims, session: SessionDep) -> AnnotateTaskRead:
         working_time_s=assignment.working_time_s,
         tracks=TracksPayload.model_validate(payload) if payload else None,
     )
-    mode: Literal["edit", "submitted", "review"] = "review" if claims["scope"] == REVIEW_SCOPE \
+    mode: Literal["edit", "submitted", "review"] = "review" if claims["scope"] == READONLY_SCOPE \
         else "edit" if assignment.status == "working" else "submitted"
     return AnnotateTaskRead(mode=mode, task=_task_reads(session, [task])[0], frames=frames,
                             assignment=read)

@@ -39,7 +39,7 @@ class QCReport(TimestampMixin, Base):
     per_joint: Mapped[list[Any]] = mapped_column(JSON, default=list)
     per_frame: Mapped[list[Any]] = mapped_column(JSON, default=list)
     swaps: Mapped[list[Any]] = mapped_column(JSON, default=list)
-    # What the reviewer's replay draws (backend.quality.review): the reference pixels the
+    # What the reviewer's replay draws (backend.quality.admin_queue): the reference pixels the
     # label is judged against per frame and point, its error matrix, its issue spans. None on
     # reports written before it was stored (scoring the target again writes it).
     replay: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)

@@ -10,7 +10,7 @@ from backend.accounts.deps import CurrentAdmin
 from backend.crowd.schemas import WorkerDetailRead, WorkerStatsRead
 from backend.db import SessionDep
 from backend.jobs.schemas import JobRead
-from backend.quality import gold, review, service, worker_records
+from backend.quality import admin_queue, gold, service, worker_records
 from backend.quality.schemas import (
     QCReportDetail,
     QCReportRead,
@@ -22,7 +22,7 @@ from backend.quality.schemas import (
 from backend.validation import Id, Key, Offset, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/qc", tags=["quality"])
-router.include_router(review.router)
+router.include_router(admin_queue.router)
 
 Outcome = Literal["approve", "review", "reject"]
 

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Response
 
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
-from backend.solve import pictures, review, service
+from backend.solve import inspection, pictures, service
 from backend.solve.models import SolveRun
 from backend.solve.schemas import (
     InitialPoseUpdate,
@@ -95,14 +95,14 @@ def residuals(run_id: Id, frame: Index, session: SessionDep, _: CurrentAdmin) ->
 @router.get("/solve-runs/{run_id}/timeline", response_model=RunTimeline)
 def timeline(run_id: Id, session: SessionDep, _: CurrentAdmin) -> dict:
     """Every frame at a glance, and the frames that need a look with their reasons."""
-    return review.run_timeline(service.finished_run_or_raise(session, run_id))
+    return inspection.run_timeline(service.finished_run_or_raise(session, run_id))
 
 
 @router.get("/solve-runs/{run_id}/compare/{other_id}", response_model=RunComparison)
 def compare(run_id: Id, other_id: Id, session: SessionDep, _: CurrentAdmin) -> dict:
     """How run ``other_id`` differs from run ``run_id`` frame by frame (both finished, one
     sequence): hand joints (mm), each object's pose (mm, degrees), the largest differences."""
-    return review.compare_runs(session, run_id, other_id)
+    return inspection.compare_runs(session, run_id, other_id)
 
 
 @router.get("/solve-settings", response_model=SolveSettingsRead)

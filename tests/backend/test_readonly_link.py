@@ -106,13 +106,13 @@ def test_review_token_cannot_save_or_submit_and_changes_nothing(
 def test_review_token_expires_within_the_hour(
     client: TestClient, admin_headers: dict, saved: dict
 ) -> None:
-    from backend.annotation.tokens import REVIEW_SCOPE
+    from backend.annotation.tokens import READONLY_SCOPE
     from backend.config import get_settings
     from backend.security import sign_token
 
     body, token = _readonly(client, admin_headers, saved["assignment_id"])
     claims = _claims(token)
-    assert claims["scope"] == REVIEW_SCOPE
+    assert claims["scope"] == READONLY_SCOPE
     assert 3500 < claims["exp"] - time.time() <= 3600
     expires = datetime.fromisoformat(body["expires_at"]).timestamp()
     assert abs(expires - claims["exp"]) < 5

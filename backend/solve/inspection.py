@@ -1,4 +1,4 @@
-"""Reading a finished run for review: its frames that need a look, and how two runs differ.
+"""Inspecting a finished run: its frames that need a look, and how two runs differ.
 
 World frame, metres in storage; the answers are in millimetres and degrees. A frame needs a
 look where an object pose is flagged as not trusted (the reason is the solver's), an object
