@@ -284,13 +284,10 @@ class Settings(BaseSettings):
         return self.database_url.startswith("sqlite")
 
 
-class InvalidSettings(DexlabelError):
+class InvalidSettings(DexlabelError, status_code=500, code="invalid_settings"):
     """The environment's settings are refused; the detail names each variable and why, one
     per line (``DEXLABEL_QC_THRESHOLDS: 'x' is not a QC threshold setting; ...``). A
     deployment's fault, not a request's: status 500. The CLI prints it without a traceback."""
-
-    status_code = 500
-    code = "invalid_settings"
 
 
 def _describe(exc: ValidationError) -> str:

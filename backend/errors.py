@@ -33,30 +33,35 @@ class DexlabelError(Exception):
         self.detail = detail
         self.extra = extra
 
-
-class NotFound(DexlabelError):
-    status_code = 404
-    code = "not_found"
-
-
-class Conflict(DexlabelError):
-    status_code = 409
-    code = "conflict"
-
-
-class Unauthorized(DexlabelError):
-    status_code = 401
-    code = "unauthorized"
+    def __init_subclass__(cls, status_code: int | None = None, code: str | None = None,
+                          **kwargs: Any) -> None:
+        """``class NotFound(DexlabelError, status_code=404, code="not_found")``: an error
+        kind's HTTP status and its ``error`` code, given where it is declared."""
+        super().__init_subclass__(**kwargs)
+        if status_code is not None:
+            cls.status_code = status_code
+        if code is not None:
+            cls.code = code
 
 
-class Forbidden(DexlabelError):
-    status_code = 403
-    code = "forbidden"
+class NotFound(DexlabelError, status_code=404, code="not_found"):
+    """No such record (or none the caller may see)."""
 
 
-class PayloadTooLarge(DexlabelError):
-    status_code = 413
-    code = "payload_too_large"
+class Conflict(DexlabelError, status_code=409, code="conflict"):
+    """The request contradicts the state of the records it touches."""
+
+
+class Unauthorized(DexlabelError, status_code=401, code="unauthorized"):
+    """No credentials, or credentials that are not valid (any more)."""
+
+
+class Forbidden(DexlabelError, status_code=403, code="forbidden"):
+    """Valid credentials that do not allow this request."""
+
+
+class PayloadTooLarge(DexlabelError, status_code=413, code="payload_too_large"):
+    """A request body over its route's limit."""
 
 
 class InvalidCapture(DexlabelError):
@@ -71,16 +76,12 @@ class InvalidCapture(DexlabelError):
         self.problem = problem
 
 
-class Busy(DexlabelError):
+class Busy(DexlabelError, status_code=503, code="busy"):
     """A concurrent request changed the same records first; the same request again works."""
 
-    status_code = 503
-    code = "busy"
 
-
-class StorageError(DexlabelError):
-    status_code = 502
-    code = "storage_error"
+class StorageError(DexlabelError, status_code=502, code="storage_error"):
+    """The storage backend failed or refused a read or write."""
 
 
 class FieldProblem(BaseModel):

@@ -26,11 +26,8 @@ SERVER_FILE = "server.json"
 MIGRATIONS_TABLE = "alembic_version"
 
 
-class NoInstance(DexlabelError):
+class NoInstance(DexlabelError, status_code=400, code="no_instance"):
     """No migrated database where the settings point."""
-
-    status_code = 400
-    code = "no_instance"
 
 
 def _safe_url(url: str) -> str:

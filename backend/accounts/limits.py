@@ -70,9 +70,8 @@ class TooManyAttempts(DexlabelError):
         self.headers = {"Retry-After": str(retry_after_s)}
 
 
-class LimiterUnavailable(DexlabelError):
-    status_code = 503
-    code = "login_limiter_unavailable"
+class LimiterUnavailable(DexlabelError, status_code=503, code="login_limiter_unavailable"):
+    pass
 
 
 class FailureStore(Protocol):

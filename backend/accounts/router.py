@@ -1,36 +1,15 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, Request, Response
-from pydantic import BaseModel, Field
 
 from backend.accounts import service
 from backend.accounts.deps import CurrentAdmin
+from backend.accounts.schemas import AdminRead, LoginRequest, PasswordChange, TokenRead
 from backend.accounts.service import ADMIN
 from backend.db import SessionDep
 
 router = APIRouter(prefix="/api/auth", tags=["auth"])
 
-
-
-class LoginRequest(BaseModel):
-    email: str = Field(min_length=3, max_length=320)
-    password: str = Field(min_length=1, max_length=1000)
-
-
-class PasswordChange(BaseModel):
-    current_password: str = Field(min_length=1, max_length=1000)
-    new_password: str = Field(min_length=1, max_length=1000)
-
-
-class TokenRead(BaseModel):
-    access_token: str
-    token_type: str = "bearer"
-    expires_in: int
-
-
-class AdminRead(BaseModel):
-    id: int
-    email: str
 
 
 def _token_read(admin_id: int, token_epoch: int) -> TokenRead:

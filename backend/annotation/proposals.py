@@ -38,9 +38,8 @@ MAX_PROPOSAL_FRAMES = 300
 _DECODE_THREADS = 8
 
 
-class InvalidProposalRequest(DexlabelError):
-    status_code = 422
-    code = "invalid_proposal_request"
+class InvalidProposalRequest(DexlabelError, status_code=422, code="invalid_proposal_request"):
+    pass
 
 
 class ProposalsRequest(BaseModel):

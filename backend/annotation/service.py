@@ -34,18 +34,16 @@ from backend.storage import Storage
 from worker.tracks import checked_rows, completeness
 
 
-class InvalidTracks(DexlabelError):
-    status_code = 422
-    code = "invalid_tracks"
+class InvalidTracks(DexlabelError, status_code=422, code="invalid_tracks"):
+    pass
 
 
-class Incomplete(DexlabelError):
-    status_code = 422
-    code = "incomplete"
+class Incomplete(DexlabelError, status_code=422, code="incomplete"):
+    pass
 
 
-class StaleVersion(Conflict):
-    code = "conflict"
+class StaleVersion(Conflict, code="conflict"):
+    pass
 
 
 def create_tasks(session: Session, storage: Storage, sequence_id: int) -> list[Task]:

@@ -106,9 +106,8 @@ class MarketplaceUnreachable(MarketplaceError):
     retryable = True
 
 
-class CrowdConfigError(DexlabelError):
-    status_code = 500
-    code = "crowd_config_error"
+class CrowdConfigError(DexlabelError, status_code=500, code="crowd_config_error"):
+    pass
 
 
 def builtin_endpoint(settings: Settings) -> str:

@@ -39,9 +39,8 @@ _DONE = {"approval": "approved", "rejection": "rejected"}
 _MARKET_STATUS = {"approval": "Approved", "rejection": "Rejected"}
 
 
-class MissingFeedback(DexlabelError):
-    status_code = 422
-    code = "validation_error"
+class MissingFeedback(DexlabelError, status_code=422, code="validation_error"):
+    pass
 
 
 def _payment_read(row: CrowdPayment, already_done: bool = False) -> PaymentRead:

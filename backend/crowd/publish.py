@@ -44,9 +44,8 @@ _DESCRIPTIONS = {
 }
 
 
-class TooManyAssignments(DexlabelError):
-    status_code = 422
-    code = "too_many_assignments"
+class TooManyAssignments(DexlabelError, status_code=422, code="too_many_assignments"):
+    pass
 
 
 def check_assignments(count: int, allow_large_hits: bool) -> None:

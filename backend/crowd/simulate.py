@@ -30,11 +30,8 @@ HTTP_TIMEOUT_S = 30.0
 # Attempts of a request that a server error left without effect, and the pause between them.
 RETRIES = 3
 RETRY_PAUSE_S = 0.2
-class SimulationError(DexlabelError):
+class SimulationError(DexlabelError, status_code=502, code="simulation_failed"):
     """A step of the worker flow answered with an error."""
-
-    status_code = 502
-    code = "simulation_failed"
 
 
 @dataclass

@@ -42,13 +42,12 @@ OPTIONS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 
 
-class InvalidExport(DexlabelError):
-    status_code = 422
-    code = "invalid_export"
+class InvalidExport(DexlabelError, status_code=422, code="invalid_export"):
+    pass
 
 
-class NotExportable(Conflict):
-    code = "not_exportable"
+class NotExportable(Conflict, code="not_exportable"):
+    pass
 
 
 class Covered(NamedTuple):

@@ -56,9 +56,8 @@ _CACHE: OrderedDict[Hashable, tuple[Prefill, list[EpipolarGuide]]] = OrderedDict
 _CACHE_LOCK = threading.Lock()
 
 
-class InvalidSuggestionRequest(DexlabelError):
-    status_code = 422
-    code = "invalid_suggestion_request"
+class InvalidSuggestionRequest(DexlabelError, status_code=422, code="invalid_suggestion_request"):
+    pass
 
 
 class PointSuggestions(BaseModel):

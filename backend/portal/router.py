@@ -10,6 +10,7 @@ from sqlalchemy.orm import Session
 from backend.accounts import service as account_service
 from backend.accounts.deps import CurrentAdmin, CurrentWorker
 from backend.accounts.models import PortalAccount
+from backend.accounts.schemas import LoginRequest, PasswordChange
 from backend.accounts.service import WORKER
 from backend.config import get_settings
 from backend.crowd.titles import TaskFacts
@@ -32,19 +33,17 @@ from backend.portal.schemas import (
     HitTaskRead,
     InviteCreate,
     InviteRead,
-    Login,
-    PasswordChange,
     Register,
-    TokenRead,
+    WorkerTokenRead,
 )
 from backend.validation import Key
 
 router = APIRouter(prefix="/api/portal", tags=["worker portal"])
 
 
-def _token_read(account_id: int, worker_id: str, token_epoch: int) -> TokenRead:
+def _token_read(account_id: int, worker_id: str, token_epoch: int) -> WorkerTokenRead:
     token = account_service.account_token(WORKER, account_id, token_epoch, worker_id=worker_id)
-    return TokenRead(access_token=token, expires_in=WORKER.ttl_s, worker_id=worker_id)
+    return WorkerTokenRead(access_token=token, expires_in=WORKER.ttl_s, worker_id=worker_id)
 
 
 def _account_read(account: PortalAccount) -> AccountRead:
@@ -109,8 +108,8 @@ def register(body: Register, session: SessionDep) -> AccountRead:
                                            clock.now()))
 
 
-@router.post("/login", response_model=TokenRead)
-async def login(body: Login, request: Request) -> TokenRead:
+@router.post("/login", response_model=WorkerTokenRead)
+async def login(body: LoginRequest, request: Request) -> WorkerTokenRead:
     """A bearer token for 12 hours. Failed logins are limited per account and per client
     address: past the limit every login answers 429 with Retry-After."""
     record = await account_service.sign_in(request, WORKER, body.email, body.password)
@@ -125,9 +124,9 @@ def logout(worker: CurrentWorker, session: SessionDep) -> Response:
     return Response(status_code=204)
 
 
-@router.post("/password", response_model=TokenRead)
+@router.post("/password", response_model=WorkerTokenRead)
 async def change_password(body: PasswordChange, request: Request, worker: CurrentWorker,
-                          session: SessionDep) -> TokenRead:
+                          session: SessionDep) -> WorkerTokenRead:
     """A new password: every token issued before ends; the reply is a new token."""
     await account_service.new_password(request, WORKER, session, worker, body.current_password,
                                        body.new_password)

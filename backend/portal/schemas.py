@@ -7,24 +7,15 @@ from datetime import datetime
 
 from pydantic import BaseModel, Field
 
+from backend.accounts.schemas import LoginRequest, TokenRead
 
-class AccountCreate(BaseModel):
-    email: str = Field(min_length=3, max_length=320)
-    password: str = Field(min_length=1, max_length=1000)
+
+class AccountCreate(LoginRequest):
+    """A new worker account's email and password."""
 
 
 class Register(AccountCreate):
     invite: str = Field(min_length=8, max_length=200)
-
-
-class Login(BaseModel):
-    email: str = Field(min_length=3, max_length=320)
-    password: str = Field(min_length=1, max_length=1000)
-
-
-class PasswordChange(BaseModel):
-    current_password: str = Field(min_length=1, max_length=1000)
-    new_password: str = Field(min_length=1, max_length=1000)
 
 
 class AccountRead(BaseModel):
@@ -43,10 +34,7 @@ class InviteRead(BaseModel):
     expires_at: datetime
 
 
-class TokenRead(BaseModel):
-    access_token: str
-    token_type: str = "bearer"
-    expires_in: int
+class WorkerTokenRead(TokenRead):
     worker_id: str
 
 

@@ -27,9 +27,8 @@ if TYPE_CHECKING:
     from worker.quality.metrics import AssignmentQC
 
 
-class InvalidClip(DexlabelError):
-    status_code = 422
-    code = "validation_error"
+class InvalidClip(DexlabelError, status_code=422, code="validation_error"):
+    pass
 
 
 def _check_tracks(task: Task, tracks: list[list[list[Any]]]) -> None:

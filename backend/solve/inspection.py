@@ -33,9 +33,8 @@ LOW_CONFIDENCE = 0.5
 LARGEST_ROWS = 10
 
 
-class RunsNotComparable(DexlabelError):
-    status_code = 422
-    code = "not_comparable"
+class RunsNotComparable(DexlabelError, status_code=422, code="not_comparable"):
+    pass
 
 
 def _rounded(values: np.ndarray, digits: int = 3) -> list[float | None]:

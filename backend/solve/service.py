@@ -37,20 +37,16 @@ OPTIMISERS: tuple[Optimiser, ...] = ("paper", "default")
 ROTATION_TOLERANCE = 1e-4
 
 
-class SolveNotReady(Conflict):
+class SolveNotReady(Conflict, code="not_ready"):
     """The sequence lacks something the solve needs; the detail says what and how to give it."""
 
-    code = "not_ready"
+
+class InvalidSolveRequest(DexlabelError, status_code=422, code="invalid_request"):
+    pass
 
 
-class InvalidSolveRequest(DexlabelError):
-    status_code = 422
-    code = "invalid_request"
-
-
-class InvalidPose(DexlabelError):
-    status_code = 422
-    code = "invalid_pose"
+class InvalidPose(DexlabelError, status_code=422, code="invalid_pose"):
+    pass
 
 
 def job_key(run_id: int) -> str:
