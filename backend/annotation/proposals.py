@@ -29,8 +29,8 @@ from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError
 from backend.storage import Storage
 from backend.validation import MAX_INT32
-from worker.tracking.checks import check_key, plant
-from worker.tracking.lk import FB_THRESHOLD_PX, propose, tracked_spans
+from worker.assist.checks import check_key, plant
+from worker.assist.lk import FB_THRESHOLD_PX, propose, tracked_spans
 
 # Frames decoded for one request at most: 300 grey 640x480 frames are 92 MB in memory and
 # about half a second of decoding; a longer stretch is asked for in parts.

@@ -19,8 +19,8 @@ from backend.annotation.points import point_names
 from backend.annotation.proposals import ProposalsRequest, grey_frames
 from backend.annotation.schemas import TracksSave
 from backend.storage import Storage
-from worker.tracking.lk import tracked_spans
-from worker.tracking.stretches import STRETCH_TOLERANCE_PX, check_stretches
+from worker.assist.lk import tracked_spans
+from worker.assist.stretches import STRETCH_TOLERANCE_PX, check_stretches
 
 # Clip frames read for one check at most (as the tracking proposals): longer clips are checked
 # over their first frames only, and the answer says so.

@@ -26,8 +26,8 @@ from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
 from worker.geometry import CameraModel
-from worker.tracking.checks import accepted_checks, check_key
-from worker.tracking.stretches import StretchCheck, check_stretches
+from worker.assist.checks import accepted_checks, check_key
+from worker.assist.stretches import StretchCheck, check_stretches
 from worker.tracks import SOURCE_PREFILLED, dense_points, keyframe_sources
 
 if TYPE_CHECKING:

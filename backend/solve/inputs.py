@@ -44,7 +44,7 @@ from worker.hand import HandModel, load_hand_model
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import check_side
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
-from worker.tracking.stretches import (
+from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,
     EVIDENCE_KEYED,

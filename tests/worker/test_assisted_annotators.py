@@ -18,7 +18,7 @@ from worker.synth.assisted import (
     plain_rows,
     row_source,
 )
-from worker.tracking.checks import CHECK_OFFSET_PX, check_cells, check_key, check_offset
+from worker.assist.checks import CHECK_OFFSET_PX, check_cells, check_key, check_offset
 from worker.tracks import dense_track
 
 WIDTH, HEIGHT, FRAMES, POINTS = 320, 240, 24, 21

@@ -28,12 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.assist.visibility import DepthMaps
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.quality.consensus import ViewLabels, decided_of
 from worker.quality.landmark_points import facing, separation_mm, shown_fraction
 from worker.quality.metrics import (
     AssignmentQC,
-    DepthMaps,
     error_issues,
     num,
     per_point_and_frame,

@@ -44,19 +44,21 @@ from worker.geometry.triangulate import (
     leave_one_out_residuals,
     triangulate_points,
 )
-from worker.quality.metrics import (
+from worker.assist.visibility import (
     HIDDEN_MARGIN_M,
     SURFACE_MARGIN_M,
-    AssignmentQC,
     DepthMaps,
     SurfaceCheck,
+    surface_check,
+)
+from worker.quality.metrics import (
+    AssignmentQC,
     completeness,
     depth_visibility,
     error_issues,
     error_summary,
     num,
     per_point_and_frame,
-    surface_check,
     track_metrics,
 )
 from worker.quality.motion import (

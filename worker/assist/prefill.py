@@ -6,7 +6,7 @@ accepted in at least MIN_ACCEPTED_VIEWS other views, each point is triangulated 
 the views that saw it (at least MIN_VIEWS; robustly, worker.geometry.triangulate) and projected
 into the target view with its lens distortion: a suggested position, image px. Its suggested
 visibility comes from the target view's depth map, with QC's own rule
-(worker.quality.metrics.surface_check): occluded where something other than the hand covers the
+(worker.assist.visibility.surface_check): occluded where something other than the hand covers the
 point by more than HIDDEN_MARGIN_M, or where the point projects outside the image or behind the
 camera; visible where the depth map reads at its pixel and covers nothing; unknown where the map
 has no reading there (or there is no map).
@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from worker.assist.visibility import HIDDEN_MARGIN_M, WINDOW_RADIUS_PX, surface_check
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.geometry.triangulate import triangulate_points
-from worker.quality.metrics import HIDDEN_MARGIN_M, WINDOW_RADIUS_PX, surface_check
 from worker.tracks import decided_mask, dense_points
 
 # Fewest other views with decided work on a point before it is suggested: two rays fix it.

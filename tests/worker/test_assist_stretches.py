@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.worker.test_tracking_lk import _frames, _keys
+from tests.worker.test_assist_lk import _frames, _keys
 from worker.synth.annotators import follow_path
-from worker.tracking.stretches import (
+from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,
     EVIDENCE_KEYED,
