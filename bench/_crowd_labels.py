@@ -16,9 +16,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from worker.synth.annotators import KEY_STEP, annotate, keyframe_indices
 from worker.assist.stretches import check_stretches
-from worker.tracks import dense_points
+from worker.synth.annotators import KEY_STEP, annotate, keyframe_indices
+from worker.tracks.interpolate import dense_points
 
 LABEL_MODES = ("noise", "crowd", "every4", "every4-unchecked")
 

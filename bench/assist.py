@@ -79,7 +79,7 @@ def _summary(err: np.ndarray) -> dict[str, float | int]:
 
 
 def _dense(tracks: list[list[list[Any]]], frames: int) -> np.ndarray:
-    from worker.tracks import dense_track
+    from worker.tracks.interpolate import dense_track
 
     return np.stack([dense_track(rows, frames).xy for rows in tracks], axis=1)
 
@@ -105,9 +105,9 @@ def _grey(view_dir: Path, frames: int) -> np.ndarray:
 
 def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, Any]:
     from backend.crowd.simulate import CaptureTruth
+    from worker.assist.lk import propose
     from worker.formats import dexycb
     from worker.synth.annotators import annotate, hand_visibility
-    from worker.assist.lk import propose
 
     truth_of = CaptureTruth(capture)
     seq_dir = next(capture.glob(dexycb.META_GLOB)).parent
@@ -168,9 +168,9 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
     from backend.db import session_scope
     from backend.migrate import upgrade
     from backend.storage import get_storage
+    from worker.assist.lk import propose
     from worker.formats import dexycb
     from worker.synth.annotators import annotate, hand_visibility
-    from worker.assist.lk import propose
 
     upgrade(get_settings().database_url)
     sequence_id = import_path(capture)[0].sequence_id
@@ -301,7 +301,7 @@ def _work_one(view: _View, variant: str, key: bytes, assignment_id: int, prefill
 def _dense_labels(tracks: list[Any], frames: int) -> tuple[np.ndarray, np.ndarray]:
     """(F, 21, 2) px and (F, 21) visibility of one view's tracks (sources dropped)."""
     from worker.synth.assisted import plain_rows
-    from worker.tracks import dense_points
+    from worker.tracks.interpolate import dense_points
 
     return dense_points(((p, plain_rows(rows)) for p, rows in enumerate(tracks)), frames, 21)
 
@@ -398,8 +398,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     from backend.config import get_settings
     from backend.db import session_scope, utcnow
     from backend.quality.models import QCReport
-    from worker.assist.prefill import MIN_ACCEPTED_VIEWS
     from worker.assist.checks import check_key
+    from worker.assist.prefill import MIN_ACCEPTED_VIEWS
 
     _fresh_setup("assist-qc")
     sequence_id, every_task = _setup(capture)
@@ -463,8 +463,8 @@ def _kept_unshown(key: bytes, assignment_id: int, tracks: list[Any], prefill: An
     offset: QC would count them as accepted checks, so this stays 0 while the route and QC
     agree on where cells are planted. Tracking proposals are planted wherever they are given,
     so only pre-fill counts."""
-    from worker.synth.assisted import row_source
     from worker.assist.checks import check_cells
+    from worker.synth.assisted import row_source
 
     if prefill is None:
         return 0

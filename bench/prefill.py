@@ -143,8 +143,8 @@ def _pure_ms(capture: Path, sequence_id: int, runs: int) -> float:
     from backend.annotation.accepted import labelled_work, sequence_tasks
     from backend.captures.service import camera_model, sequence_cameras
     from backend.db import session_scope
-    from worker.formats import dexycb
     from worker.assist.prefill import prefill, view_work
+    from worker.formats import dexycb
 
     with session_scope() as session:
         rows = sequence_cameras(session, sequence_id)

@@ -36,6 +36,7 @@ from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
 from backend.storage import Storage
+from worker.assist.checks import check_key, plant
 from worker.assist.prefill import (
     MIN_ACCEPTED_VIEWS,
     DepthReader,
@@ -46,7 +47,6 @@ from worker.assist.prefill import (
     view_work,
 )
 from worker.assist.prefill import EpipolarView as EpipolarGuide
-from worker.assist.checks import check_key, plant
 
 # Views whose suggestions are kept in memory (about 0.3 MB each for 21 points x 72 frames and 7
 # labelled views): every page load of a task reads them, and decoding the view's depth maps

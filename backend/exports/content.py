@@ -29,7 +29,7 @@ from backend.storage import get_storage
 from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.geometry import CameraModel
 from worker.hand import HandLayer
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 
 @dataclass

@@ -25,10 +25,11 @@ from backend.solve.inputs import load_mesh
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
-from worker.geometry import CameraModel
 from worker.assist.checks import accepted_checks, check_key
 from worker.assist.stretches import StretchCheck, check_stretches
-from worker.tracks import SOURCE_PREFILLED, dense_points, keyframe_sources
+from worker.geometry import CameraModel
+from worker.tracks.interpolate import dense_points
+from worker.tracks.sources import SOURCE_PREFILLED, keyframe_sources
 
 if TYPE_CHECKING:
     from worker.quality.anchored import SolvedObjects

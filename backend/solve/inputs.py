@@ -39,11 +39,6 @@ from backend.captures.service import sequence_cameras
 from backend.config import get_settings
 from backend.solve.calibrated import depth_in_world_time, hand_in_world_time, objects_in_world_time
 from backend.storage import Storage, get_storage
-from worker.geometry.mesh_io import Mesh, read_mesh
-from worker.hand import HandModel, load_hand_model
-from worker.hand.joints import NUM_JOINTS
-from worker.hand.params import check_side
-from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
 from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,
@@ -52,7 +47,12 @@ from worker.assist.stretches import (
     EVIDENCE_UNCHECKED,
     check_stretches,
 )
-from worker.tracks import dense_points
+from worker.geometry.mesh_io import Mesh, read_mesh
+from worker.hand import HandModel, load_hand_model
+from worker.hand.joints import NUM_JOINTS
+from worker.hand.params import check_side
+from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
+from worker.tracks.interpolate import dense_points
 
 
 def dense_labels(assignment: Assignment, num_frames: int,

@@ -139,8 +139,8 @@ def test_suggestions_from_three_accepted_views_lie_near_the_truth(
     client: TestClient, accepted: dict, capture4: Path
 ) -> None:
     from backend.config import get_settings
-    from worker.assist.prefill import epipolar_lines
     from worker.assist.checks import check_cells, check_key
+    from worker.assist.prefill import epipolar_lines
 
     tasks, link = accepted["tasks"], accepted["links"][0]
     answer = _get(client, link["token"])

@@ -51,8 +51,8 @@ def _submit_assisted(task_id: int, worker: str, xy: np.ndarray, visible: np.ndar
     its id, so it is created first and its tracks written once the id is known)."""
     from backend.annotation.models import Assignment
     from backend.config import get_settings
-    from worker.synth.annotators import annotate
     from worker.assist import checks
+    from worker.synth.annotators import annotate
 
     work = annotate(xy, visible, size, "careful", rng)
     assignment_id = submit_direct(task_id, worker, work.tracks)

@@ -25,7 +25,7 @@ from worker.assist.prefill import (
     view_work,
 )
 from worker.synth.annotators import annotate
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 TARGET = 0
 

@@ -21,7 +21,7 @@ from worker.quality.anchored import (
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import AssignmentQC
 from worker.synth.annotators import annotate
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 FRAMES, WIDTH, HEIGHT = 36, 640, 480
 HALF = 0.05

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from backend.captures.layout import find_sequence_dirs, read_sequence
+from worker.assist.visibility import OWN_SURFACE_M, distance_to_hand, surface_check
 from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.consensus import score_hand
 from worker.quality.evaluate import simulated_labels
-from worker.assist.visibility import OWN_SURFACE_M, distance_to_hand, surface_check
 from worker.quality.metrics import depth_visibility
 from worker.synth.annotators import hand_visibility
 

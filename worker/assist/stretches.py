@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from worker.assist.lk import propose, tracked_spans
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 # Evidence codes of one (frame, point) of a track.
 EVIDENCE_NONE = 0          # no visible position there

@@ -32,6 +32,13 @@ from typing import Any
 
 import numpy as np
 
+from worker.assist.visibility import (
+    HIDDEN_MARGIN_M,
+    SURFACE_MARGIN_M,
+    DepthMaps,
+    SurfaceCheck,
+    surface_check,
+)
 from worker.geometry.cameras import CameraModel
 from worker.geometry.refine import (
     CameraStack,
@@ -43,13 +50,6 @@ from worker.geometry.triangulate import (
     column_pairs,
     leave_one_out_residuals,
     triangulate_points,
-)
-from worker.assist.visibility import (
-    HIDDEN_MARGIN_M,
-    SURFACE_MARGIN_M,
-    DepthMaps,
-    SurfaceCheck,
-    surface_check,
 )
 from worker.quality.metrics import (
     AssignmentQC,
@@ -105,7 +105,7 @@ class ViewLabels:
     decided: (F, P) bool, where the position is the worker's own decision (placed, edited or
         a tracking proposal from this view's images accepted); False where it only comes
         from suggestions pre-filled from the other views and left unchanged
-        (worker.tracks.decided_mask). None: all of it (work without provenance). Undecided
+        (worker.tracks.sources.decided_mask). None: all of it (work without provenance). Undecided
         positions never enter the consensus and are never scored, so a view pre-filled from
         the others cannot agree with them by construction (leave-one-out holds).
     """

@@ -18,9 +18,9 @@ from typing import Literal
 
 import numpy as np
 
-from worker.quality.metrics import AssignmentQC
 from worker.assist.checks import CHECK_OFFSET_PX
-from worker.tracks import format_spans
+from worker.quality.metrics import AssignmentQC
+from worker.tracks.spans import format_spans
 
 # The consistent estimator of a normal distribution's sigma from the MAD.
 MAD_TO_SIGMA = 1.4826

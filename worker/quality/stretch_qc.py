@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from worker.quality.consensus import ViewLabels
-from worker.quality.metrics import AssignmentQC
 from worker.assist.lk import tracked_spans
 from worker.assist.stretches import StretchCheck
+from worker.quality.consensus import ViewLabels
+from worker.quality.metrics import AssignmentQC
 
 
 def without_contradicted(label: ViewLabels, check: StretchCheck) -> ViewLabels:

@@ -51,10 +51,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from worker.synth.annotators import CAREFUL_SIGMA_PX
 from worker.assist import checks
 from worker.assist.lk import propose
-from worker.tracks import dense_track
+from worker.synth.annotators import CAREFUL_SIGMA_PX
+from worker.tracks.interpolate import dense_track
 
 Source = Literal["placed", "tracked", "prefilled", "edited"]
 AssistedProfile = Literal["careful", "blind"]
