@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from worker.geometry.cameras import undistort_normalized
+from worker.geometry.raster import rasterize
 from worker.geometry.transforms import matrix_to_quaternion
 
 # DexYCB's object class table: meta.yml's ``ycb_ids`` index into it, and the ids double as the
@@ -383,8 +384,6 @@ def render_seg(meshes: Sequence[tuple[np.ndarray, np.ndarray, int]], K: np.ndarr
     meshes: (vertices (N, 3) in the camera frame, metres; faces (M, 3); seg value) each: an
     object's YCB id or HAND_SEG_VALUE. The nearest surface wins each pixel; 0 elsewhere.
     """
-    from worker.synth.raster import rasterize
-
     seg = np.zeros(height * width, dtype=np.uint8)
     drawn = [(np.asarray(v, np.float64), np.asarray(f, np.int64), value)
              for v, f, value in meshes if len(f) and np.isfinite(v).all()]

@@ -29,8 +29,9 @@ def mark_outside(keyframes: Iterable[Any], outside: np.ndarray) -> list[Keyframe
     """One point's keyframes with every stretch where it is outside the image made a keyframe
     without a position.
 
-    keyframes: what :func:`worker.tracks.keyframes.parse_keyframe` accepts, image px. outside: (F,) bool
-    over the clip's F frames. Frames where the track has no position are left as they are.
+    keyframes: what :func:`worker.tracks.keyframes.parse_keyframe` accepts, image px.
+    outside: (F,) bool over the clip's F frames. Frames where the track has no position are
+    left as they are.
     """
     kfs = as_keyframes(keyframes)
     outside = np.asarray(outside, dtype=bool)
