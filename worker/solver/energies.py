@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import torch
 
-from worker.solver.hand_fk import SubjectHand
+from worker.hand.posing import SubjectHand
 from worker.solver.projection import Rig, pose_matrix, transform
 
 MM_PER_M = 1000.0
