@@ -32,8 +32,8 @@ from worker.tracks.interpolate import dense_points
 from worker.tracks.sources import SOURCE_PREFILLED, keyframe_sources
 
 if TYPE_CHECKING:
-    from worker.quality.anchored import SolvedObjects
     from worker.quality.consensus import ViewLabels
+    from worker.quality.solved_scene import SolvedObjects
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
@@ -217,7 +217,7 @@ def solved_objects(session: Session, sequence_id: int) -> tuple[SolvedObjects, i
     (O, F, 3, 4) object-to-world in SceneObject.index order, NaN where the solve flags the
     pose) and the run's id; None before any solve. The result is read through
     backend.solve.results only."""
-    from worker.quality.anchored import SolvedObjects
+    from worker.quality.solved_scene import SolvedObjects
 
     run = latest_solve(session, sequence_id)
     if run is None or run.result_key is None:
@@ -248,7 +248,7 @@ def import_posed_objects(session: Session, sequence_id: int, target: int
     stays where it was put: an object nobody grasps keeps its import pose in every frame, the
     grasped one only at frame 0 (NaN after it). None when the target is the grasped object or
     has no import pose: then only a solve says where it is."""
-    from worker.quality.anchored import SolvedObjects
+    from worker.quality.solved_scene import SolvedObjects
 
     sequence = session.get_one(Sequence, sequence_id)
     objects = sorted(sequence.objects, key=lambda o: o.index)

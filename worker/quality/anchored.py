@@ -23,7 +23,7 @@ Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +38,7 @@ from worker.quality.metrics import (
     num,
     per_point_and_frame,
 )
+from worker.quality.solved_scene import SolvedObjects
 
 # Visible frames tried as the anchor's frame (evenly over the track): a sloppy first click
 # does not decide where a careful track is anchored.
@@ -78,21 +79,6 @@ SHOWN_SAMPLES = 64
 
 # Pixels (..., 2) of the camera model -> where the camera truly shows them.
 PixelMap = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class SolvedObjects:
-    """The solved scene: per object vertices (N, 3) and faces (M, 3) in its own frame
-    (metres), and poses (O, F, 3, 4) object-to-world (NaN where unsolved)."""
-
-    vertices: Sequence[np.ndarray]
-    faces: Sequence[np.ndarray]
-    poses: np.ndarray
-
-    def triangles(self, index: int, frame: int) -> np.ndarray:
-        """(M, 3, 3) world triangles of object ``index`` at ``frame`` (NaN if unsolved)."""
-        pose = self.poses[index, frame]
-        return (self.vertices[index] @ pose[:, :3].T + pose[:, 3])[self.faces[index]]
 
 
 @dataclass
