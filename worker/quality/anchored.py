@@ -174,21 +174,15 @@ def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: Solv
     return candidates[int(np.argmin(errors))]
 
 
-def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
-                  depth: DepthMaps | None, image_map: PixelMap | None = None) -> np.ndarray:
-    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
-    solved mesh nearer along its ray, and no depth reading well in front of it. image_map:
-    where the camera truly shows a projected pixel (a camera offset, worker.quality.
-    view_offset), so the depth map is read where the point is seen."""
-    return point_visibility(camera, world, scene, depth, image_map)[0]
-
-
 def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
                      depth: DepthMaps | None, image_map: PixelMap | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """(F,) shown as ``point_visible`` says, and (F,) the shown frames where the point sits at
-    the edge of something in front of it (``at_depth_edge``): its visibility there says
-    nothing of the worker."""
+    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
+    solved mesh nearer along its ray, and no depth reading well in front of it; and (F,) the
+    shown frames where the point sits at the edge of something in front of it
+    (``at_depth_edge``): its visibility there says nothing of the worker. image_map: where the
+    camera truly shows a projected pixel (a camera offset, worker.quality.view_offset), so the
+    depth map is read where the point is seen."""
     frames = len(world)
     pix = camera.project(world)
     if image_map is not None:
@@ -252,7 +246,7 @@ def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix
 def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
                  depth: DepthMaps | None) -> np.ndarray:
     """(F,) share of object ``target``'s sampled surface points (SHOWN_SAMPLES vertices) the
-    view shows, by the rules of point_visible (in the image, no solved mesh nearer along the
+    view shows, by the rules of point_visibility (in the image, no solved mesh nearer along the
     ray, no depth reading well in front); NaN where the pose is unknown."""
     vertices = scene.vertices[target]
     samples = vertices[np.unique(np.linspace(0, len(vertices) - 1,

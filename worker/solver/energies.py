@@ -121,12 +121,6 @@ def hand_residuals(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: Hand
     return torch.cat(parts, dim=1)
 
 
-def posed_object(delta: torch.Tensor, data: ObjectData) -> torch.Tensor:
-    """(B, N, 3) world vertices of the object for pose increments delta (B, 6)."""
-    rot, trans = pose_matrix(delta, data.base)
-    return transform(rot, trans, data.vertices.expand(delta.shape[0], -1, -1))
-
-
 def object_residuals(delta: torch.Tensor, data: ObjectData) -> torch.Tensor:
     """(B, M) residuals of one object for pose increments delta (B, 6): landmarks, depth."""
     rot, trans = pose_matrix(delta, data.base)

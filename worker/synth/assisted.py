@@ -57,7 +57,6 @@ from worker.synth.annotators import CAREFUL_SIGMA_PX
 from worker.tracks.interpolate import dense_track
 
 Source = Literal["placed", "tracked", "prefilled", "edited"]
-AssistedProfile = Literal["careful", "blind"]
 # How far (px) a shown position may be from where the careful worker sees the point before it
 # corrects it: 3 sigma of its click noise (the spread of its own keyframes), while a check cell
 # (15 px off) is always corrected.
