@@ -1,11 +1,11 @@
 """Tracking proposals for the annotation page: positions between a worker's keyframes, found in
-the view's own frames (worker.tracking.lk: Lucas-Kanade from both keyframes, stopped by a
+the view's own frames (worker.assist.lk: Lucas-Kanade from both keyframes, stopped by a
 forward-backward check).
 
 The page sends the keyframes it holds (the form it saves) and, if it wants, a frame range; the
 answer has, per point and per frame of the range, a proposed position (image px), whether it
 holds (ok) and its forward-backward error (px); at the assignment's check cells
-(worker.tracking.checks) an ok proposal is shown CHECK_OFFSET_PX off. Nothing is stored: the
+(worker.assist.checks) an ok proposal is shown CHECK_OFFSET_PX off. Nothing is stored: the
 stored model stays keyframes with linear interpolation, and a proposal the worker accepts is
 saved as a keyframe.
 """

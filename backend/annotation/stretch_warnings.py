@@ -1,5 +1,5 @@
 """The page's check before submit: interpolated stretches the view's images say the track
-does not follow (worker.tracking.stretches), as sentences the worker can act on.
+does not follow (worker.assist.stretches), as sentences the worker can act on.
 
 The page sends the keyframes it holds (the form it saves); each stretch between two visible
 keyframes is tracked in the view's own frames from both keyframes inwards, and one whose

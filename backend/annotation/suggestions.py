@@ -5,7 +5,7 @@ Once a target (a hand or an object of a sequence) has accepted work (backend.ann
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
 from them and projected into this view (worker.assist.prefill), with a visibility suggested
 from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
-calibration changes. The assignment's check cells (worker.tracking.checks) are planted into the
+calibration changes. The assignment's check cells (worker.assist.checks) are planted into the
 suggested positions, as into every suggestion the page shows; the epipolar data is left as it
 is. Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
 "prefilled".

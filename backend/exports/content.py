@@ -64,7 +64,7 @@ class WorkContent:
     """One assignment's labels of one task (one view of one target).
 
     keyframes: per point, the stored rows [frame, x, y, visible01] (px). xy: (F, P, 2) px, NaN
-    where the point has no position; visible: (F, P) bool (worker.tracks.dense_points).
+    where the point has no position; visible: (F, P) bool (worker.tracks.interpolate.dense_points).
     """
 
     assignment_id: int

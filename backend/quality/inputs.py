@@ -42,7 +42,7 @@ DECODE_THREADS = 4
 @dataclass
 class ScoredAssignment:
     """Who and what one label set is, beside its arrays; checks: (accepted, corrected) check
-    suggestions of the assignment (worker.tracking.checks.accepted_checks)."""
+    suggestions of the assignment (worker.assist.checks.accepted_checks)."""
 
     assignment_id: int
     task_id: int
@@ -73,7 +73,7 @@ def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: 
     and (F, P) decided, as a worker.quality.consensus.ViewLabels.
 
     decided is False only where the value comes from pre-filled suggestions the worker kept
-    unchanged (worker.tracks.keyframe_sources); a frame the worker left unplaced is theirs
+    unchanged (worker.tracks.sources.keyframe_sources); a frame the worker left unplaced is theirs
     as before, so work without pre-fill is judged exactly as it was."""
     from worker.quality.consensus import ViewLabels
 
@@ -133,7 +133,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
 def stretch_checks(session: Session, inputs: TargetInputs, labels: list[ViewLabels]
                    ) -> dict[str, StretchCheck]:
     """Each hand label's stretches checked against its own view's images
-    (worker.tracking.stretches), keyed by the label's key; each view's frames read once."""
+    (worker.assist.stretches), keyed by the label's key; each view's frames read once."""
     grey: dict[int, np.ndarray] = {}
     out: dict[str, StretchCheck] = {}
     for lab in labels:

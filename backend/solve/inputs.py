@@ -4,7 +4,7 @@ Labels come only from approved assignments. Where several are approved for one t
 of one target), they are merged per frame: the median of their positions (pixels) and visible
 where most of them say visible. Views run in the cameras' ``view_index`` order.
 
-Hand labels are first checked against their own view's images (worker.tracking.stretches):
+Hand labels are first checked against their own view's images (worker.assist.stretches):
 an interpolated stretch the images say the hand left is dropped from the merge (it would pin
 the solve to a straight line the hand did not take), and each view keeps, per frame and joint,
 the best evidence any of its workers gave (keyed, confirmed by the images, unchecked) for the
