@@ -3,7 +3,7 @@
 Instead of i.i.d. noise on every frame, each view is labelled by one simulated worker
 (worker.synth.annotators: keyframes, linear interpolation in between), and, like the product's
 solve (backend.solve.inputs), its interpolated stretches are checked against the view's own
-images (worker.tracking.stretches): contradicted positions are dropped and the evidence codes
+images (worker.assist.stretches): contradicted positions are dropped and the evidence codes
 go to the solve's hand confidence. ``every4`` keys every 4th frame whatever the motion (a worker
 who does not follow it), image-checked; ``every4-unchecked`` is the whole path before
 keyframes followed the motion: every 4th frame, no image check, every label trusted.
@@ -16,9 +16,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from worker.assist.stretches import check_stretches
 from worker.synth.annotators import KEY_STEP, annotate, keyframe_indices
-from worker.tracking.stretches import check_stretches
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 LABEL_MODES = ("noise", "crowd", "every4", "every4-unchecked")
 

@@ -7,9 +7,9 @@ the order of the views' serials, by one simulated crowd of each variant (``--cro
 
     today     worker.synth.annotators' careful worker: a keyframe every 4 frames plus the
               visibility changes, 2 px noise;
-    assisted  worker.synth.assisted's careful worker: tracking proposals (worker.tracking.lk,
+    assisted  worker.synth.assisted's careful worker: tracking proposals (worker.assist.lk,
               what POST /api/annotate/proposals computes) with the check cells planted, and
-              from the fourth view on (worker.quality.prefill.MIN_ACCEPTED_VIEWS, as the
+              from the fourth view on (worker.assist.prefill.MIN_ACCEPTED_VIEWS, as the
               suggestions route) the pre-fill of the views before it, corrected where off
               by more than ``--tolerance`` px;
     blind     the blind acceptor on the same pre-fill: accepts everything.
@@ -28,7 +28,7 @@ sources, then the product's QC job (backend.quality.flows.run_qc) scores the tar
 flagged = review or reject, per profile (as bench/qc.py counts them; a provisional report
 counts by its outcome, "provisional" says how many were); "checks_kept_unshown": check cells
 kept unchanged where the pre-fill was shown without an offset (occluded or of unknown
-visibility), which worker.tracking.checks.accepted_checks counts as accepted all the same.
+visibility), which worker.assist.checks.accepted_checks counts as accepted all the same.
 
 Also on the 72-frame capture: "proposals", the LK proposals accepted where they hold against
 linear interpolation between the keyframe worker's keyframes (``--every``, ``--worker-seed``;
@@ -79,7 +79,7 @@ def _summary(err: np.ndarray) -> dict[str, float | int]:
 
 
 def _dense(tracks: list[list[list[Any]]], frames: int) -> np.ndarray:
-    from worker.tracks import dense_track
+    from worker.tracks.interpolate import dense_track
 
     return np.stack([dense_track(rows, frames).xy for rows in tracks], axis=1)
 
@@ -105,9 +105,9 @@ def _grey(view_dir: Path, frames: int) -> np.ndarray:
 
 def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, Any]:
     from backend.captures.truth import CaptureTruth
+    from worker.assist.lk import propose
     from worker.formats import dexycb
     from worker.synth.annotators import annotate, hand_visibility
-    from worker.tracking.lk import propose
 
     truth_of = CaptureTruth(capture)
     seq_dir = next(capture.glob(dexycb.META_GLOB)).parent
@@ -168,9 +168,9 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
     from backend.db import session_scope
     from backend.migrate import upgrade
     from backend.storage import get_storage
+    from worker.assist.lk import propose
     from worker.formats import dexycb
     from worker.synth.annotators import annotate, hand_visibility
-    from worker.tracking.lk import propose
 
     upgrade(get_settings().database_url)
     sequence_id = import_path(capture)[0].sequence_id
@@ -267,7 +267,7 @@ def _prefill_for(cap: _Capture, done: list[list[list[list[Any]]]]) -> Any:
     """The pre-fill of the next view from the labels of the views before it (None before
     MIN_ACCEPTED_VIEWS are done, as the route), as the simulated worker takes it: unknown
     visibility suggested visible (as the page takes it), no check cell there (as the route)."""
-    from worker.quality.prefill import MIN_ACCEPTED_VIEWS, prefill, view_work
+    from worker.assist.prefill import MIN_ACCEPTED_VIEWS, prefill, view_work
     from worker.synth.assisted import Prefill
 
     target = len(done)
@@ -301,7 +301,7 @@ def _work_one(view: _View, variant: str, key: bytes, assignment_id: int, prefill
 def _dense_labels(tracks: list[Any], frames: int) -> tuple[np.ndarray, np.ndarray]:
     """(F, 21, 2) px and (F, 21) visibility of one view's tracks (sources dropped)."""
     from worker.synth.assisted import plain_rows
-    from worker.tracks import dense_points
+    from worker.tracks.interpolate import dense_points
 
     return dense_points(((p, plain_rows(rows)) for p, rows in enumerate(tracks)), frames, 21)
 
@@ -366,7 +366,7 @@ def _effort(capture: Path, seed: int, judging: tuple[float, float], solve: bool
     """Today's keyframe worker, the careful assisted worker and the blind acceptor on every
     view's hand of one capture (each crowd from the same seed); the careful crowd's pre-fills
     are what the blind one gets. The solve runs on today's and the careful crowd's labels."""
-    from worker.tracking.checks import check_key
+    from worker.assist.checks import check_key
 
     cap = _load(capture)
     key = check_key("bench assist")
@@ -398,8 +398,8 @@ def _qc(capture: Path, cap: _Capture, prefills: list[Any], draws: int, blind_vie
     from backend.config import get_settings
     from backend.db import session_scope, utcnow
     from backend.quality.models import QCReport
-    from worker.quality.prefill import MIN_ACCEPTED_VIEWS
-    from worker.tracking.checks import check_key
+    from worker.assist.checks import check_key
+    from worker.assist.prefill import MIN_ACCEPTED_VIEWS
 
     _fresh_setup("assist-qc")
     sequence_id, every_task = _setup(capture)
@@ -463,8 +463,8 @@ def _kept_unshown(key: bytes, assignment_id: int, tracks: list[Any], prefill: An
     offset: QC would count them as accepted checks, so this stays 0 while the route and QC
     agree on where cells are planted. Tracking proposals are planted wherever they are given,
     so only pre-fill counts."""
+    from worker.assist.checks import check_cells
     from worker.synth.assisted import row_source
-    from worker.tracking.checks import check_cells
 
     if prefill is None:
         return 0

@@ -18,7 +18,7 @@ Timing (median of ``--runs``): the endpoint in process for one view's 21 joints 
 clip with every other view's accepted work: "first", a view's first request (token, queries,
 densifying the tracks, the triangulation, reading and decoding the view's depth maps, the
 answer), and "again", a request whose result the server kept (a reload, another worker of the
-task); and the pure worker.quality.prefill.prefill on arrays with the depth maps already
+task); and the pure worker.assist.prefill.prefill on arrays with the depth maps already
 decoded. The machine's 1-minute load average is printed beside them.
 
 Prints one JSON line: {"capture", "frames", "views", "every", "error", "suggested",
@@ -115,7 +115,7 @@ def _compare(answer: dict, task: dict, cells: list[tuple[int, int]]) -> dict[str
 
 def _accuracy(client: Any, tasks: list[dict]) -> dict[str, Any]:
     from backend.config import get_settings
-    from worker.tracking.checks import check_cells, check_key
+    from worker.assist.checks import check_cells, check_key
 
     key = check_key(get_settings().signing_key)
     parts: dict[str, list[np.ndarray]] = {"errors": [], "suggested": [], "agree": [],
@@ -143,8 +143,8 @@ def _pure_ms(capture: Path, sequence_id: int, runs: int) -> float:
     from backend.captures.service import camera_model, sequence_cameras
     from backend.db import session_scope
     from backend.labels import labelled_work, sequence_tasks
+    from worker.assist.prefill import prefill, view_work
     from worker.formats import dexycb
-    from worker.quality.prefill import prefill, view_work
 
     with session_scope() as session:
         rows = sequence_cameras(session, sequence_id)

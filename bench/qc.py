@@ -135,7 +135,7 @@ def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Ge
     from backend.annotation.models import Assignment, Track
     from backend.db import session_scope, utcnow
     from worker.synth.annotators import annotate
-    from worker.tracks import dense_points
+    from worker.tracks.interpolate import dense_points
 
     xy, visible = truth.points(task, rng)
     work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)

@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 from worker.geometry.cameras import CameraModel, distort_normalized, world_to_camera
+from worker.geometry.raster import rasterize
 from worker.hand.joints import FINGER_NAMES, MANO_FINGER_START
-from worker.synth.raster import rasterize
 
 # BGR part colours: palm, then thumb, index, middle, ring, little (as FINGER_NAMES).
 HAND_PART_COLOURS = np.array([

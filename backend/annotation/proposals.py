@@ -1,11 +1,11 @@
 """Tracking proposals for the annotation page: positions between a worker's keyframes, found in
-the view's own frames (worker.tracking.lk: Lucas-Kanade from both keyframes, stopped by a
+the view's own frames (worker.assist.lk: Lucas-Kanade from both keyframes, stopped by a
 forward-backward check).
 
 The page sends the keyframes it holds (the form it saves) and, if it wants, a frame range; the
 answer has, per point and per frame of the range, a proposed position (image px), whether it
 holds (ok) and its forward-backward error (px); at the assignment's check cells
-(worker.tracking.checks) an ok proposal is shown CHECK_OFFSET_PX off. Nothing is stored: the
+(worker.assist.checks) an ok proposal is shown CHECK_OFFSET_PX off. Nothing is stored: the
 stored model stays keyframes with linear interpolation, and a proposal the worker accepts is
 saved as a keyframe.
 """
@@ -29,8 +29,8 @@ from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError
 from backend.storage import Storage
 from backend.validation import MAX_INT32
-from worker.tracking.checks import check_key, plant
-from worker.tracking.lk import FB_THRESHOLD_PX, propose, tracked_spans
+from worker.assist.checks import check_key, plant
+from worker.assist.lk import FB_THRESHOLD_PX, propose, tracked_spans
 
 # Frames decoded for one request at most: 300 grey 640x480 frames are 92 MB in memory and
 # about half a second of decoding; a longer stretch is asked for in parts.

@@ -88,7 +88,7 @@ def create_readonly_link(assignment_id: Id, session: SessionDep,
 def dense_tracks(assignment_id: Id, session: SessionDep, _: CurrentAdmin) -> dict[str, Any]:
     """Every point of an assignment at every frame: x, y (image px, null where unplaced or
     occluded without a position), visible, and state (keyframe / interpolated / unplaced)."""
-    from worker.tracks import dense_track
+    from worker.tracks.interpolate import dense_track
 
     assignment = service.get_assignment_or_raise(session, assignment_id)
     task = service.get_task_or_raise(session, assignment.task_id)

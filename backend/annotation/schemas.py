@@ -15,10 +15,10 @@ TASK_STATES: tuple[TaskState, ...] = get_args(TaskState)
 
 # A keyframe row: [frame, x, y, visible01] or [frame, x, y, visible01, source]; x and y in image
 # pixels or null when occluded; source (provenance) one of "placed" (the default, what a 4-element
-# row means), "tracked", "prefilled", "edited" (worker.tracks.SOURCES), stored and read back only
-# when it is not "placed". Its form and every value in it are checked once, against the task's
-# clip and image (worker.tracks.validate_keyframes: a frame in the clip, a position in the image,
-# a known source), so a value out of any bound is refused there by name.
+# row means), "tracked", "prefilled", "edited" (worker.tracks.keyframes.SOURCES), stored and read
+# back only when it is not "placed". Its form and every value in it are checked once, against the
+# task's clip and image (worker.tracks.validate.validate_keyframes: a frame in the clip, a position
+# in the image, a known source), so a value out of any bound is refused there by name.
 KeyframeRow = list[Any]
 # Generous bounds: a clip of up to 2000 frames, every frame keyed, 64 points.
 MAX_KEYFRAMES_PER_TRACK = 2000

@@ -31,7 +31,8 @@ from backend.captures.service import get_sequence_or_raise
 from backend.db import utcnow
 from backend.errors import Conflict, DexlabelError, Forbidden, NotFound
 from backend.storage import Storage
-from worker.tracks import checked_rows, completeness
+from worker.tracks.readiness import completeness
+from worker.tracks.validate import checked_rows
 
 
 class InvalidTracks(DexlabelError, status_code=422, code="invalid_tracks"):

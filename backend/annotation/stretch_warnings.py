@@ -1,5 +1,5 @@
 """The page's check before submit: interpolated stretches the view's images say the track
-does not follow (worker.tracking.stretches), as sentences the worker can act on.
+does not follow (worker.assist.stretches), as sentences the worker can act on.
 
 The page sends the keyframes it holds (the form it saves); each stretch between two visible
 keyframes is tracked in the view's own frames from both keyframes inwards, and one whose
@@ -19,8 +19,8 @@ from backend.annotation.points import point_names
 from backend.annotation.proposals import ProposalsRequest, grey_frames
 from backend.annotation.schemas import TracksSave
 from backend.storage import Storage
-from worker.tracking.lk import tracked_spans
-from worker.tracking.stretches import STRETCH_TOLERANCE_PX, check_stretches
+from worker.assist.lk import tracked_spans
+from worker.assist.stretches import STRETCH_TOLERANCE_PX, check_stretches
 
 # Clip frames read for one check at most (as the tracking proposals): longer clips are checked
 # over their first frames only, and the answer says so.

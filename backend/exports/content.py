@@ -13,7 +13,6 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-import torch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -29,7 +28,8 @@ from backend.storage import get_storage
 from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.geometry import CameraModel
 from worker.hand import HandLayer
-from worker.tracks import dense_points
+from worker.hand.posing import posed_hand
+from worker.tracks.interpolate import dense_points
 
 
 @dataclass
@@ -64,7 +64,7 @@ class WorkContent:
     """One assignment's labels of one task (one view of one target).
 
     keyframes: per point, the stored rows [frame, x, y, visible01] (px). xy: (F, P, 2) px, NaN
-    where the point has no position; visible: (F, P) bool (worker.tracks.dense_points).
+    where the point has no position; visible: (F, P) bool (worker.tracks.interpolate.dense_points).
     """
 
     assignment_id: int
@@ -202,12 +202,10 @@ def _solved_hand(solve: SolveContent) -> None:
     layer = HandLayer(model)
     pose_m = np.asarray(arrays["hand_pose_m"], dtype=np.float64)
     finite: np.ndarray = np.asarray(np.isfinite(pose_m).all(axis=1))
-    betas = torch.as_tensor(np.asarray(arrays["betas"], dtype=np.float64))
-    with torch.no_grad():
-        rest = layer.from_pose_m(torch.zeros(1, pose_m.shape[1], dtype=torch.float64), betas)
-        solve.root_joint = rest.joints[0, 0].numpy().astype(np.float64)
-        posed = layer.from_pose_m(torch.as_tensor(np.where(finite[:, None], pose_m, 0.0)), betas)
-    vertices = posed.vertices.numpy().astype(np.float64)
+    betas = np.asarray(arrays["betas"], dtype=np.float64)
+    _, rest_joints = posed_hand(layer, np.zeros((1, pose_m.shape[1])), betas)
+    solve.root_joint = rest_joints[0, 0]
+    vertices, _ = posed_hand(layer, np.where(finite[:, None], pose_m, 0.0), betas)
     vertices[~finite] = np.nan
     solve.hand_vertices = vertices
     solve.hand_faces = np.asarray(model.faces, dtype=np.int64)

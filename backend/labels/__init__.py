@@ -10,7 +10,7 @@ export and pre-fill, and those tracks as the arrays they take.
 A view's labels are dense (F, P, 2) image px (NaN = no position) and (F, P) visibility; where
 several are approved for one task (one view of one target) they are merged per frame: the
 median of their positions and visible where most of them say visible. Hand labels can first be
-checked against their own view's images (worker.tracking.stretches): an interpolated stretch
+checked against their own view's images (worker.assist.stretches): an interpolated stretch
 the images say the hand left is dropped from the merge, and each view keeps, per frame and
 joint, the best evidence any of its workers gave (keyed, confirmed by the images, unchecked).
 """
@@ -30,7 +30,7 @@ from backend.annotation.models import Assignment, Task
 from backend.annotation.proposals import grey_frames
 from backend.crowd.models import CrowdSubmission
 from backend.storage import get_storage
-from worker.tracking.stretches import (
+from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,
     EVIDENCE_KEYED,
@@ -38,7 +38,7 @@ from worker.tracking.stretches import (
     EVIDENCE_UNCHECKED,
     check_stretches,
 )
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 ACCEPTED = "approved"
 ACCEPTED_STATUSES: tuple[str, ...] = (ACCEPTED,)

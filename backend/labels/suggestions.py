@@ -3,9 +3,9 @@ places each point in this view, and the epipolar lines of those labels.
 
 Once a target (a hand or an object of a sequence) has accepted work (backend.labels)
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
-from them and projected into this view (worker.quality.prefill), with a visibility suggested
+from them and projected into this view (worker.assist.prefill), with a visibility suggested
 from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
-calibration changes. The assignment's check cells (worker.tracking.checks) are planted into the
+calibration changes. The assignment's check cells (worker.assist.checks) are planted into the
 suggested positions, as into every suggestion the page shows; the epipolar data is left as it
 is. Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
 "prefilled".
@@ -36,7 +36,8 @@ from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
 from backend.labels import labelled_work, sequence_tasks, work_query
 from backend.storage import Storage
-from worker.quality.prefill import (
+from worker.assist.checks import check_key, plant
+from worker.assist.prefill import (
     MIN_ACCEPTED_VIEWS,
     DepthReader,
     Prefill,
@@ -45,8 +46,7 @@ from worker.quality.prefill import (
     prefill,
     view_work,
 )
-from worker.quality.prefill import EpipolarView as EpipolarGuide
-from worker.tracking.checks import check_key, plant
+from worker.assist.prefill import EpipolarView as EpipolarGuide
 
 # Views whose suggestions are kept in memory (about 0.3 MB each for 21 points x 72 frames and 7
 # labelled views): every page load of a task reads them, and decoding the view's depth maps

@@ -32,7 +32,7 @@ from backend.quality.schemas import QueueItem, QueueRead, ReviewFrames, ReviewRe
 from backend.quality.service import px_lists
 from backend.security import sign_token
 from backend.validation import Id, Offset
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 router = APIRouter()
 

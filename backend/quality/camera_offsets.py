@@ -21,8 +21,9 @@ from backend.annotation.models import Task
 from backend.quality.inputs import TargetInputs, target_inputs
 
 if TYPE_CHECKING:
-    from worker.quality.anchored import AnchoredQC, SolvedObjects
+    from worker.quality.anchored import AnchoredQC
     from worker.quality.consensus import ViewLabels
+    from worker.quality.solved_scene import SolvedObjects
     from worker.quality.view_offset import ViewOffset
 
 

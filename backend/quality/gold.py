@@ -18,7 +18,8 @@ from backend.annotation.service import get_assignment_or_raise, get_task_or_rais
 from backend.errors import Conflict, DexlabelError, NotFound
 from backend.labels import ACCEPTED
 from backend.quality.schemas import TrainingClipCreate
-from worker.tracks import completeness, validate_keyframes
+from worker.tracks.readiness import completeness
+from worker.tracks.validate import validate_keyframes
 
 if TYPE_CHECKING:
     import numpy as np
@@ -100,7 +101,7 @@ def truth_tracks(session: Session, task_id: int, capture: Path) -> list[list[lis
 
 def gold_dense(clip: TrainingClip, num_frames: int) -> tuple[np.ndarray, np.ndarray]:
     """The clip's gold as (F, P, 2) px and (F, P) visibility."""
-    from worker.tracks import dense_points
+    from worker.tracks.interpolate import dense_points
 
     return dense_points(enumerate(clip.tracks), num_frames, len(clip.tracks))
 

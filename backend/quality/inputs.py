@@ -25,14 +25,15 @@ from backend.labels import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
+from worker.assist.checks import accepted_checks, check_key
+from worker.assist.stretches import StretchCheck, check_stretches
 from worker.geometry import CameraModel
-from worker.tracking.checks import accepted_checks, check_key
-from worker.tracking.stretches import StretchCheck, check_stretches
-from worker.tracks import SOURCE_PREFILLED, dense_points, keyframe_sources
+from worker.tracks.interpolate import dense_points
+from worker.tracks.sources import SOURCE_PREFILLED, keyframe_sources
 
 if TYPE_CHECKING:
-    from worker.quality.anchored import SolvedObjects
     from worker.quality.consensus import ViewLabels
+    from worker.quality.solved_scene import SolvedObjects
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
@@ -41,7 +42,7 @@ DECODE_THREADS = 4
 @dataclass
 class ScoredAssignment:
     """Who and what one label set is, beside its arrays; checks: (accepted, corrected) check
-    suggestions of the assignment (worker.tracking.checks.accepted_checks)."""
+    suggestions of the assignment (worker.assist.checks.accepted_checks)."""
 
     assignment_id: int
     task_id: int
@@ -72,7 +73,7 @@ def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: 
     and (F, P) decided, as a worker.quality.consensus.ViewLabels.
 
     decided is False only where the value comes from pre-filled suggestions the worker kept
-    unchanged (worker.tracks.keyframe_sources); a frame the worker left unplaced is theirs
+    unchanged (worker.tracks.sources.keyframe_sources); a frame the worker left unplaced is theirs
     as before, so work without pre-fill is judged exactly as it was."""
     from worker.quality.consensus import ViewLabels
 
@@ -132,7 +133,7 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
 def stretch_checks(session: Session, inputs: TargetInputs, labels: list[ViewLabels]
                    ) -> dict[str, StretchCheck]:
     """Each hand label's stretches checked against its own view's images
-    (worker.tracking.stretches), keyed by the label's key; each view's frames read once."""
+    (worker.assist.stretches), keyed by the label's key; each view's frames read once."""
     grey: dict[int, np.ndarray] = {}
     out: dict[str, StretchCheck] = {}
     for lab in labels:
@@ -216,7 +217,7 @@ def solved_objects(session: Session, sequence_id: int) -> tuple[SolvedObjects, i
     (O, F, 3, 4) object-to-world in SceneObject.index order, NaN where the solve flags the
     pose) and the run's id; None before any solve. The result is read through
     backend.solve.results only."""
-    from worker.quality.anchored import SolvedObjects
+    from worker.quality.solved_scene import SolvedObjects
 
     run = latest_solve(session, sequence_id)
     if run is None or run.result_key is None:
@@ -247,7 +248,7 @@ def import_posed_objects(session: Session, sequence_id: int, target: int
     stays where it was put: an object nobody grasps keeps its import pose in every frame, the
     grasped one only at frame 0 (NaN after it). None when the target is the grasped object or
     has no import pose: then only a solve says where it is."""
-    from worker.quality.anchored import SolvedObjects
+    from worker.quality.solved_scene import SolvedObjects
 
     sequence = session.get_one(Sequence, sequence_id)
     objects = sorted(sequence.objects, key=lambda o: o.index)

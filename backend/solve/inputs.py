@@ -28,9 +28,9 @@ from backend.captures.service import sequence_cameras
 from backend.labels import approved_labels
 from backend.solve.calibrated import depth_in_world_time, hand_in_world_time, objects_in_world_time
 from backend.storage import Storage, get_storage
+from worker.assist.stretches import EVIDENCE_NONE
 from worker.hand.joints import NUM_JOINTS
 from worker.solver import HandTarget, Landmark, ObjectTarget, SolveInputs
-from worker.tracking.stretches import EVIDENCE_NONE
 
 
 @dataclass

@@ -6,7 +6,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-import torch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -20,6 +19,7 @@ from backend.solve.service import check_frame, resolve_view
 from backend.storage import get_storage
 from worker.hand import HandLayer
 from worker.hand.joints import JOINT_NAMES
+from worker.hand.posing import posed_hand
 from worker.overlay import (
     OverlayStyle,
     caption,
@@ -51,9 +51,8 @@ def solved_hand(arrays: dict[str, np.ndarray], frame: int
         return None
     model = hand_model_for(side)
     layer = HandLayer(model)
-    with torch.no_grad():
-        out = layer.from_pose_m(torch.as_tensor(pose_m[None]), torch.as_tensor(arrays["betas"]))
-    return (out.vertices[0].numpy(), np.asarray(model.faces, dtype=np.int64),
+    vertices, _ = posed_hand(layer, pose_m[None], np.asarray(arrays["betas"], dtype=np.float64))
+    return (vertices[0], np.asarray(model.faces, dtype=np.int64),
             hand_part_of_vertices(model.weights))
 
 

@@ -27,7 +27,9 @@ from backend.storage import get_storage
 from worker.formats.coco import HAND_CATEGORY_ID
 from worker.formats.cvat import read_cvat_video
 from worker.geometry.transforms import invert_pose
-from worker.tracks import as_keyframes, dense_track, frame_spans
+from worker.tracks.interpolate import dense_track
+from worker.tracks.keyframes import as_keyframes
+from worker.tracks.spans import frame_spans
 
 
 @dataclass

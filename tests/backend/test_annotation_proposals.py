@@ -82,7 +82,7 @@ def test_accepted_proposals_are_closer_to_the_true_joints_than_interpolation(
     mean between keyframes, accepted proposals 4.3 px, proposals' median 2.3 px). On a clip
     as slow as the usual 72 frames the gain is small (bench/assist.py)."""
     from worker.synth.annotators import annotate
-    from worker.tracks import dense_track
+    from worker.tracks.interpolate import dense_track
 
     seq_id = import_path(fast_capture)[0].sequence_id
     task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",

@@ -2,7 +2,7 @@
 other views, through the real app on a small synthetic capture (4 views x 6 frames at 640x480,
 with depth maps): view 0 is labelled, views 1, 2 and 3 carry careful accepted work.
 
-Also: the tracking proposals carry the same check cells (worker.tracking.checks).
+Also: the tracking proposals carry the same check cells (worker.assist.checks).
 """
 
 from __future__ import annotations
@@ -139,8 +139,8 @@ def test_suggestions_from_three_accepted_views_lie_near_the_truth(
     client: TestClient, accepted: dict, capture4: Path
 ) -> None:
     from backend.config import get_settings
-    from worker.quality.prefill import epipolar_lines
-    from worker.tracking.checks import check_cells, check_key
+    from worker.assist.checks import check_cells, check_key
+    from worker.assist.prefill import epipolar_lines
 
     tasks, link = accepted["tasks"], accepted["links"][0]
     answer = _get(client, link["token"])
@@ -183,7 +183,7 @@ def test_check_cells_are_shown_15_px_off_and_only_there(
     """Two assignments of one task read the same suggestions but for their own check cells;
     the epipolar data carries none."""
     from backend.config import get_settings
-    from worker.tracking.checks import check_cells, check_key
+    from worker.assist.checks import check_cells, check_key
 
     first, second = (_get(client, link["token"]) for link in accepted["links"])
     assert first["epipolar"] == second["epipolar"]
@@ -218,7 +218,7 @@ def test_tracking_proposals_carry_the_same_check_cells(
     client: TestClient, admin_headers: dict, tracked_capture: Path
 ) -> None:
     from backend.config import get_settings
-    from worker.tracking.checks import check_cells, check_key
+    from worker.assist.checks import check_cells, check_key
 
     seq_id = import_path(tracked_capture)[0].sequence_id
     task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",

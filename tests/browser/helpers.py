@@ -194,7 +194,7 @@ def check_cells(server: LiveServer, assignment_id: int, num_points: int,
                 num_frames: int) -> set[tuple[int, int]]:
     """The assignment's check cells (point, frame): where any suggestion is shown 15 px off."""
     from backend.config import get_settings
-    from worker.tracking import checks
+    from worker.assist import checks
 
     with server_settings(server):
         key = checks.check_key(get_settings().signing_key)

@@ -192,7 +192,7 @@ def test_track_accept_correct_and_reload_keep_sources(
 
 # ---- pre-fill from other views and epipolar lines ------------------------------------------
 
-# Suggestions need accepted work in 3 other views (worker.quality.prefill.MIN_ACCEPTED_VIEWS):
+# Suggestions need accepted work in 3 other views (worker.assist.prefill.MIN_ACCEPTED_VIEWS):
 # views 1-3 are accepted, view 0 is suggested.
 PREFILL_VIEWS = 4
 SUGGEST_GHOST_RGB = (0xFF, 0x5F, 0xD2)

@@ -42,7 +42,7 @@ VIEW = 1
 TRACK_TOL_PX = 3.0
 # A click or drop lands within a screen px of where it was aimed, under a px at this zoom.
 PLACE_TOL_PX = 1.0
-# A check suggestion is shown 15 px off the proposal (worker.tracking.checks).
+# A check suggestion is shown 15 px off the proposal (worker.assist.checks).
 CHECK_OFF_PX = (15.0 - TRACK_TOL_PX, 15.0 + TRACK_TOL_PX)
 SIZES = [(1024, 700), (1366, 768), (1440, 900)]
 # Finger chains (DexYCB/MANO order) from their PIP joint to the tip: index, else middle.

@@ -20,7 +20,9 @@ from worker.formats.cvat import (
     read_cvat_video,
 )
 from worker.hand.joints import JOINT_NAMES
-from worker.tracks import Keyframe, as_keyframes, dense_track, frame_spans
+from worker.tracks.interpolate import dense_track
+from worker.tracks.keyframes import Keyframe, as_keyframes
+from worker.tracks.spans import frame_spans
 
 F, W, H = 30, 640, 480
 

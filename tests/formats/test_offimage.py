@@ -9,7 +9,7 @@ import numpy as np
 
 from worker.formats.cvat import CvatVideoWriter, object_label, read_cvat_video
 from worker.formats.offimage import mark_outside
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 FRAMES = 10
 # Worker keyframes (px): the point runs to the left border at frame 4 (stored clamped there,

@@ -1,5 +1,5 @@
 """The QC job honest with suggestions: saved keyframe rows carry their source, and the job
-counts each assignment's check suggestions (worker.tracking.checks) kept unchanged.
+counts each assignment's check suggestions (worker.assist.checks) kept unchanged.
 
 A synthetic capture (6 views x 16 frames) where three views are labelled by hand (4-element
 rows, as before suggestions existed) and three from suggestions: a careful worker who dragged
@@ -51,8 +51,8 @@ def _submit_assisted(task_id: int, worker: str, xy: np.ndarray, visible: np.ndar
     its id, so it is created first and its tracks written once the id is known)."""
     from backend.annotation.models import Assignment
     from backend.config import get_settings
+    from worker.assist import checks
     from worker.synth.annotators import annotate
-    from worker.tracking import checks
 
     work = annotate(xy, visible, size, "careful", rng)
     assignment_id = submit_direct(task_id, worker, work.tracks)
@@ -171,7 +171,7 @@ def _off_truth(review: dict, assignment_id: int, truth_xy: np.ndarray) -> list[f
     """Distance (px) of the replayed track from the true joint at the assignment's check
     cells."""
     from backend.config import get_settings
-    from worker.tracking import checks
+    from worker.assist import checks
 
     key = checks.check_key(get_settings().signing_key)
     out = []

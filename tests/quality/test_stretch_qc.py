@@ -6,16 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.worker.test_tracking_lk import _keys
-from tests.worker.test_tracking_stretches import COUNT, _truth
+from tests.worker.test_assist_lk import _keys
+from tests.worker.test_assist_stretches import COUNT, _truth
+from worker.assist.stretches import check_stretches
 from worker.hand.joints import JOINT_NAMES
 from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
 from worker.quality.stretch_qc import add_stretch_results, without_contradicted
 from worker.synth.annotators import follow_path
-from worker.tracking.stretches import check_stretches
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 CLEAN = {"median_error_px": 2.2, "p90_error_px": 4.0, "outlier_fraction": 0.0,
          "jitter_px": 1.6, "motion_ratio": 1.0, "occluded_on_surface": 0.0,

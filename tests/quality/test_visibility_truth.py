@@ -37,7 +37,7 @@ def test_hand_visibility_metrics_follow_the_true_flags(app_env: dict,
     from backend.quality.service import score_target
     from backend.storage import get_storage
     from worker.synth.annotators import annotate
-    from worker.tracks import dense_track
+    from worker.tracks.interpolate import dense_track
 
     sequence_id = import_path(visibility_capture)[0].sequence_id
     with session_scope() as session:

@@ -17,7 +17,7 @@ from worker.synth.annotators import (
     mesh_landmarks,
     swap_window,
 )
-from worker.tracks import dense_points
+from worker.tracks.interpolate import dense_points
 
 FRAMES, WIDTH, HEIGHT = 72, 640, 480
 SIZE = (WIDTH, HEIGHT)

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from worker.assist.checks import CHECK_OFFSET_PX, check_cells, check_key, check_offset
 from worker.synth.annotators import annotate, keyframe_actions
 from worker.synth.assisted import (
     TOLERANCE_PX,
@@ -18,8 +19,7 @@ from worker.synth.assisted import (
     plain_rows,
     row_source,
 )
-from worker.tracking.checks import CHECK_OFFSET_PX, check_cells, check_key, check_offset
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 WIDTH, HEIGHT, FRAMES, POINTS = 320, 240, 24, 21
 MARGIN = 120

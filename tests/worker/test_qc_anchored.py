@@ -12,7 +12,6 @@ import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.anchored import (
-    SolvedObjects,
     anchor,
     merge_anchored,
     ray_hits,
@@ -20,8 +19,9 @@ from worker.quality.anchored import (
 )
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import AssignmentQC
+from worker.quality.solved_scene import SolvedObjects
 from worker.synth.annotators import annotate
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 FRAMES, WIDTH, HEIGHT = 36, 640, 480
 HALF = 0.05

@@ -16,7 +16,6 @@ from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.anchored import (
     DEPTH_WINDOW_PX,
     SHOWN_SHARE,
-    SolvedObjects,
     at_depth_edge,
     covered,
     object_shown,
@@ -25,6 +24,7 @@ from worker.quality.anchored import (
 from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
+from worker.quality.solved_scene import SolvedObjects
 
 NAMES = ["landmark 1", "landmark 2"]
 

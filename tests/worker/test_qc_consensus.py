@@ -16,7 +16,7 @@ import pytest
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.consensus import HandReport, ViewLabels, score_hand
 from worker.synth.annotators import annotate
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 WIDTH, HEIGHT = 640, 480
 K = intrinsics_matrix(615.0, 615.0, 320.0, 240.0)

@@ -13,7 +13,7 @@ import pytest
 
 from tests.worker.test_qc_anchored import FRAMES, HALF, box, label, poses
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.anchored import SolvedObjects, score_anchored
+from worker.quality.anchored import score_anchored
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
 from worker.quality.landmark_points import (
     facing,
@@ -21,6 +21,7 @@ from worker.quality.landmark_points import (
     shown_fraction,
     surface_normal,
 )
+from worker.quality.solved_scene import SolvedObjects
 from worker.synth.annotators import (
     LANDMARK_SEPARATION_M,
     OBJECT_PROFILES,

@@ -17,7 +17,7 @@ from tests.worker.test_qc_consensus import camera_ring, make_label, moving_hand,
 from worker.quality.consensus import ViewLabels, score_hand
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
-from worker.tracks import decided_mask
+from worker.tracks.sources import decided_mask
 
 CAREFUL_VIEWS = (0, 1, 2)
 NAMES = [f"joint {p}" for p in range(21)]

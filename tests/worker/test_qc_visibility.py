@@ -1,4 +1,4 @@
-"""The depth check of hand visibility flags (worker.quality.metrics.surface_check and
+"""The depth check of hand visibility flags (worker.assist.visibility.surface_check and
 depth_visibility) against the synthetic capture's ground truth (worker.synth.annotators
 hand_visibility: a joint is occluded only where something other than the hand covers it).
 
@@ -16,16 +16,12 @@ import numpy as np
 import pytest
 
 from backend.captures.layout import find_sequence_dirs, read_sequence
+from worker.assist.visibility import OWN_SURFACE_M, distance_to_hand, surface_check
 from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.consensus import score_hand
 from worker.quality.evaluate import simulated_labels
-from worker.quality.metrics import (
-    OWN_SURFACE_M,
-    depth_visibility,
-    distance_to_hand,
-    surface_check,
-)
+from worker.quality.metrics import depth_visibility
 from worker.synth.annotators import hand_visibility
 
 

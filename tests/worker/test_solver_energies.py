@@ -9,6 +9,7 @@ import torch
 from tests.worker.test_solver_scene import box, cameras, pose
 from worker.geometry.cameras import project_points
 from worker.hand import HandLayer, builtin_hand_model
+from worker.hand.posing import SubjectHand
 from worker.solver.energies import (
     DepthData,
     HandData,
@@ -17,7 +18,6 @@ from worker.solver.energies import (
     hand_residuals,
     object_residuals,
 )
-from worker.solver.hand_fk import SubjectHand
 from worker.solver.lm import jacobian, levenberg_marquardt
 from worker.solver.mesh_query import AABBTree, closest_on_triangles
 from worker.solver.projection import Rig

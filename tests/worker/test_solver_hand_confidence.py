@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.solver.hand_confidence import hand_confidence
-from worker.tracking.stretches import (
+from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_KEYED,
     EVIDENCE_UNCHECKED,
 )
+from worker.solver.hand_confidence import hand_confidence
 
 VIEWS, FRAMES, JOINTS = 4, 6, 21
 

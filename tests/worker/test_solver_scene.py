@@ -7,9 +7,9 @@ import numpy as np
 import torch
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
+from worker.geometry.raster import rasterize
 from worker.geometry.transforms import axis_angle_to_matrix
 from worker.hand import HandLayer, builtin_hand_model
-from worker.synth.raster import rasterize
 
 WIDTH, HEIGHT = 160, 120
 

@@ -11,8 +11,8 @@ import yaml
 
 from worker.formats.files import npz_bytes, yaml_text
 from worker.geometry.cameras import intrinsics_matrix, pixels_to_rays
+from worker.geometry.raster import rasterize
 from worker.synth.motion import minimum_jerk
-from worker.synth.raster import rasterize
 from worker.synth.render import SceneMesh, TextureAtlas, combine, prepare_view, render_view
 from worker.synth.scene import object_sdf, place_objects, table_mesh
 from worker.synth.sensor import depth_sigma_m, simulate_depth

@@ -10,22 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from worker.tracks import (
-    SOURCE_NAMES,
+from worker.tracks.interpolate import (
     STATE_INTERPOLATED,
     STATE_KEYFRAME,
     STATE_UNPLACED,
     DenseTrack,
-    Keyframe,
-    checked_rows,
-    completeness,
-    decided_mask,
     dense_track,
-    keyframe_sources,
-    parse_keyframe,
-    suspicious,
-    validate_keyframes,
 )
+from worker.tracks.keyframes import Keyframe, parse_keyframe
+from worker.tracks.readiness import completeness, suspicious
+from worker.tracks.sources import SOURCE_NAMES, decided_mask, keyframe_sources
+from worker.tracks.validate import checked_rows, validate_keyframes
 
 GOLDEN_PATH = Path(__file__).resolve().parents[1] / "fixtures" / "interpolation_golden.json"
 GOLDEN = json.loads(GOLDEN_PATH.read_text())

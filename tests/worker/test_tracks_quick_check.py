@@ -6,7 +6,8 @@ import math
 import random
 from typing import Any
 
-from worker.tracks import _plainly_valid, checked_rows, parse_keyframe, validate_keyframes
+from worker.tracks.keyframes import parse_keyframe
+from worker.tracks.validate import _plainly_valid, checked_rows, validate_keyframes
 
 NUM_FRAMES, WIDTH, HEIGHT = 12, 64, 48
 ODD_VALUES: list[Any] = [None, True, False, 0, 1, 2, -1, 1.0, 0.0, 63.99, 64, 64.0, 47.5, 48,

@@ -74,8 +74,8 @@ import cv2
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from worker.geometry.raster import NEAR_PLANE, rasterize
 from worker.geometry.transforms import compose_poses, invert_pose
-from worker.synth.raster import NEAR_PLANE, rasterize
 
 FileSink = Callable[[str, bytes], None]
 

@@ -7,8 +7,8 @@ Input, per image (one camera view of one frame), passed to :meth:`CocoWriter.add
 
 - ``file_name`` (str), ``width``, ``height`` (int, pixels): the frame the labels refer to.
 - ``seg``: optional (height, width) uint8 segmentation as DexYCB stores it: 0 background, an
-  object's YCB class id (1..21, :data:`worker.dataset.YCB_CLASSES`), 255 the hand
-  (:data:`worker.dataset.HAND_SEG_VALUE`).
+  object's YCB class id (1..21, :data:`worker.formats.dexycb.YCB_CLASSES`), 255 the hand
+  (:data:`worker.formats.dexycb.HAND_SEG_VALUE`).
 - ``hand``: optional :class:`HandKeypoints`: ``xy`` (21, 2) float image pixels in DexYCB joint
   order (:data:`worker.hand.joints.JOINT_NAMES`), NaN where the joint carries no label;
   ``visible`` (21,) bool, True where the joint is seen, False where it is labelled but occluded
@@ -214,14 +214,6 @@ class CocoWriter:
             self.close()
         else:
             self._discard()
-
-    @property
-    def image_count(self) -> int:
-        return self._image_count
-
-    @property
-    def annotation_count(self) -> int:
-        return self._annotation_count
 
     def add_image(self, file_name: str, width: int, height: int, *,
                   seg: np.ndarray | None = None, hand: HandKeypoints | None = None,

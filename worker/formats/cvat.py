@@ -19,10 +19,11 @@ are unique; an object label is named as the caller likes (for example ``"object 
 
 ``writer.add_track(label, points, source="manual") -> int`` writes one ``<track>`` at once and
 returns its id (0, 1, ...). ``points`` holds one keyframe list per point of the label, in the
-label's order; a keyframe is what :func:`worker.tracks.parse_keyframe` accepts (a
-:class:`worker.tracks.Keyframe`, a dict {frame, x, y, visible} or [frame, x, y, visible01]),
-with x, y in image pixels (x right, y down) and frames in 0..F-1; keyframes are checked with
-:func:`worker.tracks.validate_keyframes` and a ValueError names the point and the problem.
+label's order; a keyframe is what :func:`worker.tracks.keyframes.parse_keyframe` accepts (a
+:class:`worker.tracks.keyframes.Keyframe`, a dict {frame, x, y, visible} or
+[frame, x, y, visible01]), with x, y in image pixels (x right, y down) and frames in 0..F-1;
+keyframes are checked with :func:`worker.tracks.validate.validate_keyframes` and a ValueError
+names the point and the problem.
 ``source`` is CVAT's: ``"manual"`` for crowd tracks, ``"auto"`` for computed ones (consensus).
 ``writer.close()`` ends the document (``with`` does it on success). Nothing is kept in memory
 between tracks.
@@ -38,8 +39,9 @@ data-label-name>``) per point and an edge (``<line data-type="edge" data-node-fr
 data-node-to>``) per bone, 1-based, followed by one points ``<label>`` per point with the
 skeleton as ``<parent>`` and two mutable select attributes: ``position`` (placed, none,
 unplaced), that tells a position from a placeholder, and ``keyframe_source`` (placed, tracked,
-prefilled, edited; default placed), the keyframe's provenance (:data:`worker.tracks.SOURCES`;
-named so as not to be taken for CVAT's own track ``source``, manual or auto).
+prefilled, edited; default placed), the keyframe's provenance
+(:data:`worker.tracks.keyframes.SOURCES`; named so as not to be taken for CVAT's own track
+``source``, manual or auto).
 
 ``<track id label source>`` holds ``<skeleton frame keyframe="1" outside="0" occluded="0"
 z_order="0">`` shapes at every frame where one of its points has a keyframe, each listing every
@@ -51,9 +53,9 @@ the attribute's default. Our model maps onto CVAT's as follows:
 
 - A keyframe with a position: a CVAT keyframe, outside=0, occluded = not visible, position
   placed. CVAT interpolates single points linearly and copies ``occluded`` from the keyframe
-  before, as :func:`worker.tracks.dense_track` does; after the last keyframe both hold to the
-  end of the clip, so no closing outside=1 shape is written (CVAT's own writer adds one only to
-  a shape that ends before the last frame).
+  before, as :func:`worker.tracks.interpolate.dense_track` does; after the last keyframe both
+  hold to the end of the clip, so no closing outside=1 shape is written (CVAT's own writer adds
+  one only to a shape that ends before the last frame).
 - An occluded keyframe without a position: a CVAT keyframe with outside=1, occluded=1,
   position none: the point is absent until its next keyframe, as it has no position in ours.
   Placement rule: the previous keyframe's position when that keyframe has one (CVAT
@@ -99,15 +101,10 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS
-from worker.tracks import (
-    SOURCES,
-    Keyframe,
-    KeyframeSource,
-    as_keyframes,
-    dense_points,
-    frame_spans,
-    validate_keyframes,
-)
+from worker.tracks.interpolate import dense_points
+from worker.tracks.keyframes import SOURCES, Keyframe, KeyframeSource, as_keyframes
+from worker.tracks.spans import frame_spans
+from worker.tracks.validate import validate_keyframes
 
 VERSION = "1.1"
 POSITION_ATTRIBUTE = "position"

@@ -31,8 +31,8 @@ Extrinsics are camera-to-world (the master frame), 3x4 row-major, metres; ``apri
 table's frame in the world (DexYCB's viewer crops its point clouds in it; its loader needs the
 entry). DexYCB's own loader
 builds K from fx, fy, ppx, ppy alone and ignores distortion: a capture written for it has
-pinhole images, so the export undistorts (``undistort_image``, ``undistort_pixels``) and says so
-in meta.yml (``META_UNDISTORTED``).
+pinhole images, so the export undistorts them (``undistort_image``), projects the labels with the
+same K (``pinhole_project``) and says so in meta.yml (``META_UNDISTORTED``).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from worker.geometry.cameras import undistort_normalized
+from worker.geometry.raster import rasterize
 from worker.geometry.transforms import matrix_to_quaternion
 
 # DexYCB's object class table: meta.yml's ``ycb_ids`` index into it, and the ids double as the
@@ -290,18 +290,6 @@ def has_distortion(dist: Sequence[float] | np.ndarray | None) -> bool:
     return dist is not None and bool(np.any(np.asarray(dist, dtype=np.float64) != 0.0))
 
 
-def undistort_pixels(xy: np.ndarray, K: np.ndarray, dist: np.ndarray | None) -> np.ndarray:
-    """Pixels (..., 2) of the distorted image -> where they land in the pinhole image with the
-    same K (what ``undistort_image`` makes). NaN stays NaN."""
-    xy = np.asarray(xy, dtype=np.float64)
-    K = np.asarray(K, dtype=np.float64)
-    y = (xy[..., 1] - K[1, 2]) / K[1, 1]
-    x = (xy[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
-    normal = undistort_normalized(np.stack([x, y], axis=-1), dist)
-    ones = np.ones(normal.shape[:-1] + (1,))
-    return pinhole_project(np.concatenate([normal, ones], axis=-1), K)
-
-
 def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int
                    ) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV remap tables (H, W) float32 from the pinhole image (same K) to the distorted one."""
@@ -319,11 +307,6 @@ def undistort_image(image: np.ndarray, maps: tuple[np.ndarray, np.ndarray],
     flag = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR
     return cv2.remap(image, maps[0], maps[1], flag, borderMode=cv2.BORDER_CONSTANT,
                      borderValue=0)
-
-
-def ycb_id_of(name: str) -> int | None:
-    """The class id of a YCB object name (``"003_cracker_box"``), or None."""
-    return next((i for i, n in YCB_CLASSES.items() if n == name), None)
 
 
 # --- split setups --------------------------------------------------------------------------
@@ -383,8 +366,6 @@ def render_seg(meshes: Sequence[tuple[np.ndarray, np.ndarray, int]], K: np.ndarr
     meshes: (vertices (N, 3) in the camera frame, metres; faces (M, 3); seg value) each: an
     object's YCB id or HAND_SEG_VALUE. The nearest surface wins each pixel; 0 elsewhere.
     """
-    from worker.synth.raster import rasterize
-
     seg = np.zeros(height * width, dtype=np.uint8)
     drawn = [(np.asarray(v, np.float64), np.asarray(f, np.int64), value)
              for v, f, value in meshes if len(f) and np.isfinite(v).all()]

@@ -88,8 +88,3 @@ def encode_image(ext: str, image: np.ndarray) -> bytes:
     if not ok:
         raise ValueError(f"OpenCV could not encode a {image.dtype} {image.shape} image as {ext}")
     return data.tobytes()
-
-
-def write_image(path: Path, image: np.ndarray) -> None:
-    """Write an image file, the format chosen by the suffix (``.jpg`` or ``.png``)."""
-    Path(path).write_bytes(encode_image(Path(path).suffix.lower(), image))

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.tracks import parse_keyframe
+from worker.tracks.keyframes import parse_keyframe
 
 FORMAT_NAME = "dexlabel-json"
 FORMAT_VERSION = 2
@@ -54,7 +54,7 @@ def finite(values: Any) -> Any:
 
 
 def keyframe_row(raw: Any) -> list[Any]:
-    """A keyframe (a stored row, a dict or a :class:`worker.tracks.Keyframe`) as exported:
+    """A keyframe (a stored row, a dict or a :class:`worker.tracks.keyframes.Keyframe`) as exported:
     [frame, x px, y px, visible01, source], the source always written."""
     kf = parse_keyframe(raw)
     return [kf.frame, kf.x, kf.y, 1 if kf.visible else 0, kf.source]

@@ -15,7 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from worker.tracks import Keyframe, as_keyframes, dense_track, frame_spans
+from worker.tracks.interpolate import dense_track
+from worker.tracks.keyframes import Keyframe, as_keyframes
+from worker.tracks.spans import frame_spans
 
 
 def _source_before(kfs: list[Keyframe], frame: int) -> Any:
@@ -27,8 +29,9 @@ def mark_outside(keyframes: Iterable[Any], outside: np.ndarray) -> list[Keyframe
     """One point's keyframes with every stretch where it is outside the image made a keyframe
     without a position.
 
-    keyframes: what :func:`worker.tracks.parse_keyframe` accepts, image px. outside: (F,) bool
-    over the clip's F frames. Frames where the track has no position are left as they are.
+    keyframes: what :func:`worker.tracks.keyframes.parse_keyframe` accepts, image px.
+    outside: (F,) bool over the clip's F frames. Frames where the track has no position are
+    left as they are.
     """
     kfs = as_keyframes(keyframes)
     outside = np.asarray(outside, dtype=bool)

@@ -25,7 +25,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from worker.tracks import as_keyframes, dense_track
+from worker.tracks.interpolate import dense_track
+from worker.tracks.keyframes import as_keyframes
 
 ProvenanceState = Literal["keyframed", "tracked", "prefilled", "interpolated", "none"]
 STATES: tuple[ProvenanceState, ...] = ("keyframed", "tracked", "prefilled", "interpolated",
@@ -39,7 +40,7 @@ def view_states(points: Sequence[Iterable[Any]], num_frames: int) -> list[Proven
     """The state (see the module docstring) of one view's label of one target at each frame.
 
     points: per point its keyframes (stored rows [frame, x, y, visible01(, source)], dicts or
-    :class:`worker.tracks.Keyframe`). Returns ``num_frames`` state words.
+    :class:`worker.tracks.keyframes.Keyframe`). Returns ``num_frames`` state words.
     """
     if num_frames < 0:
         raise ValueError(f"num_frames must be >= 0, got {num_frames}")

@@ -1,4 +1,4 @@
-"""Pure NumPy geometry: cameras and projection, rigid transforms, mesh I/O.
+"""Pure NumPy geometry: cameras and projection, rigid transforms, mesh I/O, rasterisation.
 
 Arrays are float64 with batch dimensions first; see each module for frames and units.
 """

@@ -8,7 +8,7 @@ Conventions (written down once for the whole project):
 - intrinsics ``K`` (3, 3) = ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` in pixels (OpenCV's own
   ``projectPoints`` ignores the skew ``s``; it is honoured here and is 0 for every capture);
 - distortion ``dist`` (5,) = ``(k1, k2, p1, p2, k3)``, OpenCV's radial-tangential model applied
-  to normalised coordinates ``(X/Z, Y/Z)``.
+  to normalised coordinates ``(X/Z, Y/Z)`` (worker.geometry.distortion, its one implementation).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from worker.geometry.distortion import distort, undistort
 from worker.geometry.transforms import make_pose
 
 
@@ -75,12 +76,7 @@ def distort_normalized(xy: np.ndarray, dist: np.ndarray | None) -> np.ndarray:
     dist = _as_dist(dist)
     if dist is None:
         return xy
-    k1, k2, p1, p2, k3 = dist
-    x, y = xy[..., 0], xy[..., 1]
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    xd, yd = distort(xy[..., 0], xy[..., 1], dist)
     return np.stack([xd, yd], axis=-1)
 
 
@@ -171,16 +167,8 @@ def undistort_normalized(xy_distorted: np.ndarray, dist: np.ndarray | None,
     dist = _as_dist(dist)
     if dist is None:
         return xy_d.copy()
-    k1, k2, p1, p2, k3 = dist
-    xy = xy_d.copy()
-    for _ in range(iterations):
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        xy = np.stack([(xy_d[..., 0] - dx) / radial, (xy_d[..., 1] - dy) / radial], axis=-1)
-    return xy
+    x, y = undistort(xy_d[..., 0], xy_d[..., 1], dist, iterations)
+    return np.stack([x, y], axis=-1)
 
 
 def pixels_to_rays(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray | None = None) -> np.ndarray:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
+from worker.geometry.distortion import distort, distort_jacobian
 
 LM_ITERATIONS = 12
 
@@ -74,14 +75,7 @@ def project_stack(stack: CameraStack, points: np.ndarray,
     inv_z = np.divide(1.0, z, out=np.full_like(z, np.nan), where=z != 0)
     x, y = cam[..., 0] * inv_z, cam[..., 1] * inv_z
     distorted = bool(stack.dist.any())
-    if distorted:
-        k1, k2, p1, p2, k3 = (stack.dist[:, i] for i in range(5))
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    else:
-        xd, yd = x, y
+    xd, yd = distort(x, y, stack.dist) if distorted else (x, y)
     K = stack.K
     u = K[:, 0, 0] * xd + K[:, 0, 1] * yd + K[:, 0, 2]
     v = K[:, 1, 1] * yd + K[:, 1, 2]
@@ -94,14 +88,7 @@ def project_stack(stack: CameraStack, points: np.ndarray,
     jn[..., 1, 2] = -y * inv_z
     if not distorted:
         return pix, z, K[:, :2, :2] @ (jn @ stack.rot)
-    d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-    # d(xd, yd) / d(x, y) of OpenCV's radial-tangential model.
-    jd = np.empty(x.shape + (2, 2))
-    jd[..., 0, 0] = radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x
-    jd[..., 0, 1] = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y
-    jd[..., 1, 0] = jd[..., 0, 1]
-    jd[..., 1, 1] = radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x
-    jac = K[:, :2, :2] @ jd @ (jn @ stack.rot)
+    jac = K[:, :2, :2] @ distort_jacobian(x, y, stack.dist) @ (jn @ stack.rot)
     return pix, z, jac
 
 

@@ -1,7 +1,8 @@
 """Hand model: MANO's parameter format, our built-in open hand, and a differentiable layer.
 
 Joints come in the DexYCB order (`JOINT_NAMES`); models are `HandModel`s, loaded from the
-official MANO pickles or built in; `HandLayer` poses them in PyTorch. Lengths are metres.
+official MANO pickles or built in; `HandLayer` poses them in PyTorch, and worker.hand.posing
+is where every caller turns pose_m into vertices and joints. Lengths are metres.
 """
 
 from worker.hand.builtin import builtin_hand_model

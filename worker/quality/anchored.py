@@ -23,21 +23,22 @@ Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.assist.visibility import DepthMaps
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.quality.consensus import ViewLabels, decided_of
 from worker.quality.landmark_points import facing, separation_mm, shown_fraction
 from worker.quality.metrics import (
     AssignmentQC,
-    DepthMaps,
     error_issues,
     num,
     per_point_and_frame,
 )
+from worker.quality.solved_scene import SolvedObjects
 
 # Visible frames tried as the anchor's frame (evenly over the track): a sloppy first click
 # does not decide where a careful track is anchored.
@@ -78,21 +79,6 @@ SHOWN_SAMPLES = 64
 
 # Pixels (..., 2) of the camera model -> where the camera truly shows them.
 PixelMap = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class SolvedObjects:
-    """The solved scene: per object vertices (N, 3) and faces (M, 3) in its own frame
-    (metres), and poses (O, F, 3, 4) object-to-world (NaN where unsolved)."""
-
-    vertices: Sequence[np.ndarray]
-    faces: Sequence[np.ndarray]
-    poses: np.ndarray
-
-    def triangles(self, index: int, frame: int) -> np.ndarray:
-        """(M, 3, 3) world triangles of object ``index`` at ``frame`` (NaN if unsolved)."""
-        pose = self.poses[index, frame]
-        return (self.vertices[index] @ pose[:, :3].T + pose[:, 3])[self.faces[index]]
 
 
 @dataclass
@@ -188,21 +174,15 @@ def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: Solv
     return candidates[int(np.argmin(errors))]
 
 
-def point_visible(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
-                  depth: DepthMaps | None, image_map: PixelMap | None = None) -> np.ndarray:
-    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
-    solved mesh nearer along its ray, and no depth reading well in front of it. image_map:
-    where the camera truly shows a projected pixel (a camera offset, worker.quality.
-    view_offset), so the depth map is read where the point is seen."""
-    return point_visibility(camera, world, scene, depth, image_map)[0]
-
-
 def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
                      depth: DepthMaps | None, image_map: PixelMap | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """(F,) shown as ``point_visible`` says, and (F,) the shown frames where the point sits at
-    the edge of something in front of it (``at_depth_edge``): its visibility there says
-    nothing of the worker."""
+    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
+    solved mesh nearer along its ray, and no depth reading well in front of it; and (F,) the
+    shown frames where the point sits at the edge of something in front of it
+    (``at_depth_edge``): its visibility there says nothing of the worker. image_map: where the
+    camera truly shows a projected pixel (a camera offset, worker.quality.view_offset), so the
+    depth map is read where the point is seen."""
     frames = len(world)
     pix = camera.project(world)
     if image_map is not None:
@@ -266,7 +246,7 @@ def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix
 def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
                  depth: DepthMaps | None) -> np.ndarray:
     """(F,) share of object ``target``'s sampled surface points (SHOWN_SAMPLES vertices) the
-    view shows, by the rules of point_visible (in the image, no solved mesh nearer along the
+    view shows, by the rules of point_visibility (in the image, no solved mesh nearer along the
     ray, no depth reading well in front); NaN where the pose is unknown."""
     vertices = scene.vertices[target]
     samples = vertices[np.unique(np.linspace(0, len(vertices) - 1,

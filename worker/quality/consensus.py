@@ -32,6 +32,13 @@ from typing import Any
 
 import numpy as np
 
+from worker.assist.visibility import (
+    HIDDEN_MARGIN_M,
+    SURFACE_MARGIN_M,
+    DepthMaps,
+    SurfaceCheck,
+    surface_check,
+)
 from worker.geometry.cameras import CameraModel
 from worker.geometry.refine import (
     CameraStack,
@@ -45,18 +52,13 @@ from worker.geometry.triangulate import (
     triangulate_points,
 )
 from worker.quality.metrics import (
-    HIDDEN_MARGIN_M,
-    SURFACE_MARGIN_M,
     AssignmentQC,
-    DepthMaps,
-    SurfaceCheck,
     completeness,
     depth_visibility,
     error_issues,
     error_summary,
     num,
     per_point_and_frame,
-    surface_check,
     track_metrics,
 )
 from worker.quality.motion import (
@@ -103,7 +105,7 @@ class ViewLabels:
     decided: (F, P) bool, where the position is the worker's own decision (placed, edited or
         a tracking proposal from this view's images accepted); False where it only comes
         from suggestions pre-filled from the other views and left unchanged
-        (worker.tracks.decided_mask). None: all of it (work without provenance). Undecided
+        (worker.tracks.sources.decided_mask). None: all of it (work without provenance). Undecided
         positions never enter the consensus and are never scored, so a view pre-filled from
         the others cannot agree with them by construction (leave-one-out holds).
     """

@@ -18,9 +18,9 @@ from typing import Literal
 
 import numpy as np
 
+from worker.assist.checks import CHECK_OFFSET_PX
 from worker.quality.metrics import AssignmentQC
-from worker.tracking.checks import CHECK_OFFSET_PX
-from worker.tracks import format_spans
+from worker.tracks.spans import format_spans
 
 # The consistent estimator of a normal distribution's sigma from the MAD.
 MAD_TO_SIGMA = 1.4826
@@ -99,7 +99,7 @@ def _bounds() -> dict[str, MetricBound]:
         "track_jitter_px": MetricBound("above", (30.0, 30.0), (60.0, 60.0)),
         "track_jitter_ratio": MetricBound("above", (1.55, 1.6)),
         "moved_with_hand": MetricBound("below", (0.15, 0.25), (0.05, 0.1)),
-        # Check suggestions (worker.tracking.checks) kept unchanged although each was shown
+        # Check suggestions (worker.assist.checks) kept unchanged although each was shown
         # CHECK_OFFSET_PX off the point, plain to anyone who looks: one may be a slip among
         # corrected ones (review); two are suggestions accepted without looking (reject).
         # Fixed, whatever the population does: work without suggestions keeps none.

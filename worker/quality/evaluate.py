@@ -18,7 +18,7 @@ from worker.geometry.cameras import CameraModel
 from worker.quality.consensus import HandReport, ViewLabels, score_hand
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
 from worker.synth.annotators import PROFILES, annotate, draw_profiles, swap_window
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 GOOD_PROFILES = ("careful",)
 SWAPPED_FINGERS = ["ring", "little"]

@@ -21,15 +21,13 @@ Object frame in metres; world metres; one camera view.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
 from worker.quality.metrics import num
+from worker.quality.solved_scene import SolvedObjects
 
-if TYPE_CHECKING:
-    from worker.quality.anchored import SolvedObjects
 
 def separation_mm(points: Sequence[np.ndarray]) -> float | None:
     """Least distance between any two of the anchored points (each (3,), object frame, metres),

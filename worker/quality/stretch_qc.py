@@ -1,7 +1,7 @@
 """QC of interpolated stretches: what the view's images say about a worker's straight lines.
 
 Each hand label's stretches between keyframes are checked against its own view's images
-(worker.tracking.stretches). Two things follow:
+(worker.assist.stretches). Two things follow:
 
 - positions the images contradict (interpolated where the point moved away from the line) are
   not the worker's decision on that frame: they enter no consensus and are scored by no one
@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from worker.assist.lk import tracked_spans
+from worker.assist.stretches import StretchCheck
 from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import AssignmentQC
-from worker.tracking.lk import tracked_spans
-from worker.tracking.stretches import StretchCheck
 
 
 def without_contradicted(label: ViewLabels, check: StretchCheck) -> ViewLabels:
@@ -49,7 +49,7 @@ def stretch_issues(check: StretchCheck) -> list[dict[str, Any]]:
 
 
 def unfollowed_share(check: StretchCheck, keyframes: Sequence[Sequence[Any]]) -> float | None:
-    """Share of the label's tracked stretches (worker.tracking.lk.tracked_spans) the images
+    """Share of the label's tracked stretches (worker.assist.lk.tracked_spans) the images
     say it does not follow; None when it has none."""
     spans = len(tracked_spans(keyframes, 0, check.evidence.shape[0]))
     return None if spans == 0 else len(check.issues) / spans

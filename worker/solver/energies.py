@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import torch
 
-from worker.solver.hand_fk import SubjectHand
+from worker.hand.posing import SubjectHand
 from worker.solver.projection import Rig, pose_matrix, transform
 
 MM_PER_M = 1000.0
@@ -119,12 +119,6 @@ def hand_residuals(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: Hand
     if data.pose_target is not None and data.sqrt_pose_smooth is not None:
         parts.append((pose_m[:, 3:48] - data.pose_target) * data.sqrt_pose_smooth[:, None])
     return torch.cat(parts, dim=1)
-
-
-def posed_object(delta: torch.Tensor, data: ObjectData) -> torch.Tensor:
-    """(B, N, 3) world vertices of the object for pose increments delta (B, 6)."""
-    rot, trans = pose_matrix(delta, data.base)
-    return transform(rot, trans, data.vertices.expand(delta.shape[0], -1, -1))
 
 
 def object_residuals(delta: torch.Tensor, data: ObjectData) -> torch.Tensor:

@@ -6,7 +6,7 @@ solve fits them well. So a frame is judged by its evidence, per view:
 
   decided view   most of the view's labelled visible joints there are keyframes (the worker
                  placed them on this frame) or interpolated positions the view's own images
-                 confirm (worker.tracking.stretches: the tracked point follows the line);
+                 confirm (worker.assist.stretches: the tracked point follows the line);
   guessing view  labelled there, but mostly by interpolation the images could not check;
   reprojection   median reprojection error (px) of the solved joints against the labels;
   depth          the frame's depth agreement (RMS point-to-mesh distance, mm).
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.tracking.stretches import EVIDENCE_CONFIRMED, EVIDENCE_KEYED, EVIDENCE_NONE
+from worker.assist.stretches import EVIDENCE_CONFIRMED, EVIDENCE_KEYED, EVIDENCE_NONE
 
 # Two views pin a point in 3D; fewer, and the solve leans on the hand model's prior alone.
 MIN_DECIDED_VIEWS = 2

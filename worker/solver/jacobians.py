@@ -18,8 +18,8 @@ from __future__ import annotations
 import torch
 from torch.func import jvp
 
+from worker.hand.posing import SubjectHand
 from worker.solver.energies import MM_PER_M, DepthData, HandData
-from worker.solver.hand_fk import SubjectHand
 from worker.solver.lm import FORWARD_AD_LOCK, jacobian
 from worker.solver.projection import Rig
 

@@ -283,12 +283,3 @@ def refit_held(problem: Problem, state: SolveState, index: int, motion: ObjectMo
     state.object_poses[index, held] = fit_poses(
         problem, index, marks, held, state.object_poses[index, held] if prior is None else prior,
         matches, prior, 2)
-
-
-def _landmark_views(marks: MappedLandmarks, frames: np.ndarray) -> np.ndarray:
-    """(B,) distinct views with a mapped landmark seen at each of frames (B,)."""
-    if not len(marks.views):
-        return np.zeros(len(frames), np.int64)
-    seen = marks.gamma[frames]
-    return np.stack([seen[:, marks.views == v].any(axis=1)
-                     for v in np.unique(marks.views)], axis=1).sum(axis=1)

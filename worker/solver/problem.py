@@ -14,9 +14,9 @@ import torch
 
 from worker.hand import HandLayer, builtin_hand_model
 from worker.hand.params import check_side
+from worker.hand.posing import SubjectHand
 from worker.solver.depth import DepthClouds, Matches, crop_to_boxes, match_points, subsample
 from worker.solver.energies import DepthData, HandData, ObjectData
-from worker.solver.hand_fk import SubjectHand
 from worker.solver.mesh_query import AABBTree
 from worker.solver.projection import Rig
 from worker.solver.surface import surface_samples

@@ -1,7 +1,8 @@
 """Camera projection in PyTorch for a fixed rig of V calibrated views, and rigid-pose helpers.
 
 World points are metres in the capture's master frame; pixels are x right, y down, with
-OpenCV's (k1, k2, p1, p2, k3) distortion, matching `worker.geometry.cameras.project_points`.
+OpenCV's (k1, k2, p1, p2, k3) distortion (worker.geometry.distortion, the same code as
+`worker.geometry.cameras.project_points`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import numpy.typing as npt
 import torch
 
 from worker.geometry.cameras import CameraModel
+from worker.geometry.distortion import distort
 from worker.hand.lbs import axis_angle_to_matrix
 
 
@@ -50,12 +52,7 @@ def _pixels(cam: torch.Tensor, K: torch.Tensor, dist: torch.Tensor) -> torch.Ten
     """Camera-frame points (..., 3) -> pixels (..., 2); K (..., 3, 3) and dist (..., 5)
     broadcast against the points' leading dimensions."""
     z = cam[..., 2].clamp(min=1e-3)
-    x, y = cam[..., 0] / z, cam[..., 1] / z
-    k1, k2, p1, p2, k3 = dist.unbind(-1)
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    xd, yd = distort(cam[..., 0] / z, cam[..., 1] / z, dist)
     u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
     v = K[..., 1, 1] * yd + K[..., 1, 2]
     return torch.stack((u, v), dim=-1)

@@ -8,13 +8,16 @@ import time
 import numpy as np
 import torch
 
+from worker.hand import HandLayer, builtin_hand_model
+from worker.hand.params import check_side
+from worker.hand.posing import posed_hand
 from worker.solver.confidence import object_confidence
 from worker.solver.default import solve_default
 from worker.solver.hand_confidence import hand_confidence
 from worker.solver.initial_pose import fit_initial_pose
 from worker.solver.paper import solve_paper
 from worker.solver.problem import Problem
-from worker.solver.state import SolveState, hand_vertices_world
+from worker.solver.state import SolveState
 from worker.solver.types import SolveInputs, SolveResult, SolveSettings
 from worker.solver.validate import check_inputs
 
@@ -104,8 +107,6 @@ def hand_vertices(result: SolveResult, inputs: SolveInputs, frame: int) -> np.nd
     MANO). Raises ValueError if the frame has no hand solution."""
     if inputs.hand is None or not 0 <= frame < len(result.labelled) or not result.labelled[frame]:
         raise ValueError(f"frame {frame} has no hand solution")
-    problem_settings = SolveSettings(use_depth=False)
-    problem = Problem(SolveInputs(inputs.cameras, inputs.num_frames, inputs.hand, [],
-                                  [None] * len(inputs.cameras), inputs.hand_model),
-                      problem_settings)
-    return hand_vertices_world(problem, result.hand_pose_m[frame][None])[0]
+    model = inputs.hand_model or builtin_hand_model(check_side(inputs.hand.side))
+    vertices, _ = posed_hand(HandLayer(model), result.hand_pose_m[frame][None], inputs.hand.betas)
+    return vertices[0]

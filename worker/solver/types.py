@@ -23,7 +23,7 @@ class HandTarget:
     keypoints: (V, F, 21, 2) px in DexYCB joint order, NaN where there is no label.
     visible: (V, F, 21) bool, the annotator's visibility flag (gamma in the paper).
     evidence: optional (V, F, 21) int8 codes of how each label was decided
-        (worker.tracking.stretches.EVIDENCE_*: keyed, interpolated and confirmed by the
+        (worker.assist.stretches.EVIDENCE_*: keyed, interpolated and confirmed by the
         view's images, interpolated unchecked, contradicted); None: every label counts as
         keyed (labels without provenance). Read by the hand's confidence only.
     """

@@ -4,12 +4,12 @@ Conventions as in worker.synth.annotators: one camera view, F frames, P points, 
 image px (x right, y down). A worker's output is P tracks of keyframe rows ``[frame, x, y,
 visible01]`` (placed by hand) or ``[frame, x, y, visible01, source]`` with source one of
 
-    tracked    an accepted tracking proposal (worker.tracking.lk), unchanged;
+    tracked    an accepted tracking proposal (worker.assist.lk), unchanged;
     prefilled  an accepted pre-fill suggestion (the consensus of other views), unchanged;
     edited     came from a suggestion and the worker moved it or changed its visibility;
 
 plus the actions it took. Every suggestion the worker is shown passes through the check cells
-of its assignment first (worker.tracking.checks.plant), exactly as the routes show them.
+of its assignment first (worker.assist.checks.plant), exactly as the routes show them.
 
 Action counting (the same rule for annotators.keyframe_actions, today's keyframe worker):
     click   placing a visible point on a frame (a new keyframe);
@@ -39,7 +39,7 @@ Workers:
               pre-fill, corrects nothing: the check cells keep their offsets. Its labels are
               as good as the suggestions, so only the check cells tell it apart.
 
-Pure numpy (and OpenCV through worker.tracking.lk); every random choice comes from ``rng``.
+Pure numpy (and OpenCV through worker.assist.lk); every random choice comes from ``rng``.
 """
 
 from __future__ import annotations
@@ -51,13 +51,12 @@ from typing import Any, Literal
 
 import numpy as np
 
+from worker.assist import checks
+from worker.assist.lk import propose
 from worker.synth.annotators import CAREFUL_SIGMA_PX
-from worker.tracking import checks
-from worker.tracking.lk import propose
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 Source = Literal["placed", "tracked", "prefilled", "edited"]
-AssistedProfile = Literal["careful", "blind"]
 # How far (px) a shown position may be from where the careful worker sees the point before it
 # corrects it: 3 sigma of its click noise (the spread of its own keyframes), while a check cell
 # (15 px off) is always corrected.
@@ -99,9 +98,9 @@ class AssistSetting:
     """What the page gives one assignment: the view's frames and the check cells' draw.
 
     grey: (F, H, W) uint8 grey frames of the view (what the proposals route tracks on).
-    key: the check-cell key (worker.tracking.checks.check_key of the instance's signing key).
+    key: the check-cell key (worker.assist.checks.check_key of the instance's signing key).
     assignment_id: the database id of the assignment (the check cells depend on it).
-    prefill: the view's pre-fill suggestions, None before worker.quality.prefill's
+    prefill: the view's pre-fill suggestions, None before worker.assist.prefill's
         MIN_ACCEPTED_VIEWS other views are done.
     """
 

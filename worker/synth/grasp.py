@@ -13,11 +13,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from worker.geometry.transforms import matrix_to_axis_angle
 from worker.hand import FINGER_NAMES, HandLayer, HandModel, builtin_hand_model
 from worker.hand.joints import MANO_FINGER_START
+from worker.hand.posing import posed_hand
 from worker.synth.scene import PlacedObject, object_sdf
 
 # Flexion (radians) of the three joints of each finger at full closure, proximal first.
@@ -71,9 +71,7 @@ class ShapedHand:
 
     def evaluate(self, pose_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """pose_m (B, 51) -> vertices (B, V, 3) and joints (B, 21, 3) in pose_m's frame."""
-        out = self.layer.from_pose_m(torch.as_tensor(pose_m, dtype=torch.float64),
-                                     torch.as_tensor(self.betas, dtype=torch.float64))
-        return out.vertices.detach().numpy(), out.joints.detach().numpy()
+        return posed_hand(self.layer, pose_m, self.betas)
 
     def open_pose(self) -> np.ndarray:
         """(45,) slightly pre-shaped open hand, full axis-angle."""

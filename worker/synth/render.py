@@ -1,7 +1,7 @@
 """Deferred shading of a triangle scene into colour, depth and segmentation for one camera.
 
 Geometry is given in the *scene frame* (the synthesiser's table frame, metres). Each view is
-rasterised with an ideal pinhole (worker.synth.raster); a lens with distortion is handled by
+rasterised with an ideal pinhole (worker.geometry.raster); a lens with distortion is handled by
 rendering a slightly larger undistorted image and resampling it at the undistorted position of
 every output pixel, so pixel (u, v) of the result shows what OpenCV's model projects to (u, v).
 Depth is the camera z of the nearest surface; seg and depth always come from the same sample.
@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from worker.geometry.cameras import pixels_to_rays
-from worker.synth.raster import Fragments, rasterize
+from worker.geometry.raster import Fragments, rasterize
 from worker.synth.sensor import finish_color, simulate_depth
 
 AMBIENT = 0.38

@@ -6,7 +6,7 @@
  *   "tracked"    an accepted tracking proposal, unchanged
  *   "prefilled"  an accepted pre-fill suggestion (other views' consensus), unchanged
  *   "edited"     came from a suggestion and the worker then moved it or changed its visibility
- * worker/tracks.py reads the same sources from saved rows [frame, x, y, visible01, source].
+ * worker/tracks/keyframes.py reads the same sources from saved rows [frame, x, y, visible01, source].
  *
  * Pure: no DOM, no state outside the objects.
  */

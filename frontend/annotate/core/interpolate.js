@@ -2,7 +2,7 @@
  * Track interpolation, completeness and plausibility checks for the annotation page.
  *
  * A track is one point (a hand joint or an object landmark) through a clip, stored as keyframes
- * sorted by frame. Positions are image pixels (x right, y down). worker/tracks.py implements the
+ * sorted by frame. Positions are image pixels (x right, y down). worker/tracks/ implements the
  * same rules for export and QC; both are checked against tests/fixtures/interpolation_golden.json,
  * so any change here must be made there too.
  *
@@ -88,8 +88,8 @@ function between(k0, k1, frame) {
   if (k1 === undefined || !hasPosition(k1)) {
     return { x: k0.x, y: k0.y, visible, state: "interpolated" };
   }
-  // The exact formula (and operation order) is shared with worker/tracks.py so that both give
-  // bit-identical results on the golden vectors.
+  // The exact formula (and operation order) is shared with worker/tracks/interpolate.py so that
+  // both give bit-identical results on the golden vectors.
   const t = (frame - k0.frame) / (k1.frame - k0.frame);
   return {
     x: k0.x + (k1.x - k0.x) * t,

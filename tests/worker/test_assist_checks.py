@@ -1,4 +1,4 @@
-"""Check suggestions (worker.tracking.checks): which cells, how far off, and how a saved
+"""Check suggestions (worker.assist.checks): which cells, how far off, and how a saved
 assignment's acceptance of them is counted."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from worker.tracking.checks import (
+from worker.assist.checks import (
     CHECK_COUNT,
     CHECK_OFFSET_PX,
     accepted_checks,

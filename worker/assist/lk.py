@@ -35,7 +35,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from worker.tracks import as_keyframes
+from worker.tracks.keyframes import as_keyframes
 
 # LK window and pyramid: 21 px windows over 4 levels follow a point moving up to about
 # 2^3 x 10 = 80 px between frames, more than a hand moves between two 30 fps frames.

@@ -108,7 +108,8 @@ def _boxes(uv: np.ndarray, faces: np.ndarray, width: int, height: int) -> _Boxes
 def rasterize(
     points_cam: np.ndarray, faces: np.ndarray, K: np.ndarray, width: int, height: int
 ) -> Fragments:
-    """Rasterise triangles seen by a pinhole camera (no distortion; see render.py for that).
+    """Rasterise triangles seen by a pinhole camera (no distortion: worker.synth.render and
+    worker.overlay handle a lens).
 
     Args:
         points_cam: (N, 3) vertices in the camera frame (OpenCV: z forward), metres.

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from worker.tracking.lk import propose
+from worker.assist.lk import propose
 
 WIDTH, HEIGHT = 320, 240
 MARGIN = 120

@@ -6,12 +6,12 @@ accepted in at least MIN_ACCEPTED_VIEWS other views, each point is triangulated 
 the views that saw it (at least MIN_VIEWS; robustly, worker.geometry.triangulate) and projected
 into the target view with its lens distortion: a suggested position, image px. Its suggested
 visibility comes from the target view's depth map, with QC's own rule
-(worker.quality.metrics.surface_check): occluded where something other than the hand covers the
+(worker.assist.visibility.surface_check): occluded where something other than the hand covers the
 point by more than HIDDEN_MARGIN_M, or where the point projects outside the image or behind the
 camera; visible where the depth map reads at its pixel and covers nothing; unknown where the map
 has no reading there (or there is no map).
 
-Only decided positions count (worker.tracks.decided_mask): a keyframe the worker took
+Only decided positions count (worker.tracks.sources.decided_mask): a keyframe the worker took
 unchanged from a pre-fill suggestion (source "prefilled") is the suggestion's own echo, not
 evidence; nor is a span between two such keyframes.
 
@@ -31,10 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from worker.assist.visibility import HIDDEN_MARGIN_M, WINDOW_RADIUS_PX, surface_check
 from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.geometry.triangulate import triangulate_points
-from worker.quality.metrics import HIDDEN_MARGIN_M, WINDOW_RADIUS_PX, surface_check
-from worker.tracks import decided_mask, dense_points
+from worker.tracks.interpolate import dense_points
+from worker.tracks.sources import decided_mask
 
 # Fewest other views with decided work on a point before it is suggested: two rays fix it.
 MIN_VIEWS = 2
@@ -89,7 +90,7 @@ class Prefill:
 def view_work(view: int, tracks: Iterable[tuple[int, Sequence[Any]]], num_frames: int,
               num_points: int) -> ViewWork:
     """An assignment's stored tracks, given as (point index, keyframe rows) pairs, as dense
-    ViewWork (image px); decided as worker.tracks.decided_mask has it (not unplaced, not
+    ViewWork (image px); decided as worker.tracks.sources.decided_mask has it (not unplaced, not
     only from unedited pre-filled keyframes)."""
     tracks = list(tracks)
     xy, visible = dense_points(tracks, num_frames, num_points)

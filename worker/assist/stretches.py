@@ -2,7 +2,7 @@
 
 Between two keyframes a track is a straight line (worker.tracks). Whether the point really
 moved along that line is a question the view's images can answer: the point is tracked from
-both keyframes inwards (worker.tracking.lk: pyramidal Lucas-Kanade with its forward-backward
+both keyframes inwards (worker.assist.lk: pyramidal Lucas-Kanade with its forward-backward
 and appearance checks), and where the tracker holds, its position is compared with the line.
 A stretch whose tracked path leaves the line by more than ``tolerance_px`` is one the images
 say the track does not follow, and becomes an issue in words ("ring tip moves 14 px between
@@ -12,7 +12,7 @@ Each (frame, point) gets an evidence code (EVIDENCE_*): keyed by the worker, int
 confirmed by the images, interpolated with no image evidence either way (the tracker lost the
 point), interpolated where the images say the point moved away, or not labelled.
 
-Conventions as worker.tracking.lk: ``frames`` (F, H, W) uint8 grey images of one view, frame i
+Conventions as worker.assist.lk: ``frames`` (F, H, W) uint8 grey images of one view, frame i
 being clip frame ``first_frame + i``; keyframe rows ``[frame, x, y, visible01, ...]``; image
 pixels, x right, y down. Pure: arrays in, arrays out.
 """
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.tracking.lk import propose, tracked_spans
-from worker.tracks import dense_points
+from worker.assist.lk import propose, tracked_spans
+from worker.tracks.interpolate import dense_points
 
 # Evidence codes of one (frame, point) of a track.
 EVIDENCE_NONE = 0          # no visible position there

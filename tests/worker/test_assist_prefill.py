@@ -1,4 +1,4 @@
-"""worker.quality.prefill: suggestions for one view from the accepted work of the others.
+"""worker.assist.prefill: suggestions for one view from the accepted work of the others.
 
 Two scenes: the ring of 8 cameras around a moving hand of the consensus tests (exact
 geometry, no lens distortion where a test says so), and a rendered synthetic capture (seed 5,
@@ -15,7 +15,7 @@ import pytest
 
 from tests.worker.test_qc_consensus import camera_ring, moving_hand, truth_pixels
 from tests.worker.test_qc_visibility import CaptureTruth
-from worker.quality.prefill import (
+from worker.assist.prefill import (
     ViewWork,
     epipolar_guide,
     epipolar_lines,
@@ -25,7 +25,7 @@ from worker.quality.prefill import (
     view_work,
 )
 from worker.synth.annotators import annotate
-from worker.tracks import dense_track
+from worker.tracks.interpolate import dense_track
 
 TARGET = 0
 

@@ -1,14 +1,23 @@
-"""MANO forward kinematics for a fixed subject, evaluated only where the solver looks.
+"""Posing MANO: the one place a hand's vertices and joints are computed from pose_m and betas.
 
-The solver's residuals need the 21 joints and, for the depth term, the few hundred vertices
-that depth points are matched to; skinning all 778 vertices in every Jacobian column would
-dominate the solve. With the subject's betas fixed, the shaped template and rest joints are
-computed once; each evaluation then poses the skeleton and skins only the requested vertices,
-with the same semantics as `worker.hand.HandLayer` (pose correctives, LBS, translation).
+- :func:`posed_hand`: the whole hand for DexYCB pose_m rows, as NumPy arrays, through
+  :class:`worker.hand.HandLayer` (the synthetic ground truth, calibration views and every caller
+  that wants a mesh);
+- :class:`SubjectHand`: the same posing for one subject (betas fixed) evaluated only where the
+  solver looks. The solver's residuals need the 21 joints and, for the depth term, the few
+  hundred vertices that depth points are matched to; skinning all 778 vertices in every
+  Jacobian column would dominate the solve. With the subject's betas fixed, the shaped
+  template and rest joints are computed once; each evaluation then poses the skeleton and
+  skins only the requested vertices, with HandLayer's semantics (pose correctives, LBS,
+  translation), in a form that stays fast under vmap.
+
+pose_m (B, 51): global axis-angle (rad), 45 PCA coefficients, translation (metres); outputs in
+metres in pose_m's frame; joints in DexYCB order.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from worker.hand.joints import NUM_SKELETON_JOINTS
@@ -63,3 +72,16 @@ class SubjectHand:
         """LBS of vertices (B, K, 3) with transforms (B, 16, 4, 4) and weights (B, K, 16)."""
         blended = (weights @ transforms[:, :, :3, :].flatten(2)).unflatten(-1, (3, 4))
         return (blended[..., :3] * vertices[..., None, :]).sum(-1) + blended[..., 3]
+
+
+def posed_hand(layer: HandLayer, pose_m: np.ndarray, betas: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (B, V, 3) and joints (B, 21, 3), metres, float64 NumPy, of ``layer``'s hand
+    for pose_m (B, 51) and betas (K,) or (B, K); no gradients.
+
+    The layer must be built for pose_m (use_pca=True, flat_hand_mean=False, as by default).
+    """
+    with torch.no_grad():
+        out = layer.from_pose_m(torch.as_tensor(pose_m, dtype=torch.float64),
+                                torch.as_tensor(betas, dtype=torch.float64))
+    return out.vertices.detach().numpy(), out.joints.detach().numpy()

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.worker.test_tracking_lk import _frames, _keys
-from worker.synth.annotators import follow_path
-from worker.tracking.stretches import (
+from tests.worker.test_assist_lk import _frames, _keys
+from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,
     EVIDENCE_KEYED,
     check_stretches,
 )
+from worker.synth.annotators import follow_path
 
 COUNT = 16
 
