@@ -22,8 +22,8 @@ from backend.quality.inputs import TargetInputs, target_inputs
 
 if TYPE_CHECKING:
     from worker.quality.anchored import AnchoredQC
-    from worker.quality.consensus import ViewLabels
     from worker.quality.solved_scene import SolvedObjects
+    from worker.quality.view_labels import ViewLabels
     from worker.quality.view_offset import ViewOffset
 
 
@@ -69,8 +69,8 @@ def rescored(inputs: TargetInputs, label: ViewLabels, offset: ViewOffset, scene:
     """The label taken back through its camera's map, anchored and judged again; its replay
     drawn in the view's own pixels and the offset in its metrics."""
     from worker.quality.anchored import score_anchored
-    from worker.quality.consensus import ViewLabels
     from worker.quality.metrics import num
+    from worker.quality.view_labels import ViewLabels
 
     moved = ViewLabels(label.key, label.view, offset.correct(label.xy), label.visible,
                        label.working_time_s, label.decided)

@@ -24,8 +24,8 @@ from worker.tracks.validate import validate_keyframes
 if TYPE_CHECKING:
     import numpy as np
 
-    from worker.quality.consensus import ViewLabels
     from worker.quality.metrics import AssignmentQC
+    from worker.quality.view_labels import ViewLabels
 
 
 class InvalidClip(DexlabelError, status_code=422, code="validation_error"):

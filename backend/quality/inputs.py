@@ -32,8 +32,8 @@ from worker.tracks.interpolate import dense_points
 from worker.tracks.sources import SOURCE_PREFILLED, keyframe_sources
 
 if TYPE_CHECKING:
-    from worker.quality.consensus import ViewLabels
     from worker.quality.solved_scene import SolvedObjects
+    from worker.quality.view_labels import ViewLabels
 
 # Depth maps decoded at once when the visibility check reads a view.
 DECODE_THREADS = 4
@@ -70,12 +70,12 @@ class TargetInputs:
 def view_labels(assignment: Assignment, view: int, num_frames: int, num_points: int
                 ) -> ViewLabels:
     """An assignment's tracks as dense (F, P, 2) px (NaN = no position), (F, P) visibility
-    and (F, P) decided, as a worker.quality.consensus.ViewLabels.
+    and (F, P) decided, as a worker.quality.view_labels.ViewLabels.
 
     decided is False only where the value comes from pre-filled suggestions the worker kept
     unchanged (worker.tracks.sources.keyframe_sources); a frame the worker left unplaced is theirs
     as before, so work without pre-fill is judged exactly as it was."""
-    from worker.quality.consensus import ViewLabels
+    from worker.quality.view_labels import ViewLabels
 
     xy, visible = dense_points(((t.point_index, t.keyframes) for t in assignment.tracks),
                                num_frames, num_points)

@@ -10,10 +10,10 @@ from tests.worker.test_assist_lk import _keys
 from tests.worker.test_assist_stretches import COUNT, _truth
 from worker.assist.stretches import check_stretches
 from worker.hand.joints import JOINT_NAMES
-from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
 from worker.quality.stretch_qc import add_stretch_results, without_contradicted
+from worker.quality.view_labels import ViewLabels
 from worker.synth.annotators import follow_path
 from worker.tracks.interpolate import dense_points
 

@@ -11,15 +11,11 @@ import numpy as np
 import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.anchored import (
-    anchor,
-    merge_anchored,
-    ray_hits,
-    score_anchored,
-)
-from worker.quality.consensus import ViewLabels
+from worker.quality.anchored import anchor, merge_anchored, score_anchored
 from worker.quality.metrics import AssignmentQC
+from worker.quality.object_views import ray_hits
 from worker.quality.solved_scene import SolvedObjects
+from worker.quality.view_labels import ViewLabels
 from worker.synth.annotators import annotate
 from worker.tracks.interpolate import dense_track
 

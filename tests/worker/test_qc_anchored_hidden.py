@@ -13,18 +13,18 @@ import pytest
 
 from tests.worker.test_qc_anchored import FRAMES, HEIGHT, WIDTH, box, poses
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.anchored import (
+from worker.quality.anchored import score_anchored
+from worker.quality.decide import decide, learn_thresholds
+from worker.quality.metrics import AssignmentQC
+from worker.quality.object_views import (
     DEPTH_WINDOW_PX,
     SHOWN_SHARE,
     at_depth_edge,
     covered,
     object_shown,
-    score_anchored,
 )
-from worker.quality.consensus import ViewLabels
-from worker.quality.decide import decide, learn_thresholds
-from worker.quality.metrics import AssignmentQC
 from worker.quality.solved_scene import SolvedObjects
+from worker.quality.view_labels import ViewLabels
 
 NAMES = ["landmark 1", "landmark 2"]
 

@@ -9,9 +9,10 @@ import pytest
 
 from tests.worker.test_qc_consensus import camera_ring, make_label, moving_hand, truth_pixels
 from worker.hand import JOINT_NAMES
+from worker.quality.bounds import MetricBound
 from worker.quality.consensus import score_hand
-from worker.quality.decide import MetricBound, QCThresholds, decide, learn_thresholds
-from worker.quality.evaluate import assignment_plan, confusion, evaluate_hand_qc, span_overlap
+from worker.quality.decide import QCThresholds, decide, learn_thresholds
+from worker.synth.qc_evaluation import assignment_plan, confusion, evaluate_hand_qc, span_overlap
 from worker.quality.metrics import AssignmentQC
 
 NAMES = list(JOINT_NAMES)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.consensus import ViewLabels
 from worker.quality.decide import decide, learn_thresholds
 from worker.quality.landmarks import score_landmarks, score_object
+from worker.quality.view_labels import ViewLabels
 
 FRAMES, WIDTH, HEIGHT = 30, 320, 240
 RADIUS = 30

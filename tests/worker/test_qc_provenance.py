@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from tests.worker.test_qc_consensus import camera_ring, make_label, moving_hand, truth_pixels
-from worker.quality.consensus import ViewLabels, score_hand
+from worker.quality.consensus import score_hand
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
+from worker.quality.view_labels import ViewLabels
 from worker.tracks.sources import decided_mask
 
 CAREFUL_VIEWS = (0, 1, 2)

@@ -23,14 +23,12 @@ Pixels x right, y down, one view; world metres; poses object-to-world (3, 4).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from worker.assist.visibility import DepthMaps
 from worker.geometry.cameras import CameraModel, pixels_to_rays
-from worker.quality.consensus import ViewLabels, decided_of
 from worker.quality.landmark_points import facing, separation_mm, shown_fraction
 from worker.quality.metrics import (
     AssignmentQC,
@@ -38,26 +36,19 @@ from worker.quality.metrics import (
     num,
     per_point_and_frame,
 )
+from worker.quality.object_views import (
+    SHOWN_SHARE,
+    PixelMap,
+    object_shown,
+    point_visibility,
+    ray_hits,
+)
 from worker.quality.solved_scene import SolvedObjects
+from worker.quality.view_labels import ViewLabels, decided_of
 
 # Visible frames tried as the anchor's frame (evenly over the track): a sloppy first click
 # does not decide where a careful track is anchored.
 ANCHOR_TRIES = 12
-# A mesh nearer than the point by this much along its ray hides it (metres): the point lies on
-# a face, and the face it lies on must not hide it.
-MESH_MARGIN_M = 0.004
-# The depth camera hides a point when it reads a surface this much nearer (metres): a hand
-# over the object reads 1-3 cm nearer; sensor noise at 0.7 m is ~1 mm.
-DEPTH_MARGIN_M = 0.012
-# The depth camera hides a point only when every reading within this many px of its pixel
-# (a square) is that much nearer: a rig whose calibration or depth registration is a few
-# pixels off (a camera turned by 0.5 degrees or moved by 5 mm shows 3-8 px, less what the
-# view's offset takes out; depth images 2-3 px off their colour images) reads a point near an
-# edge, or on a slope of its own surface, at a neighbouring pixel that is nearer, while a
-# hand over the point covers the whole square.
-DEPTH_WINDOW_PX = 3
-_WINDOW = np.array([(dy, dx) for dy in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)
-                    for dx in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)])
 # A click this close to the object's outline (px) is on it: a careful click lands within ~2 px,
 # and a landmark near the silhouette may miss by that much.
 SNAP_PX = 4.0
@@ -68,19 +59,6 @@ _SNAPS = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (SNAP_
 MIN_HIDDEN_FRAMES = 6
 # An issue span: the track this far off the anchored point (px).
 ISSUE_PX = 10.0
-# A label that marks none of its landmarks visible anywhere has nothing to anchor; it is judged
-# by the object itself: a frame shows the object when at least SHOWN_SHARE of SHOWN_SAMPLES
-# surface points (its vertices, evenly taken) are in view, about a fifth of the side facing
-# the camera, enough for a careful worker to place a landmark. An object that never shows in
-# the view (out of the image, behind another object or the hand) is rightly labelled hidden.
-SHOWN_SHARE = 0.1
-SHOWN_SAMPLES = 64
-
-
-# Pixels (..., 2) of the camera model -> where the camera truly shows them.
-PixelMap = Callable[[np.ndarray], np.ndarray]
-
-
 @dataclass
 class AnchoredQC(AssignmentQC):
     """An AssignmentQC with what a reviewer's replay draws: reprojection (F, P, 2) px of each
@@ -95,30 +73,6 @@ class AnchoredQC(AssignmentQC):
     def to_dict(self) -> dict:
         return AssignmentQC(self.key, self.view, self.metrics, self.per_joint, self.per_frame,
                             self.swaps, self.issues, self.provisional).to_dict()
-
-
-def ray_hits(origin: np.ndarray, dirs: np.ndarray,
-             tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest hit of each ray with the triangles (Moller-Trumbore).
-
-    origin (3,), dirs (R, 3) unit, tri (M, 3, 3) world metres. Returns (R,) distance along the
-    ray (inf where none) and (R,) the face hit (-1 where none).
-    """
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    p = np.cross(dirs[:, None, :], e2[None])
-    det = np.einsum("mk,rmk->rm", e1, p)
-    ok = np.abs(det) > 1e-12
-    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
-    s = origin - tri[:, 0]
-    u = np.einsum("mk,rmk->rm", s, p) * inv
-    q = np.cross(s, e1)
-    v = np.einsum("rk,mk->rm", dirs, q) * inv
-    t = np.einsum("mk,mk->m", e2, q)[None] * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(t)
-    dist = np.where(hit, t, np.inf)
-    face = np.argmin(dist, axis=1)
-    best = dist[np.arange(len(dirs)), face]
-    return best, np.where(np.isfinite(best), face, -1)
 
 
 def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -174,106 +128,6 @@ def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: Solv
     return candidates[int(np.argmin(errors))]
 
 
-def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObjects,
-                     depth: DepthMaps | None, image_map: PixelMap | None = None
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(F,) whether the world track (F, 3) shows in the view: in front, inside the image, no
-    solved mesh nearer along its ray, and no depth reading well in front of it; and (F,) the
-    shown frames where the point sits at the edge of something in front of it
-    (``at_depth_edge``): its visibility there says nothing of the worker. image_map: where the
-    camera truly shows a projected pixel (a camera offset, worker.quality.view_offset), so the
-    depth map is read where the point is seen."""
-    frames = len(world)
-    pix = camera.project(world)
-    if image_map is not None:
-        pix = image_map(pix)
-    z = camera.depth_of(world)
-    inside = np.isfinite(z) & (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < camera.width) \
-        & (pix[:, 1] >= 0) & (pix[:, 1] < camera.height)
-    shown = inside.copy()
-    origin = camera.T_cam_to_world[:, 3]
-    for f in np.flatnonzero(inside):
-        offset = world[f] - origin
-        reach = float(np.linalg.norm(offset))
-        dirs = (offset / reach)[None]
-        for index in range(len(scene.vertices)):
-            tri = scene.triangles(index, int(f))
-            if np.isfinite(tri).all() and ray_hits(origin, dirs, tri)[0][0] < reach - MESH_MARGIN_M:
-                shown[f] = False
-                break
-    edge = np.zeros(frames, bool)
-    if depth is not None:
-        at = np.flatnonzero(shown)
-        if at.size:
-            hidden, near_edge = depth_cover(depth, camera, at, pix[at], z[at])
-            edge[at[near_edge]] = True
-            shown[at[hidden]] = False
-    assert shown.shape == (frames,)
-    return shown, edge
-
-
-def depth_cover(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
-                z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """From one read of the square of DEPTH_WINDOW_PX around each point's pixel: (N,) whether
-    the point is ``covered`` and (N,) whether it is ``at_depth_edge``. frames (N,) int; pix
-    (N, 2) px; z (N,) metres."""
-    rows = np.rint(pix[:, 1]).astype(int)[:, None] + _WINDOW[:, 0]
-    cols = np.rint(pix[:, 0]).astype(int)[:, None] + _WINDOW[:, 1]
-    reading = depth[(np.broadcast_to(frames[:, None], rows.shape),
-                     rows.clip(0, camera.height - 1), cols.clip(0, camera.width - 1))] / 1000.0
-    read = reading > 0
-    nearer = read & (z[:, None] - reading > DEPTH_MARGIN_M)
-    hidden = nearer[:, len(_WINDOW) // 2] & (nearer | ~read).all(axis=1)
-    return hidden, nearer.any(axis=1) & ~hidden
-
-
-def covered(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
-            z: np.ndarray) -> np.ndarray:
-    """(N,) whether the depth camera reads something well in front of each point: the reading
-    at its pixel and every other within DEPTH_WINDOW_PX (those with a reading) more than
-    DEPTH_MARGIN_M nearer than its depth. frames (N,) int; pix (N, 2) px; z (N,) metres."""
-    return depth_cover(depth, camera, frames, pix, z)[0]
-
-
-def at_depth_edge(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,
-                  z: np.ndarray) -> np.ndarray:
-    """(N,) whether something in front of each point covers part of the square around its
-    pixel but not the point (``covered``): the edge of a hand or another object, where a rig
-    a few pixels off cannot say which side the point is on."""
-    return depth_cover(depth, camera, frames, pix, z)[1]
-
-
-def object_shown(camera: CameraModel, scene: SolvedObjects, target: int,
-                 depth: DepthMaps | None) -> np.ndarray:
-    """(F,) share of object ``target``'s sampled surface points (SHOWN_SAMPLES vertices) the
-    view shows, by the rules of point_visibility (in the image, no solved mesh nearer along the
-    ray, no depth reading well in front); NaN where the pose is unknown."""
-    vertices = scene.vertices[target]
-    samples = vertices[np.unique(np.linspace(0, len(vertices) - 1,
-                                             min(SHOWN_SAMPLES, len(vertices))).astype(int))]
-    origin = camera.T_cam_to_world[:, 3]
-    out = np.full(scene.poses.shape[1], np.nan)
-    for f in range(scene.poses.shape[1]):
-        pose = scene.poses[target, f]
-        if not np.isfinite(pose).all():
-            continue
-        world = samples @ pose[:, :3].T + pose[:, 3]
-        pix, z = camera.project(world), camera.depth_of(world)
-        shown = np.isfinite(z) & (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < camera.width) \
-            & (pix[:, 1] >= 0) & (pix[:, 1] < camera.height)
-        reach = np.linalg.norm(world - origin, axis=1)
-        dirs = (world - origin) / reach[:, None]
-        for index in range(len(scene.vertices)):
-            tri = scene.triangles(index, f)
-            if shown.any() and np.isfinite(tri).all():
-                shown &= ~(ray_hits(origin, dirs, tri)[0] < reach - MESH_MARGIN_M)
-        at = np.flatnonzero(shown)
-        if depth is not None and at.size:
-            shown[at[covered(depth, camera, np.full(at.size, f), pix[at], z[at])]] = False
-        out[f] = shown.mean()
-    return out
-
-
 def _drift(errors: np.ndarray) -> float | None:
     """Median error of the last third of the clip less that of the first third, px (the
     largest over the landmarks)."""
@@ -313,43 +167,91 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     """
     xy = np.asarray(label.xy, np.float64)
     visible = np.asarray(label.visible, bool)
-    # Only the worker's own decisions are judged (a pre-filled suggestion kept unchanged is
-    # not); the anchor, which object point a landmark marks, reads the whole track.
-    decided = decided_of(label)
-    frames, points = visible.shape
+    frames = visible.shape[0]
     if scene.poses.shape[:2] != (len(scene.vertices), frames) or not 0 <= target < len(
             scene.vertices):
         raise ValueError(f"scene poses must have shape (O={len(scene.vertices)}, F={frames}, 3, "
                          f"4) and target be an object index, got {scene.poses.shape}, {target}")
-    errors = np.full((frames, points), np.nan)
-    reprojection = np.full((frames, points, 2), np.nan)
-    shown = np.zeros((frames, points), bool)
-    edge = np.zeros((frames, points), bool)
+    # Only the worker's own decisions are judged (a pre-filled suggestion kept unchanged is
+    # not); the anchor, which object point a landmark marks, reads the whole track.
+    found = _anchored_tracks(camera, xy, visible, decided_of(label), scene, target, depth,
+                             image_map)
     # Frames without a solved pose of the object judge nothing.
     known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
-    found: dict[int, np.ndarray] = {}
-    faced: list[float] = []
+    metrics = _anchored_metrics(found, xy, visible, decided_of(label), known)
+    if not (visible & np.isfinite(xy).all(axis=2)).any() and known.any():
+        metrics["anchored_visible_occluded"] = _hidden_while_shown(camera, label, scene, target,
+                                                                   depth)
+    per_joint, per_frame = per_point_and_frame(found.errors)
+    issues = [dict(i, about="anchored") for i in error_issues(found.errors, ISSUE_PX)]
+    return AnchoredQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
+                      per_frame=per_frame, issues=issues, provisional=not known.any(),
+                      reprojection=np.where(known[:, None, None], found.reprojection, np.nan),
+                      shown=found.shown, errors=found.errors)
+
+
+def _hidden_while_shown(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
+                        target: int, depth: DepthMaps | None) -> float | None:
+    """A label with every landmark marked hidden all through: right where the object never
+    shows; the share of its decided frames where the object does show (marked occluded while
+    it can be seen). None where no frame is known."""
+    share = object_shown(camera, scene, target, depth)
+    asked = np.isfinite(share) & decided_of(label).any(axis=1)
+    return num((share[asked] >= SHOWN_SHARE).sum() / asked.sum()) if asked.any() else None
+
+
+@dataclass
+class _Tracks:
+    """A label's landmarks anchored on the solved object, (F, P) each unless named: errors px
+    (track against its anchored point where both call it visible, NaN elsewhere),
+    reprojection (F, P, 2) px of the anchored points, shown (the point shows in the view),
+    edge (at a depth edge: visibility undecided), points {landmark: object point (3,) m},
+    faced: each anchored landmark's median cosine of the surface's turn to the camera."""
+
+    errors: np.ndarray
+    reprojection: np.ndarray
+    shown: np.ndarray
+    edge: np.ndarray
+    points: dict[int, np.ndarray]
+    faced: list[float]
+
+
+def _anchored_tracks(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
+                     decided: np.ndarray, scene: SolvedObjects, target: int,
+                     depth: DepthMaps | None, image_map: PixelMap | None) -> _Tracks:
+    """Each landmark anchored on object ``target`` and followed through its solved poses."""
+    frames, points = visible.shape
+    out = _Tracks(np.full((frames, points), np.nan), np.full((frames, points, 2), np.nan),
+                  np.zeros((frames, points), bool), np.zeros((frames, points), bool), {}, [])
     for p in range(points):
         point = anchor(camera, xy[:, p], visible[:, p], scene, target)
         if point is None:
             continue
-        found[p] = point
+        out.points[p] = point
         world = _track_of(camera, point, scene.poses[target])
-        shown[:, p], edge[:, p] = point_visibility(camera, world, scene, depth, image_map)
-        cosine = facing(camera, point, world, shown[:, p], scene, target)
+        out.shown[:, p], out.edge[:, p] = point_visibility(camera, world, scene, depth,
+                                                           image_map)
+        cosine = facing(camera, point, world, out.shown[:, p], scene, target)
         if cosine is not None:
-            faced.append(cosine)
-        both = shown[:, p] & visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
-        reprojection[:, p] = camera.project(world)
-        errors[both, p] = np.linalg.norm(reprojection[both, p] - xy[both, p], axis=1)
-    anchored = len(found)
+            out.faced.append(cosine)
+        both = out.shown[:, p] & visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
+        out.reprojection[:, p] = camera.project(world)
+        out.errors[both, p] = np.linalg.norm(out.reprojection[both, p] - xy[both, p], axis=1)
+    return out
+
+
+def _anchored_metrics(found: _Tracks, xy: np.ndarray, visible: np.ndarray, decided: np.ndarray,
+                      known: np.ndarray) -> dict[str, float | None]:
+    """The metrics of score_anchored (see there) from the anchored tracks."""
+    errors, shown, edge = found.errors, found.shown, found.edge
+    anchored = len(found.points)
     judged = np.isfinite(errors)
     # Visibility is judged where the views say plainly whether the point shows.
     hidden = ~shown & known[:, None] & decided & ~edge
     seen = shown & decided & ~edge
     # Landmarks the worker shows somewhere: only these can be anchored.
     placed = int((visible & np.isfinite(xy).all(axis=2)).any(axis=0).sum())
-    metrics: dict[str, float | None] = {
+    return {
         "anchored_median_px": num(np.median(errors[judged])) if judged.any() else None,
         "anchored_p90_px": num(np.percentile(errors[judged], 90)) if judged.any() else None,
         "anchored_visible_occluded": num((seen & ~visible).sum() / seen.sum())
@@ -360,25 +262,11 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
         "anchored_fraction": num(anchored / placed) if placed else None,
         # Distinct points of the surface, in plain view, shown through the clip
         # (worker.quality.landmark_points).
-        "landmark_separation_mm": separation_mm(list(found.values())),
-        "anchored_facing": num(min(faced)) if faced else None,
+        "landmark_separation_mm": separation_mm(list(found.points.values())),
+        "anchored_facing": num(min(found.faced)) if found.faced else None,
         "anchored_shown_fraction": shown_fraction(
-            shown, known, np.isin(np.arange(points), list(found))),
+            shown, known, np.isin(np.arange(visible.shape[1]), list(found.points))),
     }
-    if not placed and known.any():
-        # Every landmark marked hidden all through: right where the object never shows; the
-        # frames where it does are frames marked occluded while it can be seen.
-        share = object_shown(camera, scene, target, depth)
-        asked = np.isfinite(share) & decided.any(axis=1)
-        if asked.any():
-            metrics["anchored_visible_occluded"] = num(
-                (share[asked] >= SHOWN_SHARE).sum() / asked.sum())
-    per_joint, per_frame = per_point_and_frame(errors)
-    issues = [dict(i, about="anchored") for i in error_issues(errors, ISSUE_PX)]
-    return AnchoredQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
-                      per_frame=per_frame, issues=issues, provisional=not known.any(),
-                      reprojection=np.where(known[:, None, None], reprojection, np.nan),
-                      shown=shown, errors=errors)
 
 
 # What the label's own track says (worker.quality.landmarks) only stands in for the solved

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import (
     AssignmentQC,
     error_issues,
@@ -18,6 +17,7 @@ from worker.quality.metrics import (
     track_metrics,
 )
 from worker.quality.swaps import find_swaps
+from worker.quality.view_labels import ViewLabels
 
 # Same meaning as the consensus' outlier threshold: five times a careful annotator's 2 px.
 GOLD_OUTLIER_PX = 10.0

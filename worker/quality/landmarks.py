@@ -12,7 +12,6 @@ import cv2
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
-from worker.quality.consensus import ViewLabels, decided_of, decided_xy
 from worker.quality.metrics import (
     AssignmentQC,
     completeness,
@@ -29,6 +28,7 @@ from worker.quality.motion import (
     others_motion,
     track_jitter,
 )
+from worker.quality.view_labels import ViewLabels, decided_of, decided_xy
 
 # A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
 # at pixel centres and a careful click lands within ~2 px.
@@ -147,6 +147,33 @@ def _own_shake(xy: np.ndarray, motion: ObjectMotion | None) -> float | None:
     return num(np.sqrt(max(shake ** 2 - expected ** 2, 0.0)))
 
 
+def _track_metrics(xy: np.ndarray, motion: ObjectMotion | None
+                   ) -> tuple[np.ndarray, np.ndarray, dict[str, float | None]]:
+    """The track as sent, on its own: its jumps (F-1, P) bool beyond what the object's motion
+    explains, its steps (F-1, P) px, and jump_fraction, max_step_ratio, jitter_px and
+    static_fraction."""
+    jump, typical = jumps(xy, motion.step if motion is not None else None)
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    steps = np.isfinite(step)
+    return jump, step, {
+        "jump_fraction": num(jump.sum() / steps.sum()) if steps.any() else None,
+        "max_step_ratio": num(np.nanmax(step) / max(typical, 0.5))
+        if typical is not None else None,
+        "jitter_px": _own_shake(xy, motion),
+        "static_fraction": static_fraction(xy),
+    }
+
+
+def _issues(dist: np.ndarray, jump: np.ndarray, step: np.ndarray) -> list[dict]:
+    """Spans off the silhouette, and each jump of the track (its step, px)."""
+    issues = [dict(i, about="silhouette")
+              for i in error_issues(dist, SILHOUETTE_TOLERANCE_PX, min_frames=1)]
+    for f, p in zip(*np.nonzero(jump), strict=True):
+        issues.append({"point": int(p), "frames": [int(f), int(f) + 1],
+                       "error_px": num(step[f, p], 1), "about": "jump"})
+    return issues
+
+
 def score_landmarks(camera: CameraModel, label: ViewLabels,
                     masks: dict[int, np.ndarray] | None = None,
                     motion: ObjectMotion | None = None) -> AssignmentQC:
@@ -181,16 +208,10 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["outlier_fraction"] = num((dist[judged] > SILHOUETTE_TOLERANCE_PX).mean()) \
         if judged.any() else None
     metrics["motion_ratio"] = _mask_motion_ratio(own_xy, masks)
-    jump, typical = jumps(xy, motion.step if motion is not None else None)
     metrics["moved_with_object"] = moved_with_object(own_xy, motion) \
         if motion is not None else None
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
-    steps = np.isfinite(step)
-    metrics["jump_fraction"] = num(jump.sum() / steps.sum()) if steps.any() else None
-    metrics["max_step_ratio"] = num(np.nanmax(step) / max(typical, 0.5)) \
-        if typical is not None else None
-    metrics["jitter_px"] = _own_shake(xy, motion)
-    metrics["static_fraction"] = static_fraction(xy)
+    jump, step, track = _track_metrics(xy, motion)
+    metrics.update(track)
     metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())
     metrics["working_time_s"] = num(label.working_time_s, 1)
@@ -198,13 +219,8 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     own = sent & decided
     metrics["decided_fraction"] = num(own.sum() / sent.sum()) if sent.any() else None
     per_joint, per_frame = per_point_and_frame(dist)
-    issues = [dict(i, about="silhouette")
-              for i in error_issues(dist, SILHOUETTE_TOLERANCE_PX, min_frames=1)]
-    for f, p in zip(*np.nonzero(jump), strict=True):
-        issues.append({"point": int(p), "frames": [int(f), int(f) + 1],
-                       "error_px": num(step[f, p], 1), "about": "jump"})
     return AssignmentQC(key=label.key, view=label.view, metrics=metrics, per_joint=per_joint,
-                        per_frame=per_frame, issues=issues,
+                        per_frame=per_frame, issues=_issues(dist, jump, step),
                         # Suggestions alone leave nothing to wait for (decide.py).
                         provisional=not judged.any() and metrics["moved_with_object"] is None
                         and (own.any() or not sent.any()))

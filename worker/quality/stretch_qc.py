@@ -27,8 +27,8 @@ import numpy as np
 
 from worker.assist.lk import tracked_spans
 from worker.assist.stretches import StretchCheck
-from worker.quality.consensus import ViewLabels
 from worker.quality.metrics import AssignmentQC
+from worker.quality.view_labels import ViewLabels
 
 
 def without_contradicted(label: ViewLabels, check: StretchCheck) -> ViewLabels:
