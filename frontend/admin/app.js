@@ -15,7 +15,7 @@ import { initSolve, showSolveRuns } from "./solve.js";
 import {
   crowdWorkers, initProject, openWorker, sequencesProgress, showJobRows, showProgress,
 } from "./project.js";
-import { createQueue } from "./queue.js";
+import { ReviewQueue } from "./queue.js";
 import { showReviewIn } from "./review.js";
 import {
   barChart, renderCosts, renderFacts, renderReports, renderSequences,
@@ -28,7 +28,7 @@ const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", 
 
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
-const queue = createQueue(api, fail);
+const queue = new ReviewQueue(api, fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
 const state = {
