@@ -14,7 +14,8 @@
  * visibility makes it "edited" unless the edit names a source; moving a keyframe in time keeps it.
  *
  * Stored positions are rounded to 0.01 px (the precision of the autosave payload, so toJSON and
- * fromJSON round-trip exactly) and clamped into the image, 0 <= x < width, 0 <= y < height.
+ * fromJSON round-trip exactly) and clamped into the image, 0 <= x < width, 0 <= y < height
+ * (keyframe.js). What an edit changes, and the description of it, is worked out in changes.js.
  */
 
 import { denseTrack, valueAt } from "./interpolate.js";
