@@ -12,15 +12,14 @@ import { AdminApi } from "./api.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
-import {
-  crowdWorkers, initProject, openWorker, sequencesProgress, showJobRows, showProgress,
-} from "./project.js";
-import { createQueue } from "./queue.js";
+import { initProject, sequencesProgress, showJobRows, showProgress } from "./project.js";
+import { ReviewQueue } from "./queue.js";
 import { showReviewIn } from "./review.js";
 import {
   barChart, renderCosts, renderFacts, renderReports, renderSequences,
   renderSwaps, renderWorkers,
 } from "./views.js";
+import { crowdWorkers, initWorkers, openWorker } from "./workers.js";
 
 const api = new AdminApi(window.sessionStorage);
 const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
@@ -28,7 +27,7 @@ const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", 
 
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
-const queue = createQueue(api, fail);
+const queue = new ReviewQueue(api, fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
 const state = {
@@ -281,6 +280,7 @@ function start() {
   initSolve(api, fail);
   initRig(api, fail);
   initProject(api, fail, route);
+  initWorkers(api, fail);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route });
 }
 

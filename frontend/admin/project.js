@@ -1,16 +1,14 @@
 /**
  * Project control on the admin page: import a capture, each sequence's progress (a summary
  * per listed sequence, the view x target grid on its page), create its tasks, publish them
- * with the count and cost shown first; each worker's record with block, unblock and bonus
- * (each confirmed first); the job table's filters and whole results.
+ * with the count and cost shown first; the job table's filters and whole results. Each
+ * worker's record is workers.js's.
  */
 
-import { ApiError } from "../common/api.js";
 import { $, el } from "../common/dom.js";
-import { dollars } from "../common/format.js";
-import { errorText, showNotice } from "../common/notice.js";
+import { showFailure, showNotice } from "../common/notice.js";
 import { JOB_STATUSES, costLine, jobQuery } from "./core/project-format.js";
-import { progressSummary, renderJobs, renderProgressGrid, renderWorkerDetail } from "./views.js";
+import { progressSummary, renderJobs, renderProgressGrid } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
 
@@ -23,19 +21,9 @@ const state = {
   /** The publish options the shown cost is for (JSON), and its HIT count. */
   /** @type {string|null} */ planned: null,
   plannedHits: 0,
-  /** The worker whose record is open. @type {string|null} */ worker: null,
-  /** What the confirmation under a worker's record would do when confirmed. */
-  /** @type {(() => Promise<void>)|null} */ pending: null,
   /** Jobs shown whole. @type {Set<number>} */ expanded: new Set(),
-  /** Names the bonus the form describes: the same bonus confirmed again (after an error)
-   * pays once; changing the assignment, amount or reason makes it another bonus. */
-  bonusKey: newKey(),
   /** The listing shown again after an import. @type {() => unknown} */ refresh: () => {},
 };
-
-function newKey() {
-  return `admin-${Date.now().toString(36)}-${Math.random().toString(36).slice(2, 8)}`;
-}
 
 function api() {
   if (!state.api) throw new Error("initProject was not called");
@@ -55,13 +43,7 @@ function say(id, text, kind = "info") {
  * @param {string} id  @param {string} what  the action, e.g. "Publish"  @param {unknown} err
  */
 function failed(id, what, err) {
-  if (err instanceof ApiError && err.status === 401) {
-    state.fail(err);
-    return;
-  }
-  const why = errorText(err);
-  const status = err instanceof ApiError ? ` (${err.status})` : "";
-  say(id, `${what} failed${status}: ${why}`, "error");
+  showFailure($(id), what, err, state.fail);
 }
 
 // ----- sequences ---------------------------------------------------------------------------
@@ -198,135 +180,6 @@ async function publish() {
   }
 }
 
-// ----- workers -----------------------------------------------------------------------------
-
-/**
- * A page of workers with their stats (GET /api/crowd/workers).
- * @param {number} offset  @param {number} limit
- */
-export function crowdWorkers(offset, limit) {
-  return api().request("GET", `/crowd/workers?offset=${offset}&limit=${limit}`);
-}
-
-/** The worker whose record is open, for marking their row. */
-export function openWorker() {
-  return state.worker;
-}
-
-/** @param {string} workerId */
-async function showWorker(workerId) {
-  const w = await api().request("GET", `/crowd/workers/${encodeURIComponent(workerId)}`);
-  state.worker = workerId;
-  $("worker-title").textContent = w.worker_id;
-  renderWorkerDetail({ facts: $("worker-facts"), chart: $("worker-chart"),
-    assignments: $("worker-assignments"),
-    bonusFor: /** @type {HTMLSelectElement} */ ($("bonus-assignment")) }, w);
-  $("block").hidden = w.blocked;
-  $("unblock").hidden = !w.blocked;
-  $("bonus-form").hidden = !w.assignments.some((/** @type {any} */ a) => a.confirmed);
-  $("no-bonus").hidden = !$("bonus-form").hidden;
-  $("worker-detail").hidden = false;
-  for (const row of document.querySelectorAll("#worker-rows tr")) {
-    row.classList.toggle("selected", /** @type {HTMLElement} */ (row).dataset.worker === workerId);
-  }
-  return w;
-}
-
-/**
- * Ask before an action on a worker: the question and Confirm / Cancel under their record.
- * @param {string} question  @param {() => Promise<void>} action
- */
-function confirmFirst(question, action) {
-  state.pending = action;
-  $("worker-confirm-text").textContent = question;
-  $("worker-confirm").hidden = false;
-  say("worker-result", "");
-  $("worker-confirm-yes").focus();
-}
-
-function cancelConfirm() {
-  state.pending = null;
-  $("worker-confirm").hidden = true;
-}
-
-async function confirmed() {
-  const action = state.pending;
-  cancelConfirm();
-  if (action) await action();
-}
-
-/** @param {"block"|"unblock"} kind */
-function askBlock(kind) {
-  const worker = String(state.worker);
-  const reason = input("block-reason").value.trim();
-  if (kind === "block" && !reason) {
-    say("worker-result", "Blocking needs a reason: the worker reads it.", "error");
-    return;
-  }
-  const path = `/crowd/workers/${encodeURIComponent(worker)}/block`;
-  confirmFirst(kind === "block" ? `Block ${worker}? They can take none of our HITs until `
-    + "unblocked." : `Unblock ${worker}? They can take our HITs again.`, async () => {
-    try {
-      if (kind === "block") await api().request("POST", path, { reason });
-      else await api().request("DELETE", reason ? `${path}?reason=${encodeURIComponent(reason)}`
-        : path);
-      await refreshWorker();
-      say("worker-result", `${worker} is ${kind === "block" ? "blocked" : "unblocked"}.`);
-    } catch (err) {
-      failed("worker-result", kind === "block" ? "Blocking" : "Unblocking", err);
-    }
-  });
-}
-
-function askBonus() {
-  const worker = String(state.worker);
-  const assignment = /** @type {HTMLSelectElement} */ ($("bonus-assignment")).value;
-  const amount = input("bonus-amount").value.trim();
-  const reason = input("bonus-reason").value.trim();
-  if (!assignment || !amount || !reason) {
-    say("worker-result", "A bonus needs an assignment, an amount and a reason the worker "
-      + "reads.", "error");
-    return;
-  }
-  const dollarsText = dollars(amount);
-  confirmFirst(`Pay ${worker} a bonus of ${dollarsText} (plus the marketplace's fee) on `
-    + `assignment ${assignment}?`, async () => {
-    try {
-      const key = state.bonusKey;
-      const paid = await api().request("POST", `/crowd/assignments/${assignment}/bonus`,
-        { amount, reason, key });
-      state.bonusKey = newKey();
-      await refreshWorker();
-      say("worker-result", paid.already_done ? `That bonus was already paid (${dollarsText}).`
-        : `Paid ${worker} a ${dollarsText} bonus (fee $${paid.fee}) on assignment `
-          + `${assignment}.`);
-    } catch (err) {
-      failed("worker-result", "The bonus", err);
-    }
-  });
-}
-
-/** The open record and its row again, after an action changed them. */
-async function refreshWorker() {
-  if (!state.worker) return;
-  const w = await showWorker(state.worker);
-  const row = document.querySelector(`#worker-rows tr[data-worker="${CSS.escape(w.worker_id)}"]`);
-  const cell = row?.lastElementChild;
-  if (cell) {
-    cell.replaceChildren(w.blocked ? el("span", { class: "status status-reject" }, ["blocked"])
-      : "no");
-  }
-}
-
-function closeWorker() {
-  state.worker = null;
-  cancelConfirm();
-  $("worker-detail").hidden = true;
-  for (const row of document.querySelectorAll("#worker-rows tr.selected")) {
-    row.classList.remove("selected");
-  }
-}
-
 // ----- jobs --------------------------------------------------------------------------------
 
 /** The job table under the chosen filters, its kinds listed with their counts. */
@@ -373,25 +226,6 @@ export function initProject(client, fail, refresh) {
   for (const id of ["publish-reward", "publish-assignments", "publish-approval"]) {
     $(id).addEventListener("input", forgetPlan);
   }
-  $("worker-rows").addEventListener("click", (e) => {
-    const button = /** @type {HTMLElement} */ (e.target).closest("button[data-open-worker]");
-    const id = button && /** @type {HTMLElement} */ (button).dataset.openWorker;
-    if (id) {
-      cancelConfirm();
-      say("worker-result", "");
-      showWorker(id).then(() => $("worker-detail").scrollIntoView({ block: "nearest" }))
-        .catch(fail);
-    }
-  });
-  $("worker-close").addEventListener("click", closeWorker);
-  $("block").addEventListener("click", () => askBlock("block"));
-  $("unblock").addEventListener("click", () => askBlock("unblock"));
-  $("bonus").addEventListener("click", askBonus);
-  for (const id of ["bonus-assignment", "bonus-amount", "bonus-reason"]) {
-    $(id).addEventListener("input", () => { state.bonusKey = newKey(); });
-  }
-  $("worker-confirm-yes").addEventListener("click", () => confirmed().catch(fail));
-  $("worker-confirm-no").addEventListener("click", cancelConfirm);
   $("job-status").replaceChildren(el("option", { value: "" }, ["all"]),
     ...JOB_STATUSES.map((s) => el("option", { value: s }, [s])));
   for (const id of ["job-status", "job-kind"]) {

@@ -9,6 +9,10 @@
 import { ApiError } from "../common/api.js";
 import { $, el } from "../common/dom.js";
 import { errorText, showNotice } from "../common/notice.js";
+import {
+  bonusPaidText, decidedText, decisionProblem, itemToOpen, movedTo, nextAfterDecision,
+  queueKeyAction, queueRowText, queueTally,
+} from "./core/queue-core.js";
 import { evidenceFeedback } from "./core/replay.js";
 import { ReviewPanel } from "./review.js";
 import { badge } from "./views.js";
@@ -18,155 +22,160 @@ const QUEUE_PAGE = 200;
 /** Names the bonus the queue pays, so that a second press never pays twice. */
 const BONUS_KEY = "review";
 
-
 /**
- * @param {import("./api.js").AdminApi} api
- * @param {(err: unknown) => void} fail  how the page reports an error it cannot place
+ * A listed report, linked to its place in the queue.
+ * @param {any} item  a row of GET /api/qc/queue  @param {number|null} current  the open one
  */
-export function createQueue(api, fail) {
-  /** @type {ReviewPanel|null} */ let panel = null;
-  /** @type {any[]} */ let items = [];
-  /** @type {number|null} */ let current = null;
-  let busy = false;
+function queueRow(item, current) {
+  const text = queueRowText(item);
+  return el("li", { "data-assignment": String(item.assignment_id),
+    class: item.assignment_id === current ? "selected" : "" }, [
+    el("a", { href: `#/queue/${item.assignment_id}` }, [
+      el("span", { class: "q-head" }, [
+        badge(item.outcome), item.provisional ? el("span", { class: "muted" },
+          [" provisional"]) : "", el("span", { class: "q-error" }, [text.error])]),
+      el("span", { class: "q-what" }, [text.what]),
+      el("span", { class: "q-where muted" }, [text.where]),
+    ]),
+  ]);
+}
 
-  const feedback = () => /** @type {HTMLTextAreaElement} */ ($("queue-feedback"));
-  const buttons = () => ["queue-approve", "queue-reject", "queue-bonus"]
-    .map((id) => /** @type {HTMLButtonElement} */ ($(id)));
+const feedback = () => /** @type {HTMLTextAreaElement} */ ($("queue-feedback"));
 
-  /** @param {string} text @param {"info"|"error"} kind */
-  function say(text, kind) {
-    showNotice($("queue-result"), text, kind);
+/** @param {boolean} disabled */
+function disableDecisions(disabled) {
+  for (const id of ["queue-approve", "queue-reject", "queue-bonus"]) {
+    /** @type {HTMLButtonElement} */ ($(id)).disabled = disabled;
+  }
+}
+
+/** @param {string} text @param {"info"|"error"} kind */
+function say(text, kind) {
+  showNotice($("queue-result"), text, kind);
+}
+
+/** The queue view: its list, the open report's review panel and the decisions on it. */
+export class ReviewQueue {
+  /**
+   * @param {import("./api.js").AdminApi} api
+   * @param {(err: unknown) => void} fail  how the page reports an error it cannot place
+   */
+  constructor(api, fail) {
+    this.api = api;
+    this.fail = fail;
+    /** @type {ReviewPanel|null} */ this.panel = null;
+    /** @type {any[]} */ this.items = [];
+    /** @type {number|null} */ this.current = null;
+    this.busy = false;
   }
 
-  function renderList() {
-    const list = $("queue-list");
-    list.replaceChildren(...items.map((item) => {
-      const error = item.error_px === null ? "–" : `${item.error_px.toFixed(1)} px`;
-      const li = el("li", { "data-assignment": String(item.assignment_id),
-        class: item.assignment_id === current ? "selected" : "" }, [
-        el("a", { href: `#/queue/${item.assignment_id}` }, [
-          el("span", { class: "q-head" }, [
-            badge(item.outcome), item.provisional ? el("span", { class: "muted" },
-              [" provisional"]) : "", el("span", { class: "q-error" }, [error])]),
-          el("span", { class: "q-what" }, [`#${item.assignment_id} ${item.target_key} · `
-            + `${item.worker_id}`]),
-          el("span", { class: "q-where muted" }, [`${item.sequence}`
-            + (item.swaps ? ` · ${item.swaps} swap${item.swaps > 1 ? "s" : ""}` : "")
-            + (item.issues ? ` · ${item.issues} issue${item.issues > 1 ? "s" : ""}` : "")]),
-        ]),
-      ]);
-      return li;
-    }));
-    $("queue-empty").hidden = items.length > 0;
-    $("queue-work").hidden = items.length === 0;
+  renderList() {
+    $("queue-list").replaceChildren(...this.items.map((item) => queueRow(item, this.current)));
+    $("queue-empty").hidden = this.items.length > 0;
+    $("queue-work").hidden = this.items.length === 0;
   }
 
   /** @param {number|null} assignmentId  the one to open (the first when null or gone) */
-  async function show(assignmentId) {
-    const page = await api.request("GET", `/qc/queue?limit=${QUEUE_PAGE}&offset=0`);
-    items = page.items;
-    $("queue-tally").textContent = `${page.total} waiting for an admin`
-      + (page.total > items.length ? ` (the worst ${items.length} listed)` : "");
-    const open = items.find((i) => i.assignment_id === assignmentId) ?? items[0] ?? null;
-    current = open ? open.assignment_id : null;
-    renderList();
+  async show(assignmentId) {
+    const page = await this.api.request("GET", `/qc/queue?limit=${QUEUE_PAGE}&offset=0`);
+    this.items = page.items;
+    $("queue-tally").textContent = queueTally(page.total, this.items.length);
+    const open = itemToOpen(this.items, assignmentId);
+    this.current = open ? open.assignment_id : null;
+    this.renderList();
     if (!open) {
-      panel?.close();
+      this.panel?.close();
       return;
     }
     if (open.assignment_id !== assignmentId) {
       history.replaceState(null, "", `#/queue/${open.assignment_id}`);
     }
-    const review = await api.request("GET", `/qc/reports/${open.assignment_id}/review`);
-    if (current !== review.assignment_id) return;
-    panel ??= new ReviewPanel($("queue-review"), api);
-    panel.load(review);
+    const review = await this.api.request("GET", `/qc/reports/${open.assignment_id}/review`);
+    if (this.current !== review.assignment_id) return;
+    this.panel ??= new ReviewPanel($("queue-review"), this.api);
+    this.panel.load(review);
     feedback().value = evidenceFeedback(review);
     say("", "info");
   }
 
   /** @param {number} by  +1 next, -1 previous */
-  function move(by) {
-    const at = items.findIndex((i) => i.assignment_id === current);
-    const next = items[Math.min(Math.max(at + by, 0), items.length - 1)];
-    if (next && next.assignment_id !== current) location.hash = `#/queue/${next.assignment_id}`;
+  move(by) {
+    const next = movedTo(this.items, this.current, by);
+    if (next !== null) location.hash = `#/queue/${next}`;
   }
 
   /** @param {"approve"|"reject"|"bonus"} kind */
-  async function decide(kind) {
-    if (busy || current === null) return;
-    const assignmentId = current;
+  async decide(kind) {
+    if (this.busy || this.current === null) return;
+    const assignmentId = this.current;
     const text = feedback().value.trim();
-    if (kind === "reject" && !text) {
-      say("A rejection needs feedback: tell the worker what was wrong.", "error");
-      return;
-    }
     const amount = /** @type {HTMLInputElement} */ ($("queue-bonus-amount")).value.trim();
-    if (kind === "bonus" && !(Number(amount) > 0)) {
-      say("A bonus needs an amount in dollars, more than $0.00.", "error");
+    const problem = decisionProblem(kind, text, amount);
+    if (problem) {
+      say(problem, "error");
       return;
     }
-    busy = true;
-    for (const b of buttons()) b.disabled = true;
+    this.busy = true;
+    disableDecisions(true);
     try {
-      if (kind === "bonus") {
-        const paid = await api.request("POST", `/crowd/assignments/${assignmentId}/bonus`, {
-          amount: Number(amount).toFixed(2), key: BONUS_KEY,
-          reason: "A bonus for careful work: thank you." });
-        say(`Bonus of $${paid.amount} paid to ${paid.worker_id} for assignment ${assignmentId}`
-          + `${paid.already_done ? " (already paid)" : ""}.`, "info");
-        return;
-      }
-      const done = kind === "approve" ? await api.approve(assignmentId, text)
-        : await api.reject(assignmentId, text);
-      const at = items.findIndex((i) => i.assignment_id === assignmentId);
-      const next = items[at + 1] ?? items[at - 1] ?? null;
-      await show(next ? next.assignment_id : null);
-      history.replaceState(null, "", current === null ? "#/queue" : `#/queue/${current}`);
-      say(`${kind === "approve" ? "Approved" : "Rejected"} assignment ${assignmentId}`
-        + `${done.already_done ? " (already done)" : ""}.`, "info");
+      if (kind === "bonus") await this.payBonus(assignmentId, amount);
+      else await this.settle(kind, assignmentId, text);
     } catch (err) {
-      if (err instanceof ApiError && err.status === 401) fail(err);
+      if (err instanceof ApiError && err.status === 401) this.fail(err);
       else say(errorText(err), "error");
     } finally {
-      busy = false;
-      for (const b of buttons()) b.disabled = false;
+      this.busy = false;
+      disableDecisions(false);
     }
+  }
+
+  /** @param {number} assignmentId @param {string} amount  dollars */
+  async payBonus(assignmentId, amount) {
+    const paid = await this.api.request("POST", `/crowd/assignments/${assignmentId}/bonus`, {
+      amount: Number(amount).toFixed(2), key: BONUS_KEY,
+      reason: "A bonus for careful work: thank you." });
+    say(bonusPaidText(paid, assignmentId), "info");
+  }
+
+  /**
+   * Approve or reject, then open the next report waiting.
+   * @param {"approve"|"reject"} kind @param {number} assignmentId @param {string} text feedback
+   */
+  async settle(kind, assignmentId, text) {
+    const done = kind === "approve" ? await this.api.approve(assignmentId, text)
+      : await this.api.reject(assignmentId, text);
+    await this.show(nextAfterDecision(this.items, assignmentId));
+    history.replaceState(null, "", this.current === null ? "#/queue"
+      : `#/queue/${this.current}`);
+    say(decidedText(kind, assignmentId, done), "info");
   }
 
   /** @param {KeyboardEvent} e */
-  function onKey(e) {
+  onKey(e) {
     if ($("queue-view").hidden || e.ctrlKey || e.metaKey || e.altKey) return;
     const target = /** @type {HTMLElement} */ (e.target);
     if (target.closest("input, textarea, select, [contenteditable]")) return;
-    const key = e.key.length === 1 ? e.key.toLowerCase() : e.key;
-    /** @type {Record<string, () => void>} */
-    const actions = {
-      a: () => decide("approve"), r: () => decide("reject"), b: () => decide("bonus"),
-      j: () => move(1), n: () => move(1), k: () => move(-1),
-      " ": () => panel?.togglePlay(), ArrowLeft: () => panel?.step(-1),
-      ArrowRight: () => panel?.step(1),
-    };
-    const act = actions[key];
-    if (!act) return;
+    const action = queueKeyAction(e.key);
+    if (!action) return;
     e.preventDefault();
-    act();
+    if (action === "approve" || action === "reject" || action === "bonus") this.decide(action);
+    else if (action === "next" || action === "previous") this.move(action === "next" ? 1 : -1);
+    else if (action === "play") this.panel?.togglePlay();
+    else this.panel?.step(action === "forward" ? 1 : -1);
   }
 
-  function bind() {
-    $("queue-approve").addEventListener("click", () => decide("approve"));
-    $("queue-reject").addEventListener("click", () => decide("reject"));
-    $("queue-bonus").addEventListener("click", () => decide("bonus"));
-    $("queue-next").addEventListener("click", () => move(1));
-    $("queue-previous").addEventListener("click", () => move(-1));
-    document.addEventListener("keydown", onKey);
-    window.addEventListener("resize", () => panel?.layout());
+  bind() {
+    $("queue-approve").addEventListener("click", () => this.decide("approve"));
+    $("queue-reject").addEventListener("click", () => this.decide("reject"));
+    $("queue-bonus").addEventListener("click", () => this.decide("bonus"));
+    $("queue-next").addEventListener("click", () => this.move(1));
+    $("queue-previous").addEventListener("click", () => this.move(-1));
+    document.addEventListener("keydown", (e) => this.onKey(e));
+    window.addEventListener("resize", () => this.panel?.layout());
   }
 
-  return {
-    bind,
-    show,
-    /** Stop the replay when the page leaves the queue. */
-    leave: () => panel?.close(),
-  };
+  /** Stop the replay when the page leaves the queue. */
+  leave() {
+    this.panel?.close();
+  }
 }

@@ -42,6 +42,27 @@ async function renderMetrics(list, review) {
   }
 }
 
+/** The replay's key: the error colour ramp and the marks of the worker and the reference. */
+function replayLegend() {
+  return el("div", { class: "replay-legend" }, [
+    el("span", { class: "ramp" }, legendStops().map(([px, colour]) =>
+      el("span", { style: `background:${colour}` }, [`${px}${px === 20 ? "+" : ""}`]))),
+    el("span", {}, ["px from the reference"]),
+    el("span", { class: "key worker" }, ["● worker"]),
+    el("span", { class: "key hidden" }, ["○ marked occluded"]),
+    el("span", { class: "key ref" }, ["◇ reference"]),
+    el("span", { class: "key refhidden" }, ["◇ reference, hidden"]),
+  ]);
+}
+
+/** The heat map's key: the grey of no error and of a point marked occluded. */
+function heatKey() {
+  return el("p", { class: "heat-key muted" }, [
+    el("span", { class: "swatch", style: `background:${NO_ERROR}` }), " no error measured ",
+    el("span", { class: "swatch", style: `background:${MARKED_OCCLUDED}` }),
+    " marked occluded by the worker; click a cell for its frame"]);
+}
+
 export class ReviewPanel {
   /**
    * @param {HTMLElement} host  emptied and filled with the panel
@@ -76,35 +97,27 @@ export class ReviewPanel {
       "aria-label": "swap and issue spans" });
     this.reasons = el("ul", { class: "reasons" });
     this.facts = el("dl", { class: "facts" });
+    const controls = this.replayControls();
+    this.root.append(this.title, this.note, el("div", { class: "replay-stage" }, [this.canvas]),
+      controls, replayLegend(), el("h3", {}, ["Error per point and frame"]), this.heatNote,
+      heatKey(), this.heat, el("h3", {}, ["Swaps and issues"]), this.timeline,
+      el("h3", {}, ["Reasons"]), this.reasons, el("h3", {}, ["Metrics"]), this.facts);
+    host.replaceChildren(this.root);
+    this.bind(controls);
+  }
+
+  /** The buttons, slider and frame label under the replay. */
+  replayControls() {
     const button = (/** @type {string} */ act, /** @type {string} */ text,
       /** @type {string} */ tip) => el("button", { type: "button", "data-act": act, title: tip },
       [text]);
-    const controls = el("div", { class: "replay-controls" }, [
+    return el("div", { class: "replay-controls" }, [
       button("back", "◀", "Previous frame (←)"), this.playButton,
       button("forward", "▶", "Next frame (→)"), this.slider, this.frameLabel,
       button("zoom-out", "−", "Zoom out"), button("zoom-in", "+", "Zoom in (or the wheel)"),
       button("fit", "Frame", "The whole frame"),
       button("points", "Follow", "Zoom to the points and follow them"), this.readonly,
     ]);
-    const legend = el("div", { class: "replay-legend" }, [
-      el("span", { class: "ramp" }, legendStops().map(([px, colour]) =>
-        el("span", { style: `background:${colour}` }, [`${px}${px === 20 ? "+" : ""}`]))),
-      el("span", {}, ["px from the reference"]),
-      el("span", { class: "key worker" }, ["● worker"]),
-      el("span", { class: "key hidden" }, ["○ marked occluded"]),
-      el("span", { class: "key ref" }, ["◇ reference"]),
-      el("span", { class: "key refhidden" }, ["◇ reference, hidden"]),
-    ]);
-    this.root.append(this.title, this.note, el("div", { class: "replay-stage" }, [this.canvas]),
-      controls, legend, el("h3", {}, ["Error per point and frame"]), this.heatNote,
-      el("p", { class: "heat-key muted" }, [
-        el("span", { class: "swatch", style: `background:${NO_ERROR}` }), " no error measured ",
-        el("span", { class: "swatch", style: `background:${MARKED_OCCLUDED}` }),
-        " marked occluded by the worker; click a cell for its frame"]), this.heat,
-      el("h3", {}, ["Swaps and issues"]), this.timeline, el("h3", {}, ["Reasons"]),
-      this.reasons, el("h3", {}, ["Metrics"]), this.facts);
-    host.replaceChildren(this.root);
-    this.bind(controls);
   }
 
   /** @param {HTMLElement} controls */

@@ -25,6 +25,21 @@ export function showNotice(line, text, kind = "info") {
 }
 
 /**
+ * Shows that an action failed in its result line, with the reply's status and detail; a refused
+ * sign-in (401) goes to `fail` instead, the page's handler, which signs out.
+ * @param {HTMLElement} line  @param {string} what  the action, e.g. "Publishing"
+ * @param {unknown} err  @param {(err: unknown) => void} fail
+ */
+export function showFailure(line, what, err, fail) {
+  if (err instanceof ApiError && err.status === 401) {
+    fail(err);
+    return;
+  }
+  const status = err instanceof ApiError ? ` (${err.status})` : "";
+  showNotice(line, `${what} failed${status}: ${errorText(err)}`, "error");
+}
+
+/**
  * The page's notice line, with notify and fail.
  * @param {HTMLElement} line  the notice element
  * @param {() => void} signIn  shows the page's sign-in form

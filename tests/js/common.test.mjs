@@ -3,7 +3,7 @@ import assert from "node:assert/strict";
 import { afterEach, test } from "node:test";
 
 import { ApiError, BearerClient } from "../../frontend/common/api.js";
-import { errorText, noticeLine } from "../../frontend/common/notice.js";
+import { errorText, noticeLine, showFailure } from "../../frontend/common/notice.js";
 
 /** sessionStorage as a Map. */
 class MemoryStorage {
@@ -83,6 +83,21 @@ test("the notice line shows errors, and a refused sign-in sends the page to sign
   notify("");
   assert.equal(line.hidden, true);
   assert.equal(errorText("plain"), "plain");
+});
+
+test("a failed action says what failed and why; a refused sign-in goes to the page", () => {
+  const line = { textContent: "", className: "", hidden: true };
+  const failedOver = [];
+  const fail = (err) => failedOver.push(err);
+  showFailure(line, "Publishing", new ApiError(409, { detail: "already published" }), fail);
+  assert.deepEqual(line, { textContent: "Publishing failed (409): already published",
+    className: "notice error", hidden: false });
+  showFailure(line, "The bonus", new Error("offline"), fail);
+  assert.equal(line.textContent, "The bonus failed: offline");
+  const refused = new ApiError(401, { detail: "token expired" });
+  showFailure(line, "Blocking", refused, fail);
+  assert.deepEqual(failedOver, [refused]);
+  assert.equal(line.textContent, "The bonus failed: offline");
 });
 
 test("a notice set across navigation survives the next one only", () => {

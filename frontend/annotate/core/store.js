@@ -14,34 +14,26 @@
  * visibility makes it "edited" unless the edit names a source; moving a keyframe in time keeps it.
  *
  * Stored positions are rounded to 0.01 px (the precision of the autosave payload, so toJSON and
- * fromJSON round-trip exactly) and clamped into the image, 0 <= x < width, 0 <= y < height.
+ * fromJSON round-trip exactly) and clamped into the image, 0 <= x < width, 0 <= y < height
+ * (keyframe.js). What an edit changes, and the description of it, is worked out in changes.js.
  */
 
 import { denseTrack, valueAt } from "./interpolate.js";
 import { UndoStack } from "./undo.js";
-import {
-  KeyframeEdit, checkSource, indexOfFrame, sourceAfterEdit, writeTrack,
-} from "./edits.js";
+import { KeyframeEdit, indexOfFrame } from "./edits.js";
+import { checkIndex, clampToImage, keyframeToRow, trackFromRows } from "./keyframe.js";
+import { applyWrites, changesFor } from "./changes.js";
 
 export { KEYFRAME_SOURCES } from "./edits.js";
-
-/** Stored coordinate precision, image px. */
-export const POSITION_STEP_PX = 0.01;
-
-/** Rounds to the 0.01 px grid (idempotent: a rounded value rounds to itself). @param {number} v */
-function quantize(v) {
-  return Math.round(v * 100) / 100;
-}
+export { POSITION_STEP_PX } from "./keyframe.js";
 
 /**
  * @typedef {import("./edits.js").KeyframeSource} KeyframeSource
- * @typedef {import("./interpolate.js").Keyframe & {source: KeyframeSource}} Keyframe
+ * @typedef {import("./keyframe.js").Keyframe} Keyframe
  * @typedef {{x: number|null, y: number|null, visible: boolean, source?: KeyframeSource}}
  *   KeyframeValue  without source: see sourceAfterEdit in edits.js
- * @typedef {{frame: number, x?: number|null, y?: number|null, visible?: boolean,
- *   source?: KeyframeSource, remove?: boolean}} FrameEntry  remove: true deletes the keyframe
- * @typedef {{point: number, x?: number|null, y?: number|null, visible?: boolean,
- *   source?: KeyframeSource, remove?: boolean}} PointEntry  remove: true deletes the keyframe
+ * @typedef {import("./changes.js").FrameEntry} FrameEntry
+ * @typedef {import("./changes.js").PointEntry} PointEntry
  */
 
 export class AnnotationStore {
@@ -125,10 +117,7 @@ export class AnnotationStore {
    * @param {number} x @param {number} y @returns {{x: number, y: number}}
    */
   clampToImage(x, y) {
-    // The largest stored coordinate is size - 0.01, so that x < width holds after rounding.
-    const clamp = (v, size) =>
-      Math.min(Math.max(quantize(v), 0), quantize(size - POSITION_STEP_PX));
-    return { x: clamp(x, this.width), y: clamp(y, this.height) };
+    return clampToImage(x, y, this);
   }
 
   /**
@@ -162,7 +151,7 @@ export class AnnotationStore {
   setKeyframes(point, entries, options = {}) {
     this._checkPoint(point);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor([{ point, frame: null, entries }]);
+    const changes = changesFor(this._tracks, [{ point, frame: null, entries }], this);
     return this._execute(options.label ?? "set keyframes", changes, options.gesture);
   }
 
@@ -188,7 +177,7 @@ export class AnnotationStore {
       }
       return { point, frame: null, entries };
     });
-    const changes = this._changesFor(groups);
+    const changes = changesFor(this._tracks, groups, this);
     return this._execute(options.label ?? "set tracks", changes, options.gesture);
   }
 
@@ -203,7 +192,7 @@ export class AnnotationStore {
   setPose(frame, entries, options = {}) {
     this._checkFrame(frame);
     if (!Array.isArray(entries)) throw new TypeError("entries must be an array");
-    const changes = this._changesFor([{ point: null, frame, entries }]);
+    const changes = changesFor(this._tracks, [{ point: null, frame, entries }], this);
     return this._execute(options.label ?? "set pose", changes, options.gesture);
   }
 
@@ -296,11 +285,7 @@ export class AnnotationStore {
       version: this.version,
       tracks: this._tracks.map((keyframes, point) => ({
         point,
-        keyframes: keyframes.map((k) => {
-          const row = [k.frame, k.x, k.y, k.visible ? 1 : 0];
-          if (k.source !== "placed") row.push(k.source);
-          return row;
-        }),
+        keyframes: keyframes.map(keyframeToRow),
       })),
     };
   }
@@ -318,114 +303,12 @@ export class AnnotationStore {
     const store = new AnnotationStore({ ...options, version: Number(payload.version) || 0 });
     for (const track of payload.tracks) {
       store._checkPoint(track.point);
-      if (!Array.isArray(track.keyframes)) {
-        throw new TypeError(`point ${track.point}: keyframes must be an array`);
-      }
-      const keyframes = track.keyframes.map((row) => store._keyframeFromRow(track.point, row));
-      keyframes.sort((a, b) => a.frame - b.frame);
-      keyframes.forEach((k, i) => {
-        if (i > 0 && keyframes[i - 1].frame === k.frame) {
-          throw new RangeError(`point ${track.point}: two keyframes at frame ${k.frame}`);
-        }
-      });
-      store._tracks[track.point] = keyframes;
+      store._tracks[track.point] = trackFromRows(track.point, track.keyframes, store);
     }
     return store;
   }
 
   // ---- internals --------------------------------------------------------------------------
-
-  /**
-   * @param {number} point
-   * @param {any[]} row [frame, x, y, visible01] or [frame, x, y, visible01, source]
-   */
-  _keyframeFromRow(point, row) {
-    if (!Array.isArray(row) || (row.length !== 4 && row.length !== 5)) {
-      const got = JSON.stringify(row);
-      const shape = "[frame, x, y, visible01] or [frame, x, y, visible01, source]";
-      throw new TypeError(`point ${point}: keyframe must be ${shape}, got ${got}`);
-    }
-    const [frame, x, y, visible, source = "placed"] = row;
-    this._checkFrame(frame);
-    if (visible !== 0 && visible !== 1 && visible !== true && visible !== false) {
-      throw new TypeError(`point ${point}, frame ${frame}: visible must be 0 or 1, got ${visible}`);
-    }
-    checkSource(source, `point ${point}, frame ${frame}`);
-    return this._makeKeyframe(frame, { x, y, visible: Boolean(visible) }, source);
-  }
-
-  /**
-   * @param {number} frame @param {{x: any, y: any, visible: any}} value
-   * @param {KeyframeSource} source @returns {Keyframe}
-   */
-  _makeKeyframe(frame, { x, y, visible }, source) {
-    if (typeof visible !== "boolean") {
-      throw new TypeError(`visible must be a boolean, got ${visible}`);
-    }
-    if (x === null && y === null) {
-      if (visible) throw new TypeError(`frame ${frame}: a visible keyframe needs a position`);
-      return Object.freeze({ frame, x: null, y: null, visible, source });
-    }
-    if (!Number.isFinite(x) || !Number.isFinite(y)) {
-      const got = `${x}, ${y}`;
-      const rule = "x and y must be finite numbers or both null";
-      throw new TypeError(`frame ${frame}: ${rule}, got ${got}`);
-    }
-    return Object.freeze({ frame, ...this.clampToImage(x, y), visible, source });
-  }
-
-  /**
-   * The changes that entries {x, y, visible, source?} or {remove: true} make at their point and
-   * frame, skipping those that change nothing. A group fixes the point or the frame of its
-   * entries (null: read entry.point or entry.frame). Validates everything before anything is
-   * written. O(n) in the touched tracks' lengths plus the entries (no search per entry).
-   * @param {Array<{point: number|null, frame: number|null, entries: Array<FrameEntry|PointEntry>}>}
-   *   groups
-   */
-  _changesFor(groups) {
-    /** @type {Map<number, Map<number, Keyframe>>} */
-    const tracks = new Map();
-    const seen = new Set();
-    const changes = [];
-    for (const { point: fixedPoint, frame: fixedFrame, entries } of groups) {
-      for (const entry of entries) {
-        const point = fixedPoint ?? /** @type {PointEntry} */ (entry).point;
-        const frame = fixedFrame ?? /** @type {FrameEntry} */ (entry).frame;
-        const change = this._changeAt(point, frame, entry, tracks, seen);
-        if (change) changes.push(change);
-      }
-    }
-    return changes;
-  }
-
-  /**
-   * The change one entry makes at (point, frame), or null when it changes nothing.
-   * @param {number} point @param {number} frame @param {FrameEntry|PointEntry} entry
-   * @param {Map<number, Map<number, Keyframe>>} tracks  keyframes by frame of points seen so far
-   * @param {Set<number>} seen  cells (point * numFrames + frame) written so far
-   */
-  _changeAt(point, frame, entry, tracks, seen) {
-    this._checkPoint(point);
-    this._checkFrame(frame);
-    const cell = point * this.numFrames + frame;
-    if (seen.has(cell)) throw new RangeError(`point ${point}, frame ${frame}: given twice`);
-    seen.add(cell);
-    if (!tracks.has(point)) {
-      tracks.set(point, new Map(this._tracks[point].map((k) => [k.frame, k])));
-    }
-    const before = tracks.get(point).get(frame) ?? null;
-    if (entry.remove === true) return before ? { point, frame, before, after: null } : null;
-    const explicit = entry.source !== undefined;
-    const source = explicit
-      ? checkSource(entry.source, `point ${point}, frame ${frame}`)
-      : sourceAfterEdit(before);
-    const after = this._makeKeyframe(frame, entry, source);
-    // Writing a suggestion's own value again, without a source, is no edit of it.
-    if (before && samePlace(before, after) && (!explicit || before.source === source)) {
-      return null;
-    }
-    return { point, frame, before, after };
-  }
 
   /** Runs a new edit through the undo stack; false when `changes` is empty. */
   _execute(label, changes, gesture) {
@@ -441,25 +324,7 @@ export class AnnotationStore {
    * @returns {object} the change description
    */
   _write(label, writes) {
-    /** @type {Map<number, Array<[number, Keyframe|null]>>} */
-    const byPoint = new Map();
-    const created = new Set();
-    const updated = new Set();
-    const deleted = new Set();
-    for (const [point, frame, from, to] of writes) {
-      if (!byPoint.has(point)) byPoint.set(point, []);
-      byPoint.get(point).push([frame, to]);
-      if (!from && to) created.add(frame);
-      else if (from && to) updated.add(frame);
-      else if (from && !to) deleted.add(frame);
-    }
-    for (const [point, pointWrites] of byPoint) writeTrack(this._tracks[point], pointWrites);
-    const points = [...byPoint.keys()].sort((a, b) => a - b);
-    const frames = (set) => [...set].sort((a, b) => a - b);
-    return {
-      label, point: points.length === 1 ? points[0] : null, points,
-      created: frames(created), updated: frames(updated), deleted: frames(deleted),
-    };
+    return applyWrites(this._tracks, label, writes);
   }
 
   /** @param {string} cause @param {object|undefined} change */
@@ -475,23 +340,13 @@ export class AnnotationStore {
     for (const fn of [...this._listeners]) fn(full);
   }
 
+  /** @param {number} point */
   _checkPoint(point) {
-    if (!Number.isInteger(point) || point < 0 || point >= this.numPoints) {
-      throw new RangeError(`point must be an integer in 0..${this.numPoints - 1}, got ${point}`);
-    }
+    checkIndex("point", point, this.numPoints);
   }
 
+  /** @param {number} frame */
   _checkFrame(frame) {
-    if (!Number.isInteger(frame) || frame < 0 || frame >= this.numFrames) {
-      throw new RangeError(`frame must be an integer in 0..${this.numFrames - 1}, got ${frame}`);
-    }
+    checkIndex("frame", frame, this.numFrames);
   }
-}
-
-/**
- * Same frame, position and visibility (the source aside).
- * @param {Keyframe} a @param {Keyframe} b
- */
-function samePlace(a, b) {
-  return a.frame === b.frame && a.x === b.x && a.y === b.y && a.visible === b.visible;
 }
