@@ -13,7 +13,7 @@ from backend.exports import trust
 from backend.exports.archive import ExportArchive
 from backend.exports.content import SequenceContent, ViewContent
 from backend.exports.writers import Exporter, Step, _Frames, _seq_dir, _world_meshes, seg_of
-from worker.formats import bop, coco, dexycb, jsonfmt
+from worker.formats import bop, coco, dexycb, dexycb_frames, jsonfmt
 from worker.geometry.cameras import distort_normalized
 from worker.geometry.transforms import invert_pose, transform_points
 
@@ -62,7 +62,7 @@ class CocoExporter(Exporter):
             with np.errstate(divide="ignore", invalid="ignore"):
                 xy = distort_normalized(points[:, :2] / z, cam.dist)
             meshes.append((np.concatenate([xy * z, z], axis=1), faces, value))
-        return dexycb.render_seg(meshes, cam.K, cam.width, cam.height)
+        return dexycb_frames.render_seg(meshes, cam.K, cam.width, cam.height)
 
     def _objects(self, content: SequenceContent, frame: int) -> dict[int, dict[str, Any]]:
         """Per seg value the object's trust and provenance; a flagged pose's instance is a crowd

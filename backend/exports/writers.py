@@ -20,7 +20,7 @@ from backend.exports.archive import ExportArchive
 from backend.exports.content import SequenceContent, ViewContent
 from backend.solve.results import frame_payload
 from backend.storage import LocalStorage, Storage, get_storage
-from worker.formats import cvat, dexycb, dexycb_flags, jsonfmt, offimage
+from worker.formats import cvat, dexycb, dexycb_flags, dexycb_frames, jsonfmt, offimage
 from worker.formats.files import encode_image, npz_bytes, yaml_text
 from worker.geometry.mesh_io import Mesh
 from worker.geometry.transforms import invert_pose, transform_points
@@ -88,7 +88,7 @@ def seg_of(exporter: Exporter, content: SequenceContent, view: ViewContent, fram
     w2c = invert_pose(cam.T_cam_to_world)
     meshes = [(transform_points(w2c, v), f, value)
               for v, f, value in _world_meshes(exporter, content, frame)]
-    return dexycb.render_seg(meshes, cam.K, cam.width, cam.height)
+    return dexycb_frames.render_seg(meshes, cam.K, cam.width, cam.height)
 
 
 class _Frames:
@@ -98,8 +98,9 @@ class _Frames:
     def __init__(self, exporter: Exporter, view: ViewContent) -> None:
         self.exporter, self.view = exporter, view
         cam = view.camera
-        self.distorted = dexycb.has_distortion(cam.dist)
-        self.maps = (dexycb.undistort_maps(cam.K, np.asarray(cam.dist), cam.width, cam.height)
+        self.distorted = dexycb_frames.has_distortion(cam.dist)
+        self.maps = (dexycb_frames.undistort_maps(cam.K, np.asarray(cam.dist), cam.width,
+                                                  cam.height)
                      if self.distorted else None)
 
     def color(self, frame: int) -> bytes:
@@ -109,7 +110,7 @@ class _Frames:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         if image is None:
             raise ValueError(f"colour frame {self.view.color_keys[frame]} does not decode")
-        return encode_image(".jpg", dexycb.undistort_image(image, self.maps))
+        return encode_image(".jpg", dexycb_frames.undistort_image(image, self.maps))
 
     def depth(self, frame: int) -> bytes | None:
         key = self.view.depth_keys[frame]
@@ -121,7 +122,7 @@ class _Frames:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise ValueError(f"depth frame {key} does not decode")
-        return encode_image(".png", dexycb.undistort_image(image, self.maps, nearest=True))
+        return encode_image(".png", dexycb_frames.undistort_image(image, self.maps, nearest=True))
 
     def local_path(self, key: str | None) -> Path | None:
         storage = self.exporter.storage
@@ -164,7 +165,7 @@ class DexYCBExporter(Exporter):
         for view in content.views:
             cam = view.camera
             coeffs = [float(c) for c in np.asarray(cam.dist if cam.dist is not None else [])]
-            if dexycb.has_distortion(coeffs):
+            if dexycb_frames.has_distortion(coeffs):
                 undistorted[view.serial] = coeffs
             self._once(dexycb.intrinsics_file(view.serial, cam.width, cam.height),
                                yaml_text(dexycb.intrinsics_doc(
@@ -227,7 +228,7 @@ class DexYCBExporter(Exporter):
             seg = seg_of(self, content, view, f)
             # A flagged hand frame is unlabelled, as DexYCB leaves a hand it cannot label.
             hand = bool(content.hands) and solve.hand_trusted(f)
-            labels = dexycb.camera_frame_labels(
+            labels = dexycb_frames.camera_frame_labels(
                 view.camera.T_cam_to_world, view.camera.K, arrays["object_poses"][:, f],
                 arrays["hand_pose_m"][f] if hand else None,
                 arrays["hand_joints"][f] if hand else None, solve.root_joint, seg)

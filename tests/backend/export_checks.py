@@ -25,7 +25,7 @@ from backend.solve.results import decode_result
 from backend.solve.service import current_run
 from backend.storage import get_storage
 from worker.formats.coco import HAND_CATEGORY_ID
-from worker.formats.cvat import read_cvat_video
+from worker.formats.cvat_read import read_cvat_video
 from worker.geometry.transforms import invert_pose
 from worker.tracks.interpolate import dense_track
 from worker.tracks.keyframes import as_keyframes

@@ -16,7 +16,8 @@ from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
 from worker.formats import jsonfmt
-from worker.formats.cvat import CvatFormatError, CvatVideoWriter, hand_label, read_cvat_video
+from worker.formats.cvat import CvatVideoWriter, hand_label
+from worker.formats.cvat_read import CvatFormatError, read_cvat_video
 from worker.tracks.keyframes import Keyframe
 
 NUM_FRAMES = 6  # the small capture's clip

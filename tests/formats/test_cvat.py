@@ -10,15 +10,8 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from worker.formats.cvat import (
-    CvatFormatError,
-    CvatVideo,
-    CvatVideoWriter,
-    SkeletonLabel,
-    hand_label,
-    object_label,
-    read_cvat_video,
-)
+from worker.formats.cvat import CvatVideoWriter, SkeletonLabel, hand_label, object_label
+from worker.formats.cvat_read import CvatFormatError, CvatVideo, read_cvat_video
 from worker.hand.joints import JOINT_NAMES
 from worker.tracks.interpolate import dense_track
 from worker.tracks.keyframes import Keyframe, as_keyframes

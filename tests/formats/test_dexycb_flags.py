@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worker.formats import dexycb, dexycb_flags
+from worker.formats import dexycb, dexycb_flags, dexycb_frames
 from worker.geometry.transforms import axis_angle_to_matrix, make_pose
 
 K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
@@ -34,7 +34,7 @@ def _hand_absent(label: dict[str, np.ndarray]) -> bool:
 class TestLabelFiles:
     def test_an_unlabelled_or_flagged_hand_reads_as_absent_and_objects_as_poses(self) -> None:
         for T in CAMERAS:
-            label = dexycb.camera_frame_labels(T, K, OBJECTS, None, None, None, SEG)
+            label = dexycb_frames.camera_frame_labels(T, K, OBJECTS, None, None, None, SEG)
             assert _hand_absent(label)
             assert label["joint_3d"].shape == (1, 21, 3) and label["pose_m"].shape == (1, 51)
             for row in label["pose_y"].astype(np.float64):
@@ -45,7 +45,7 @@ class TestLabelFiles:
     def test_every_pose_y_row_maps_to_one_world_pose_over_the_cameras(self) -> None:
         worlds = []
         for T in CAMERAS:
-            label = dexycb.camera_frame_labels(T, K, OBJECTS, None, None, None, SEG)
+            label = dexycb_frames.camera_frame_labels(T, K, OBJECTS, None, None, None, SEG)
             pose_y = label["pose_y"].astype(np.float64)
             worlds.append(np.einsum("ij,ojk->oik", T[:, :3], pose_y)
                           + np.pad(T[:, 3][None, :, None], ((0, 0), (0, 0), (3, 0))))

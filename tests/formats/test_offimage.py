@@ -7,7 +7,8 @@ import io
 
 import numpy as np
 
-from worker.formats.cvat import CvatVideoWriter, object_label, read_cvat_video
+from worker.formats.cvat import CvatVideoWriter, object_label
+from worker.formats.cvat_read import read_cvat_video
 from worker.formats.offimage import mark_outside
 from worker.tracks.interpolate import dense_track
 

@@ -1,6 +1,7 @@
 """Label formats, each with one home: the DexYCB raw layout (``dexycb``: read by the importer,
 written by the synthetic capture and the export), COCO keypoints (``coco``), BOP (``bop``),
-CVAT for video XML (``cvat``) and dexlabel's own JSON (``jsonfmt``).
+CVAT for video XML (``cvat``; read back by ``cvat_read``) and dexlabel's own JSON
+(``jsonfmt``).
 
 The modules are pure: arrays and plain values in, file contents (bytes, documents) out; the
 export (backend.exports) feeds them from the database and storage and writes the archive.

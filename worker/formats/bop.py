@@ -292,6 +292,25 @@ class BopSceneWriter:
         scene_gt_info entry; a note with ``pose_valid`` false keeps the instance in scene_gt
         and out of :attr:`targets`.
         """
+        key, seg, depth = self._checked_image(im_id, seg, object_poses, depth)
+        self._scene_camera[key] = {
+            "cam_K": _flat(self._K), "depth_scale": float(self._camera.depth_scale),
+            "cam_R_w2c": _flat(self._w2c[:, :3]), "cam_t_w2c": _flat(self._w2c[:, 3] * MM_PER_M)}
+        if notes is not None and len(notes) != len(object_poses):
+            raise ValueError(f"notes must have one entry per posed object ({len(object_poses)}), "
+                             f"got {len(notes)}")
+        self._scene_gt[key], self._scene_gt_info[key] = self._instances(
+            im_id, object_poses, seg, depth, notes)
+        if depth is not None:
+            self._sink(f"{self._root}/depth/{im_id:06d}.png", _png(depth))
+        if rgb is not None:
+            self._sink(f"{self._root}/rgb/{im_id:06d}{self._rgb_ext}", rgb)
+
+    def _checked_image(self, im_id: int, seg: np.ndarray,
+                       object_poses: Sequence[tuple[int, np.ndarray]], depth: np.ndarray | None
+                       ) -> tuple[str, np.ndarray, np.ndarray | None]:
+        """The image's key in the scene files, its seg (H, W) uint8 and depth (H, W) uint16 or
+        None, once the writer is open, the id new and the arrays and object ids are as BOP's."""
         if self._closed:
             raise RuntimeError("the BOP scene writer is closed")
         size = (self._camera.height, self._camera.width)
@@ -308,12 +327,14 @@ class BopSceneWriter:
         ids = [int(obj_id) for obj_id, _ in object_poses]
         if len(set(ids)) != len(ids):
             raise ValueError(f"each object may appear once per image, got ids {ids}")
-        self._scene_camera[key] = {
-            "cam_K": _flat(self._K), "depth_scale": float(self._camera.depth_scale),
-            "cam_R_w2c": _flat(self._w2c[:, :3]), "cam_t_w2c": _flat(self._w2c[:, 3] * MM_PER_M)}
-        if notes is not None and len(notes) != len(object_poses):
-            raise ValueError(f"notes must have one entry per posed object ({len(object_poses)}), "
-                             f"got {len(notes)}")
+        return key, seg, depth
+
+    def _instances(self, im_id: int, object_poses: Sequence[tuple[int, np.ndarray]],
+                   seg: np.ndarray, depth: np.ndarray | None,
+                   notes: Sequence[Mapping[str, Any]] | None
+                   ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+        """The image's scene_gt and scene_gt_info entries, one per posed object (its masks
+        written); its trusted instances visible enough to be scored join :attr:`targets`."""
         gts, infos = [], []
         counts: dict[int, int] = {}
         for gt_id, (obj_id, pose) in enumerate(object_poses):
@@ -327,12 +348,7 @@ class BopSceneWriter:
             infos.append(info)
         self.targets.extend({"scene_id": self._scene_id, "im_id": int(im_id), "obj_id": obj_id,
                              "inst_count": n} for obj_id, n in sorted(counts.items()))
-        self._scene_gt[key] = gts
-        self._scene_gt_info[key] = infos
-        if depth is not None:
-            self._sink(f"{self._root}/depth/{im_id:06d}.png", _png(depth))
-        if rgb is not None:
-            self._sink(f"{self._root}/rgb/{im_id:06d}{self._rgb_ext}", rgb)
+        return gts, infos
 
     def _ground_truth(self, im_id: int, gt_id: int, obj_id: int, pose: np.ndarray,
                       seg: np.ndarray, depth: np.ndarray | None

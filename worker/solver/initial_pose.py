@@ -127,6 +127,44 @@ def _icp(tree: AABBTree, points: np.ndarray, rot: np.ndarray, trans: np.ndarray
     return rot, trans, float((dist < FIT_M).mean())
 
 
+def _object_points(cameras: list[CameraModel], depth: list[np.ndarray | None],
+                   centre: np.ndarray, radius: float, rng: np.random.Generator
+                   ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """World points (N, 3) of the object's visible surface at frame 0: the merged depth of all
+    views within 1.5 radii of centre, less the supporting plane found within 3 radii; and that
+    plane (see _without_plane)."""
+    cloud = DepthClouds(cameras, [None if d is None else d[:1] for d in depth], 2).points(0)
+    wide = cloud[np.linalg.norm(cloud - centre, axis=1) < 3 * radius]
+    wide, plane = _without_plane(wide, rng)
+    return wide[np.linalg.norm(wide - centre, axis=1) < 1.5 * radius], plane
+
+
+def _rivals(vertices: np.ndarray, poses: np.ndarray, scores: np.ndarray, best: int) -> int:
+    """How many poses (K, 3, 4) other than the best score within AMBIGUOUS of it while placing
+    the corners of the object's bounding box more than 1 cm (mean) away from the best's."""
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) \
+        * np.ptp(vertices, axis=0) + vertices.min(0)
+    posed = np.einsum("kij,nj->kni", poses[:, :, :3], corners) + poses[:, None, :, 3]
+    apart = np.linalg.norm(posed - posed[best], axis=-1).mean(-1) > 0.01
+    return int((apart & (scores >= scores[best] - AMBIGUOUS)).sum())
+
+
+def _verdict(pose: np.ndarray, rivals: int, explained: float, through: float,
+            off: float) -> InitialFit:
+    """The best fit accepted, or None with the first check it fails."""
+    if rivals:
+        return InitialFit(None, "its shape fits its depth equally well in "
+                                f"{rivals + 1} distinct poses")
+    if explained < MIN_EXPLAINED:
+        return InitialFit(None, f"the best fit explains {explained:.0%} of its depth points "
+                                f"(need {MIN_EXPLAINED:.0%})")
+    if through > MAX_THROUGH:
+        return InitialFit(None, f"the cameras see through {through:.0%} of the fitted surface")
+    if off > SEED_M:
+        return InitialFit(None, f"its landmarks lie {off * 1000:.0f} mm off the fitted surface")
+    return InitialFit(pose)
+
+
 def fit_initial_pose(cameras: list[CameraModel], depth: list[np.ndarray | None],
                      vertices: np.ndarray, faces: np.ndarray, landmarks: list[Landmark],
                      seed: int = 0) -> InitialFit:
@@ -140,11 +178,8 @@ def fit_initial_pose(cameras: list[CameraModel], depth: list[np.ndarray | None],
     vertices = np.asarray(vertices, np.float64)
     centre = np.median(seeds, axis=0)
     radius = float(np.linalg.norm(vertices - vertices.mean(0), axis=1).max())
-    cloud = DepthClouds(cameras, [None if d is None else d[:1] for d in depth], 2).points(0)
     rng = np.random.default_rng(seed)
-    wide = cloud[np.linalg.norm(cloud - centre, axis=1) < 3 * radius]
-    wide, plane = _without_plane(wide, rng)
-    points = wide[np.linalg.norm(wide - centre, axis=1) < 1.5 * radius]
+    points, plane = _object_points(cameras, depth, centre, radius, rng)
     if len(points) < MIN_POINTS:
         return InitialFit(None, f"only {len(points)} depth points of it at frame 0")
     if len(points) > MAX_POINTS:
@@ -165,20 +200,6 @@ def fit_initial_pose(cameras: list[CameraModel], depth: list[np.ndarray | None],
     pose, explained, through = poses[best], fits[best][2], float(through_all[best])
     # A shape that fits its depth as well in another pose (a box turned over, a can about its
     # axis) leaves the pose to the texture, which depth does not see: a person must say.
-    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) \
-        * np.ptp(vertices, axis=0) + vertices.min(0)
-    posed = np.einsum("kij,nj->kni", poses[:, :, :3], corners) + poses[:, None, :, 3]
-    apart = np.linalg.norm(posed - posed[best], axis=-1).mean(-1) > 0.01
-    rivals = int((apart & (scores >= scores[best] - AMBIGUOUS)).sum())
+    rivals = _rivals(vertices, poses, scores, best)
     off = float(np.median(tree.closest((seeds - pose[:, 3]) @ pose[:, :3])[0]))
-    if rivals:
-        return InitialFit(None, "its shape fits its depth equally well in "
-                                f"{rivals + 1} distinct poses")
-    if explained < MIN_EXPLAINED:
-        return InitialFit(None, f"the best fit explains {explained:.0%} of its depth points "
-                                f"(need {MIN_EXPLAINED:.0%})")
-    if through > MAX_THROUGH:
-        return InitialFit(None, f"the cameras see through {through:.0%} of the fitted surface")
-    if off > SEED_M:
-        return InitialFit(None, f"its landmarks lie {off * 1000:.0f} mm off the fitted surface")
-    return InitialFit(pose)
+    return _verdict(pose, rivals, explained, through, off)
