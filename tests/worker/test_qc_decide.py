@@ -12,8 +12,8 @@ from worker.hand import JOINT_NAMES
 from worker.quality.bounds import MetricBound
 from worker.quality.consensus import score_hand
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
-from worker.synth.qc_evaluation import assignment_plan, confusion, evaluate_hand_qc, span_overlap
 from worker.quality.metrics import AssignmentQC
+from worker.synth.qc_evaluation import assignment_plan, confusion, evaluate_hand_qc, span_overlap
 
 NAMES = list(JOINT_NAMES)
 # The review bounds of the median error, (strictest, most lenient) px.

@@ -20,9 +20,9 @@ from worker.assist.visibility import OWN_SURFACE_M, distance_to_hand, surface_ch
 from worker.formats import dexycb
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.consensus import score_hand
-from worker.synth.qc_evaluation import simulated_labels
 from worker.quality.metrics import depth_visibility
 from worker.synth.annotators import hand_visibility
+from worker.synth.qc_evaluation import simulated_labels
 
 
 class CaptureTruth:
