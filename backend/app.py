@@ -43,6 +43,7 @@ from backend.pipeline.router import router as pipeline_router
 from backend.portal.router import router as portal_router
 from backend.progress.router import page_router as progress_page_router
 from backend.progress.router import router as progress_router
+from backend.progress.router import tasks_router as progress_tasks_router
 from backend.quality.router import records_router as worker_records_router
 from backend.quality.router import router as review_router
 from backend.queue import check_queue
@@ -69,6 +70,7 @@ def create_app() -> FastAPI:
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)
+    app.include_router(progress_tasks_router)
     app.include_router(progress_page_router)
     app.include_router(labels_page_router)
     app.include_router(crowd_page_router)

@@ -53,6 +53,9 @@ def get_progress(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> Seque
 
 # ----- tasks, each with its state derived from its work ----------------------------------
 
+# The annotation domain's task routes, answered with each task's state (under its tag).
+tasks_router = APIRouter(prefix="/api", tags=["annotation"])
+
 def _task_reads(session: Session, tasks: list[Task]) -> list[TaskRead]:
     """The tasks as the API shows them, each with its state derived from its work."""
     states = task_states(session, [t.id for t in tasks])
@@ -70,15 +73,14 @@ def _task_read(task: Task, status: TaskState) -> TaskRead:
     )
 
 
-@router.post("/sequences/{sequence_id}/tasks", response_model=list[TaskRead],
-             tags=["annotation"])
+@tasks_router.post("/sequences/{sequence_id}/tasks", response_model=list[TaskRead])
 def create_tasks(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> list[TaskRead]:
     """One task per view and target; running it again creates only what is missing."""
     made = tasks.create_tasks(session, get_storage(), sequence_id)
     return _task_reads(session, [tasks.get_task_or_raise(session, t.id) for t in made])
 
 
-@router.get("/tasks", response_model=list[TaskRead], tags=["annotation"])
+@tasks_router.get("/tasks", response_model=list[TaskRead])
 def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: QueryId = None,
                limit: int = Query(500, ge=1, le=5000),
                offset: Offset = 0) -> list[TaskRead]:
@@ -86,7 +88,7 @@ def list_tasks(session: SessionDep, _: CurrentAdmin, sequence_id: QueryId = None
     return _task_reads(session, tasks.list_tasks(session, sequence_id, limit, offset))
 
 
-@router.put("/tasks/{task_id}/highlight", response_model=TaskRead, tags=["annotation"])
+@tasks_router.put("/tasks/{task_id}/highlight", response_model=TaskRead)
 def set_highlight(task_id: Id, body: HighlightUpdate, session: SessionDep,
                   _: CurrentAdmin) -> TaskRead:
     """Draw the object's box by hand (when its projected initial pose is missing or wrong)."""
