@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.quality.consensus import HandReport, score_hand
+from worker.quality.consensus import score_hand
+from worker.quality.hand_report import HandReport
 from worker.quality.view_labels import ViewLabels
 from worker.synth.annotators import annotate
 from worker.tracks.interpolate import dense_track

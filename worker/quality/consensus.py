@@ -27,7 +27,7 @@ Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; w
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -35,6 +35,7 @@ import numpy as np
 from worker.assist.visibility import DepthMaps, SurfaceCheck, surface_check
 from worker.geometry.cameras import CameraModel
 from worker.quality.consensus_fit import Fit, HandOptions, distinct_views, fit_consensus
+from worker.quality.hand_report import HandReport
 from worker.quality.metrics import (
     AssignmentQC,
     completeness,
@@ -58,33 +59,6 @@ from worker.quality.swaps import find_swaps, swap_corrections
 from worker.quality.view_faults import camera_offsets, offset_corrected, report_offsets
 from worker.quality.view_labels import ViewLabels, check_labels, decided_of, decided_xy
 from worker.quality.view_offset import ViewOffset
-
-
-@dataclass
-class HandReport:
-    """consensus: (F, P, 3) world metres, NaN where unsupported. support: (F, P) number of
-    distinct views behind each point. assignments: AssignmentQC per assignment key.
-    provisional: fewer than 3 distinct views support the target."""
-
-    consensus: np.ndarray
-    support: np.ndarray
-    assignments: dict[str, AssignmentQC]
-    provisional: bool
-    # What a reviewer's replay draws, per assignment key: "reference" (F, P, 2) px where the
-    # other views place each point (NaN where they do not fix it), "errors" (F, P) raw px
-    # from the label to it (NaN where not scored).
-    replay: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
-    # Per view, its camera's systematic offset (worker.quality.view_offset) and its lag in
-    # whole frames: where found, the view's labels were taken back through them before scoring.
-    camera_offsets: dict[int, ViewOffset] = field(default_factory=dict)
-    camera_lags: dict[int, int] = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        pts = np.round(self.consensus, 6).astype(object)
-        pts[~np.isfinite(self.consensus)] = None
-        return {"consensus": pts.tolist(), "support": self.support.astype(int).tolist(),
-                "provisional": self.provisional,
-                "assignments": {k: a.to_dict() for k, a in self.assignments.items()}}
 
 
 @dataclass

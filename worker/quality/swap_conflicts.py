@@ -5,18 +5,14 @@ swaps undone for the refit.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
 from worker.geometry.refine import CameraStack, reprojection_errors
 from worker.quality.consensus_fit import Fit, HandOptions, fit_consensus
+from worker.quality.hand_report import HandReport
 from worker.quality.swaps import consensus_swapped, moved_joints, overlaps, undo_swaps
 from worker.quality.view_labels import ViewLabels, decided_of
-
-if TYPE_CHECKING:
-    from worker.quality.consensus import HandReport
 
 
 def _own_swaps(report: HandReport, corrections: dict[str, list[dict]]) -> list[tuple[str, dict]]:

@@ -5,12 +5,11 @@ view's labels before anyone is scored and reported on the camera, never charged 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
 from worker.quality.consensus_fit import Fit
+from worker.quality.hand_report import HandReport
 from worker.quality.metrics import num
 from worker.quality.view_labels import ViewLabels, decided_of
 from worker.quality.view_offset import (
@@ -21,9 +20,6 @@ from worker.quality.view_offset import (
     vacated_frames,
 )
 from worker.rig.timing import joint_offsets
-
-if TYPE_CHECKING:
-    from worker.quality.consensus import HandReport
 
 
 def camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: Fit,

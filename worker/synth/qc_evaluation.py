@@ -15,8 +15,9 @@ import time
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
-from worker.quality.consensus import HandReport, score_hand
+from worker.quality.consensus import score_hand
 from worker.quality.decide import QCThresholds, decide, learn_thresholds
+from worker.quality.hand_report import HandReport
 from worker.quality.view_labels import ViewLabels
 from worker.synth.annotators import PROFILES, annotate, draw_profiles, swap_window
 from worker.tracks.interpolate import dense_track
