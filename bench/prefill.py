@@ -166,7 +166,7 @@ def _pure_ms(capture: Path, sequence_id: int, runs: int) -> float:
 def _timing(client: Any, task: dict, runs: int) -> dict[str, float]:
     """Median ms of the endpoint: "first", the view's first request (nothing kept), and
     "again", a request after it (the result kept: another worker's, a reload)."""
-    from backend.annotation.suggestions import clear_cache
+    from backend.labels.suggestions import clear_cache
 
     _, token = _link(task["id"], "timed")
     headers = {"Authorization": f"Bearer {token}"}

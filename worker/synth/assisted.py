@@ -80,7 +80,7 @@ class Prefill:
         known the page takes the suggestion as visible, so pass True there.
     known: (F, P) bool, where the view's depth decided the visibility (None: everywhere).
         The route plants check cells wherever a suggestion has a position and is not known
-        to be occluded (backend.annotation.suggestions): the page shows those as visible.
+        to be occluded (backend.labels.suggestions): the page shows those as visible.
     """
 
     xy: np.ndarray
