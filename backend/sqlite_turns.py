@@ -9,6 +9,8 @@ import re
 import sqlite3
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, cast
@@ -116,7 +118,11 @@ class TurnTakingConnection(sqlite3.Connection):
         finally:
             self.give_turn_back()
 
-    def before_statement(self, sql: str) -> None:
+    @contextmanager
+    def statement(self, sql: str) -> Iterator[None]:
+        """Runs one statement: with the writer turn first if it writes and the transaction
+        has none yet; a statement outside a transaction (DDL, a failed first write) gives
+        the turn back when it ends."""
         if not self.has_turn and _writes(sql):
             # A request waits only until its own deadline (see get_session).
             deadline = REQUEST_DEADLINE.get()
@@ -125,11 +131,11 @@ class TurnTakingConnection(sqlite3.Connection):
                 raise sqlite3.OperationalError(
                     f"database is locked: no turn to write came within {self.wait_s:g} s")
             self.has_turn = True
-
-    def after_statement(self) -> None:
-        # A statement outside a transaction (DDL, a failed first write) ends its own.
-        if self.has_turn and not self.in_transaction:
-            self.give_turn_back()
+        try:
+            yield
+        finally:
+            if self.has_turn and not self.in_transaction:
+                self.give_turn_back()
 
     def give_turn_back(self) -> None:
         if self.has_turn:
@@ -140,26 +146,17 @@ class TurnTakingConnection(sqlite3.Connection):
 class TurnTakingCursor(sqlite3.Cursor):
     """The cursor of a :class:`TurnTakingConnection`: each statement asks for the turn."""
 
+    def _connection(self) -> TurnTakingConnection:
+        return cast(TurnTakingConnection, self.connection)
+
     def execute(self, sql: str, parameters: Any = (), /) -> TurnTakingCursor:
-        conn = cast(TurnTakingConnection, self.connection)
-        conn.before_statement(sql)
-        try:
+        with self._connection().statement(sql):
             return super().execute(sql, parameters)
-        finally:
-            conn.after_statement()
 
     def executemany(self, sql: str, seq_of_parameters: Any, /) -> TurnTakingCursor:
-        conn = cast(TurnTakingConnection, self.connection)
-        conn.before_statement(sql)
-        try:
+        with self._connection().statement(sql):
             return super().executemany(sql, seq_of_parameters)
-        finally:
-            conn.after_statement()
 
     def executescript(self, sql_script: str, /) -> TurnTakingCursor:
-        conn = cast(TurnTakingConnection, self.connection)
-        conn.before_statement("SCRIPT")
-        try:
+        with self._connection().statement("SCRIPT"):
             return cast(TurnTakingCursor, super().executescript(sql_script))
-        finally:
-            conn.after_statement()

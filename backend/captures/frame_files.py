@@ -109,16 +109,12 @@ def _decode_video(rd: CaptureReader, cam: CameraPlan) -> list[bytes]:
 def _check_frame(rd: CaptureReader, folder: Path, cam: CameraPlan, index: int) -> FramePlan:
     color = folder / dexycb.color_file(index)
     depth = folder / dexycb.depth_file(index)
-    if not color.is_file():
-        raise rd.fail(color, f"frame {index} is missing")
-    problem = check_jpeg(color, cam.width, cam.height)
-    if problem:
-        raise rd.fail(color, problem)
-    rd.digest.update(f"{rd.rel(color)}:{color.stat().st_size}".encode())
-    if not depth.is_file():
-        raise rd.fail(depth, f"depth of frame {index} is missing")
-    problem = check_png16(depth, cam.width, cam.height)
-    if problem:
-        raise rd.fail(depth, problem)
-    rd.digest.update(f"{rd.rel(depth)}:{depth.stat().st_size}".encode())
+    for path, check, missing in ((color, check_jpeg, f"frame {index} is missing"),
+                                 (depth, check_png16, f"depth of frame {index} is missing")):
+        if not path.is_file():
+            raise rd.fail(path, missing)
+        problem = check(path, cam.width, cam.height)
+        if problem:
+            raise rd.fail(path, problem)
+        rd.digest.update(f"{rd.rel(path)}:{path.stat().st_size}".encode())
     return FramePlan(index=index, color_path=color, depth_path=depth)

@@ -1,16 +1,20 @@
 """The requester API: one handler per MTurk operation, from validated input to wire output.
 
 Handlers only translate: the rules live in hits, assignments, payments, qualifications and
-blocks. Every handler receives input that already matches the operation's input shape.
+blocks. Every handler receives input that already matches the operation's input shape. The
+List operations, and those that hand their whole input on and reply with nothing, are each
+made by one factory (``_listing``, ``_no_output``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from backend.market import assignments, blocks, hits, payments, qualifications
 from backend.market.context import Call
+from backend.market.lifecycle import HitState
+from backend.market.models import Hit
 from backend.market.pagination import page_result
 from backend.market.views import (
     assignment_view,
@@ -22,6 +26,28 @@ from backend.market.views import (
 
 Handler = Callable[[Call, dict[str, Any]], dict[str, Any]]
 EMPTY: dict[str, Any] = {}
+Row = TypeVar("Row")
+
+
+def _listing(key: str, lister: Callable[[Call, dict[str, Any]], tuple[list[Row], str | None]],
+             view: Callable[[Row], dict[str, Any]]) -> Handler:
+    """A List operation: one page of ``lister``'s rows, each in its wire ``view``, under ``key``."""
+    def handler(call: Call, params: dict[str, Any]) -> dict[str, Any]:
+        found, next_token = lister(call, params)
+        return page_result(key, [view(row) for row in found], next_token)
+    return handler
+
+
+def _no_output(action: Callable[[Call, dict[str, Any]], object]) -> Handler:
+    """An operation that takes its whole input to ``action`` and replies with nothing."""
+    def handler(call: Call, params: dict[str, Any]) -> dict[str, Any]:
+        action(call, params)
+        return EMPTY
+    return handler
+
+
+def _hit_row(row: tuple[Hit, HitState]) -> dict[str, Any]:
+    return hit_view(*row)
 
 
 def create_hit(call: Call, params: dict[str, Any]) -> dict[str, Any]:
@@ -40,16 +66,6 @@ def create_hit_with_hit_type(call: Call, params: dict[str, Any]) -> dict[str, An
 
 def get_hit(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return {"HIT": hit_view(*hits.get_hit_or_raise(call, params["HITId"]))}
-
-
-def list_hits(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    found, next_token = hits.list_hits(call, params)
-    return page_result("HITs", [hit_view(*item) for item in found], next_token)
-
-
-def list_reviewable_hits(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    found, next_token = hits.list_reviewable_hits(call, params)
-    return page_result("HITs", [hit_view(*item) for item in found], next_token)
 
 
 def update_expiration_for_hit(call: Call, params: dict[str, Any]) -> dict[str, Any]:
@@ -73,11 +89,6 @@ def create_additional_assignments_for_hit(call: Call, params: dict[str, Any]) ->
     return EMPTY
 
 
-def list_assignments_for_hit(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    found, next_token = assignments.list_for_hit(call, params)
-    return page_result("Assignments", [assignment_view(a) for a in found], next_token)
-
-
 def get_assignment(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     assignment, state = assignments.get_assignment_or_raise(call, params["AssignmentId"])
     return {"Assignment": assignment_view(assignment), "HIT": hit_view(assignment.hit, state)}
@@ -94,16 +105,6 @@ def reject_assignment(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return EMPTY
 
 
-def send_bonus(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    payments.send_bonus(call, params)
-    return EMPTY
-
-
-def list_bonus_payments(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    found, next_token = payments.list_bonus_payments(call, params)
-    return page_result("BonusPayments", [bonus_view(b) for b in found], next_token)
-
-
 def get_account_balance(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return payments.account_balance(call)
 
@@ -116,21 +117,6 @@ def create_qualification_type(call: Call, params: dict[str, Any]) -> dict[str, A
 def get_qualification_type(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return {"QualificationType": qualification_type_view(
         qualifications.get_type_or_raise(call, params["QualificationTypeId"]))}
-
-
-def associate_qualification_with_worker(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    qualifications.associate(call, params)
-    return EMPTY
-
-
-def disassociate_qualification_from_worker(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    qualifications.disassociate(call, params)
-    return EMPTY
-
-
-def list_workers_with_qualification_type(call: Call, params: dict[str, Any]) -> dict[str, Any]:
-    found, next_token = qualifications.list_workers(call, params)
-    return page_result("Qualifications", [qualification_view(q) for q in found], next_token)
 
 
 def create_worker_block(call: Call, params: dict[str, Any]) -> dict[str, Any]:
@@ -156,24 +142,25 @@ HANDLERS: dict[str, Handler] = {
     "CreateHITType": create_hit_type,
     "CreateHITWithHITType": create_hit_with_hit_type,
     "GetHIT": get_hit,
-    "ListHITs": list_hits,
-    "ListReviewableHITs": list_reviewable_hits,
+    "ListHITs": _listing("HITs", hits.list_hits, _hit_row),
+    "ListReviewableHITs": _listing("HITs", hits.list_reviewable_hits, _hit_row),
     "UpdateExpirationForHIT": update_expiration_for_hit,
     "UpdateHITReviewStatus": update_hit_review_status,
     "DeleteHIT": delete_hit,
     "CreateAdditionalAssignmentsForHIT": create_additional_assignments_for_hit,
-    "ListAssignmentsForHIT": list_assignments_for_hit,
+    "ListAssignmentsForHIT": _listing("Assignments", assignments.list_for_hit, assignment_view),
     "GetAssignment": get_assignment,
     "ApproveAssignment": approve_assignment,
     "RejectAssignment": reject_assignment,
-    "SendBonus": send_bonus,
-    "ListBonusPayments": list_bonus_payments,
+    "SendBonus": _no_output(payments.send_bonus),
+    "ListBonusPayments": _listing("BonusPayments", payments.list_bonus_payments, bonus_view),
     "GetAccountBalance": get_account_balance,
     "CreateQualificationType": create_qualification_type,
     "GetQualificationType": get_qualification_type,
-    "AssociateQualificationWithWorker": associate_qualification_with_worker,
-    "DisassociateQualificationFromWorker": disassociate_qualification_from_worker,
-    "ListWorkersWithQualificationType": list_workers_with_qualification_type,
+    "AssociateQualificationWithWorker": _no_output(qualifications.associate),
+    "DisassociateQualificationFromWorker": _no_output(qualifications.disassociate),
+    "ListWorkersWithQualificationType": _listing("Qualifications", qualifications.list_workers,
+                                                  qualification_view),
     "CreateWorkerBlock": create_worker_block,
     "DeleteWorkerBlock": delete_worker_block,
     "NotifyWorkers": notify_workers,

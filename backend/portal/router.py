@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from fastapi import APIRouter, Query, Request, Response
+from fastapi import APIRouter, Query, Response
 from sqlalchemy.orm import Session
 
 from backend.accounts import service as account_service
-from backend.accounts.deps import CurrentAdmin, CurrentWorker
+from backend.accounts.deps import CurrentAdmin, CurrentWorker, current_worker
 from backend.accounts.models import PortalAccount
-from backend.accounts.schemas import LoginRequest, PasswordChange
+from backend.accounts.routes import add_sign_in_routes
 from backend.accounts.service import WORKER
 from backend.config import get_settings
 from backend.crowd.titles import TaskFacts
@@ -41,7 +41,8 @@ from backend.validation import Key
 router = APIRouter(prefix="/api/portal", tags=["worker portal"])
 
 
-def _token_read(account_id: int, worker_id: str, token_epoch: int) -> WorkerTokenRead:
+def _token_read(account_id: int, token_epoch: int, worker_id: str | None) -> WorkerTokenRead:
+    assert worker_id is not None  # every portal account has one
     token = account_service.account_token(WORKER, account_id, token_epoch, worker_id=worker_id)
     return WorkerTokenRead(access_token=token, expires_in=WORKER.ttl_s, worker_id=worker_id)
 
@@ -108,29 +109,9 @@ def register(body: Register, session: SessionDep) -> AccountRead:
                                            clock.now()))
 
 
-@router.post("/login", response_model=WorkerTokenRead)
-async def login(body: LoginRequest, request: Request) -> WorkerTokenRead:
-    """A bearer token for 12 hours. Failed logins are limited per account and per client
-    address: past the limit every login answers 429 with Retry-After."""
-    record = await account_service.sign_in(request, WORKER, body.email, body.password)
-    assert record.worker_id is not None
-    return _token_read(record.account_id, record.worker_id, record.token_epoch)
-
-
-@router.post("/logout", status_code=204, response_class=Response)
-def logout(worker: CurrentWorker, session: SessionDep) -> Response:
-    """Ends every token of this worker account (on every device)."""
-    account_service.sign_out(session, worker)
-    return Response(status_code=204)
-
-
-@router.post("/password", response_model=WorkerTokenRead)
-async def change_password(body: PasswordChange, request: Request, worker: CurrentWorker,
-                          session: SessionDep) -> WorkerTokenRead:
-    """A new password: every token issued before ends; the reply is a new token."""
-    await account_service.new_password(request, WORKER, session, worker, body.current_password,
-                                       body.new_password)
-    return _token_read(worker.id, worker.worker_id, worker.token_epoch)
+add_sign_in_routes(router, WORKER, login_path="/login", holder="worker account",
+                   current_account=current_worker, token_model=WorkerTokenRead,
+                   token_reply=_token_read)
 
 
 @router.get("/me", response_model=AccountRead)
