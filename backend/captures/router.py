@@ -51,9 +51,7 @@ async def import_capture(body: ImportRequest, _: CurrentAdmin) -> list[ImportRes
     inside one of the folders of DEXLABEL_CAPTURE_ROOTS (403 outside them)."""
     roots = flows.allowed_capture_roots(get_settings())
     results = await run_in_threadpool(flows.import_path, body.path, None, roots)
-    return [ImportResultRead(sequence_id=r.sequence_id, subject=r.subject, name=r.name,
-                             created=r.created, num_cameras=r.num_cameras,
-                             num_frames=r.num_frames, repaired=r.repaired) for r in results]
+    return list(results)
 
 
 @router.get("/sequences", response_model=list[SequenceRead])

@@ -11,12 +11,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from pydantic import Field
 from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
 from backend.captures.calibration import imported_model
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.captures.plans import SequencePlan
+from backend.captures.schemas import ImportResultRead
 from backend.errors import Conflict, NotFound
 from backend.storage import Storage
 from worker.formats import dexycb
@@ -29,17 +31,11 @@ LISTED_KEYS = 5
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class ImportResult:
-    sequence_id: int
-    subject: str
-    name: str
-    created: bool
-    num_cameras: int
-    num_frames: int
-    # Stored files of an already-imported sequence that were missing and are written again.
-    repaired: int = 0
-    storage_uid: str = ""
+class ImportResult(ImportResultRead):
+    """What an import did, as the API reads it, and where its files are stored."""
+
+    # Left out of every dump: the storage prefix is for the import's own clean-up only.
+    storage_uid: str = Field("", exclude=True)
 
 
 @dataclass(frozen=True)
@@ -146,8 +142,10 @@ def import_sequence(session: Session, storage: Storage, plan: SequencePlan) -> I
     seq = existing_import(session, plan)
     if seq is not None:
         repaired = restore_missing_files(session, storage, plan, seq)
-        return ImportResult(seq.id, plan.subject, plan.name, False, len(seq.cameras),
-                            seq.num_frames, repaired=repaired, storage_uid=seq.storage_uid)
+        return ImportResult(sequence_id=seq.id, subject=plan.subject, name=plan.name,
+                            created=False, num_cameras=len(seq.cameras),
+                            num_frames=seq.num_frames, repaired=repaired,
+                            storage_uid=seq.storage_uid)
     uid = new_storage_uid(plan.subject, plan.name)
     try:
         seq = _add_rows(session, plan, uid)
@@ -156,7 +154,8 @@ def import_sequence(session: Session, storage: Storage, plan: SequencePlan) -> I
     except BaseException:
         storage.delete_prefix(capture_prefix(uid))
         raise
-    return ImportResult(seq.id, plan.subject, plan.name, True, len(plan.cameras), plan.num_frames,
+    return ImportResult(sequence_id=seq.id, subject=plan.subject, name=plan.name, created=True,
+                        num_cameras=len(plan.cameras), num_frames=plan.num_frames,
                         storage_uid=uid)
 
 
