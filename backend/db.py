@@ -9,7 +9,7 @@ from __future__ import annotations
 import collections
 import sqlite3
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Iterable, Iterator
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -21,10 +21,27 @@ import anyio
 from anyio.lowlevel import RunVar
 from fastapi import Depends, FastAPI, Request
 from fastapi.responses import JSONResponse
-from sqlalchemy import DateTime, Dialect, Engine, MetaData, TypeDecorator, create_engine, event
+from sqlalchemy import (
+    CheckConstraint,
+    DateTime,
+    Dialect,
+    Engine,
+    ForeignKey,
+    MetaData,
+    TypeDecorator,
+    create_engine,
+    event,
+)
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeout
-from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
+from sqlalchemy.orm import (
+    DeclarativeBase,
+    Mapped,
+    MappedColumn,
+    Session,
+    mapped_column,
+    sessionmaker,
+)
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.config import get_settings
@@ -72,6 +89,18 @@ class UTCDateTime(TypeDecorator[datetime]):
 
 class TimestampMixin:
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+
+def parent_key(target: str, **column: Any) -> MappedColumn[Any]:
+    """A column keyed to the row ``target`` ("table.id") that this row belongs to: deleting
+    that row deletes this one with it."""
+    return mapped_column(ForeignKey(target, ondelete="CASCADE"), **column)
+
+
+def one_of(column: str, values: Iterable[str]) -> CheckConstraint:
+    """The check that ``column`` holds one of ``values``, named "<column>_valid"."""
+    listed = ", ".join(repr(value) for value in values)
+    return CheckConstraint(f"{column} IN ({listed})", name=f"{column}_valid")
 
 
 # ----- engines --------------------------------------------------------------------------

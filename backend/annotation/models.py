@@ -14,7 +14,6 @@ from sqlalchemy import (
     JSON,
     CheckConstraint,
     Float,
-    ForeignKey,
     Index,
     Integer,
     String,
@@ -24,28 +23,26 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from backend.captures.models import Camera, Sequence
-from backend.db import Base, TimestampMixin, UTCDateTime
+from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key
 
 
 class Task(TimestampMixin, Base):
     __tablename__ = "tasks"
     __table_args__ = (
         UniqueConstraint("camera_id", "target_key"),
-        CheckConstraint("kind IN ('hand', 'object')", name="kind_valid"),
+        one_of("kind", ("hand", "object")),
         CheckConstraint("num_points > 0", name="num_points_positive"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
     # Indexed: a sequence's tasks are read by every progress, QC and solve query.
-    sequence_id: Mapped[int] = mapped_column(
-        ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
-    camera_id: Mapped[int] = mapped_column(ForeignKey("cameras.id", ondelete="CASCADE"))
+    sequence_id: Mapped[int] = parent_key("sequences.id", index=True)
+    camera_id: Mapped[int] = parent_key("cameras.id")
     kind: Mapped[str] = mapped_column(String(8))
     # "hand:<index>" or "object:<index>": the target within the sequence.
     target_key: Mapped[str] = mapped_column(String(32))
-    hand_id: Mapped[int | None] = mapped_column(ForeignKey("hands.id", ondelete="CASCADE"))
-    object_id: Mapped[int | None] = mapped_column(
-        ForeignKey("scene_objects.id", ondelete="CASCADE"))
+    hand_id: Mapped[int | None] = parent_key("hands.id")
+    object_id: Mapped[int | None] = parent_key("scene_objects.id")
     num_points: Mapped[int] = mapped_column(Integer)
     # Object tasks: {"polygon": [[x, y], ...]} from the projected initial pose, or {"box": [...]}.
     highlight: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
@@ -65,13 +62,11 @@ class Assignment(TimestampMixin, Base):
         # A task's work, and its work in one state (the approved labels, the submitted work).
         Index("ix_assignments_task_id_status", "task_id", "status"),
         CheckConstraint("version >= 0", name="version_nonnegative"),
-        CheckConstraint(
-            "status IN ('working', 'submitted', 'approved', 'rejected')", name="status_valid"
-        ),
+        one_of("status", ("working", "submitted", "approved", "rejected")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"))
+    task_id: Mapped[int] = parent_key("tasks.id")
     worker_id: Mapped[str] = mapped_column(String(64))
     # The marketplace's AssignmentId (or one we made for a direct link); unique everywhere.
     external_id: Mapped[str] = mapped_column(String(64), unique=True)
@@ -96,7 +91,7 @@ class Track(Base):
     __table_args__ = (UniqueConstraint("assignment_id", "point_index"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    assignment_id: Mapped[int] = mapped_column(ForeignKey("assignments.id", ondelete="CASCADE"))
+    assignment_id: Mapped[int] = parent_key("assignments.id")
     point_index: Mapped[int] = mapped_column(Integer)
     keyframes: Mapped[list[list[Any]]] = mapped_column(JSON)
 
@@ -111,7 +106,7 @@ class TrainingClip(TimestampMixin, Base):
     __tablename__ = "training_clips"
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), unique=True)
+    task_id: Mapped[int] = parent_key("tasks.id", unique=True)
     # "truth" (a synthetic capture's ground truth) or "assignment:<id>" (accepted labels).
     source: Mapped[str] = mapped_column(String(64))
     # P tracks of keyframe rows [frame, x, y, visible01], as the annotation page saves them.

@@ -19,7 +19,6 @@ import numpy as np
 from sqlalchemy import (
     JSON,
     Boolean,
-    ForeignKey,
     Index,
     Integer,
     String,
@@ -30,7 +29,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from backend.captures.models import Camera
-from backend.db import Base, TimestampMixin
+from backend.db import Base, TimestampMixin, parent_key
 from worker.geometry.cameras import CameraModel
 
 
@@ -47,8 +46,7 @@ class CalibrationVersion(TimestampMixin, Base):
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"),
-                                             index=True)
+    sequence_id: Mapped[int] = parent_key("sequences.id", index=True)
     number: Mapped[int] = mapped_column(Integer)
     source: Mapped[str] = mapped_column(String(32), default="rig-health")
     in_use: Mapped[bool] = mapped_column(Boolean, default=False)

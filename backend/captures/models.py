@@ -20,7 +20,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from backend.db import Base, TimestampMixin
+from backend.db import Base, TimestampMixin, one_of, parent_key
 
 
 class Subject(TimestampMixin, Base):
@@ -76,7 +76,7 @@ class Camera(Base):
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"))
+    sequence_id: Mapped[int] = parent_key("sequences.id")
     serial: Mapped[str] = mapped_column(String(64))
     view_index: Mapped[int] = mapped_column(Integer)
     width: Mapped[int] = mapped_column(Integer)
@@ -104,7 +104,7 @@ class SceneObject(Base):
     __table_args__ = (UniqueConstraint("sequence_id", "index"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"))
+    sequence_id: Mapped[int] = parent_key("sequences.id")
     index: Mapped[int] = mapped_column(Integer)
     ycb_id: Mapped[int] = mapped_column(Integer)
     name: Mapped[str] = mapped_column(String(200))
@@ -122,11 +122,11 @@ class Hand(Base):
     __tablename__ = "hands"
     __table_args__ = (
         UniqueConstraint("sequence_id", "index"),
-        CheckConstraint("side IN ('right', 'left')", name="side_valid"),
+        one_of("side", ("right", "left")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(ForeignKey("sequences.id", ondelete="CASCADE"))
+    sequence_id: Mapped[int] = parent_key("sequences.id")
     index: Mapped[int] = mapped_column(Integer)
     side: Mapped[str] = mapped_column(String(8))
     calib_name: Mapped[str | None] = mapped_column(String(200))
@@ -146,7 +146,7 @@ class Frame(Base):
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    camera_id: Mapped[int] = mapped_column(ForeignKey("cameras.id", ondelete="CASCADE"))
+    camera_id: Mapped[int] = parent_key("cameras.id")
     index: Mapped[int] = mapped_column(Integer)
     color_key: Mapped[str] = mapped_column(String(500))
     color_bytes: Mapped[int] = mapped_column(Integer)

@@ -11,7 +11,6 @@ from datetime import datetime
 from sqlalchemy import (
     BigInteger,
     CheckConstraint,
-    ForeignKey,
     Index,
     Integer,
     String,
@@ -21,7 +20,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin, UTCDateTime
+from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key
 
 OPEN_SLOTS = "hit_id IS NOT NULL AND expired_at IS NULL AND max_assignments > decided"
 
@@ -41,7 +40,7 @@ class CrowdHit(TimestampMixin, Base):
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"))
+    task_id: Mapped[int] = parent_key("tasks.id")
     round: Mapped[int] = mapped_column(Integer, default=1)
     request_token: Mapped[str] = mapped_column(String(64), unique=True)
     hit_id: Mapped[str | None] = mapped_column(String(64), unique=True)
@@ -59,8 +58,7 @@ class CrowdSubmission(TimestampMixin, Base):
     __tablename__ = "crowd_submissions"
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    assignment_id: Mapped[int] = mapped_column(
-        ForeignKey("assignments.id", ondelete="CASCADE"), unique=True)
+    assignment_id: Mapped[int] = parent_key("assignments.id", unique=True)
     hit_id: Mapped[str] = mapped_column(String(64))
     worker_id: Mapped[str] = mapped_column(String(64))
     market_status: Mapped[str] = mapped_column(String(16))
@@ -71,15 +69,14 @@ class CrowdPayment(TimestampMixin, Base):
 
     __tablename__ = "crowd_payments"
     __table_args__ = (
-        CheckConstraint("kind IN ('approval', 'rejection', 'bonus')", name="kind_valid"),
+        one_of("kind", ("approval", "rejection", "bonus")),
         CheckConstraint("amount_cents >= 0 AND fee_cents >= 0", name="amounts_nonnegative"),
-        CheckConstraint("state IN ('pending', 'done')", name="state_valid"),
+        one_of("state", ("pending", "done")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))
-    assignment_id: Mapped[int] = mapped_column(
-        ForeignKey("assignments.id", ondelete="CASCADE"), index=True)
+    assignment_id: Mapped[int] = parent_key("assignments.id", index=True)
     worker_id: Mapped[str] = mapped_column(String(64), index=True)
     # Deterministic: "approval-<assignment>", "rejection-<assignment>" or a bonus token.
     request_token: Mapped[str] = mapped_column(String(64), unique=True)
@@ -107,7 +104,7 @@ class CrowdWorkerAction(TimestampMixin, Base):
     __tablename__ = "crowd_worker_actions"
     __table_args__ = (
         UniqueConstraint("worker_id", "kind", "target"),
-        CheckConstraint("kind IN ('block', 'qualification')", name="kind_valid"),
+        one_of("kind", ("block", "qualification")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -145,7 +142,7 @@ class CrowdCostTotal(Base):
     __tablename__ = "crowd_cost_totals"
     __table_args__ = (
         UniqueConstraint("scope", "key", "kind", "state"),
-        CheckConstraint("scope IN ('sequence', 'worker')", name="scope_valid"),
+        one_of("scope", ("sequence", "worker")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)

@@ -13,7 +13,7 @@ from typing import Any
 from sqlalchemy import JSON, CheckConstraint, Index, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
+from backend.db import Base, TimestampMixin, UTCDateTime, one_of, utcnow
 
 JOB_STATUSES = ("queued", "running", "retrying", "waiting", "done", "failed")
 
@@ -24,9 +24,7 @@ class Job(TimestampMixin, Base):
         # The job listing, newest first, of one status or one kind.
         Index("ix_jobs_status_id", "status", "id"),
         Index("ix_jobs_kind_id", "kind", "id"),
-        CheckConstraint(
-            "status IN ('queued', 'running', 'retrying', 'waiting', 'done', 'failed')",
-            name="status_valid"),
+        one_of("status", ("queued", "running", "retrying", "waiting", "done", "failed")),
         CheckConstraint("attempts >= 0 AND max_attempts >= 1", name="attempts_valid"),
     )
 

@@ -26,14 +26,10 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from backend.db import Base, UTCDateTime
+from backend.db import Base, UTCDateTime, one_of
 
 ASSIGNMENT_STATUSES = ("Accepted", "Submitted", "Approved", "Rejected", "Returned", "Abandoned")
 LEDGER_KINDS = ("hold", "release", "pay", "bonus")
-
-
-def _status_check(column: str, values: tuple[str, ...]) -> str:
-    return f"{column} IN ({', '.join(repr(v) for v in values)})"
 
 
 class HitType(Base):
@@ -102,7 +98,7 @@ class MarketAssignment(Base):
 
     __tablename__ = "market_assignments"
     __table_args__ = (
-        CheckConstraint(_status_check("status", ASSIGNMENT_STATUSES), name="status_valid"),
+        one_of("status", ASSIGNMENT_STATUSES),
         Index("ix_market_assignments_status_auto_approval_time", "status", "auto_approval_time"),
         Index("ix_market_assignments_status_deadline", "status", "deadline"),
     )
@@ -144,7 +140,7 @@ class QualificationType(Base):
     __tablename__ = "market_qualification_types"
     __table_args__ = (
         UniqueConstraint("requester", "name"),
-        CheckConstraint("status IN ('Active', 'Inactive')", name="status_valid"),
+        one_of("status", ("Active", "Inactive")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -169,7 +165,7 @@ class Qualification(Base):
     __tablename__ = "market_qualifications"
     __table_args__ = (
         UniqueConstraint("type_pk", "worker_id"),
-        CheckConstraint("status IN ('Granted', 'Revoked')", name="status_valid"),
+        one_of("status", ("Granted", "Revoked")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -246,7 +242,7 @@ class LedgerEntry(Base):
     """
 
     __tablename__ = "market_ledger"
-    __table_args__ = (CheckConstraint(_status_check("kind", LEDGER_KINDS), name="kind_valid"),)
+    __table_args__ = (one_of("kind", LEDGER_KINDS),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     requester: Mapped[str] = mapped_column(String(128), index=True)

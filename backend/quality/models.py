@@ -11,10 +11,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, CheckConstraint, ForeignKey, Index, Integer, String, Text
+from sqlalchemy import JSON, Boolean, Index, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin, UTCDateTime, utcnow
+from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key, utcnow
 
 
 class QCReport(TimestampMixin, Base):
@@ -22,15 +22,13 @@ class QCReport(TimestampMixin, Base):
     __table_args__ = (
         # Each worker's tally by outcome (worker quality) is read from this index alone.
         Index("ix_qc_reports_worker_id_outcome", "worker_id", "outcome", "provisional"),
-        CheckConstraint("outcome IN ('approve', 'review', 'reject')", name="outcome_valid"),
+        one_of("outcome", ("approve", "review", "reject")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    assignment_id: Mapped[int] = mapped_column(
-        ForeignKey("assignments.id", ondelete="CASCADE"), unique=True)
-    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), index=True)
-    sequence_id: Mapped[int] = mapped_column(
-        ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
+    assignment_id: Mapped[int] = parent_key("assignments.id", unique=True)
+    task_id: Mapped[int] = parent_key("tasks.id", index=True)
+    sequence_id: Mapped[int] = parent_key("sequences.id", index=True)
     target_key: Mapped[str] = mapped_column(String(32))
     worker_id: Mapped[str] = mapped_column(String(64))
     # "consensus" (scored against the other views) or "gold" (a training clip's known labels).

@@ -11,10 +11,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, CheckConstraint, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
-from backend.db import Base, TimestampMixin, UTCDateTime
+from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key
 
 SOLVE_STATUSES = ("queued", "running", "done", "failed")
 
@@ -22,14 +22,12 @@ SOLVE_STATUSES = ("queued", "running", "done", "failed")
 class SolveRun(TimestampMixin, Base):
     __tablename__ = "solve_runs"
     __table_args__ = (
-        CheckConstraint("status IN ('queued', 'running', 'done', 'failed')",
-                        name="status_valid"),
-        CheckConstraint("optimiser IN ('paper', 'default')", name="optimiser_valid"),
+        one_of("status", ("queued", "running", "done", "failed")),
+        one_of("optimiser", ("paper", "default")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sequence_id: Mapped[int] = mapped_column(
-        ForeignKey("sequences.id", ondelete="CASCADE"), index=True)
+    sequence_id: Mapped[int] = parent_key("sequences.id", index=True)
     optimiser: Mapped[str] = mapped_column(String(16))
     # The solver settings used (weights, iterations, device), as given to worker.solver.
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
