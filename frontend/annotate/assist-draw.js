@@ -14,7 +14,7 @@
 import { $ } from "../common/dom.js";
 import { Assist } from "./core/assist.js";
 import { clipLine } from "./core/epipolar.js";
-import { addSceneLayer } from "./render.js";
+import { addSceneLayer, traceImagePath } from "./render.js";
 
 export const TRACK_GHOST = "#35d0ff";
 export const SUGGEST_GHOST = "#ff5fd2";
@@ -116,12 +116,7 @@ function drawPath(ctx, tf, path) {
   ctx.globalAlpha = 0.7;
   ctx.lineWidth = 1;
   ctx.strokeStyle = TRACK_GHOST;
-  ctx.beginPath();
-  path.forEach(([x, y], i) => {
-    const s = tf.toScreen(x, y);
-    if (i === 0) ctx.moveTo(s.x, s.y);
-    else ctx.lineTo(s.x, s.y);
-  });
+  traceImagePath(ctx, tf, path);
   ctx.stroke();
   ctx.restore();
 }

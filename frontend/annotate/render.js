@@ -91,12 +91,7 @@ export function drawHighlight(ctx, tf, highlight) {
     corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
   }
   if (!corners) return;
-  ctx.beginPath();
-  corners.forEach(([x, y], i) => {
-    const s = tf.toScreen(x, y);
-    if (i === 0) ctx.moveTo(s.x, s.y);
-    else ctx.lineTo(s.x, s.y);
-  });
+  traceImagePath(ctx, tf, corners);
   ctx.closePath();
   ctx.fillStyle = "rgba(255, 214, 10, 0.12)";
   ctx.fill();
@@ -105,6 +100,20 @@ export function drawHighlight(ctx, tf, highlight) {
   ctx.strokeStyle = "rgba(255, 214, 10, 0.95)";
   ctx.stroke();
   ctx.setLineDash([]);
+}
+
+/**
+ * Begins a path through points given in image pixels, drawn in screen pixels; the caller
+ * strokes or fills it.
+ * @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {number[][]} points  image px
+ */
+export function traceImagePath(ctx, tf, points) {
+  ctx.beginPath();
+  points.forEach(([x, y], i) => {
+    const s = tf.toScreen(x, y);
+    if (i === 0) ctx.moveTo(s.x, s.y);
+    else ctx.lineTo(s.x, s.y);
+  });
 }
 
 /** @param {DenseValue|undefined} v */

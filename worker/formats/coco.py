@@ -65,12 +65,12 @@ import shutil
 import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import IO, Any, Literal
 
 import numpy as np
 
 from worker.formats.dexycb import HAND_SEG_VALUE, YCB_CLASSES
+from worker.formats.writer import StreamWriter
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS, NUM_JOINTS
 
 LabelSource = Literal["annotated_2d", "projected_3d"]
@@ -177,7 +177,7 @@ def categories(object_classes: Mapping[int, str] = YCB_CLASSES) -> list[dict[str
     return [hand, *objects]
 
 
-class CocoWriter:
+class CocoWriter(StreamWriter):
     """Streams a COCO keypoints document into ``out`` (a binary file object opened for writing).
 
     Use as a context manager, or call :meth:`close` once after the last :meth:`add_image`; the
@@ -204,16 +204,6 @@ class CocoWriter:
         self._image_count = 0
         self._annotation_count = 0
         self._closed = False
-
-    def __enter__(self) -> CocoWriter:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self._discard()
 
     def add_image(self, file_name: str, width: int, height: int, *,
                   seg: np.ndarray | None = None, hand: HandKeypoints | None = None,

@@ -81,12 +81,12 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from types import TracebackType
 from typing import IO, Any, Literal
 from xml.sax.saxutils import escape
 
 import numpy as np
 
+from worker.formats.writer import StreamWriter
 from worker.hand.joints import JOINT_NAMES, JOINT_PARENTS
 from worker.tracks.interpolate import dense_points
 from worker.tracks.keyframes import SOURCES, Keyframe, KeyframeSource, as_keyframes
@@ -260,7 +260,7 @@ def _points_xml(name: str, e: CvatElement, keyframe: bool) -> str:
             f'<attribute name="{SOURCE_ATTRIBUTE}">{e.source}</attribute></points>')
 
 
-class CvatVideoWriter:
+class CvatVideoWriter(StreamWriter):
     """Writes one CVAT for video 1.1 document track by track (see the module docstring)."""
 
     def __init__(self, out: IO[bytes], labels: Sequence[SkeletonLabel], *, num_frames: int,
@@ -346,11 +346,3 @@ class CvatVideoWriter:
         if not self._closed:
             self._write("</annotations>\n")
             self._closed = True
-
-    def __enter__(self) -> CvatVideoWriter:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()

@@ -64,11 +64,7 @@ export class UndoStack {
    * @returns {any} what `revert()` returned, or undefined when there is nothing to undo
    */
   undo() {
-    const command = this._done.pop();
-    if (!command) return undefined;
-    const result = command.revert();
-    this._undone.push(command);
-    return result;
+    return this._move(this._done, this._undone, (command) => command.revert());
   }
 
   /**
@@ -76,10 +72,19 @@ export class UndoStack {
    * @returns {any} what `apply()` returned, or undefined when there is nothing to redo
    */
   redo() {
-    const command = this._undone.pop();
+    return this._move(this._undone, this._done, (command) => command.apply());
+  }
+
+  /**
+   * Takes the latest command off one stack, runs it one way and puts it on the other.
+   * @param {Command[]} from @param {Command[]} to @param {(command: Command) => any} run
+   * @returns {any} what `run` returned, or undefined when `from` is empty
+   */
+  _move(from, to, run) {
+    const command = from.pop();
     if (!command) return undefined;
-    const result = command.apply();
-    this._done.push(command);
+    const result = run(command);
+    to.push(command);
     return result;
   }
 
