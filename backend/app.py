@@ -48,6 +48,7 @@ from backend.quality.router import records_router as worker_records_router
 from backend.quality.router import router as review_router
 from backend.queue import check_queue
 from backend.rig.router import router as rig_router
+from backend.server_process import exit_with_parent
 from backend.solve.router import router as solve_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
@@ -109,7 +110,10 @@ def create_served_app() -> FastAPI:
     ~300,000 objects that live as long as the process) is moved out of the garbage
     collector's reach, so that its passes stop walking them again and again as requests
     allocate (a track save makes ~3,000 lists). Server CPU per autosave under a crowd of 200:
-    14.9 -> 9.2 ms (bench/load.py). Not for tests: frozen objects are never collected."""
+    14.9 -> 9.2 ms (bench/load.py). Not for tests: frozen objects are never collected.
+    A server process of `serve --workers N` also ends when its supervisor dies
+    (backend.server_process)."""
+    exit_with_parent()
     app = create_app()
     inner = app.router.lifespan_context
 

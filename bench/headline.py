@@ -69,10 +69,12 @@ SECTIONS: dict[str, list[Run]] = {
              "proposals", "timing_ms", "qc.confusion", "targets"), timeout_s=HOURS),
         Run("prefill", ("--runs", "3"), ("error", "suggested", "visibility", "timing_ms"),
             timeout_s=HOURS)],
-    "README: page, import, marketplace": [
+    "README: page, import, marketplace, API process": [
         Run("annotate", (), QUICK["annotate"].keys, needs=("chromium",), timeout_s=HOURS),
         Run("import", (), QUICK["import"].keys, timeout_s=HOURS),
-        Run("market", (), QUICK["market"].keys, timeout_s=HOURS)],
+        Run("market", (), QUICK["market"].keys, timeout_s=HOURS),
+        Run("api_memory", (), QUICK["api_memory"].keys, equal=QUICK["api_memory"].equal,
+            timeout_s=HOURS)],
 }
 
 

@@ -43,6 +43,9 @@ from _runs import BENCH, ROOT, Context, Run, run_bench
 RUNNERS = {"smoke", "headline"}
 
 QUICK: dict[str, Run] = {
+    "api_memory": Run("api_memory", ("--rounds", "1"),
+                      ("rss_mb", "peak_rss_mb", "create_app_s", "modules"),
+                      equal={"torch_loaded": False, "solver_loaded": False}),
     "annotate": Run("annotate", ("--frames", "6", "--views", "2", "--steps", "10"),
                     ("first_frame_ms_median", "all_frames_ms_median", "step_ms_median",
                      "step_ms_p99", "autosave_bytes"), needs=("chromium",)),

@@ -174,6 +174,11 @@ def create_admin(
 # A stopping server finishes the requests it has for at most this long (every database wait
 # of a request is bounded by DEXLABEL_DB_WAIT_S), then closes what is left.
 SHUTDOWN_GRACE_S = 15
+# With --workers N, uvicorn's supervisor pings every server process each half second and kills
+# one that does not answer within this many seconds, also while it starts. uvicorn's 5 s is
+# less than a process's start (interpreter, uvicorn, then the app in a thread beside the one
+# that answers) takes on a loaded machine: starting children were killed 8-17 times in a row.
+WORKER_HEALTH_TIMEOUT_S = 30
 
 
 @app.command()
@@ -210,6 +215,7 @@ def serve(
     try:
         uvicorn.run("backend.app:create_served_app", factory=True, host=host, port=port,
                     workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+                    timeout_worker_healthcheck=WORKER_HEALTH_TIMEOUT_S,
                     # The client address behind a proxy is DEXLABEL_TRUSTED_PROXIES' business
                     # (backend.accounts.limits.client_address), not uvicorn's loopback default.
                     proxy_headers=False)

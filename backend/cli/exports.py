@@ -17,6 +17,7 @@ import typer
 from backend.cli.console import fail, progress, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 from backend.errors import DexlabelError
+from worker.formats import FORMATS
 
 # Suffixes that name a file, not a folder: refused rather than made into a folder so named.
 _FILE_SUFFIXES = {".gz", ".tgz", ".bz2", ".xz", ".zst", ".7z", ".rar", ".json", ".xml", ".npz"}
@@ -44,10 +45,11 @@ def export_command(
         "--labels", help="coco: hand keypoints from the 2D labels or the solve")] = None,
 ) -> None:
     """Export labels of one or more sequences (or --all) in a format, with a progress bar."""
+    # The arguments are checked before the export's modules load: a typo answers at once.
+    out = _checked_out(fmt, out, bool(sequences), all_sequences)
     from backend.exports.archive import kind_of
     from backend.exports.service import check_request, run_export
 
-    out = _checked_out(fmt, out, bool(sequences), all_sequences)
     options: dict[str, Any] = {"frames": "link" if link_frames else ("copy" if frames else None),
                                "split": split, "labels": labels}
     options = {k: v for k, v in options.items() if v is not None}
@@ -78,6 +80,8 @@ def _checked_out(fmt: str, out: Path | None, named: bool, all_sequences: bool) -
     (else the command stops naming what to give)."""
     if not fmt:
         fail("give --format (dexycb, coco, bop, cvat or json)")
+    if fmt not in FORMATS:
+        fail(f"--format must be one of {', '.join(FORMATS)}; {fmt!r} is none of them")
     if out is None:
         fail("give --out PATH (an archive .zip or .tar, or a folder)")
     if named == all_sequences:

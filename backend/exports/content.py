@@ -27,8 +27,6 @@ from backend.solve.service import current_run
 from backend.storage import get_storage
 from worker.formats.provenance import ProvenanceState, frame_provenance, view_states
 from worker.geometry import CameraModel
-from worker.hand import HandLayer
-from worker.hand.posing import posed_hand
 from worker.tracks.interpolate import dense_points
 
 
@@ -194,6 +192,10 @@ def _work(session: Session, sequence_id: int, views: dict[int, int], num_frames:
 
 def _solved_hand(solve: SolveContent) -> None:
     """The hand mesh at every labelled frame and the rest root joint, from pose_m and betas."""
+    # Posing loads PyTorch: imported here, so that only exports with a solved hand pay for it.
+    from worker.hand.layer import HandLayer
+    from worker.hand.posing import posed_hand
+
     arrays = solve.arrays
     side = str(arrays["hand_side"])
     if not side or arrays["betas"].size == 0:

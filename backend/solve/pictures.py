@@ -17,9 +17,7 @@ from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, frame_payload, object_trust
 from backend.solve.service import check_frame, resolve_view
 from backend.storage import get_storage
-from worker.hand import HandLayer
 from worker.hand.joints import JOINT_NAMES
-from worker.hand.posing import posed_hand
 from worker.overlay import (
     OverlayStyle,
     caption,
@@ -45,6 +43,10 @@ def solved_hand(arrays: dict[str, np.ndarray], frame: int
 
     None where the frame is unlabelled or the run has no hand.
     """
+    # Posing loads PyTorch: imported here, so that the API loads it only when a hand is shown.
+    from worker.hand.layer import HandLayer
+    from worker.hand.posing import posed_hand
+
     side = str(arrays["hand_side"])
     pose_m = arrays["hand_pose_m"][frame]
     if not side or not np.isfinite(pose_m).all() or arrays["betas"].size == 0:

@@ -16,12 +16,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from worker.geometry.cameras import CameraModel
 from worker.geometry.triangulate import triangulate_points
 from worker.hand.joints import JOINT_PARENTS, NUM_JOINTS
-from worker.hand.layer import HandLayer
 from worker.hand.params import HandModel
 
 # Ridge weight (m^2 per unit beta^2): 1e-8 is (0.1 mm)^2, small beside the bone-length residuals,
@@ -85,6 +83,12 @@ def median_bone_lengths(joints: np.ndarray, min_frames: int = 3) -> np.ndarray:
 
 def rest_joint_map(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
     """The affine map betas -> rest-pose joints: base (21, 3) and basis (21, 3, K), metres."""
+    # PyTorch loads here, not with the module: the API checks shapes with this module's other
+    # functions and never poses a hand.
+    import torch
+
+    from worker.hand.layer import HandLayer
+
     layer = HandLayer(model, flat_hand_mean=True, use_pca=False)
     k = model.num_betas
     betas = torch.cat((torch.zeros(1, k, dtype=torch.float64),

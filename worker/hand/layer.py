@@ -151,14 +151,41 @@ class HandLayer(nn.Module):
 
     def _skin(self, full_pose: torch.Tensor, betas: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Shape, pose-correct and skin: vertices (B, V, 3), skeleton (B, 16, 3), model frame."""
-        batch = full_pose.shape[0]
         v_shaped = self.v_template + blend_shapes(betas, self.shapedirs)
         rest_joints = torch.einsum("jv,bvc->bjc", self.J_regressor, v_shaped)
-        rotations = axis_angle_to_matrix(full_pose.reshape(batch, NUM_SKELETON_JOINTS, 3))
-        offsets = (pose_features(rotations) @ self.posedirs).reshape(batch, -1, 3)
-        skeleton, transforms = rigid_transforms(rotations, rest_joints, self.parents)
-        vertices = linear_blend_skinning(v_shaped + offsets, transforms, self.lbs_weights)
+        skeleton, vertices = self.pose_vertices(full_pose, v_shaped, rest_joints)
         return vertices, skeleton
+
+    def pose_vertices(
+        self,
+        full_pose: torch.Tensor,
+        v_shaped: torch.Tensor,
+        rest_joints: torch.Tensor,
+        vertex_ids: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """MANO's forward kinematics and skinning: the one place vertices are posed.
+
+        full_pose: (B, 48) axis-angle of the 16 joints, rad (see :meth:`full_pose`).
+        v_shaped: (V, 3) or (B, V, 3) shaped template, metres; rest_joints: (16, 3) or
+        (B, 16, 3) its rest skeleton. vertex_ids: (B, K) the vertices to skin per frame, or
+        None for all V. Returns the posed skeleton (B, 16, 3) and vertices (B, K or V, 3),
+        metres, in the model frame (no translation).
+        """
+        batch = full_pose.shape[0]
+        rotations = axis_angle_to_matrix(full_pose.reshape(batch, NUM_SKELETON_JOINTS, 3))
+        skeleton, transforms = rigid_transforms(
+            rotations, rest_joints.expand(batch, -1, -1), self.parents)
+        # One dense product for all vertices, then a gather: a plain matrix product stays fast
+        # under vmap, where a per-frame gather of the basis first would be copied per tangent.
+        offsets = (pose_features(rotations) @ self.posedirs).reshape(batch, -1, 3)
+        weights = self.lbs_weights
+        if vertex_ids is not None:
+            index = vertex_ids[..., None].expand(-1, -1, 3)
+            offsets = torch.gather(offsets, 1, index)
+            v_shaped = (v_shaped[vertex_ids] if v_shaped.ndim == 2
+                        else torch.gather(v_shaped, 1, index))
+            weights = weights[vertex_ids]
+        return skeleton, linear_blend_skinning(v_shaped + offsets, transforms, weights)
 
     def from_pose_m(self, pose_m: torch.Tensor, betas: torch.Tensor) -> HandOutput:
         """Pose the hand from a DexYCB label's pose_m.

@@ -86,12 +86,14 @@ def rigid_transforms(
 def linear_blend_skinning(
     vertices: torch.Tensor, transforms: torch.Tensor, weights: torch.Tensor
 ) -> torch.Tensor:
-    """Skin vertices (B, V, 3) with per-joint transforms (B, J, 4, 4) and weights (V, J).
+    """Skin vertices (B, V, 3) with per-joint transforms (B, J, 4, 4) and weights (V, J) or
+    (B, V, J).
 
-    Returns (B, V, 3): sum_j w_vj (R_j v + t_j), metres.
+    Returns (B, V, 3): sum_j w_vj (R_j v + t_j), metres. Blending the 3x4 transforms is one
+    plain matrix product, which stays fast under vmap (the solver's Jacobians).
     """
-    blended = torch.einsum("vj,bjrc->bvrc", weights, transforms[:, :, :3, :])
-    return (blended[..., :3] @ vertices[..., None])[..., 0] + blended[..., 3]
+    blended = (weights @ transforms[:, :, :3, :].flatten(2)).unflatten(-1, (3, 4))
+    return (blended[..., :3] * vertices[..., None, :]).sum(-1) + blended[..., 3]
 
 
 def pose_features(rotations: torch.Tensor) -> torch.Tensor:

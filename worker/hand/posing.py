@@ -8,8 +8,11 @@
   hundred vertices that depth points are matched to; skinning all 778 vertices in every
   Jacobian column would dominate the solve. With the subject's betas fixed, the shaped
   template and rest joints are computed once; each evaluation then poses the skeleton and
-  skins only the requested vertices, with HandLayer's semantics (pose correctives, LBS,
-  translation), in a form that stays fast under vmap.
+  skins only the requested vertices.
+
+Both pose through :meth:`worker.hand.HandLayer.pose_vertices`, the one implementation of MANO's
+forward kinematics and skinning (pose correctives, rigid transforms, LBS), in a form that stays
+fast under vmap.
 
 pose_m (B, 51): global axis-angle (rad), 45 PCA coefficients, translation (metres); outputs in
 metres in pose_m's frame; joints in DexYCB order.
@@ -20,9 +23,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from worker.hand.joints import NUM_SKELETON_JOINTS
 from worker.hand.layer import HandLayer
-from worker.hand.lbs import axis_angle_to_matrix, pose_features, rigid_transforms
 
 
 class SubjectHand:
@@ -33,7 +34,6 @@ class SubjectHand:
         betas = betas.to(layer.v_template)
         self.v_shaped = layer.v_template + torch.einsum("k,vck->vc", betas, layer.shapedirs)
         self.rest_joints = layer.J_regressor @ self.v_shaped
-        self.posedirs = layer.posedirs  # (135, V * 3)
         self.tips = layer.tip_vertex_ids
         self.num_vertices = self.v_shaped.shape[0]
         self.faces = layer.faces
@@ -47,31 +47,15 @@ class SubjectHand:
         """
         batch = pose_m.shape[0]
         full = self.layer.full_pose(pose_m[:, :3], pose_m[:, 3:48])
-        rot = axis_angle_to_matrix(full.reshape(batch, NUM_SKELETON_JOINTS, 3))
-        rest = self.rest_joints.expand(batch, -1, -1)
-        skeleton, transforms = rigid_transforms(rot, rest, self.layer.parents)
-        feats = pose_features(rot)
         ids = torch.arange(self.num_vertices, device=pose_m.device) if vertex_ids is None \
             else vertex_ids
         if ids.ndim == 1:
             ids = ids.expand(batch, -1)
         wanted = torch.cat((self.tips.expand(batch, -1), ids), dim=1)  # (B, 5 + K)
-        # One dense product for all vertices, then a gather: a plain matrix product stays fast
-        # under vmap, where a per-frame gather of the basis first would be copied per tangent.
-        every = (feats @ self.posedirs).reshape(batch, self.num_vertices, 3)
-        offsets = torch.gather(every, 1, wanted[..., None].expand(-1, -1, 3))
-        verts = self._skin(self.v_shaped[wanted] + offsets, transforms,
-                           self.layer.lbs_weights[wanted])
+        skeleton, verts = self.layer.pose_vertices(full, self.v_shaped, self.rest_joints, wanted)
         shift = pose_m[:, None, 48:51]
         joints = torch.cat((skeleton, verts[:, :5]), dim=1)[:, self.layer.joint_order]
         return joints + shift, verts[:, 5:] + shift
-
-    @staticmethod
-    def _skin(vertices: torch.Tensor, transforms: torch.Tensor, weights: torch.Tensor
-              ) -> torch.Tensor:
-        """LBS of vertices (B, K, 3) with transforms (B, 16, 4, 4) and weights (B, K, 16)."""
-        blended = (weights @ transforms[:, :, :3, :].flatten(2)).unflatten(-1, (3, 4))
-        return (blended[..., :3] * vertices[..., None, :]).sum(-1) + blended[..., 3]
 
 
 def posed_hand(layer: HandLayer, pose_m: np.ndarray, betas: np.ndarray

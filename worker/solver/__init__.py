@@ -3,9 +3,17 @@
 `solve(inputs, settings)` minimises E = E_kpt + E_depth + E_reg (DexYCB's energy) with either
 the paper's per-frame Adam (`optimiser="paper"`) or the default batched Levenberg-Marquardt.
 Pure NumPy/PyTorch: no I/O. World = the capture's master frame, metres; pixels x right, y down.
+
+The input and settings types load with the package; `solve` and `hand_vertices` (PyTorch) load
+on first use, so that a process that only builds inputs or reads settings (the API) never
+imports PyTorch.
 """
 
-from worker.solver.solve import hand_vertices, solve
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING
+
 from worker.solver.types import (
     HandTarget,
     Landmark,
@@ -14,6 +22,14 @@ from worker.solver.types import (
     SolveResult,
     SolveSettings,
 )
+
+if TYPE_CHECKING:
+    from worker.solver.entry import hand_vertices, solve
+
+# Name -> the module that defines it, imported when the name is first read. (The module is not
+# named solve: importing a submodule sets the package's attribute of its name, which would hide
+# the function.)
+_LAZY = {"hand_vertices": "worker.solver.entry", "solve": "worker.solver.entry"}
 
 __all__ = [
     "HandTarget",
@@ -25,3 +41,13 @@ __all__ = [
     "hand_vertices",
     "solve",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """The lazily loaded names of ``__all__``, imported from their module on first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value
