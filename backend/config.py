@@ -175,6 +175,9 @@ class Settings(BaseSettings):
     # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
     mturk_sandbox: bool = True
     mturk_use_aws: bool = False
+    # Days an export's archive is kept in storage after the export finished; the hourly
+    # clean-up job deletes older ones (0: keep them all).
+    export_retention_days: float = Field(default=7.0, ge=0)
     # Queue jobs (QC, solve): attempts before "failed", the first retry delay (doubled each
     # attempt), and the lease a running job holds; a job whose lease ran out (its worker died)
     # is queued again by the reaper. A lost queue message is re-sent after job_requeue_after_s.
