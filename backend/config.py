@@ -178,12 +178,17 @@ class Settings(BaseSettings):
     # Days an export's archive is kept in storage after the export finished; the hourly
     # clean-up job deletes older ones (0: keep them all).
     export_retention_days: float = Field(default=7.0, ge=0)
+    # This host's name in the job table (which host ran each job, as "name:pid"); unset, the
+    # machine's hostname.
+    host_name: str = Field(default="", max_length=200)
     # Queue jobs (QC, solve): attempts before "failed", the first retry delay (doubled each
     # attempt), and the lease a running job holds; a job whose lease ran out (its worker died)
     # is queued again by the reaper. A lost queue message is re-sent after job_requeue_after_s.
     job_max_attempts: int = Field(default=5, ge=1, le=50)
     job_retry_base_s: float = Field(default=5.0, ge=0)
-    job_lease_s: float = Field(default=900.0, gt=0)
+    # A minute's lease, renewed by the attempt's heartbeat every quarter of it, and a reaper
+    # pass every half minute: a killed worker's job is taken over within about 90 s.
+    job_lease_s: float = Field(default=60.0, gt=0)
     job_requeue_after_s: float = Field(default=600.0, gt=0)
     # Pause this long at each checkpoint of a job (between the QC job's actions): a
     # fault-injection knob for the crash-recovery test and drills (kill a worker mid-job);

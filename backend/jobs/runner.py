@@ -10,12 +10,19 @@ database for a whole lease) stops at its next checkpoint without acting (``Lease
 
 A message the queue could not take (the queue was down) is recorded on the job's row, and the
 reaper sends it again once the queue answers.
+
+Each claim records the host that took the job (``host``, "name:pid") and opens an entry in the
+run's ``attempt_log``; a job records its actions there (``record_actions``) in the same unit of
+work as the actions themselves, so a job retried after its worker was killed reports the
+actions of every attempt (``actions`` summed, ``attempts`` one by one, in its result).
 """
 
 from __future__ import annotations
 
 import contextvars
 import logging
+import os
+import socket
 import threading
 import time
 import traceback
@@ -25,6 +32,7 @@ from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar, cast
 
 from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
+from sqlalchemy.orm import Session
 
 from backend.config import get_settings
 from backend.db import session_scope
@@ -35,6 +43,8 @@ log = logging.getLogger(__name__)
 
 CLAIMABLE = ("queued", "retrying")
 ACTIVE = ("queued", "running", "retrying")
+# The heartbeat renews a lease this fraction of it apart.
+HEARTBEAT_FRACTION = 0.25
 
 
 @dataclass(frozen=True)
@@ -154,6 +164,12 @@ _current: contextvars.ContextVar[Attempt | None] = contextvars.ContextVar(
     "dexlabel_job_attempt", default=None)
 
 
+def host_id() -> str:
+    """This process as the job table names it: "name:pid", the name DEXLABEL_HOST_NAME or the
+    machine's hostname."""
+    return f"{get_settings().host_name or socket.gethostname()}:{os.getpid()}"
+
+
 def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
     """Take the job for this worker: (attempt, kind, args), or None when not ours to run."""
     settings = get_settings()
@@ -165,18 +181,24 @@ def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
         handler = handler_for(job.kind)
         lease = (handler.lease_s if handler and handler.lease_s else settings.job_lease_s)
         now = utc_now()
+        host = host_id()
         claimed = session.execute(
             update(Job).where(Job.key == key, or_(
                 Job.status.in_(CLAIMABLE),
                 (Job.status == "running") & (Job.lease_until < now)))
             .values(status="running", attempts=Job.attempts + 1, started_at=now,
                     lease_until=now + timedelta(seconds=lease), error=None,
-                    requests_claimed=Job.requests)
+                    requests_claimed=Job.requests, host=host)
             .execution_options(synchronize_session=False))
         if _rowcount(claimed) != 1:
             return None
         session.refresh(job)
         assert job.started_at is not None
+        # The claim holds the row's write lock: the log is read and extended in one step. A
+        # run's first attempt starts a new log.
+        earlier = list(job.attempt_log or []) if job.attempts > 1 else []
+        job.attempt_log = [*earlier, {"attempt": job.attempts, "host": host,
+                                      "started_at": now.isoformat(timespec="seconds")}]
         attempt = Attempt(key, job.attempts, job.started_at, lease)
         return attempt, job.kind, dict(job.args or {})
 
@@ -192,9 +214,12 @@ def _renew(attempt: Attempt) -> bool:
 
 
 class _Heartbeat:
-    """Renews an attempt's lease every third of the lease while the job works, so a job that
-    runs longer than its lease keeps it; stops when the attempt ends or loses its job. A
-    worker that dies stops renewing, and its lease runs out."""
+    """Renews an attempt's lease every quarter of the lease while the job works, so a job that
+    runs longer than its lease keeps it (and a renewal or two may fail on a database that
+    does not answer); stops when the attempt ends or loses its job. A worker that dies stops
+    renewing, and its lease runs out. The beat is a thread of its own: a long handler (the
+    solve, in PyTorch and NumPy calls that release the interpreter lock) needs no calls of
+    its own to keep its lease."""
 
     def __init__(self, attempt: Attempt) -> None:
         self._attempt = attempt
@@ -213,7 +238,7 @@ class _Heartbeat:
         self._thread.join(timeout=10)
 
     def _beat(self) -> None:
-        interval = self._attempt.lease_s / 3
+        interval = self._attempt.lease_s * HEARTBEAT_FRACTION
         while not self._stopped.wait(interval):
             try:
                 if not _renew(self._attempt):
@@ -259,6 +284,60 @@ def report_progress(done: int, total: int, stage: str = "") -> None:
         session.execute(update(Job).where(attempt.held())
                         .values(progress={"done": done, "total": total, "stage": stage})
                         .execution_options(synchronize_session=False))
+
+
+def record_actions(session: Session, counts: Mapping[str, int]) -> None:
+    """Add ``counts`` ({"approved": 1}) to the actions of the attempt this thread runs, in
+    ``session``: the unit of work that holds the actions themselves, so they are recorded
+    exactly when they commit. Nothing outside a job or for an attempt that lost its job."""
+    attempt = _current.get()
+    if attempt is None or not counts:
+        return
+    session.flush()  # the unit of work's own writes first
+    entries = session.scalar(select(Job.attempt_log).where(attempt.held()))
+    if not entries:
+        return
+    entries = list(entries)
+    last = dict(entries[-1])
+    actions = dict(last.get("actions") or {})
+    for what, n in counts.items():
+        actions[what] = actions.get(what, 0) + n
+    entries[-1] = {**last, "actions": actions}
+    session.execute(update(Job).where(attempt.held()).values(attempt_log=entries)
+                    .execution_options(synchronize_session=False))
+
+
+def run_actions() -> dict[str, int]:
+    """The actions every attempt of the current run of this thread's job recorded, summed
+    (empty outside a job)."""
+    attempt = _current.get()
+    if attempt is None:
+        return {}
+    with session_scope() as session:
+        entries = session.scalar(select(Job.attempt_log).where(Job.key == attempt.key))
+    return _summed(entries or [])
+
+
+def _summed(entries: list[dict[str, Any]]) -> dict[str, int]:
+    total: dict[str, int] = {}
+    for entry in entries:
+        for what, n in (entry.get("actions") or {}).items():
+            total[what] = total.get(what, 0) + int(n)
+    return total
+
+
+def _with_every_attempt(attempt: Attempt, result: dict[str, Any]) -> dict[str, Any]:
+    """A finished job's result with the actions of all its run's attempts (when any were
+    recorded): ``actions`` summed, and ``attempts`` one by one when there were several."""
+    with session_scope() as session:
+        entries = session.scalar(select(Job.attempt_log).where(attempt.held())) or []
+    if not any(entry.get("actions") for entry in entries):
+        return result
+    result = {**result, "actions": _summed(entries)}
+    if len(entries) > 1:
+        result["attempts"] = [{"attempt": e.get("attempt"), "host": e.get("host"),
+                               "actions": e.get("actions") or {}} for e in entries]
+    return result
 
 
 def checkpoint() -> None:
@@ -332,7 +411,8 @@ def execute(key: str) -> None:
     if failure is not None:
         _after_failure(attempt, failure)
         return
-    _finish(attempt, status="done", result=result, finished_at=utc_now())
+    _finish(attempt, status="done", result=_with_every_attempt(attempt, result),
+            finished_at=utc_now())
 
 
 def _after_failure(attempt: Attempt, exc: Exception) -> None:
