@@ -15,6 +15,7 @@ import os
 import re
 import secrets
 import threading
+from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -28,6 +29,14 @@ from backend.errors import DexlabelError
 # Well-known values refused as DEXLABEL_SECRET_KEY in every mode (the former dev default too).
 PLACEHOLDER_SECRETS = frozenset({"changeme", "change-me", "secret", "dev-secret-change-me"})
 MIN_SECRET_LENGTH = 32
+# A prod key must look random: at least this many distinct characters, and by its characters'
+# own frequencies (Shannon entropy) this many bits in all and per character. 32 random hex
+# digits (`openssl rand -hex 16`) estimate about 115 bits, 3.6 a character (40 random decimal
+# digits 3.2); 40 of one letter 0 bits, a word repeated well under 80, a letter repeated with
+# some others among it under 2.5 a character.
+MIN_SECRET_DISTINCT = 10
+MIN_SECRET_BITS = 80.0
+MIN_SECRET_BITS_PER_CHAR = 2.5
 # With DEXLABEL_SECRET_KEY unset, tokens are signed in dev with a random key made once and kept
 # in {VAR_DIR}/secret_key (mode 0600), and in test with the test suite's own key; prod refuses
 # to start without one. There is no default key anyone could know.
@@ -166,12 +175,20 @@ class Settings(BaseSettings):
     # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
     mturk_sandbox: bool = True
     mturk_use_aws: bool = False
+    # Days an export's archive is kept in storage after the export finished; the hourly
+    # clean-up job deletes older ones (0: keep them all).
+    export_retention_days: float = Field(default=7.0, ge=0)
+    # This host's name in the job table (which host ran each job, as "name:pid"); unset, the
+    # machine's hostname.
+    host_name: str = Field(default="", max_length=200)
     # Queue jobs (QC, solve): attempts before "failed", the first retry delay (doubled each
     # attempt), and the lease a running job holds; a job whose lease ran out (its worker died)
     # is queued again by the reaper. A lost queue message is re-sent after job_requeue_after_s.
     job_max_attempts: int = Field(default=5, ge=1, le=50)
     job_retry_base_s: float = Field(default=5.0, ge=0)
-    job_lease_s: float = Field(default=900.0, gt=0)
+    # A minute's lease, renewed by the attempt's heartbeat every quarter of it, and a reaper
+    # pass every half minute: a killed worker's job is taken over within about 90 s.
+    job_lease_s: float = Field(default=60.0, gt=0)
     job_requeue_after_s: float = Field(default=600.0, gt=0)
     # Pause this long at each checkpoint of a job (between the QC job's actions): a
     # fault-injection knob for the crash-recovery test and drills (kill a worker mid-job);
@@ -251,6 +268,13 @@ class Settings(BaseSettings):
         if self.env == "prod" and len(secret) < MIN_SECRET_LENGTH:
             raise ValueError(f"DEXLABEL_SECRET_KEY is too short; prod needs {MIN_SECRET_LENGTH} "
                              "or more random characters")
+        if self.env == "prod":
+            _check_secret_randomness(secret)
+        if self.env == "dev" and not secret and self.shared_deployment:
+            raise ValueError(
+                "DEXLABEL_SECRET_KEY is not set; a deployment on PostgreSQL or Redis runs on "
+                "several hosts, which must all sign with one key: set it on every host (e.g. "
+                "`openssl rand -hex 32`)")
         requesters = parse_market_requesters(self.market_requesters, self.market_start_balance)
         if self.env == "prod":
             if DEV_MARKET_ACCESS_KEY in requesters:
@@ -270,6 +294,13 @@ class Settings(BaseSettings):
         return instance_secret(self.var_dir)
 
     @property
+    def shared_deployment(self) -> bool:
+        """Whether hosts other than this one may serve or work for this instance: its database
+        or queue is a server (PostgreSQL, Redis). Such hosts share nothing on disk, so a key
+        kept in the instance folder (the embedded default's) would differ on each."""
+        return bool(self.redis_url) or not self.is_sqlite
+
+    @property
     def queue_path(self) -> Path:
         """SQLite file of the embedded job queue (used when REDIS_URL is unset)."""
         return self.var_dir / "queue.db"
@@ -282,6 +313,28 @@ class Settings(BaseSettings):
     @property
     def is_sqlite(self) -> bool:
         return self.database_url.startswith("sqlite")
+
+
+def secret_bits(secret: str) -> float:
+    """An estimate of a key's randomness in bits: its length times the Shannon entropy of its
+    characters' frequencies (a key of one repeated letter has 0)."""
+    if not secret:
+        return 0.0
+    counts = Counter(secret)
+    n = len(secret)
+    return -n * sum(c / n * math.log2(c / n) for c in counts.values())
+
+
+def _check_secret_randomness(secret: str) -> None:
+    distinct = len(set(secret))
+    bits = secret_bits(secret)
+    if (distinct < MIN_SECRET_DISTINCT or bits < MIN_SECRET_BITS
+            or bits < MIN_SECRET_BITS_PER_CHAR * len(secret)):
+        raise ValueError(
+            f"DEXLABEL_SECRET_KEY does not look random ({distinct} distinct characters, about "
+            f"{bits:.0f} bits); prod needs at least {MIN_SECRET_DISTINCT} distinct characters "
+            f"and {MIN_SECRET_BITS:.0f} bits ({MIN_SECRET_BITS_PER_CHAR} a character): use a "
+            "random value (e.g. `openssl rand -hex 32`)")
 
 
 class InvalidSettings(DexlabelError, status_code=500, code="invalid_settings"):

@@ -1,6 +1,9 @@
-"""Frame and model storage: a local folder by default, S3 (or MinIO) through boto3.
+"""Frame, model and job output storage: a local folder by default, S3 (or MinIO) through boto3.
 
-Keys are '/'-separated relative paths such as ``captures/<uid>/<serial>/color_000000.jpg``.
+Keys are '/'-separated relative paths such as ``captures/<uid>/<serial>/color_000000.jpg`` or
+``exports/export-000012.zip``. Every host of a deployment reads and writes the same storage, so
+whatever one host writes here (an export archive, a solve result) another can serve. Large
+objects go in from a file and come out as a stream of chunks, never whole in memory.
 boto3 is touched only here; its ClientError becomes our StorageError.
 """
 
@@ -9,6 +12,9 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from functools import lru_cache
 from pathlib import Path
 from typing import Protocol
@@ -17,11 +23,26 @@ from urllib.parse import urlparse
 from backend.config import Settings, get_settings
 from backend.errors import NotFound, StorageError
 
+CHUNK_BYTES = 1024 * 1024
+
+
+@dataclass(frozen=True)
+class StoredObject:
+    """One stored object as a listing shows it: its key, size in bytes, and when it was last
+    written (UTC)."""
+
+    key: str
+    size: int
+    modified: datetime
+
 
 class Storage(Protocol):
     def put_bytes(self, key: str, data: bytes, content_type: str = ...) -> None: ...
+    def put_file(self, key: str, path: Path, content_type: str = ...) -> None: ...
     def get_bytes(self, key: str) -> bytes: ...
+    def open_stream(self, key: str) -> tuple[int, Iterator[bytes]]: ...
     def exists(self, key: str) -> bool: ...
+    def list_prefix(self, prefix: str) -> list[StoredObject]: ...
     def delete_prefix(self, prefix: str) -> int: ...
     def url_for(self, key: str, expires_s: int = ...) -> str | None: ...
 
@@ -55,14 +76,55 @@ class LocalStorage:
             Path(tmp).unlink(missing_ok=True)
             raise
 
+    def put_file(self, key: str, path: Path, content_type: str = "") -> None:
+        """The file at ``path`` stored under ``key`` (copied, then renamed into place)."""
+        target = self._path(key)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".part-")
+        os.close(fd)
+        try:
+            shutil.copyfile(path, tmp)
+            os.replace(tmp, target)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
     def get_bytes(self, key: str) -> bytes:
         try:
             return self._path(key).read_bytes()
         except FileNotFoundError:
             raise NotFound(f"storage object {key!r} does not exist") from None
 
+    def open_stream(self, key: str) -> tuple[int, Iterator[bytes]]:
+        """The object's size and its bytes in chunks; NotFound now (not while streaming)."""
+        try:
+            fh = self._path(key).open("rb")
+        except FileNotFoundError:
+            raise NotFound(f"storage object {key!r} does not exist") from None
+        size = os.fstat(fh.fileno()).st_size
+
+        def chunks() -> Iterator[bytes]:
+            with fh:
+                while chunk := fh.read(CHUNK_BYTES):
+                    yield chunk
+        return size, chunks()
+
     def exists(self, key: str) -> bool:
         return self._path(key).is_file()
+
+    def list_prefix(self, prefix: str) -> list[StoredObject]:
+        """The objects under the folder ``prefix`` (files written but not yet in place, whose
+        names start with a dot, left out)."""
+        folder = self._path(prefix.rstrip("/"))
+        if not folder.is_dir():
+            return []
+        found = []
+        for path in sorted(folder.rglob("*")):
+            if path.is_file() and not path.name.startswith("."):
+                stat = path.stat()
+                found.append(StoredObject(path.relative_to(self.root).as_posix(), stat.st_size,
+                                          datetime.fromtimestamp(stat.st_mtime, UTC)))
+        return found
 
     def delete_prefix(self, prefix: str) -> int:
         path = self._path(prefix.rstrip("/"))
@@ -124,9 +186,33 @@ class S3Storage:
             Bucket=self.bucket, Key=self._key(key), Body=data, ContentType=content_type,
         )
 
+    def put_file(self, key: str, path: Path,
+                 content_type: str = "application/octet-stream") -> None:
+        """The file at ``path`` uploaded under ``key`` (in parts when large: boto3's transfer)."""
+        from boto3.exceptions import S3UploadFailedError
+
+        try:
+            self._call("upload", self.client.upload_file, Filename=str(path),
+                       Bucket=self.bucket, Key=self._key(key),
+                       ExtraArgs={"ContentType": content_type})
+        except S3UploadFailedError as exc:
+            raise StorageError(f"S3 upload failed: {exc}") from exc
+
     def get_bytes(self, key: str) -> bytes:
         resp = self._call("get", self.client.get_object, Bucket=self.bucket, Key=self._key(key))
         return resp["Body"].read()
+
+    def open_stream(self, key: str) -> tuple[int, Iterator[bytes]]:
+        """The object's size and its bytes in chunks as S3 sends them."""
+        resp = self._call("get", self.client.get_object, Bucket=self.bucket, Key=self._key(key))
+        body = resp["Body"]
+
+        def chunks() -> Iterator[bytes]:
+            try:
+                yield from body.iter_chunks(CHUNK_BYTES)
+            finally:
+                body.close()
+        return int(resp["ContentLength"]), chunks()
 
     def exists(self, key: str) -> bool:
         try:
@@ -134,6 +220,21 @@ class S3Storage:
         except NotFound:
             return False
         return True
+
+    def list_prefix(self, prefix: str) -> list[StoredObject]:
+        """The objects under the folder ``prefix``, keys relative to this storage's prefix."""
+        full = self._key(prefix.rstrip("/")) + "/"
+        skip = len(self.prefix) + 1 if self.prefix else 0
+        paginator = self.client.get_paginator("list_objects_v2")
+        found = []
+        try:
+            for page in paginator.paginate(Bucket=self.bucket, Prefix=full):
+                found += [StoredObject(o["Key"][skip:], int(o["Size"]),
+                                       o["LastModified"].astimezone(UTC))
+                          for o in page.get("Contents", [])]
+        except Exception as exc:  # botocore's errors, as _call words them
+            raise StorageError(f"S3 list failed: {exc}") from exc
+        return found
 
     def delete_prefix(self, prefix: str) -> int:
         full = self._key(prefix.rstrip("/"))

@@ -13,7 +13,8 @@ from typing import Any
 
 from backend import pipeline
 from backend.captures.flows import FRAME_STATS, compute_frame_stats
-from backend.exports.flows import export_job
+from backend.exports.flows import cleanup_job, export_job
+from backend.exports.stored import CLEANUP_KIND
 from backend.jobs.runner import Handler
 from backend.jobs.runner import register_handlers as register
 from backend.rig.flows import run_rig_health
@@ -48,8 +49,13 @@ def rig_health(args: dict[str, Any]) -> dict[str, Any]:
 
 
 def export_labels(args: dict[str, Any]) -> dict[str, Any]:
-    """Write an export's archive (backend.exports), progress on the job's row."""
+    """Write an export's archive to storage (backend.exports), progress on the job's row."""
     return export_job(args)
+
+
+def clean_up_exports(args: dict[str, Any]) -> dict[str, Any]:
+    """Delete export archives past DEXLABEL_EXPORT_RETENTION_DAYS."""
+    return cleanup_job(args)
 
 
 # No lease of its own for the solve: the heartbeat renews a long solve's lease
@@ -62,6 +68,7 @@ HANDLERS: dict[str, Handler] = {
     "solve": Handler(solve_run, None),
     "rig_health": Handler(rig_health, None),
     "export": Handler(export_labels, None),
+    CLEANUP_KIND: Handler(clean_up_exports, None),
 }
 
 

@@ -1,16 +1,17 @@
-"""Admin endpoints of the export: start an export job, read its state, download its archive."""
+"""Admin endpoints of the export: start an export job, read its state, download its archive
+(streamed from the instance's storage, whichever host wrote it), delete it."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from fastapi import APIRouter
-from fastapi.responses import FileResponse
+from fastapi.responses import StreamingResponse
 
 from backend.accounts.deps import CurrentAdmin
 from backend.db import SessionDep
-from backend.exports import service
-from backend.exports.schemas import ExportRead, ExportRequest
+from backend.exports import service, stored
+from backend.exports.schemas import ExportDeleted, ExportRead, ExportRequest
 from backend.validation import Id
 
 router = APIRouter(prefix="/api/exports", tags=["exports"])
@@ -34,9 +35,19 @@ def read_export(export_id: Id, session: SessionDep, _: CurrentAdmin) -> ExportRe
     return ExportRead.of(service.get_export_or_raise(session, export_id))
 
 
-@router.get("/{export_id}/download", response_class=FileResponse, responses=_ARCHIVE)
-def download_export(export_id: Id, session: SessionDep, _: CurrentAdmin) -> FileResponse:
-    """The finished archive, streamed from disk in chunks (never read whole into memory)."""
-    path = service.finished_archive(session, export_id)
-    media = "application/zip" if path.suffix == ".zip" else "application/x-tar"
-    return FileResponse(path, media_type=media, filename=f"dexlabel-{path.name}")
+@router.delete("/{export_id}", response_model=ExportDeleted)
+def delete_export(export_id: Id, session: SessionDep, _: CurrentAdmin) -> ExportDeleted:
+    """Delete an export and its archive; 409 while it runs."""
+    stored.delete_export(session, export_id)
+    return ExportDeleted(id=export_id, state="deleted")
+
+
+@router.get("/{export_id}/download", response_class=StreamingResponse, responses=_ARCHIVE)
+def download_export(export_id: Id, session: SessionDep, _: CurrentAdmin) -> StreamingResponse:
+    """The finished archive, streamed from storage in chunks (never read whole into memory);
+    410 once it was deleted (DEXLABEL_EXPORT_RETENTION_DAYS)."""
+    archive = stored.finished_archive(session, export_id)
+    size, chunks = stored.open_archive(archive, export_id)
+    return StreamingResponse(chunks, media_type=archive.media_type, headers={
+        "Content-Length": str(size),
+        "Content-Disposition": f'attachment; filename="{archive.filename}"'})

@@ -60,7 +60,9 @@ class ExportRead(BaseModel):
     @classmethod
     def of(cls, job: Job) -> ExportRead:
         args = job.args or {}
-        result = {k: v for k, v in (job.result or {}).items() if k != "path"} or None
+        # Where the archive is stored is the server's business: the download URL serves it.
+        result = {k: v for k, v in (job.result or {}).items() if k not in ("path", "key")} or None
+        gone = bool((job.result or {}).get("deleted_at"))
         return cls(id=job.id, status=job.status, format=str(args.get("format")),
                    include=str(args.get("include")), archive=str(args.get("archive", "zip")),
                    sequence_ids=list(args.get("sequence_ids") or []),
@@ -68,5 +70,10 @@ class ExportRead(BaseModel):
                    options=dict(args.get("options") or {}), progress=job.progress,
                    result=result, error=job.error, created_at=job.created_at,
                    finished_at=job.finished_at,
-                   download_url=(f"/api/exports/{job.id}/download" if job.status == "done"
-                                 else None))
+                   download_url=(f"/api/exports/{job.id}/download"
+                                 if job.status == "done" and not gone else None))
+
+
+class ExportDeleted(BaseModel):
+    id: int
+    state: Literal["deleted"]

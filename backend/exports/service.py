@@ -1,6 +1,6 @@
 """Export rules: what may be exported, export jobs, and the export itself. Services flush, never
 commit; the job (kind ``export``) is a row of the job table whose ``progress`` counts the views
-written and whose ``result`` names the finished archive under ``<var>/exports``.
+written and whose ``result`` names the finished archive's storage key (backend.exports.stored).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera, Sequence, Subject
-from backend.config import get_settings
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError, NotFound
 from backend.exports.archive import ExportArchive
@@ -188,20 +187,6 @@ def get_export_or_raise(session: Session, export_id: int) -> Job:
     if job.kind != JOB_KIND:
         raise NotFound(f"no export {export_id}")
     return job
-
-
-def archive_path(export_id: int, archive: str) -> Path:
-    return get_settings().var_dir / "exports" / f"export-{export_id:06d}.{archive}"
-
-
-def finished_archive(session: Session, export_id: int) -> Path:
-    """The archive of a finished export; 409 while it runs or when it failed."""
-    job = get_export_or_raise(session, export_id)
-    path = Path((job.result or {}).get("path", ""))
-    if job.status != "done" or not path.is_file():
-        raise Conflict(f"export {export_id} is {job.status}; its archive can be downloaded "
-                       "once it is done", state=job.status)
-    return path
 
 
 def run_export(fmt: str, sequence_ids: list[int], include: str, options: dict[str, Any],

@@ -95,11 +95,28 @@ def _why_again(row: Any, now: datetime, lost_before: datetime, starting: bool,
     return None
 
 
+# Seconds between reaper passes: huey's periodic tasks run at most once a minute, so each
+# minute's pass schedules a second one this much later. With the minute's lease, a killed
+# worker's job is queued again within lease + REAP_EVERY_S of its last heartbeat.
+REAP_EVERY_S = 30.0
+
+
 @huey.periodic_task(crontab(minute="*"))
 def reap_jobs() -> None:
     """Every minute: re-queue jobs whose worker died or whose queue message was lost (all of
-    them at once when the queue's store lost its messages, e.g. a Redis restarted empty)."""
+    them at once when the queue's store lost its messages, e.g. a Redis restarted empty),
+    and again half a minute later."""
     requeue_stale(queue_reset=queue_lost_messages())
+    try:
+        reap_jobs_again.schedule(delay=REAP_EVERY_S)
+    except Exception as exc:  # the queue is down: the next minute's pass comes anyway
+        log.warning("could not schedule the reaper's next pass: %s", exc)
+
+
+@huey.task()
+def reap_jobs_again() -> None:
+    """The half-minute pass of the reaper (jobs whose worker died or whose message was lost)."""
+    requeue_stale()
 
 
 def run_queued(max_rounds: int = 200) -> list[str]:

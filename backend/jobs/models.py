@@ -48,6 +48,11 @@ class Job(TimestampMixin, Base):
     # queued or retrying job: when its queue message, which the queue did not take, is due to
     # be sent again by the reaper; None once sent.
     lease_until: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # The host whose attempt last claimed the job ("name:pid", DEXLABEL_HOST_NAME or the
+    # machine's hostname), and this run's attempts: [{"attempt", "host", "started_at",
+    # "actions"}], so a job retried after its worker died still reports every attempt's actions.
+    host: Mapped[str | None] = mapped_column(String(255))
+    attempt_log: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)

@@ -10,11 +10,13 @@ database for a whole lease) stops at its next checkpoint without acting (``Lease
 
 A message the queue could not take (the queue was down) is recorded on the job's row, and the
 reaper sends it again once the queue answers.
+
+Each claim records the host that took the job and opens an entry in the run's attempt log, where
+the job records its actions (backend.jobs.attempts).
 """
 
 from __future__ import annotations
 
-import contextvars
 import logging
 import threading
 import time
@@ -24,10 +26,16 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar, cast
 
-from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
+from sqlalchemy import CursorResult, Result, or_, select, update
 
 from backend.config import get_settings
 from backend.db import session_scope
+from backend.jobs.attempts import (
+    Attempt,
+    current_attempt,
+    host_id,
+    with_every_attempt,
+)
 from backend.jobs.models import Job
 from backend.queue import huey
 
@@ -35,6 +43,8 @@ log = logging.getLogger(__name__)
 
 CLAIMABLE = ("queued", "retrying")
 ACTIVE = ("queued", "running", "retrying")
+# The heartbeat renews a lease this fraction of it apart.
+HEARTBEAT_FRACTION = 0.25
 
 
 @dataclass(frozen=True)
@@ -133,27 +143,6 @@ class LeaseLost(Exception):
     job. It stops where it is, acting no further; the attempt holding the job carries on."""
 
 
-@dataclass(frozen=True)
-class Attempt:
-    """One claimed run of a job: its key, its number and when it was claimed (as stored), which
-    together tell it from every other attempt, a later one of the same number included."""
-
-    key: str
-    number: int
-    started_at: datetime
-    lease_s: float
-
-    def held(self) -> ColumnElement[bool]:
-        """The row still belongs to this attempt."""
-        return ((Job.key == self.key) & (Job.status == "running")
-                & (Job.attempts == self.number) & (Job.started_at == self.started_at))
-
-
-# The attempt the current thread is running (checkpoint() checks that it still holds its job).
-_current: contextvars.ContextVar[Attempt | None] = contextvars.ContextVar(
-    "dexlabel_job_attempt", default=None)
-
-
 def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
     """Take the job for this worker: (attempt, kind, args), or None when not ours to run."""
     settings = get_settings()
@@ -165,20 +154,28 @@ def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
         handler = handler_for(job.kind)
         lease = (handler.lease_s if handler and handler.lease_s else settings.job_lease_s)
         now = utc_now()
+        host = host_id()
         claimed = session.execute(
             update(Job).where(Job.key == key, or_(
                 Job.status.in_(CLAIMABLE),
                 (Job.status == "running") & (Job.lease_until < now)))
             .values(status="running", attempts=Job.attempts + 1, started_at=now,
                     lease_until=now + timedelta(seconds=lease), error=None,
-                    requests_claimed=Job.requests)
+                    requests_claimed=Job.requests, host=host)
             .execution_options(synchronize_session=False))
         if _rowcount(claimed) != 1:
             return None
         session.refresh(job)
         assert job.started_at is not None
+        # The claim holds the row's write lock: the log is read and extended in one step. A
+        # run's first attempt starts a new log.
+        earlier = list(job.attempt_log or []) if job.attempts > 1 else []
+        job.attempt_log = [*earlier, {"attempt": job.attempts, "host": host,
+                                      "started_at": now.isoformat(timespec="seconds")}]
         attempt = Attempt(key, job.attempts, job.started_at, lease)
-        return attempt, job.kind, dict(job.args or {})
+        kind, args = job.kind, dict(job.args or {})
+    log.info("job %s attempt %d runs on %s", key, attempt.number, host)
+    return attempt, kind, args
 
 
 def _renew(attempt: Attempt) -> bool:
@@ -192,9 +189,12 @@ def _renew(attempt: Attempt) -> bool:
 
 
 class _Heartbeat:
-    """Renews an attempt's lease every third of the lease while the job works, so a job that
-    runs longer than its lease keeps it; stops when the attempt ends or loses its job. A
-    worker that dies stops renewing, and its lease runs out."""
+    """Renews an attempt's lease every quarter of the lease while the job works, so a job that
+    runs longer than its lease keeps it (and a renewal or two may fail on a database that
+    does not answer); stops when the attempt ends or loses its job. A worker that dies stops
+    renewing, and its lease runs out. The beat is a thread of its own: a long handler (the
+    solve, in PyTorch and NumPy calls that release the interpreter lock) needs no calls of
+    its own to keep its lease."""
 
     def __init__(self, attempt: Attempt) -> None:
         self._attempt = attempt
@@ -213,7 +213,7 @@ class _Heartbeat:
         self._thread.join(timeout=10)
 
     def _beat(self) -> None:
-        interval = self._attempt.lease_s / 3
+        interval = self._attempt.lease_s * HEARTBEAT_FRACTION
         while not self._stopped.wait(interval):
             try:
                 if not _renew(self._attempt):
@@ -228,7 +228,7 @@ class _Heartbeat:
 def check_lease() -> None:
     """Raise LeaseLost unless the attempt this thread runs still holds its job (nothing to
     check outside a job). A job calls it before each action it must not repeat."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         return
     with session_scope() as session:
@@ -239,7 +239,7 @@ def check_lease() -> None:
 
 def current_job_id() -> int:
     """The id of the job this thread runs (its row); LookupError outside a job."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         raise LookupError("not inside a job")
     with session_scope() as session:
@@ -252,7 +252,7 @@ def current_job_id() -> int:
 def report_progress(done: int, total: int, stage: str = "") -> None:
     """Record how far the job this thread runs has come (one short committed UPDATE); a call
     outside a job, or from an attempt that lost its job, records nothing."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         return
     with session_scope() as session:
@@ -311,7 +311,7 @@ def execute(key: str) -> None:
     handler = handler_for(kind)
     failure: Exception | None = None
     result: dict[str, Any] = {}
-    token = _current.set(attempt)
+    token = current_attempt.set(attempt)
     try:
         with _Heartbeat(attempt):
             if handler is None:
@@ -328,11 +328,12 @@ def execute(key: str) -> None:
         log.exception("job %s attempt %d failed", key, attempt.number)
         failure = exc
     finally:
-        _current.reset(token)
+        current_attempt.reset(token)
     if failure is not None:
         _after_failure(attempt, failure)
         return
-    _finish(attempt, status="done", result=result, finished_at=utc_now())
+    _finish(attempt, status="done", result=with_every_attempt(attempt, result),
+            finished_at=utc_now())
 
 
 def _after_failure(attempt: Attempt, exc: Exception) -> None:

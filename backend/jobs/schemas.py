@@ -23,6 +23,10 @@ class JobRead(BaseModel):
     max_attempts: int
     error: str | None
     result: dict[str, Any] | None
+    # The host ("name:pid") whose attempt last claimed it, and each attempt of this run: its
+    # number, host, start and the actions it recorded.
+    host: str | None
+    attempt_log: list[dict[str, Any]] | None
     created_at: datetime
     updated_at: datetime
     started_at: datetime | None

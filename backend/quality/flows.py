@@ -2,8 +2,9 @@
 work (backend.pipeline runs it and moves on to the solve).
 
 Marketplace calls happen with no write transaction open (the embedded SQLite database is
-shared with the built-in marketplace); each action's ledger row and the report's ``action``
-are committed together, so a job killed at any point and run again repeats no action.
+shared with the built-in marketplace); each action's ledger row, the report's ``action`` and the
+job's count of it are committed together, so a job killed at any point and run again repeats no
+action, and its result counts the actions of every attempt.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from backend.crowd.client import MarketplaceError, MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
+from backend.jobs.attempts import record_actions, run_actions
 from backend.jobs.runner import RetryLater, check_lease, checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
@@ -49,7 +51,8 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
         acted = act_on_reports(client, sequence_id, target_key)
         block_repeat_failures(client, sequence_id, target_key)
     timings["act_s"] = round(time.perf_counter() - started, 3)
-    return {"scored": counts, "actions": acted, "timings": timings}
+    # Inside a job: the actions of every attempt of this run (a worker killed after some).
+    return {"scored": counts, "actions": run_actions() or acted, "timings": timings}
 
 
 def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
@@ -96,10 +99,12 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
             # Not from a marketplace (a direct link): the decision is recorded, nobody is paid.
             assignment.status = "approved" if report.outcome == "approve" else "rejected"
             report.action, report.action_detail = "recorded", "no marketplace submission"
+            record_actions(session, {"recorded": 1})
             return "recorded"
         elif report.outcome == "approve":
             decisions.approve(session, client, assignment_id, None)
             report.action, report.action_detail = "approved", "approved automatically"
+            record_actions(session, {"approved": 1})
             if report.method != "gold":
                 return "approved"
             report.action_detail, follow_up = GRANT_PENDING, _grant
@@ -107,6 +112,7 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
             decisions.reject(session, client, assignment_id,
                              decisions.fit_feedback(report.feedback))
             report.action, report.action_detail = "rejected", REOPEN_PENDING
+            record_actions(session, {"rejected": 1})
             follow_up = _reopen
     follow_up(client, report_id, assignment_id)
     return report.action

@@ -9,6 +9,8 @@ from backend.config import Settings
 from backend.errors import Unauthorized
 from backend.security import hash_password, sign_token, verify_password, verify_token
 
+PROD_KEY = "kq3V9xT2mZ7rB4wN8pL1cH6yD5fJ0sGa"  # 32 characters, 32 distinct
+
 
 def test_defaults_are_the_embedded_deployment(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
     for name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_STORAGE_URL", "DEXLABEL_REDIS_URL"):
@@ -33,14 +35,14 @@ def test_prod_refuses_a_placeholder_or_short_secret(
 
 def test_prod_accepts_a_long_random_secret(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DEXLABEL_ENV", "prod")
-    monkeypatch.setenv("DEXLABEL_SECRET_KEY", "x7" * 20)
+    monkeypatch.setenv("DEXLABEL_SECRET_KEY", PROD_KEY)
     monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", "AKIAPRODREQUESTER000:" + "s3" * 20)
     assert Settings().env == "prod"
 
 
 def test_prod_refuses_the_dev_market_key_pair(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DEXLABEL_ENV", "prod")
-    monkeypatch.setenv("DEXLABEL_SECRET_KEY", "x7" * 20)
+    monkeypatch.setenv("DEXLABEL_SECRET_KEY", PROD_KEY)
     monkeypatch.delenv("DEXLABEL_MARKET_REQUESTERS", raising=False)
     with pytest.raises(ValidationError, match="dev key pair"):
         Settings()

@@ -5,9 +5,11 @@ without a long one; a refused key never shows in an error or a log; the image ru
 from __future__ import annotations
 
 import re
+import secrets
 import stat
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -22,6 +24,13 @@ from tests.conftest import reset_caches
 
 ROOT = Path(__file__).resolve().parents[2]
 PUBLIC_DEFAULT = "dev-secret-change-me"  # the signing key every dev instance once shared
+
+
+@pytest.fixture
+def database_url(tmp_path: Path) -> str:
+    """SQLite only: a dev instance makes its own key only as the single-folder embedded
+    default (on PostgreSQL or Redis it must be given one)."""
+    return f"sqlite:///{tmp_path / 'test.db'}"
 
 
 def _dev(monkeypatch: pytest.MonkeyPatch, var_dir: Path) -> Settings:
@@ -151,3 +160,62 @@ def test_the_image_runs_prod_so_it_needs_real_keys() -> None:
         assert service_env["DEXLABEL_ENV"] == "prod"
         assert ":?" in service_env["DEXLABEL_SECRET_KEY"]
         assert ":?" in service_env["DEXLABEL_MARKET_REQUESTERS"]
+
+
+SHARED = {"DEXLABEL_DATABASE_URL": "postgresql+psycopg://dexlabel@127.0.0.1:1/dexlabel",
+          "DEXLABEL_REDIS_URL": "redis://127.0.0.1:1/0"}
+
+
+@pytest.mark.parametrize("setting", sorted(SHARED))
+def test_a_dev_deployment_on_a_server_refuses_to_start_without_a_key(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, setting: str
+) -> None:
+    """Hosts sharing PostgreSQL or Redis share no folder: a key each made for itself would
+    make every host refuse the others' tokens. Checked before anything is reached."""
+    monkeypatch.setenv(setting, SHARED[setting])
+    with pytest.raises(ValidationError, match="DEXLABEL_SECRET_KEY is not set; a deployment "
+                                              "on PostgreSQL or Redis"):
+        _dev(monkeypatch, tmp_path / "var")
+    assert not (tmp_path / "var").exists(), "no per-folder key was made"
+    monkeypatch.setenv("DEXLABEL_SECRET_KEY", secrets.token_hex(32))
+    assert Settings().shared_deployment
+
+
+def test_serve_with_several_workers_refuses_to_start_without_a_key(tmp_path: Path) -> None:
+    """``serve --workers 2`` needs PostgreSQL, so it needs the key too: one line naming it."""
+    done = subprocess.run(
+        [sys.executable, "-m", "backend.cli", "serve", "--workers", "2", "--port", "1"],
+        cwd=tmp_path, env=clean_env(DEXLABEL_ENV="dev", DEXLABEL_VAR_DIR=str(tmp_path / "var"),
+                                    DEXLABEL_DATABASE_URL=SHARED["DEXLABEL_DATABASE_URL"]),
+        capture_output=True, text=True, timeout=120)
+    output = (done.stdout + done.stderr).strip()
+    assert done.returncode != 0, output
+    assert "DEXLABEL_SECRET_KEY is not set" in output and "Traceback" not in output, output
+    assert len([line for line in output.splitlines() if "SECRET_KEY" in line]) == 1, output
+    assert not (tmp_path / "var" / "secret_key").exists()
+
+
+@pytest.mark.parametrize("secret", ["a" * 40, "password" * 5, "ab" * 20,
+                                    "abcd1234" * 5, "aaaaaaaaab" * 3 + "cdefghijklmn"])
+def test_prod_refuses_a_long_key_that_is_not_random(
+    monkeypatch: pytest.MonkeyPatch, secret: str
+) -> None:
+    monkeypatch.setenv("DEXLABEL_ENV", "prod")
+    monkeypatch.setenv("DEXLABEL_SECRET_KEY", secret)
+    monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", "AKIAPRODREQUESTER000:" + "s3" * 20)
+    with pytest.raises(ValidationError, match="DEXLABEL_SECRET_KEY does not look random") as err:
+        Settings()
+    assert secret not in str(err.value)
+
+
+@pytest.mark.parametrize("make", [lambda: secrets.token_hex(16), lambda: secrets.token_hex(32),
+                                  lambda: secrets.token_urlsafe(32)])
+def test_prod_accepts_random_keys_as_the_usual_tools_make_them(
+    monkeypatch: pytest.MonkeyPatch, make: Callable[[], str]
+) -> None:
+    monkeypatch.setenv("DEXLABEL_ENV", "prod")
+    monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", "AKIAPRODREQUESTER000:" + "s3" * 20)
+    for _ in range(50):
+        key = make()
+        monkeypatch.setenv("DEXLABEL_SECRET_KEY", key)
+        assert Settings().signing_key == key

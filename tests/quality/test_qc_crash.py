@@ -76,6 +76,10 @@ def test_killed_worker_mid_qc_job_is_retried_and_acts_once(crowd_url: str, qc_ca
         second.terminate()
         second.wait(timeout=15)
     assert (done.status, done.attempts) == ("done", 2), log.read_text()[-3000:]
+    # The result counts the first attempt's payment too, and says who did what.
+    assert done.result["actions"] == {"approved": 5, "rejected": 1}, done.result
+    assert [sum(a["actions"].values()) for a in done.result["attempts"]] == [1, 5]
+    assert all(a["host"] for a in done.result["attempts"])
     with session_scope() as session:
         reports = list(session.scalars(select(QCReport)))
         payments = list(session.scalars(select(CrowdPayment)))
