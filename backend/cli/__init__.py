@@ -23,6 +23,7 @@ from backend.instance import (
     client_url,
     forget_server,
     record_server,
+    refuse_second_server,
     require_database,
     serve_at,
 )
@@ -197,11 +198,12 @@ def serve(
         fail(f"--workers {workers} needs PostgreSQL (DEXLABEL_DATABASE_URL): the embedded SQLite "
              "database takes one writer at a time, so it is served by one process; run "
              "without --workers, or point DEXLABEL_DATABASE_URL at PostgreSQL")
+    with refusing_bad_input():  # one server per instance: refused before anything starts
+        record_server(settings, client_url(host, port))
     consumer = None
     if settings.inprocess_worker and not settings.redis_url:
         register_handlers()
         consumer = start_inprocess_consumer(settings.worker_threads)
-    record_server(settings, client_url(host, port))
     # uvicorn stops on SIGINT/SIGTERM, then raises the signal again for the handler it found:
     # this one ends the process through the ``finally`` below, so the record is removed. With
     # several processes, uvicorn's supervisor stops them and returns instead.
@@ -264,6 +266,8 @@ def demo(
 
     started = time.perf_counter()
     settings = serve_at(host, port)
+    with refusing_bad_input():  # one server per instance, checked before the slow work
+        refuse_second_server(settings)
     seq, capture = _demo_capture(settings.var_dir / "demo-capture", settings.database_url,
                                  frames, views, objects)
     with refusing_bad_input():
