@@ -279,9 +279,13 @@ def _replace_tracks(session: Session, assignment_id: int, status: str, clip: _Cl
         "assignment": assignment_id, "base": body.version, "edits": body.edit_count,
         "seconds": body.working_time_s, "at": saved_at}).scalar_one_or_none()
     if version is None:
-        status, current = session.execute(
+        row = session.execute(
             select(_assignments.c.status, _assignments.c.version)
-            .where(_assignments.c.id == assignment_id)).one()
+            .where(_assignments.c.id == assignment_id)).one_or_none()
+        if row is None:  # deleted since it was read (a forced delete of its sequence)
+            raise NotFound(f"assignment {assignment_id} no longer exists (its sequence or "
+                           "task was deleted); nothing was saved")
+        status, current = row
         if status != "working":  # submitted from another tab meanwhile
             raise Conflict(f"assignment is {status}; its labels can no longer change")
         raise StaleVersion(
