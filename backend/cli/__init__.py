@@ -17,7 +17,7 @@ import typer
 from typer.core import TyperGroup
 
 from backend.cli.console import fail, progress, refusing_bad_input
-from backend.config import get_settings
+from backend.config import get_settings, keep_instance_private
 from backend.instance import (
     adopt_recorded_server,
     client_url,
@@ -61,6 +61,7 @@ def _instance(ctx: typer.Context) -> None:
         return
     with refusing_bad_input():
         require_database(get_settings())
+    keep_instance_private(get_settings().var_dir)
     if ctx.invoked_subcommand not in LONG_RUNNING:
         adopt_recorded_server()
 
@@ -76,6 +77,7 @@ def migrate(
     from backend import migrate as m
 
     url = get_settings().database_url
+    keep_instance_private(get_settings().var_dir)
     (m.downgrade if down else m.upgrade)(url, to)
     typer.echo(f"database at {to} ({make_url(url).render_as_string(hide_password=True)})")
 
@@ -268,6 +270,7 @@ def demo(
     settings = serve_at(host, port)
     with refusing_bad_input():  # one server per instance, checked before the slow work
         refuse_second_server(settings)
+    keep_instance_private(settings.var_dir)
     seq, capture = _demo_capture(settings.var_dir / "demo-capture", settings.database_url,
                                  frames, views, objects)
     with refusing_bad_input():
