@@ -26,6 +26,7 @@ def attach_frames(
     for cam in cameras:
         folder = seq_dir / cam.serial
         if folder.is_dir():
+            rd.inside(folder)
             count = (num_frames if num_frames is not None
                      else len(list(folder.glob(dexycb.COLOR_GLOB))))
             cam.frames = [_check_frame(rd, folder, cam, i) for i in range(count)]
@@ -34,7 +35,7 @@ def attach_frames(
             video = next((v for v in videos if v.is_file()), None)
             if video is None:
                 raise rd.fail(folder, "camera folder (or <serial>.mp4 video) is missing")
-            cam.video_path = video
+            cam.video_path = rd.inside(video)
             cam.video_frames = _decode_video(rd, cam)
             rd.digest.update(f"{rd.rel(video)}:{video.stat().st_size}".encode())
     counts = {len(c.frames) if c.video_path is None else len(c.video_frames) for c in cameras}
@@ -111,12 +112,14 @@ def _check_frame(rd: CaptureReader, folder: Path, cam: CameraPlan, index: int) -
     depth = folder / dexycb.depth_file(index)
     if not color.is_file():
         raise rd.fail(color, f"frame {index} is missing")
+    rd.inside(color)
     problem = check_jpeg(color, cam.width, cam.height)
     if problem:
         raise rd.fail(color, problem)
     rd.digest.update(f"{rd.rel(color)}:{color.stat().st_size}".encode())
     if not depth.is_file():
         raise rd.fail(depth, f"depth of frame {index} is missing")
+    rd.inside(depth)
     problem = check_png16(depth, cam.width, cam.height)
     if problem:
         raise rd.fail(depth, problem)

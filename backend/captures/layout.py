@@ -28,7 +28,7 @@ import numpy as np
 
 from backend.captures.frame_files import attach_frames
 from backend.captures.plans import CameraPlan, HandPlan, ObjectPlan, SequencePlan
-from backend.captures.reader import CaptureReader
+from backend.captures.reader import CaptureReader, CaptureRoots
 from backend.errors import InvalidCapture
 from worker.formats import dexycb
 from worker.formats.dexycb import YCB_CLASSES
@@ -58,10 +58,12 @@ def capture_root_of(seq_dir: Path) -> Path:
     return seq_dir.parent.parent
 
 
-def read_sequence(seq_dir: Path) -> SequencePlan:
-    """Parse and check one sequence and everything it refers to; touches nothing."""
+def read_sequence(seq_dir: Path, roots: CaptureRoots | None = None) -> SequencePlan:
+    """Parse and check one sequence and everything it refers to; touches nothing. With
+    ``roots`` (an HTTP import), every file and folder it opens must lie inside them."""
     root = capture_root_of(seq_dir)
-    rd = CaptureReader(root)
+    rd = CaptureReader(root, roots)
+    rd.inside(seq_dir)
     meta_path = seq_dir / dexycb.META_FILE
     meta = rd.yaml(meta_path)
     serials = [str(s) for s in rd.field(meta, meta_path, dexycb.META_SERIALS, list)]
@@ -149,19 +151,21 @@ def _read_objects(
             raise rd.fail(meta_path, f"field 'ycb_ids[{i}]' is not a known YCB id: {ycb_id!r}")
         name = YCB_CLASSES[ycb_id]
         folder = root / dexycb.model_dir(name)
+        if folder.is_dir():
+            rd.inside(folder)
         meshes = sorted(p for p in folder.glob("*") if p.suffix.lower() in MESH_SUFFIXES)
         preferred = folder / dexycb.MODEL_OBJ
         mesh_path = preferred if preferred.is_file() else (meshes[0] if meshes else preferred)
         if not mesh_path.is_file():
             raise rd.fail(preferred, f"object model of {name} is missing")
         try:
-            mesh = read_mesh(mesh_path)
+            mesh = read_mesh(rd.inside(mesh_path))
         except (ValueError, OSError) as exc:
             raise rd.fail(mesh_path, f"unreadable mesh: {exc}") from None
         rd.digest.update(rd.rel(mesh_path).encode() + mesh_path.read_bytes())
         out.append(ObjectPlan(
             index=i, ycb_id=ycb_id, name=name, mesh_path=mesh_path,
-            model_files=sorted(p for p in folder.iterdir() if p.is_file()),
+            model_files=sorted(rd.inside(p) for p in folder.iterdir() if p.is_file()),
             num_vertices=len(mesh.vertices), num_faces=len(mesh.faces),
             grasped=grasp == i, initial_pose=None if poses is None else poses[i],
         ))
@@ -177,7 +181,7 @@ def _initial_poses(
     if not path.is_file():
         return None
     try:
-        with np.load(path) as npz:
+        with np.load(rd.inside(path)) as npz:
             pose_y = np.asarray(npz[dexycb.POSE_Y], dtype=np.float64)
     except KeyError:
         raise rd.fail(path, "field 'pose_y' is missing") from None
