@@ -129,6 +129,11 @@ class Settings(BaseSettings):
     worker_threads: int = Field(default=2, ge=1, le=64)
     # Upper bound on frames served in one per-view bundle (a DexYCB clip has 72).
     max_bundle_frames: int = Field(default=2000, ge=1)
+    # The largest frame an import takes, in pixels: checked from the intrinsics and every
+    # frame's header before anything is decoded (a 16,000 x 16,000 frame would take ~0.8 GB
+    # to decode, and minutes of statistics). DexYCB's frames are 640 x 480.
+    max_frame_width: int = Field(default=4096, ge=1, le=65535)
+    max_frame_height: int = Field(default=4096, ge=1, le=65535)
     # Folders POST /api/captures/import may read a capture from (the path and the capture's
     # root must lie inside one): a JSON list, or folders separated by os.pathsep (':'); empty =
     # the instance folder's captures/ and the instance folder itself.

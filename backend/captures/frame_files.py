@@ -90,6 +90,12 @@ def _decode_video(rd: CaptureReader, cam: CameraPlan) -> list[bytes]:
     cap = cv2.VideoCapture(str(cam.video_path))
     if not cap.isOpened():
         raise rd.fail(cam.video_path, "video cannot be opened by OpenCV")
+    # The container's stated size, before a frame is decoded (each is checked again below).
+    size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+    if size != (0, 0) and size != (cam.width, cam.height):
+        cap.release()
+        raise rd.fail(cam.video_path, f"video is {size[0]}x{size[1]}, the intrinsics say "
+                                      f"{cam.width}x{cam.height}")
     frames = []
     try:
         while True:

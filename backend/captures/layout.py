@@ -29,6 +29,7 @@ import numpy as np
 from backend.captures.frame_files import attach_frames
 from backend.captures.plans import CameraPlan, HandPlan, ObjectPlan, SequencePlan
 from backend.captures.reader import CaptureReader, CaptureRoots
+from backend.config import get_settings
 from backend.errors import InvalidCapture
 from worker.formats import dexycb
 from worker.formats.dexycb import YCB_CLASSES
@@ -124,6 +125,7 @@ def _read_camera(
                      for k, default in (("width", size_w), ("height", size_h)))
     if width <= 0 or height <= 0:
         raise rd.fail(path, f"image size must be positive, got {width}x{height}")
+    _check_frame_size(rd, path, width, height)
     coeffs = color.get("coeffs", [0.0] * 5)
     dist = rd.numbers(coeffs, path, "color.coeffs", len(coeffs) if isinstance(coeffs, list) else 5)
     if len(dist) not in (4, 5, 8):
@@ -132,6 +134,16 @@ def _read_camera(
         raise rd.fail(path, "fields 'color.fx' and 'color.fy' must be positive")
     return CameraPlan(serial=serial, width=width, height=height, fx=vals["fx"], fy=vals["fy"],
                       ppx=vals["ppx"], ppy=vals["ppy"], distortion=dist, extrinsics=extrinsics)
+
+
+def _check_frame_size(rd: CaptureReader, path: Path, width: int, height: int) -> None:
+    """Refuse frames over the size limit before one is read: every frame's header must then
+    match the intrinsics' size (frame_files), so none larger is ever decoded."""
+    settings = get_settings()
+    if width > settings.max_frame_width or height > settings.max_frame_height:
+        raise rd.fail(path, f"frames of {width}x{height} are larger than an import takes "
+                            f"({settings.max_frame_width}x{settings.max_frame_height}: "
+                            "DEXLABEL_MAX_FRAME_WIDTH, DEXLABEL_MAX_FRAME_HEIGHT)")
 
 
 def _read_objects(
