@@ -42,7 +42,7 @@ def content_security_policy(settings: Settings) -> str:
     extra = f" {storage}" if storage else ""
     return "; ".join((
         "default-src 'self'", "script-src 'self'", "style-src 'self'",
-        f"img-src 'self' data: blob:{extra}", f"connect-src 'self'{extra}",
+        f"img-src 'self' data: blob:{extra}", f"connect-src 'self' blob:{extra}",
         f"media-src 'self' blob:{extra}", "frame-src 'self' https: http:",
         "object-src 'none'", "base-uri 'none'", "form-action 'self'",
         "frame-ancestors 'none'"))
