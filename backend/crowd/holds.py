@@ -117,7 +117,7 @@ def confirm_held(task_id: int, hit_id: str, assignment_id: str,
         if record.get("HITId") != hit_id or record.get("WorkerId") != worker_id:
             raise Forbidden(f"the marketplace's assignment {assignment_id} is not worker "
                             f"{worker_id}'s on HIT {hit_id}")
-        return
+        return None
     held = int(hit.get("NumberOfAssignmentsPending") or 0)
     if held < 1:
         raise Forbidden(f"the marketplace knows no assignment {assignment_id}: no worker holds "
