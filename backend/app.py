@@ -38,6 +38,7 @@ from backend.jobs.router import router as jobs_router
 from backend.labels.router import page_router as labels_page_router
 from backend.market.router import router as market_router
 from backend.middleware import install_request_guards
+from backend.page_headers import install_page_headers
 from backend.pipeline.router import page_router as pipeline_page_router
 from backend.pipeline.router import router as pipeline_router
 from backend.portal.router import router as portal_router
@@ -68,6 +69,7 @@ def create_app() -> FastAPI:
     install_error_handlers(app)
     install_request_limits(app)
     install_request_guards(app)
+    install_page_headers(app)
     app.include_router(auth_router)
     app.include_router(captures_router)
     app.include_router(annotation_router)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import ipaddress
 import json
+import logging
 import math
 import os
 import re
@@ -137,6 +138,11 @@ class Settings(BaseSettings):
     worker_threads: int = Field(default=2, ge=1, le=64)
     # Upper bound on frames served in one per-view bundle (a DexYCB clip has 72).
     max_bundle_frames: int = Field(default=2000, ge=1)
+    # The largest frame an import takes, in pixels: checked from the intrinsics and every
+    # frame's header before anything is decoded (a 16,000 x 16,000 frame would take ~0.8 GB
+    # to decode, and minutes of statistics). DexYCB's frames are 640 x 480.
+    max_frame_width: int = Field(default=4096, ge=1, le=65535)
+    max_frame_height: int = Field(default=4096, ge=1, le=65535)
     # Folders POST /api/captures/import may read a capture from (the path and the capture's
     # root must lie inside one): a JSON list, or folders separated by os.pathsep (':'); empty =
     # the instance folder's captures/ and the instance folder itself.
@@ -352,6 +358,24 @@ def _describe(exc: ValidationError) -> str:
     return "\n".join(lines)
 
 
+# The instance folder holds the database, the queue, the signing key, export archives and
+# the stored frames: readable by its owner only, so its files need no mode of their own.
+INSTANCE_FOLDER_MODE = 0o700
+
+
+def keep_instance_private(var_dir: Path) -> None:
+    """Make the instance folder (if missing) with mode 0700, or take group's and others'
+    access from one that has it. A folder this process may not change (a volume owned by
+    another user) is left as it is, with a warning."""
+    try:
+        var_dir.mkdir(mode=INSTANCE_FOLDER_MODE, parents=True, exist_ok=True)
+        if var_dir.stat().st_mode & 0o077:
+            os.chmod(var_dir, INSTANCE_FOLDER_MODE)
+    except OSError as exc:
+        logging.getLogger(__name__).warning(
+            "the instance folder %s cannot be made private (mode 0700): %s", var_dir, exc)
+
+
 _secret_lock = threading.Lock()
 _instance_secrets: dict[Path, str] = {}
 
@@ -370,7 +394,7 @@ def instance_secret(var_dir: Path) -> str:
 
 def _read_or_make_secret(path: Path) -> str:
     if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
+        keep_instance_private(path.parent)
         # Written whole under a temporary name, then linked into place: a process racing this
         # one reads either no file or the whole key, and the first link wins.
         temp = path.with_name(f".{SECRET_FILE}.{os.getpid()}.{secrets.token_hex(4)}")

@@ -17,6 +17,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.routing import APIRoute, iter_route_contexts
 from pydantic import BaseModel, ConfigDict
+from sqlalchemy.exc import NoResultFound
 from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
 from starlette.routing import compile_path
@@ -164,6 +165,13 @@ def install_error_handlers(app: FastAPI) -> None:
         return JSONResponse({"error": Busy.code, "detail": "a concurrent request changed the "
                              "same records; please try again"}, status_code=Busy.status_code,
                             headers={"Retry-After": "1"})
+
+    @app.exception_handler(NoResultFound)
+    async def _gone(_: Request, exc: NoResultFound) -> JSONResponse:
+        # A row read a moment before was deleted by a request that committed in between (a
+        # forced delete racing a save): the answer of a record that is not there.
+        return JSONResponse({"error": NotFound.code, "detail": "a record this request works on "
+                             "was deleted meanwhile"}, status_code=NotFound.status_code)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:

@@ -5,6 +5,8 @@ A command that needs the database first checks that a migrated one is there, bef
 engine is made (making a SQLite engine creates the file's folder), so a command run in the
 wrong folder says so and leaves nothing behind. ``dexlabel serve`` and ``dexlabel demo``
 record the address they serve at in ``{var_dir}/server.json`` and remove it when they stop;
+one server per instance: a second one refuses while the recorded one is alive, and a record
+whose process is gone is replaced;
 commands in another terminal (``crowd sync``, ``crowd bonus``, ``publish``) reach the built-in
 marketplace there unless ``DEXLABEL_PUBLIC_URL`` or ``DEXLABEL_MTURK_ENDPOINT_URL`` says
 otherwise.
@@ -12,10 +14,13 @@ otherwise.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import socket
 import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -28,6 +33,10 @@ MIGRATIONS_TABLE = "alembic_version"
 
 class NoInstance(DexlabelError, status_code=400, code="no_instance"):
     """No migrated database where the settings point."""
+
+
+class AlreadyServing(DexlabelError, status_code=409, code="already_serving"):
+    """A live server of this instance recorded its address: one server per instance."""
 
 
 def _safe_url(url: str) -> str:
@@ -121,23 +130,76 @@ def client_url(host: str, port: int) -> str:
 
 
 def record_server(settings: Settings, url: str) -> Path:
-    """Write where this process serves; :func:`forget_server` removes it on the way out."""
+    """Write where this process serves; :func:`forget_server` removes it on the way out.
+
+    Raises:
+        AlreadyServing: another live server of this instance recorded its address (its
+            record is left as it is).
+    """
     path = server_file(settings)
     path.parent.mkdir(parents=True, exist_ok=True)
-    record = {"url": url, "pid": os.getpid(), "host": socket.gethostname(),
-              "started_at": datetime.now(UTC).isoformat(timespec="seconds")}
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(json.dumps(record, indent=2) + "\n")
-    partial.replace(path)
+    with _locked(path.parent):
+        _refuse_live_record(path)
+        record = {"url": url, "pid": os.getpid(), "host": socket.gethostname(),
+                  "started_at": datetime.now(UTC).isoformat(timespec="seconds")}
+        partial = path.with_name(path.name + ".partial")
+        partial.write_text(json.dumps(record, indent=2) + "\n")
+        partial.replace(path)
     return path
+
+
+def refuse_second_server(settings: Settings) -> None:
+    """Refuse to start a server while another live one serves this instance (the check a
+    command makes before its slow preparations; :func:`record_server` makes it again).
+
+    Raises:
+        AlreadyServing: naming the running server's address and process id.
+    """
+    path = server_file(settings)
+    if path.parent.is_dir():
+        with _locked(path.parent):
+            _refuse_live_record(path)
 
 
 def forget_server(settings: Settings) -> None:
     """Remove this process's record (a record another server wrote since is left alone)."""
     path = server_file(settings)
+    if not path.parent.is_dir():
+        return
+    with _locked(path.parent):
+        record = _read_record(path)
+        if record is not None and record.get("pid") == os.getpid():
+            path.unlink(missing_ok=True)
+
+
+@contextmanager
+def _locked(folder: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the instance folder: two servers starting at once read and
+    write the record one after the other."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
+
+
+def _refuse_live_record(path: Path) -> None:
+    """Raise AlreadyServing when the record names a live process of this machine other than
+    this one. A record of a process that is gone, or of this process, is stale; so is one
+    written on another machine, since an instance folder belongs to one host (a container
+    started again on the same folder gets a new host name)."""
     record = _read_record(path)
-    if record is not None and record.get("pid") == os.getpid():
-        path.unlink(missing_ok=True)
+    if record is None or record.get("pid") == os.getpid():
+        return
+    if record.get("host") != socket.gethostname() or not _alive(record.get("pid")):
+        return
+    since = f", since {record['started_at']}" if isinstance(record.get("started_at"), str) else ""
+    raise AlreadyServing(
+        f"this instance is already served at {str(record['url']).rstrip('/')} (pid "
+        f"{record.get('pid')}{since}; recorded in {path.name}): one server per instance. "
+        "Stop that one first, or set DEXLABEL_VAR_DIR to another instance folder",
+        url=record["url"], pid=record.get("pid"))
 
 
 def _read_record(path: Path) -> dict | None:

@@ -6,13 +6,14 @@ Services flush and never commit; the request is the unit of work.
 from __future__ import annotations
 
 import secrets
-from datetime import datetime
+from datetime import datetime, timedelta
 from typing import Any, NamedTuple, cast
 
 import msgspec
 from sqlalchemy import (
     Table,
     bindparam,
+    func,
     insert,
     inspect,
     select,
@@ -123,6 +124,30 @@ def create_assignment(
     session.add(assignment)
     session.flush()
     return assignment
+
+
+def require_open_slot(session: Session, hit_id: str, held: int, duration_s: int) -> None:
+    """Refuse to open one more assignment of a HIT than workers hold on the marketplace.
+
+    The marketplace counts ``held`` assignments of the HIT but cannot name their workers, so
+    an assignment opened here is unconfirmed until it is submitted: every holder of the HIT's
+    task token (a previewer) could open any number. Unconfirmed work opened within the HIT's
+    assignment duration takes one slot each; older work the marketplace has taken back (it
+    has expired) takes none.
+
+    Raises:
+        Forbidden: every held slot is taken by work already opened here.
+    """
+    since = utcnow() - timedelta(seconds=duration_s) if duration_s > 0 else None
+    opened = select(func.count()).select_from(Assignment).where(
+        Assignment.hit_id == hit_id, Assignment.status == "working")
+    if since is not None:
+        opened = opened.where(Assignment.created_at >= since)
+    taken = session.scalar(opened) or 0
+    if taken >= held:
+        raise Forbidden(f"HIT {hit_id} has {held} assignment(s) held by workers and "
+                        f"{taken} already opened here: no open slot for another (accept the "
+                        "HIT on the marketplace first)")
 
 
 def start_assignment(
@@ -279,9 +304,13 @@ def _replace_tracks(session: Session, assignment_id: int, status: str, clip: _Cl
         "assignment": assignment_id, "base": body.version, "edits": body.edit_count,
         "seconds": body.working_time_s, "at": saved_at}).scalar_one_or_none()
     if version is None:
-        status, current = session.execute(
+        row = session.execute(
             select(_assignments.c.status, _assignments.c.version)
-            .where(_assignments.c.id == assignment_id)).one()
+            .where(_assignments.c.id == assignment_id)).one_or_none()
+        if row is None:  # deleted since it was read (a forced delete of its sequence)
+            raise NotFound(f"assignment {assignment_id} no longer exists (its sequence or "
+                           "task was deleted); nothing was saved")
+        status, current = row
         if status != "working":  # submitted from another tab meanwhile
             raise Conflict(f"assignment is {status}; its labels can no longer change")
         raise StaleVersion(

@@ -12,7 +12,6 @@ other, refused, removes its own files and finds the committed sequence when it a
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence as Seq
 from pathlib import Path
 
 import cv2
@@ -23,9 +22,10 @@ from sqlalchemy.exc import IntegrityError
 from backend.captures import layout, service
 from backend.captures.models import Camera, Frame, Sequence
 from backend.captures.plans import SequencePlan
+from backend.captures.reader import CaptureRoots
 from backend.config import Settings
 from backend.db import session_scope
-from backend.errors import Forbidden, InvalidCapture
+from backend.errors import InvalidCapture
 from backend.jobs.service import enqueue_job
 from backend.storage import Storage, get_storage
 
@@ -39,18 +39,20 @@ log = logging.getLogger(__name__)
 
 
 def import_path(path: str | Path, storage: Storage | None = None,
-                roots: Seq[Path] | None = None) -> list[service.ImportResult]:
+                roots: CaptureRoots | None = None) -> list[service.ImportResult]:
     """Import every sequence under ``path`` (a capture root or one sequence folder).
 
     All sequences are parsed and checked before the first one is written. A sequence already
     imported from the same capture is unchanged, except that stored files that went missing are
-    written again (``repaired``). With ``roots`` (the HTTP import), the path and the root of
-    every capture found must lie inside one of those folders, symbolic links followed.
+    written again (``repaired``). With ``roots`` (the HTTP import), the path, the root of every
+    capture found and every file and folder read must lie inside one of those folders,
+    symbolic links followed.
 
     Raises:
         InvalidCapture: a path with a NUL character, longer than MAX_PATH_CHARS, unreadable, or
             a capture with a missing or malformed file.
-        Forbidden: outside ``roots``.
+        Forbidden: outside ``roots``, named relative to the capture (roots relative to the
+            instance folder).
     """
     storage = storage or get_storage()
     folder = _checked_path(path, roots)
@@ -60,17 +62,19 @@ def import_path(path: str | Path, storage: Storage | None = None,
         raise InvalidCapture(_shown(str(path)), f"cannot be read ({exc.strerror or exc})") from exc
     if roots is not None:
         for capture_root in sorted({layout.capture_root_of(d) for d in seq_dirs}):
-            _require_inside(capture_root, roots, f"the capture root {capture_root} (where its "
-                                                 "calibration and models are read)")
-    plans = [layout.read_sequence(d) for d in seq_dirs]
+            if not roots.holds(capture_root):
+                raise roots.refuse(f"the capture root of {_shown(str(path))} (the folder "
+                                   "above its subject folders, where its calibration and "
+                                   "models are read)")
+    plans = [layout.read_sequence(d, roots) for d in seq_dirs]
     return [_import_plan(storage, plan) for plan in plans]
 
 
-def allowed_capture_roots(settings: Settings) -> list[Path]:
-    """The folders an HTTP import may read from (DEXLABEL_CAPTURE_ROOTS), resolved; by default
-    the instance folder's captures/ and the instance folder itself."""
+def allowed_capture_roots(settings: Settings) -> CaptureRoots:
+    """The folders an HTTP import may read from (DEXLABEL_CAPTURE_ROOTS); by default the
+    instance folder's captures/ and the instance folder itself."""
     roots = settings.capture_roots or [settings.var_dir / "captures", settings.var_dir]
-    return [Path(root).resolve() for root in roots]
+    return CaptureRoots(roots, settings.var_dir)
 
 
 def _shown(path: str) -> str:
@@ -78,7 +82,7 @@ def _shown(path: str) -> str:
     return path if len(path) <= 200 else f"{path[:200]}... ({len(path)} characters)"
 
 
-def _checked_path(path: str | Path, roots: Seq[Path] | None) -> Path:
+def _checked_path(path: str | Path, roots: CaptureRoots | None) -> Path:
     text = str(path)
     if "\x00" in text:
         raise InvalidCapture(_shown(text.replace("\x00", "\\0")),
@@ -90,9 +94,10 @@ def _checked_path(path: str | Path, roots: Seq[Path] | None) -> Path:
         resolved = Path(text).resolve()
     except (OSError, RuntimeError) as exc:  # RuntimeError: a symbolic link loop
         raise InvalidCapture(_shown(text), f"cannot be read ({exc})") from exc
-    if roots is not None:
-        _require_inside(resolved, roots, text if resolved == Path(text) else
-                        f"{text} (that is {resolved})")
+    if roots is not None and not roots.holds(resolved):
+        # The path as given, never where it leads: the server's folders stay unnamed.
+        raise roots.refuse(_shown(text) if resolved == Path(text) else
+                           f"{_shown(text)} (a symbolic link leads outside)")
     try:
         there = resolved.exists()
     except OSError as exc:
@@ -100,14 +105,6 @@ def _checked_path(path: str | Path, roots: Seq[Path] | None) -> Path:
     if not there:
         raise InvalidCapture(_shown(text), "path does not exist")
     return resolved
-
-
-def _require_inside(path: Path, roots: Seq[Path], what: str) -> None:
-    if not any(path.is_relative_to(root) for root in roots):
-        raise Forbidden(
-            f"{_shown(what)} is outside the folders captures are imported from "
-            f"({', '.join(str(r) for r in roots)}); put the capture in one of them or list its "
-            "folder in DEXLABEL_CAPTURE_ROOTS")
 
 
 def _import_plan(storage: Storage, plan: SequencePlan) -> service.ImportResult:

@@ -26,6 +26,7 @@ def attach_frames(
     for cam in cameras:
         folder = seq_dir / cam.serial
         if folder.is_dir():
+            rd.inside(folder)
             count = (num_frames if num_frames is not None
                      else len(list(folder.glob(dexycb.COLOR_GLOB))))
             cam.frames = [_check_frame(rd, folder, cam, i) for i in range(count)]
@@ -34,7 +35,7 @@ def attach_frames(
             video = next((v for v in videos if v.is_file()), None)
             if video is None:
                 raise rd.fail(folder, "camera folder (or <serial>.mp4 video) is missing")
-            cam.video_path = video
+            cam.video_path = rd.inside(video)
             cam.video_frames = _decode_video(rd, cam)
             rd.digest.update(f"{rd.rel(video)}:{video.stat().st_size}".encode())
     counts = {len(c.frames) if c.video_path is None else len(c.video_frames) for c in cameras}
@@ -89,6 +90,12 @@ def _decode_video(rd: CaptureReader, cam: CameraPlan) -> list[bytes]:
     cap = cv2.VideoCapture(str(cam.video_path))
     if not cap.isOpened():
         raise rd.fail(cam.video_path, "video cannot be opened by OpenCV")
+    # The container's stated size, before a frame is decoded (each is checked again below).
+    size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+    if size != (0, 0) and size != (cam.width, cam.height):
+        cap.release()
+        raise rd.fail(cam.video_path, f"video is {size[0]}x{size[1]}, the intrinsics say "
+                                      f"{cam.width}x{cam.height}")
     frames = []
     try:
         while True:
@@ -113,6 +120,7 @@ def _check_frame(rd: CaptureReader, folder: Path, cam: CameraPlan, index: int) -
                                  (depth, check_png16, f"depth of frame {index} is missing")):
         if not path.is_file():
             raise rd.fail(path, missing)
+        rd.inside(path)
         problem = check(path, cam.width, cam.height)
         if problem:
             raise rd.fail(path, problem)

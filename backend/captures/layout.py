@@ -28,7 +28,8 @@ import numpy as np
 
 from backend.captures.frame_files import attach_frames
 from backend.captures.plans import CameraPlan, HandPlan, ObjectPlan, SequencePlan
-from backend.captures.reader import CaptureReader
+from backend.captures.reader import CaptureReader, CaptureRoots
+from backend.config import get_settings
 from backend.errors import InvalidCapture
 from worker.formats import dexycb
 from worker.formats.dexycb import YCB_CLASSES
@@ -58,10 +59,12 @@ def capture_root_of(seq_dir: Path) -> Path:
     return seq_dir.parent.parent
 
 
-def read_sequence(seq_dir: Path) -> SequencePlan:
-    """Parse and check one sequence and everything it refers to; touches nothing."""
+def read_sequence(seq_dir: Path, roots: CaptureRoots | None = None) -> SequencePlan:
+    """Parse and check one sequence and everything it refers to; touches nothing. With
+    ``roots`` (an HTTP import), every file and folder it opens must lie inside them."""
     root = capture_root_of(seq_dir)
-    rd = CaptureReader(root)
+    rd = CaptureReader(root, roots)
+    rd.inside(seq_dir)
     meta_path = seq_dir / dexycb.META_FILE
     meta = rd.yaml(meta_path)
     serials = [str(s) for s in rd.field(meta, meta_path, dexycb.META_SERIALS, list)]
@@ -122,6 +125,7 @@ def _read_camera(
                      for k, default in (("width", size_w), ("height", size_h)))
     if width <= 0 or height <= 0:
         raise rd.fail(path, f"image size must be positive, got {width}x{height}")
+    _check_frame_size(rd, path, width, height)
     coeffs = color.get("coeffs", [0.0] * 5)
     dist = rd.numbers(coeffs, path, "color.coeffs", len(coeffs) if isinstance(coeffs, list) else 5)
     if len(dist) not in (4, 5, 8):
@@ -130,6 +134,16 @@ def _read_camera(
         raise rd.fail(path, "fields 'color.fx' and 'color.fy' must be positive")
     return CameraPlan(serial=serial, width=width, height=height, fx=vals["fx"], fy=vals["fy"],
                       ppx=vals["ppx"], ppy=vals["ppy"], distortion=dist, extrinsics=extrinsics)
+
+
+def _check_frame_size(rd: CaptureReader, path: Path, width: int, height: int) -> None:
+    """Refuse frames over the size limit before one is read: every frame's header must then
+    match the intrinsics' size (frame_files), so none larger is ever decoded."""
+    settings = get_settings()
+    if width > settings.max_frame_width or height > settings.max_frame_height:
+        raise rd.fail(path, f"frames of {width}x{height} are larger than an import takes "
+                            f"({settings.max_frame_width}x{settings.max_frame_height}: "
+                            "DEXLABEL_MAX_FRAME_WIDTH, DEXLABEL_MAX_FRAME_HEIGHT)")
 
 
 def _read_objects(
@@ -149,19 +163,21 @@ def _read_objects(
             raise rd.fail(meta_path, f"field 'ycb_ids[{i}]' is not a known YCB id: {ycb_id!r}")
         name = YCB_CLASSES[ycb_id]
         folder = root / dexycb.model_dir(name)
+        if folder.is_dir():
+            rd.inside(folder)
         meshes = sorted(p for p in folder.glob("*") if p.suffix.lower() in MESH_SUFFIXES)
         preferred = folder / dexycb.MODEL_OBJ
         mesh_path = preferred if preferred.is_file() else (meshes[0] if meshes else preferred)
         if not mesh_path.is_file():
             raise rd.fail(preferred, f"object model of {name} is missing")
         try:
-            mesh = read_mesh(mesh_path)
+            mesh = read_mesh(rd.inside(mesh_path))
         except (ValueError, OSError) as exc:
             raise rd.fail(mesh_path, f"unreadable mesh: {exc}") from None
         rd.digest.update(rd.rel(mesh_path).encode() + mesh_path.read_bytes())
         out.append(ObjectPlan(
             index=i, ycb_id=ycb_id, name=name, mesh_path=mesh_path,
-            model_files=sorted(p for p in folder.iterdir() if p.is_file()),
+            model_files=sorted(rd.inside(p) for p in folder.iterdir() if p.is_file()),
             num_vertices=len(mesh.vertices), num_faces=len(mesh.faces),
             grasped=grasp == i, initial_pose=None if poses is None else poses[i],
         ))
@@ -177,7 +193,7 @@ def _initial_poses(
     if not path.is_file():
         return None
     try:
-        with np.load(path) as npz:
+        with np.load(rd.inside(path)) as npz:
             pose_y = np.asarray(npz[dexycb.POSE_Y], dtype=np.float64)
     except KeyError:
         raise rd.fail(path, "field 'pose_y' is missing") from None

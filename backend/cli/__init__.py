@@ -17,12 +17,13 @@ import typer
 from typer.core import TyperGroup
 
 from backend.cli.console import fail, progress, refusing_bad_input
-from backend.config import get_settings
+from backend.config import get_settings, keep_instance_private
 from backend.instance import (
     adopt_recorded_server,
     client_url,
     forget_server,
     record_server,
+    refuse_second_server,
     require_database,
     serve_at,
 )
@@ -60,6 +61,7 @@ def _instance(ctx: typer.Context) -> None:
         return
     with refusing_bad_input():
         require_database(get_settings())
+    keep_instance_private(get_settings().var_dir)
     if ctx.invoked_subcommand not in LONG_RUNNING:
         adopt_recorded_server()
 
@@ -75,6 +77,7 @@ def migrate(
     from backend import migrate as m
 
     url = get_settings().database_url
+    keep_instance_private(get_settings().var_dir)
     (m.downgrade if down else m.upgrade)(url, to)
     typer.echo(f"database at {to} ({make_url(url).render_as_string(hide_password=True)})")
 
@@ -202,11 +205,12 @@ def serve(
         fail(f"--workers {workers} needs PostgreSQL (DEXLABEL_DATABASE_URL): the embedded SQLite "
              "database takes one writer at a time, so it is served by one process; run "
              "without --workers, or point DEXLABEL_DATABASE_URL at PostgreSQL")
+    with refusing_bad_input():  # one server per instance: refused before anything starts
+        record_server(settings, client_url(host, port))
     consumer = None
     if settings.inprocess_worker and not settings.redis_url:
         register_handlers()
         consumer = start_inprocess_consumer(settings.worker_threads)
-    record_server(settings, client_url(host, port))
     # uvicorn stops on SIGINT/SIGTERM, then raises the signal again for the handler it found:
     # this one ends the process through the ``finally`` below, so the record is removed. With
     # several processes, uvicorn's supervisor stops them and returns instead.
@@ -270,6 +274,9 @@ def demo(
 
     started = time.perf_counter()
     settings = serve_at(host, port)
+    with refusing_bad_input():  # one server per instance, checked before the slow work
+        refuse_second_server(settings)
+    keep_instance_private(settings.var_dir)
     seq, capture = _demo_capture(settings.var_dir / "demo-capture", settings.database_url,
                                  frames, views, objects)
     with refusing_bad_input():

@@ -19,7 +19,7 @@ confirm job, ``backend.crowd.confirm``), and only confirmed marketplace work is 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from typing import Any
+from typing import Any, NamedTuple
 from urllib.parse import parse_qs, urlsplit
 
 from backend.annotation.tokens import TASK_SCOPE
@@ -83,9 +83,20 @@ def task_of_question(question: str) -> int | None:
     return int(claims["task_id"])
 
 
-def confirm_held(task_id: int, hit_id: str, assignment_id: str, worker_id: str) -> None:
+class HeldSlots(NamedTuple):
+    """A HIT's assignments held by workers and not yet submitted, as the marketplace counts
+    them, and how long a worker may hold one (after that the marketplace takes it back)."""
+
+    held: int
+    duration_s: int
+
+
+def confirm_held(task_id: int, hit_id: str, assignment_id: str,
+                 worker_id: str) -> HeldSlots | None:
     """Returns when the marketplace vouches, as far as its requester API can, that
-    ``worker_id`` holds ``assignment_id`` of ``hit_id``, a HIT showing task ``task_id``.
+    ``worker_id`` holds ``assignment_id`` of ``hit_id``, a HIT showing task ``task_id``:
+    None when it names the assignment's worker, else the HIT's held slots, which bound how
+    many assignments of it may be opened (the caller counts those already opened).
 
     Raises:
         NotFound: the marketplace has no such HIT.
@@ -106,7 +117,9 @@ def confirm_held(task_id: int, hit_id: str, assignment_id: str, worker_id: str) 
         if record.get("HITId") != hit_id or record.get("WorkerId") != worker_id:
             raise Forbidden(f"the marketplace's assignment {assignment_id} is not worker "
                             f"{worker_id}'s on HIT {hit_id}")
-        return
-    if int(hit.get("NumberOfAssignmentsPending") or 0) < 1:
+        return None
+    held = int(hit.get("NumberOfAssignmentsPending") or 0)
+    if held < 1:
         raise Forbidden(f"the marketplace knows no assignment {assignment_id}: no worker holds "
                         f"an assignment of HIT {hit_id} (accept the HIT first)")
+    return HeldSlots(held, int(hit.get("AssignmentDurationInSeconds") or 0))

@@ -168,7 +168,9 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
                         "(hitId, assignmentId and workerId in the page address); a direct "
                         "link is made by an admin (POST /api/tasks/{id}/assignments)")
     if not _opened_before(task_id, body):
-        holds.confirm_held(task_id, body.hit_id, body.assignment_id, body.worker_id)
+        slots = holds.confirm_held(task_id, body.hit_id, body.assignment_id, body.worker_id)
+        if slots is not None:
+            tasks.require_open_slot(session, body.hit_id, slots.held, slots.duration_s)
     task = tasks.get_task_or_raise(session, task_id)
     assignment = tasks.start_assignment(session, task, body.assignment_id, body.worker_id,
                                           body.hit_id)

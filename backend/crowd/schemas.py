@@ -13,14 +13,15 @@ from backend.validation import BodyId, Int32
 # MTurk's own bounds: lifetime 30 s to 1 year, assignment duration 30 s to 1 year,
 # auto-approval delay 0 to 30 days.
 Seconds = Annotated[int, Field(ge=30, le=31_536_000)]
-Dollars = Annotated[Decimal, Field(ge=0, le=1000, decimal_places=2)]
+# A reward is at least one cent: a $0.00 assignment pays nothing and the marketplace refuses it.
+Reward = Annotated[Decimal, Field(ge=Decimal("0.01"), le=1000, decimal_places=2)]
 Feedback = Annotated[str, Field(min_length=1, max_length=1024)]
 
 
 class PublishOptions(BaseModel):
     """How tasks are published. Rewards in dollars, durations in seconds."""
 
-    reward: Dollars = Decimal("0.50")
+    reward: Reward = Decimal("0.50")
     max_assignments: int = Field(default=1, ge=1, le=1_000_000_000)
     # 10+ assignments per HIT cost 20% more in fees: it must be asked for explicitly.
     allow_large_hits: bool = False

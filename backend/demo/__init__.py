@@ -68,6 +68,8 @@ class DemoServer:
         from worker.tasks import register_handlers
 
         settings = get_settings()
+        # Claimed first: a second server of this instance is refused before it starts.
+        record_server(settings, client_url(self.host, self.port))
         if settings.inprocess_worker and not settings.redis_url:
             register_handlers()
             self.consumer = start_inprocess_consumer(settings.worker_threads)
@@ -82,7 +84,6 @@ class DemoServer:
                 raise DexlabelError(f"the server did not start on {self.host}:{self.port} "
                                     "(is the port taken? try --port)")
             time.sleep(0.05)
-        record_server(settings, client_url(self.host, self.port))
 
     def wait(self) -> None:
         """Serve until Ctrl+C or SIGTERM: uvicorn installs its own signal handlers only in

@@ -25,6 +25,12 @@ def start_export(body: ExportRequest, session: SessionDep, _: CurrentAdmin) -> E
     if body.all == (body.sequences is not None):
         raise service.InvalidExport("give either sequences (a list of ids) or all: true",
                                     field="sequences")
+    if body.options.frames == "link":
+        # Links name files in the server's own storage: a downloaded archive would hold
+        # server paths and no frames.
+        raise service.InvalidExport(
+            "options.frames=link is for `dexlabel export --link-frames` on the server only; "
+            "an HTTP export copies the frames (options.frames=copy)", field="options.frames")
     job = service.request_export(session, body.format, None if body.all else body.sequences,
                                  body.include, body.options.model_dump(), body.archive)
     return ExportRead.of(job)

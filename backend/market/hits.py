@@ -64,12 +64,20 @@ def _type_properties(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return {
         "title": params["Title"], "description": params["Description"],
         "keywords": params.get("Keywords"),
-        "reward_cents": parse_amount(params["Reward"], "Reward"),
+        "reward_cents": _reward_cents(params["Reward"]),
         "assignment_duration_s": params["AssignmentDurationInSeconds"],
         "auto_approval_delay_s": params.get(
             "AutoApprovalDelayInSeconds", DEFAULT_AUTO_APPROVAL_DELAY_S),
         "qualification_requirements": requirements,
     }
+
+
+def _reward_cents(text: str) -> int:
+    """A HIT's reward in cents: at least one (an assignment that pays nothing is refused)."""
+    cents = parse_amount(text, "Reward")
+    if cents < 1:
+        raise invalid(f"Reward {text} is less than the smallest reward, 0.01")
+    return cents
 
 
 def find_or_create_hit_type(call: Call, params: dict[str, Any]) -> HitType:

@@ -99,7 +99,9 @@ def create_invite(body: InviteCreate, session: SessionDep, admin: CurrentAdmin) 
     """A one-time registration link; the invite token is shown only in this reply."""
     token, invite = accounts.create_invite(session, admin, timedelta(hours=body.ttl_hours),
                                            clock.now())
-    url = f"{get_settings().public_url.rstrip('/')}/market/?invite={token}"
+    # In the fragment, which the browser never sends: the token stays out of access logs,
+    # proxies and Referer headers.
+    url = f"{get_settings().public_url.rstrip('/')}/market/#invite={token}"
     return InviteRead(invite=token, url=url, expires_at=invite.expires_at)
 
 

@@ -67,11 +67,14 @@ def task_states(session: Session, task_ids: Iterable[int]) -> dict[int, TaskProg
         reviewed[task_id] = n
     hits: Counter[int] = Counter()
     live: Counter[int] = Counter()
-    for task_id, expired_at in session.execute(
-            select(CrowdHit.task_id, CrowdHit.expired_at)
+    slots: Counter[int] = Counter()
+    for task_id, expired_at, max_assignments in session.execute(
+            select(CrowdHit.task_id, CrowdHit.expired_at, CrowdHit.max_assignments)
             .where(CrowdHit.task_id.in_(ids), CrowdHit.hit_id.is_not(None))):
         hits[task_id] += 1
         live[task_id] += expired_at is None
+        slots[task_id] += max_assignments
+    _count_confirmable_work(session, ids, counts, slots)
     rows = session.execute(
         select(Task.id, Task.kind, Task.target_key, Camera.serial)
         .join(Camera, Camera.id == Task.camera_id).where(Task.id.in_(ids))).all()
@@ -82,6 +85,21 @@ def task_states(session: Session, task_ids: Iterable[int]) -> dict[int, TaskProg
             hits=hits[task_id], hits_live=live[task_id],
             assignments=AssignmentCounts(**counts[task_id]))
         for task_id, kind, target_key, serial in rows}
+
+
+def _count_confirmable_work(session: Session, ids: list[int],
+                            counts: dict[int, dict[str, int]], slots: Counter[int]) -> None:
+    """Marketplace work being done counts up to the assignments the task's HITs offer: work
+    the marketplace has not confirmed yet (opened with a HIT's task token, which previewers
+    hold too) counts no further than workers can hold. Work on a direct link (no HIT) is an
+    admin's and always counts."""
+    for task_id, n in session.execute(
+            select(Assignment.task_id, func.count())
+            .where(Assignment.task_id.in_(ids), Assignment.status == "working",
+                   Assignment.hit_id.is_not(None))
+            .group_by(Assignment.task_id)):
+        direct = counts[task_id].get("working", 0) - n
+        counts[task_id]["working"] = direct + min(n, slots[task_id])
 
 
 def _target_order(key: str) -> tuple[int, int, str]:

@@ -7,7 +7,7 @@ import { $ } from "../common/dom.js";
 import { errorText, noticeLine } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { PortalApi } from "./api.js";
-import { parseRoute } from "./core/route.js";
+import { inviteOf, parseRoute } from "./core/route.js";
 import { renderEarnings, renderHits, taskFrame } from "./views.js";
 
 const api = new PortalApi(window.sessionStorage);
@@ -94,14 +94,16 @@ async function route() {
   }
 }
 
+/** The invite token of the registration link this page was opened with ("" if none). */
+let invite = "";
+
 /** @param {SubmitEvent} event */
 async function onRegister(event) {
   event.preventDefault();
   const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
-  const invite = new URLSearchParams(location.search).get("invite") || "";
   try {
     await api.register(invite, String(data.get("email")), String(data.get("password")));
-    history.replaceState(null, "", location.pathname);
+    invite = "";
     $("register").hidden = true;
     notify("Account created: sign in with your email and password.");
   } catch (err) {
@@ -134,8 +136,12 @@ async function loadMe() {
 }
 
 function start() {
+  invite = inviteOf(location.hash, location.search);
+  // Out of the address at once: out of the history, and of what a reload or a copied link
+  // carries. The registration form keeps it.
+  if (invite) history.replaceState(null, "", location.pathname);
   $("register").addEventListener("submit", (e) => onRegister(/** @type {SubmitEvent} */ (e)));
-  $("register").hidden = !new URLSearchParams(location.search).get("invite");
+  $("register").hidden = !invite;
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });

@@ -232,7 +232,7 @@ def test_bad_export_requests_are_refused_naming_the_problem(
     refused({"format": "json", "all": True, "options": {"frames": "copy"}}, 422,
             "options.frames is not an option of the json format")
     refused({"format": "dexycb", "all": True, "options": {"frames": "link"}}, 422,
-            "a zip archive cannot hold links")
+            "options.frames=link is for `dexlabel export --link-frames`")
     assert client.post("/api/exports", json={"format": "json", "all": True}).status_code == 401
     assert client.get("/api/exports/1").status_code == 401
     assert client.get("/api/exports/1/download").status_code == 401

@@ -121,10 +121,16 @@ def test_work_the_marketplace_never_confirmed_is_not_scored(
     crowd_url: str, mturk: Any, hit_ids: list[str]
 ) -> None:
     """A made-up assignment id started on a HIT while a real worker holds one of it gets in
-    (the requester API cannot name the holder before submission), but its work never enters
-    the consensus: only work the marketplace confirmed is scored."""
+    (the requester API cannot name the holder before submission) and takes the held slot
+    until the HIT's assignment duration has passed; its work never enters the consensus:
+    only work the marketplace confirmed is scored."""
+    from datetime import timedelta
+
+    from sqlalchemy import update
+
     from backend.annotation.models import Assignment
     from backend.crowd.client import make_client
+    from backend.db import utcnow
     from backend.pipeline import sync
     from backend.quality.inputs import target_inputs
 
@@ -132,8 +138,15 @@ def test_work_the_marketplace_never_confirmed_is_not_scored(
     token = _task_token(mturk, hit_id)
     market_id = accept(hit_id, "AWORKERGENUINE03")
     forged = _start(crowd_url, token, "FORGEDWHILEHELD1", "NOBODY", hit_id)
+    assert forged.status_code == 200
+    refused = _start(crowd_url, token, market_id, "AWORKERGENUINE03", hit_id)
+    assert refused.status_code == 403 and "no open slot" in refused.json()["detail"]
+    duration = mturk.get_hit(HITId=hit_id)["HIT"]["AssignmentDurationInSeconds"]
+    with session_scope() as session:  # the forged start has expired
+        session.execute(update(Assignment).where(Assignment.external_id == "FORGEDWHILEHELD1")
+                        .values(created_at=utcnow() - timedelta(seconds=duration + 60)))
     genuine = _start(crowd_url, token, market_id, "AWORKERGENUINE03", hit_id)
-    assert forged.status_code == 200 and genuine.status_code == 200
+    assert genuine.status_code == 200, genuine.text
     for started in (forged, genuine):
         done = httpx.post(f"{crowd_url}/api/annotate/submit", timeout=30,
                           headers=_bearer(started.json()["token"]),

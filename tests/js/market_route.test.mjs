@@ -2,7 +2,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { parseRoute } from "../../frontend/market/core/route.js";
+import { inviteOf, parseRoute } from "../../frontend/market/core/route.js";
 
 test("parseRoute maps each hash to its view and id", () => {
   assert.deepEqual(parseRoute(""), { view: "hits", id: null });
@@ -11,4 +11,13 @@ test("parseRoute maps each hash to its view and id", () => {
   assert.deepEqual(parseRoute("#/work/3X%2FY"), { view: "work", id: "3X/Y" });
   assert.deepEqual(parseRoute("#/earnings"), { view: "earnings", id: null });
   assert.deepEqual(parseRoute("#/nowhere"), { view: "hits", id: null });
+});
+
+test("inviteOf reads the fragment's invite, and an older link's query", () => {
+  assert.equal(inviteOf("#invite=abc.DEF-1", ""), "abc.DEF-1");
+  assert.equal(inviteOf("", "?invite=old-link"), "old-link");
+  assert.equal(inviteOf("#invite=new", "?invite=old"), "new");
+  assert.equal(inviteOf("#/hits", ""), "");
+  assert.equal(inviteOf("", ""), "");
+  assert.deepEqual(parseRoute("#invite=abc"), { view: "hits", id: null });
 });

@@ -107,7 +107,7 @@ def test_concurrent_bonuses_never_overdraw_the_balance(market_url: str) -> None:
     from tests.market.helpers import POOR_REQUESTER
 
     poor = make_client(market_url, key=POOR_REQUESTER, retries=4)
-    assignment_id = work(market_url, create_hit(poor, Reward="0.00")["HITId"])
+    assignment_id = work(market_url, create_hit(poor, Reward="0.01")["HITId"])
     outcomes: list[str] = []
 
     def bonus(index: int) -> None:
@@ -123,6 +123,7 @@ def test_concurrent_bonuses_never_overdraw_the_balance(market_url: str) -> None:
         thread.start()
     for thread in threads:
         thread.join()
-    # 1.00 - 0.01 (hold of a free HIT: the minimum fee) leaves room for two 0.36 bonuses.
+    # 1.00 - 0.02 (hold of a one-cent HIT and its minimum fee) leaves room for two 0.36
+    # bonuses.
     assert sorted(outcomes) == ["AWS.MechanicalTurk.InsufficientFunds"] * 3 + ["paid"] * 2
-    assert poor.get_account_balance()["AvailableBalance"] == "0.27"
+    assert poor.get_account_balance()["AvailableBalance"] == "0.26"

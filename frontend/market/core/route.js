@@ -12,3 +12,16 @@ export function parseRoute(hash) {
   if (view === "earnings") return { view: "earnings", id: null };
   return { view: "hits", id: null };
 }
+
+/**
+ * The invite token of a registration link: from the fragment (``#invite=...``, which the
+ * browser never sends to a server), or from the query of a link made before invites moved
+ * there (``?invite=...``); "" when there is none.
+ * @param {string} hash
+ * @param {string} search
+ * @returns {string}
+ */
+export function inviteOf(hash, search) {
+  const fragment = new URLSearchParams(hash.replace(/^#/, "")).get("invite");
+  return fragment || new URLSearchParams(search).get("invite") || "";
+}
