@@ -187,3 +187,15 @@ def test_the_bucket_policy_limits_the_app_to_its_bucket(written: dict[str, Any])
     bucket = written["x-dexlabel-env"]["DEXLABEL_STORAGE_URL"].split("/")[2]
     assert bucket == "dexlabel-frames"
     assert "mc admin policy attach local dexlabel-frames --user" in script
+
+
+def test_the_readme_recipe_lists_every_required_secret() -> None:
+    required = set(re.findall(r"\$\{(\w+):\?", COMPOSE_FILE.read_text()))
+    assert required == set(SECRETS)
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("## Scaling out"):readme.index("### Many annotators")]
+    recipe = re.search(r"cat > \.env <<END\n(.*?)\nEND", section, re.DOTALL)
+    assert recipe, "the README's compose recipe is gone"
+    assert required <= {line.split("=", 1)[0] for line in recipe.group(1).splitlines()}
+    for name in required:
+        assert f"`{name}`" in section, f"the README does not say what {name} is"
