@@ -2,9 +2,10 @@
 
 It points at the built-in marketplace by default (``{INTERNAL_URL}/mturk``, or without one
 ``{PUBLIC_URL}/mturk``, with the dev requester pair; with neither set, at the address this
-instance's running ``serve`` or ``demo`` recorded) and at AWS or any MTurk-compatible endpoint by setting. Marketplace errors, and a
-marketplace that cannot be reached, come back as our own errors so routers and the CLI render
-them like every other failure (one line naming the URL and the setting, no botocore traceback).
+instance's running ``serve`` or ``demo`` recorded) and at AWS or any MTurk-compatible endpoint
+by setting. Marketplace errors, and a marketplace that cannot be reached, come back as our own
+errors so routers and the CLI render them like every other failure (one line naming the URL
+and the setting, no botocore traceback).
 A refusal of the request's values (a worker id of the wrong form, an unknown qualification
 type) is the caller's input at fault: 422 naming the fields; any other failure is 502.
 """
