@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlparse
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict, SettingsError
@@ -128,7 +129,16 @@ class Settings(BaseSettings):
     storage_url: str = ""
     s3_endpoint_url: str | None = None
     s3_region: str = "us-east-1"
+    # Frame links on S3 storage: true, presigned URLs of the S3 server that browsers fetch
+    # from directly (DEXLABEL_S3_ENDPOINT_URL must then be reachable from browsers); false,
+    # the API reads each frame from storage and serves it, so the S3 server can stay private.
+    s3_presigned_links: bool = True
+    # The address browsers reach the app at: the HITs' page links, invites, the portal's forms.
     public_url: str = "http://127.0.0.1:8000"
+    # The address this deployment's own processes (queue workers, the API itself) reach the
+    # app's built-in marketplace at, where PUBLIC_URL is not reachable from inside (in a
+    # container network: http://api:8000). Unset = PUBLIC_URL.
+    internal_url: str | None = None
     # Signs every token; read it through ``signing_key`` (unset: see SECRET_FILE above).
     secret_key: str = Field(default="", repr=False)
     mano_dir: Path | None = None
@@ -229,6 +239,15 @@ class Settings(BaseSettings):
         if text.startswith("["):
             return json.loads(text)
         return [part.strip() for part in text.split(os.pathsep) if part.strip()]
+
+    @field_validator("internal_url")
+    @classmethod
+    def _check_internal_url(cls, value: str | None) -> str | None:
+        if not value:
+            return None
+        if urlparse(value).scheme not in ("http", "https") or not urlparse(value).netloc:
+            raise ValueError("must be an http:// or https:// address, e.g. http://api:8000")
+        return value.rstrip("/")
 
     @field_validator("trusted_proxies", mode="before")
     @classmethod

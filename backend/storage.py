@@ -145,7 +145,8 @@ class LocalStorage:
 class S3Storage:
     """Objects under ``s3://bucket/prefix`` through boto3 (AWS, MinIO, or moto's server)."""
 
-    def __init__(self, url: str, endpoint_url: str | None, region: str) -> None:
+    def __init__(self, url: str, endpoint_url: str | None, region: str,
+                 presigned_links: bool = True) -> None:
         import boto3
         from botocore.config import Config
 
@@ -154,6 +155,7 @@ class S3Storage:
             raise ValueError(f"STORAGE_URL {url!r} is not of the form s3://bucket/prefix")
         self.bucket = parsed.netloc
         self.prefix = parsed.path.strip("/")
+        self.presigned_links = presigned_links
         self.client = boto3.client(
             "s3",
             endpoint_url=endpoint_url,
@@ -251,7 +253,11 @@ class S3Storage:
         return deleted
 
     def url_for(self, key: str, expires_s: int = 3600) -> str | None:
-        """A presigned GET URL the browser can fetch directly."""
+        """A presigned GET URL the browser can fetch directly; None with presigned links off
+        (DEXLABEL_S3_PRESIGNED_LINKS=false: the S3 server is not reachable from browsers, the
+        API streams the object)."""
+        if not self.presigned_links:
+            return None
         return self.client.generate_presigned_url(
             "get_object", Params={"Bucket": self.bucket, "Key": self._key(key)},
             ExpiresIn=expires_s,
@@ -260,7 +266,8 @@ class S3Storage:
 
 def make_storage(settings: Settings) -> Storage:
     if settings.storage_url.startswith("s3://"):
-        return S3Storage(settings.storage_url, settings.s3_endpoint_url, settings.s3_region)
+        return S3Storage(settings.storage_url, settings.s3_endpoint_url, settings.s3_region,
+                         settings.s3_presigned_links)
     if "://" in settings.storage_url and not settings.storage_url.startswith("file://"):
         raise ValueError(f"STORAGE_URL {settings.storage_url!r}: use a folder or s3://bucket/prefix")
     return LocalStorage(settings.storage_url.removeprefix("file://"))

@@ -48,6 +48,15 @@ if [ -z "${DEXLABEL_CHROMIUM:-}" ] && ! command -v chromium >/dev/null; then
   fi
 fi
 
+# docker-compose.yml is validated by Debian's docker-compose (tests/deploy; nothing is pulled).
+if ! command -v docker-compose >/dev/null; then
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    echo "installing Debian's docker-compose for the compose file's check"
+    apt-get update -qq >/dev/null \
+      && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq docker-compose >/dev/null
+  fi
+fi
+
 # The page's pure core and its golden vectors, in Node's own test runner.
 if command -v node >/dev/null; then
   node --test tests/js/

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import Depends, Query, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from backend.accounts.models import Admin, PortalAccount
 from backend.accounts.service import ADMIN, WORKER, signed_in_account
@@ -22,6 +23,17 @@ VIEW_SCOPE = "view"
 FRAME_SCOPES = (VIEW_SCOPE,)
 
 
+# The API document's bearer scheme, so /docs has an Authorize button whose token is sent with
+# every operation that declares it. It only declares: each dependency below reads the header
+# itself (bearer_token) and answers a missing or wrong token with our own 401.
+BEARER = HTTPBearer(
+    auto_error=False, scheme_name="bearer",
+    description="An admin's token from POST /api/auth/token, a portal worker's from POST "
+                "/api/portal/login, or an annotation page's token from its link.")
+# The scheme as a dependency; a direct call (not through FastAPI) passes nothing.
+BearerCredentials = Annotated[HTTPAuthorizationCredentials | None, Depends(BEARER)]
+
+
 def bearer_token(request: Request) -> str | None:
     header = request.headers.get("authorization", "")
     scheme, _, token = header.partition(" ")
@@ -34,12 +46,14 @@ def view_token(sequence_id: int, serial: str, ttl_s: int) -> str:
     return sign_token(payload, get_settings().signing_key, ttl_s)
 
 
-def current_admin(request: Request, session: SessionDep) -> Admin:
+def current_admin(request: Request, session: SessionDep,
+                  _scheme: BearerCredentials = None) -> Admin:
     account: Admin = signed_in_account(ADMIN, session, bearer_token(request))
     return account
 
 
-def current_worker(request: Request, session: SessionDep) -> PortalAccount:
+def current_worker(request: Request, session: SessionDep,
+                   _scheme: BearerCredentials = None) -> PortalAccount:
     account: PortalAccount = signed_in_account(WORKER, session, bearer_token(request))
     return account
 
@@ -55,7 +69,7 @@ ViewTokenQuery = Annotated[str | None, Query(
 
 def require_view_access(
     request: Request, session: SessionDep, sequence_id: Id, serial: Key,
-    token: ViewTokenQuery = None,
+    token: ViewTokenQuery = None, _scheme: BearerCredentials = None,
 ) -> None:
     """An admin, or the holder of a view token for exactly this sequence and camera."""
     if bearer_token(request) is not None:

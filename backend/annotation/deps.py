@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Request
 
-from backend.accounts.deps import bearer_token
+from backend.accounts.deps import BearerCredentials, bearer_token
 from backend.annotation import service
 from backend.annotation.models import Assignment
 from backend.annotation.tokens import ASSIGNMENT_SCOPE, READONLY_SCOPE, TASK_SCOPE
@@ -18,7 +18,7 @@ from backend.security import verify_token
 
 
 # Both run on the event loop (no thread hop): they only check the token's signature.
-async def worker_claims(request: Request) -> dict[str, Any]:
+async def worker_claims(request: Request, _scheme: BearerCredentials = None) -> dict[str, Any]:
     token = bearer_token(request)
     if token is None:
         raise Unauthorized("this page needs the token from its link (Authorization: Bearer)")

@@ -44,9 +44,12 @@ class _Commands(TyperGroup):
         return super().resolve_command(ctx, args)
 
 
+# Plain help (rich_markup_mode=None on every group): it wraps to the terminal, never cuts an
+# option's name, and shows no type on a flag.
 app = typer.Typer(cls=_Commands,
                   help="dexlabel: crowd-labelled multi-view video to 3D hand and object poses.",
-                  no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+                  no_args_is_help=True, rich_markup_mode=None, add_completion=False,
+                  pretty_exceptions_enable=False)
 
 
 def _asks_for_help(ctx: typer.Context) -> bool:
@@ -90,19 +93,23 @@ def synth(
     views: Annotated[int, typer.Option(min=1, max=64)] = 8,
     objects: Annotated[int, typer.Option(min=1, max=10)] = 3,
     fault: Annotated[list[str] | None, typer.Option(
+        metavar="FAULT",
         help="rig fault the product reads, truth unchanged (repeatable or a comma list): "
              "extrinsics:DEG,MM, late:N, depth-scale:S, depth-shift:LO-HI, betas[:SIGMA]; "
              "see worker/synth/faults.py")] = None,
     fault_seed: Annotated[int, typer.Option(min=0, help="seed of the faults' choices")] = 0,
 ) -> None:
-    """Write a synthetic capture (DexYCB layout) with its ground-truth labels."""
+    """Write a synthetic capture and its ground-truth labels.
+
+    The capture has DexYCB's raw layout; its folder must be new or empty."""
     from worker.synth import generate_capture
     from worker.synth.faults import parse_faults
 
     try:
         faults = parse_faults(fault or [])
-        if faults and out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise FileExistsError(f"{out} exists and is not an empty folder")
+        # Refused before any work is announced (generate_capture checks it again).
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise FileExistsError(f"{out} exists and is not an empty folder; give a new one")
         clean = out.with_name(out.name + ".clean") if faults else out
         with progress(f"synthesising {views} views x {frames} frames") as step:
             summary = generate_capture(clean, seed=seed, frames=frames, views=views,
@@ -153,7 +160,7 @@ def _import(path: Path) -> list[Any]:
 def import_(
     path: Annotated[Path, typer.Argument(help="capture root or one sequence folder")],
 ) -> None:
-    """Import a capture (DexYCB raw layout, or one video per camera)."""
+    """Import a capture (DexYCB layout, or a video per camera)."""
     _import(path)
 
 
@@ -191,10 +198,12 @@ def serve(
     workers: Annotated[int, typer.Option(
         min=1, max=64, help="server processes sharing the port (PostgreSQL only)")] = 1,
 ) -> None:
-    """Run the API and pages (plus an in-process queue consumer on the embedded default);
-    the address is recorded in the instance for the other commands. ``--workers N`` serves
-    from N processes, which needs PostgreSQL: SQLite takes one writer at a time, and only
-    the writers of one process wait their turn (the others would fail on a locked file)."""
+    """Run the API and pages.
+
+    On the embedded default it runs a queue consumer too. The address is recorded in the
+    instance for the other commands. --workers N serves from N processes, which needs
+    PostgreSQL: SQLite takes one writer at a time, and only the writers of one process wait
+    their turn (the others would fail on a locked file)."""
     import uvicorn
 
     from backend.jobs.consumer import start_inprocess_consumer
@@ -263,7 +272,9 @@ def demo(
     simulate_: Annotated[bool, typer.Option(
         "--simulate/--no-simulate", help="fill the demo with simulated submissions")] = True,
 ) -> None:
-    """Migrate, synthesise a capture if none, import it, publish its tasks on the built-in
+    """A demo instance: a capture, a simulated crowd, a solve.
+
+    Migrate, synthesise a capture if none, import it, publish its tasks on the built-in
     marketplace, start the server, let a simulated crowd (mixed profiles) work until every
     task has accepted work, wait for the quality checks and the solve, print the links with
     ready logins, and keep serving. Re-running adds nothing that is already there."""

@@ -9,7 +9,8 @@ import typer
 from backend.cli.console import SequenceArg, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
-sequences_app = typer.Typer(help="Imported sequences.", no_args_is_help=True)
+sequences_app = typer.Typer(help="Imported sequences.", no_args_is_help=True,
+                            rich_markup_mode=None)
 
 
 @sequences_app.command("delete")
@@ -18,8 +19,9 @@ def sequences_delete(
     force: Annotated[bool, typer.Option(
         "--force", help="delete it even with submitted or approved work (deleted too)")] = False,
 ) -> None:
-    """Delete a sequence: its rows, the tasks and work on it, and its stored files (refused
-    while it has submitted or approved work, unless --force)."""
+    """Delete a sequence with its tasks, work and stored files.
+
+    Refused while it has submitted or approved work, unless --force."""
     from backend.pipeline.deletion import delete_sequence
 
     with refusing_bad_input():

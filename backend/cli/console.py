@@ -87,12 +87,13 @@ Step = Callable[[str], None]
 
 
 @contextmanager
-def progress(label: str, total: int | None = None) -> Iterator[Step]:
+def progress(label: str, total: int | None = None, err: bool = False) -> Iterator[Step]:
     """Progress of one piece of long work; yields ``step(what)``, called as each step ends.
 
     ``total`` is the number of steps (None: unknown, a spinner). On a terminal a bar with
     the step count and the elapsed time; otherwise ``label: what (i/total)`` per step. Either
-    way the work ends with ``label: done in 12.3 s`` (or ``label: failed after ...``).
+    way the work ends with ``label: done in 12.3 s`` (or ``label: failed after ...``). With
+    ``err`` every line goes to stderr (stdout carries only a command's --json document).
     """
     started = time.perf_counter()
     done = 0
@@ -100,7 +101,8 @@ def progress(label: str, total: int | None = None) -> Iterator[Step]:
         columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn()]
         if total is not None:
             columns.append(MofNCompleteColumn())
-        bar = Progress(*columns, TimeElapsedColumn(), console=_console(), transient=True)
+        bar = Progress(*columns, TimeElapsedColumn(),
+                       console=Console(highlight=False, stderr=err), transient=True)
         task = bar.add_task(label, total=total)
 
         def step(what: str) -> None:
@@ -108,13 +110,13 @@ def progress(label: str, total: int | None = None) -> Iterator[Step]:
             done += 1
             bar.update(task, advance=1, description=f"{label}: {what}")
     else:
-        typer.echo(f"{label} ...")
+        typer.echo(f"{label} ...", err=err)
         bar = None
 
         def step(what: str) -> None:
             nonlocal done
             done += 1
-            typer.echo(f"{label}: {what}" + (f" ({done}/{total})" if total else ""))
+            typer.echo(f"{label}: {what}" + (f" ({done}/{total})" if total else ""), err=err)
     ok = False
     try:
         if bar is not None:
@@ -125,4 +127,4 @@ def progress(label: str, total: int | None = None) -> Iterator[Step]:
         ok = True
     finally:
         elapsed = time.perf_counter() - started
-        typer.echo(f"{label}: {'done in' if ok else 'failed after'} {elapsed:.1f} s")
+        typer.echo(f"{label}: {'done in' if ok else 'failed after'} {elapsed:.1f} s", err=err)

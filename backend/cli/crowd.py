@@ -15,7 +15,8 @@ import typer
 from backend.cli.console import SequenceArg, fail, progress, refusing_bad_input, resolve_sequence
 from backend.config import get_settings
 
-tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).", no_args_is_help=True)
+tasks_app = typer.Typer(help="Annotation tasks (sequence x view x target).",
+                        no_args_is_help=True, rich_markup_mode=None)
 
 
 @tasks_app.command("create")
@@ -63,7 +64,9 @@ def publish_command(
     require_training: Annotated[bool, typer.Option(
         help="require our training qualification")] = False,
 ) -> None:
-    """Publish one HIT per task not yet published in this round (safe to re-run)."""
+    """Publish a HIT per task not yet published (safe to re-run).
+
+    One HIT per task not yet published in this round; --dry-run prints the cost only."""
     from backend.crowd import flows
     from backend.crowd.client import make_client
     from backend.db import session_scope
@@ -88,13 +91,15 @@ def publish_command(
                    f"{result.already_published} already published")
 
 
-crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.", no_args_is_help=True)
+crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.",
+                        no_args_is_help=True, rich_markup_mode=None)
 
 
 @crowd_app.command("sync")
 def crowd_sync() -> None:
-    """Collect submitted assignments, check them against the requester API's records, and
-    queue the quality check of each new one."""
+    """Collect submitted assignments and queue their quality checks.
+
+    Each one is checked against the requester API's records first."""
     from backend.crowd.client import make_client
     from backend.db import session_scope
     from backend.pipeline import sync
@@ -118,8 +123,9 @@ def _cost_row(label: str, line: Any) -> str:
 
 @crowd_app.command("costs")
 def crowd_costs() -> None:
-    """Spend so far and money committed (US dollars): rewards, bonuses and fees apart, for the
-    project, per sequence and per worker."""
+    """Spend so far and money committed, in US dollars.
+
+    Rewards, bonuses and fees apart, for the project, per sequence and per worker."""
     from backend.crowd.costs import costs
     from backend.db import session_scope
 
@@ -143,7 +149,9 @@ def crowd_bonus(
     reason: Annotated[str, typer.Option(help="what the worker reads")],
     key: Annotated[str, typer.Option(help="names this bonus: one key pays once")] = "1",
 ) -> None:
-    """Pay a bonus once (ledger row committed before the payment; safe to re-run)."""
+    """Pay a worker a bonus, once (safe to re-run).
+
+    Its ledger row is committed before the payment, and one --key pays once."""
     from backend.crowd import flows, pricing
     from backend.crowd.client import make_client
 
@@ -173,7 +181,9 @@ def crowd_simulate(
     seed: Annotated[int, typer.Option(help="random seed of profiles and labels")] = 0,
     first: Annotated[int, typer.Option(min=1, help="number of the first simulated worker")] = 1,
 ) -> None:
-    """Simulated workers accept, label and submit HITs through the portal, over HTTP."""
+    """Let simulated workers accept, label and submit HITs.
+
+    They work through the portal, over HTTP, like real workers."""
     from backend.crowd.simulate import simulate
 
     if not admin_email or not admin_password:

@@ -44,7 +44,9 @@ def export_command(
     labels: Annotated[Literal["2d", "3d"] | None, typer.Option(
         "--labels", help="coco: hand keypoints from the 2D labels or the solve")] = None,
 ) -> None:
-    """Export labels of one or more sequences (or --all) in a format, with a progress bar."""
+    """Export labels of sequences in a dataset's format.
+
+    One or more sequences (or --all), with a progress bar."""
     # The arguments are checked before the export's modules load: a typo answers at once.
     out = _checked_out(fmt, out, bool(sequences), all_sequences)
     from backend.exports.archive import kind_of

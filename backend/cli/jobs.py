@@ -11,7 +11,7 @@ from backend.cli.console import refusing_bad_input
 from backend.db import session_scope
 
 jobs_app = typer.Typer(help="Queue jobs: status, attempts, results and errors.",
-                       no_args_is_help=True)
+                       no_args_is_help=True, rich_markup_mode=None)
 
 
 class JobStatus(StrEnum):
@@ -31,7 +31,9 @@ def jobs_list(
     kind: Annotated[str | None, typer.Option(help="only jobs of this kind (qc, solve, ...)")]
     = None,
 ) -> None:
-    """The newest jobs: status, attempts, and the result or error in one line."""
+    """The newest jobs, one line each: status, result or error.
+
+    Each line gives the job's status, attempts, and its result or error."""
     from backend.jobs.service import describe, list_jobs
 
     with session_scope() as session:

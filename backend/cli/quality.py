@@ -11,9 +11,10 @@ from sqlalchemy import select
 from backend.cli.console import EXIT_FAILED, SequenceArg, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
-qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True)
+qc_app = typer.Typer(help="Quality control of submitted work.", no_args_is_help=True,
+                     rich_markup_mode=None)
 training_app = typer.Typer(help="Training clips (gold) for the qualification.",
-                           no_args_is_help=True)
+                           no_args_is_help=True, rich_markup_mode=None)
 
 
 @qc_app.command("run")
@@ -23,7 +24,7 @@ def qc_run(
     now: Annotated[bool, typer.Option("--now/--queue",
                                       help="run here and wait, or queue for a worker")] = True,
 ) -> None:
-    """Score the submitted work of a sequence's targets and act on the decisions."""
+    """Score a sequence's submitted work and act on the decisions."""
     from backend.jobs.models import Job
     from backend.jobs.runner import execute
     from backend.jobs.service import describe
@@ -51,7 +52,9 @@ def qc_run(
 
 @qc_app.command("reports")
 def qc_reports(sequence: SequenceArg) -> None:
-    """One line per scored assignment: outcome, errors, action, and the worker's feedback."""
+    """One line per scored assignment, with the worker's feedback.
+
+    Its outcome, errors, the action taken, and what the worker was told."""
     with refusing_bad_input(), session_scope() as session:
         sequence_id = resolve_sequence(session, sequence)
     _print_reports(sequence_id)

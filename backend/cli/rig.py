@@ -16,8 +16,8 @@ import typer
 from backend.cli.console import SequenceArg, progress, refusing_bad_input, resolve_sequence
 from backend.db import session_scope
 
-rig_app = typer.Typer(help="Rig health: cameras whose calibration, sync or depth is off, and "
-                           "refined calibrations.", no_args_is_help=True)
+rig_app = typer.Typer(help="Rig health: cameras off in calibration, sync or depth.",
+                      no_args_is_help=True, rich_markup_mode=None)
 
 
 def _line(row: dict) -> str:
@@ -36,8 +36,10 @@ def health_command(
     sequence: SequenceArg,
     as_json: Annotated[bool, typer.Option("--json", help="print the report as JSON")] = False,
 ) -> None:
-    """Estimate every camera's time offset, pose correction and depth scale/shift from the
-    accepted labels; store the result as a new calibration version (not in use)."""
+    """Estimate each camera's time offset, pose and depth errors.
+
+    Every camera's time offset, pose correction and depth scale and shift, from the accepted
+    labels; the result is stored as a new calibration version (not in use)."""
     from backend.rig.service import estimate, read_inputs, store_version
 
     with refusing_bad_input(), session_scope() as session:
@@ -71,7 +73,9 @@ def adopt_command(
     solve: Annotated[bool, typer.Option("--solve/--no-solve",
                                         help="queue a solve under it")] = True,
 ) -> None:
-    """Put a calibration version in use for the solve, QC and export, and re-solve."""
+    """Put a calibration version in use, and solve again.
+
+    The version is used by the solve, QC and export from then on."""
     from backend.pipeline import adopt_calibration
 
     with refusing_bad_input(), session_scope() as session:

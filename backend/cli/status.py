@@ -89,8 +89,10 @@ def status_command(
         show_default=False)] = None,
     json: Annotated[bool, typer.Option("--json", help="print the progress API's JSON")] = False,
 ) -> None:
-    """Where the work stands: each view x target task's state (open, published, submitted,
-    in review, accepted), HIT and assignment counts, and the current solve."""
+    """Where the work stands: tasks, HITs, assignments, solve.
+
+    Each view x target task's state (open, published, submitted, in review, accepted), HIT
+    and assignment counts, and the current solve."""
     from backend.db import session_scope
     from backend.progress.service import sequences_progress
 

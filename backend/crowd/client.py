@@ -1,10 +1,11 @@
 """The requester's boto3 ``mturk`` client: the only module of the crowd domain touching boto3.
 
-It points at the built-in marketplace by default (``{PUBLIC_URL}/mturk`` with the dev requester
-pair; with PUBLIC_URL unset, at the address this instance's running ``serve`` or ``demo``
-recorded) and at AWS or any MTurk-compatible endpoint by setting. Marketplace errors, and a
-marketplace that cannot be reached, come back as our own errors so routers and the CLI render
-them like every other failure (one line naming the URL and the setting, no botocore traceback).
+It points at the built-in marketplace by default (``{INTERNAL_URL}/mturk``, or without one
+``{PUBLIC_URL}/mturk``, with the dev requester pair; with neither set, at the address this
+instance's running ``serve`` or ``demo`` recorded) and at AWS or any MTurk-compatible endpoint
+by setting. Marketplace errors, and a marketplace that cannot be reached, come back as our own
+errors so routers and the CLI render them like every other failure (one line naming the URL
+and the setting, no botocore traceback).
 A refusal of the request's values (a worker id of the wrong form, an unknown qualification
 type) is the caller's input at fault: 422 naming the fields; any other failure is 502.
 """
@@ -111,7 +112,11 @@ class CrowdConfigError(DexlabelError, status_code=500, code="crowd_config_error"
 
 
 def builtin_endpoint(settings: Settings) -> str:
-    return public_url(settings).rstrip("/") + BUILTIN_PATH
+    """The built-in marketplace as this process reaches it: at DEXLABEL_INTERNAL_URL when set
+    (a worker container, for which the browsers' PUBLIC_URL is not the app), else at the
+    public address."""
+    base = settings.internal_url or public_url(settings)
+    return base.rstrip("/") + BUILTIN_PATH
 
 
 def endpoint_hint(settings: Settings) -> str:
@@ -120,6 +125,9 @@ def endpoint_hint(settings: Settings) -> str:
         return "check DEXLABEL_MTURK_ENDPOINT_URL"
     if settings.mturk_use_aws:
         return "check DEXLABEL_MTURK_USE_AWS, DEXLABEL_MTURK_SANDBOX and the network"
+    if settings.internal_url:
+        return ("check DEXLABEL_INTERNAL_URL (the app's address from this host; the built-in "
+                "marketplace is served at its /mturk)")
     if "public_url" in settings.model_fields_set:
         return "check DEXLABEL_PUBLIC_URL (the built-in marketplace is served at its /mturk)"
     if recorded_server(settings):

@@ -4,11 +4,16 @@ and icon its page names is on the app and answers with the right content type.""
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from html.parser import HTMLParser
+from typing import Any
 
 import pytest
+from fastapi import FastAPI
+from fastapi.routing import APIRoute, iter_route_contexts
 from fastapi.testclient import TestClient
 
+from backend.accounts.deps import current_admin, current_worker
 from backend.app import create_app
 
 # What each kind of reference must answer with.
@@ -70,3 +75,60 @@ def test_swagger_ui_asks_no_outside_validator(client: TestClient) -> None:
 def test_docs_page_is_not_an_operation_of_the_api(client: TestClient) -> None:
     paths = client.get("/openapi.json").json()["paths"]
     assert not any(p.startswith("/docs") for p in paths)
+
+
+def _calls(dependant: Any) -> set[Any]:
+    """Every function a route's dependencies call, however deep."""
+    found = {dependant.call}
+    for sub in dependant.dependencies:
+        found |= _calls(sub)
+    return found
+
+
+def _operations_needing(app: FastAPI, dependency: Callable[..., Any]) -> set[tuple[str, str]]:
+    """(method, path) of every operation whose dependencies include ``dependency``."""
+    found = set()
+    for route in iter_route_contexts(app.routes):
+        original = route.original_route
+        if (isinstance(original, APIRoute) and original.include_in_schema
+                and dependency in _calls(original.dependant)):
+            found |= {(m.lower(), route.path) for m in route.methods or ()}
+    return found
+
+
+def test_the_api_document_declares_the_bearer_scheme_that_admin_routes_use() -> None:
+    """/docs shows an Authorize button: the document declares HTTP bearer, and every admin
+    and worker operation asks for it, so a token given there is sent with them."""
+    app = create_app()
+    doc = app.openapi()
+    scheme = doc["components"]["securitySchemes"]["bearer"]
+    assert (scheme["type"], scheme["scheme"]) == ("http", "bearer")
+    assert "POST /api/auth/token" in scheme["description"]
+    admin = _operations_needing(app, current_admin)
+    worker = _operations_needing(app, current_worker)
+    assert len(admin) > 20 and ("get", "/api/jobs") in admin and worker
+    for method, path in admin | worker:
+        assert doc["paths"][path][method].get("security") == [{"bearer": []}], (method, path)
+    # What one calls to get a token, and the health check, ask for none.
+    for method, path in (("post", "/api/auth/token"), ("post", "/api/portal/login"),
+                         ("get", "/healthz")):
+        assert "security" not in doc["paths"][path][method], (method, path)
+
+
+def test_an_admin_route_answers_the_token_the_docs_page_sends(client: TestClient) -> None:
+    """Swagger UI sends the authorised token as `Authorization: Bearer`; without one the
+    answer is our own 401 in the error shape, not FastAPI's 403."""
+    refused = client.get("/api/jobs")
+    assert refused.status_code == 401 and refused.json()["error"] == "unauthorized"
+    wrong = client.get("/api/jobs", headers={"Authorization": "Basic abc"})
+    assert wrong.status_code == 401 and wrong.json()["error"] == "unauthorized"
+
+
+def test_the_root_page_links_the_worker_portal_admin_page_and_docs(client: TestClient) -> None:
+    page = client.get("/")
+    assert page.status_code == 200
+    links = re.findall(r'<a href="([^"]+)">([^<]+)</a>', page.text)
+    assert ("/market/", "Worker portal") in links
+    assert {"/admin/", "/docs"} <= {href for href, _ in links}
+    for href, _ in links:
+        assert client.get(href).status_code == 200, href

@@ -7,6 +7,8 @@ with the true object pose. The solve job runs inline (`execute`).
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 
 import cv2
@@ -384,11 +386,35 @@ def test_calibrate_hand_recovers_the_subjects_bone_lengths_from_accepted_tracks(
 
 
 @pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)
-def test_the_solve_command_waits_for_the_run_and_prints_its_summary(approved: int) -> None:
+def test_the_solve_command_waits_for_the_run_and_prints_its_summary(
+    approved: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from backend.cli import solve as solve_cli
+
+    # --json without --wait: stdout is the queued run as one JSON document, nothing else.
+    queued = CliRunner().invoke(_cli(), ["solve", str(approved), "--json"])
+    assert queued.exit_code == 0, queued.output
+    assert json.loads(queued.stdout) == {"run_id": 1, "status": "queued",
+                                         "optimiser": "default"}
+    assert "solve run 1 queued" in queued.stderr
+    # --wait takes that queued run over; off a terminal it says the solve is alive as it runs.
+    monkeypatch.setattr(solve_cli, "TICK_S", 0.5)
     result = CliRunner().invoke(_cli(), ["solve", str(approved), "--optimiser", "default",
                                          "--wait"])
     assert result.exit_code == 0, result.output
-    assert "solve run 1 done" in result.output and '"labelled_frames"' in result.output
+    lines = result.output.splitlines()
+    ticks = [line for line in lines if re.fullmatch(r"solve run 1: running, \d+ s", line)]
+    assert ticks, result.output
+    done = lines.index(next(line for line in lines if line.startswith("solve run 1 done in ")))
+    assert lines.index(ticks[0]) < done
+    # The result in a few readable lines, no JSON.
+    result_lines = lines[done:]
+    assert len(result_lines) <= 8 and "{" not in result.output
+    assert re.fullmatch(r"solve run 1 done in \d+\.\d s \(default optimiser\)", result_lines[0])
+    assert any(re.fullmatch(r"  frames labelled: \d+ of \d+", line) for line in result_lines)
+    assert any(re.fullmatch(r"  keypoint error: median \d+\.\d\d px, mean \d+\.\d\d px", line)
+               for line in result_lines), result_lines
+    assert all(len(line) <= 100 for line in result_lines)
     refused = CliRunner().invoke(_cli(), ["solve", "no-such/sequence"])
     assert refused.exit_code == 2 and "no sequence" in refused.output
 

@@ -88,3 +88,35 @@ def test_a_listing_names_each_object_under_a_folder_with_its_size_and_age(  # ty
     assert all(now - timedelta(minutes=5) < o.modified <= now + timedelta(minutes=1)
                for o in listed)
     assert storage.list_prefix("nothing") == []
+
+
+def test_s3_without_presigned_links_gives_no_direct_url(s3_endpoint: str, s3_bucket: str) -> None:
+    """DEXLABEL_S3_PRESIGNED_LINKS=false: a private S3 server; the API serves the objects."""
+    storage = S3Storage(f"s3://{s3_bucket}", s3_endpoint, "us-east-1", presigned_links=False)
+    storage.put_bytes("f/color.jpg", b"jpegbytes", "image/jpeg")
+    assert storage.url_for("f/color.jpg") is None
+    assert storage.get_bytes("f/color.jpg") == b"jpegbytes"
+
+
+@pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)
+def test_frames_of_a_private_s3_server_are_served_by_the_api(
+    app_env: dict, s3_endpoint: str, s3_bucket: str, small_capture: Path,
+    monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest,
+) -> None:
+    from backend.captures.flows import import_path
+    from tests.conftest import reset_caches
+
+    monkeypatch.setenv("DEXLABEL_STORAGE_URL", f"s3://{s3_bucket}/captures")
+    monkeypatch.setenv("DEXLABEL_S3_ENDPOINT_URL", s3_endpoint)
+    monkeypatch.setenv("DEXLABEL_S3_PRESIGNED_LINKS", "false")
+    reset_caches()
+    client, headers = request.getfixturevalue("client"), request.getfixturevalue("admin_headers")
+    sequence_id = import_path(small_capture)[0].sequence_id
+    serial = client.get(f"/api/sequences/{sequence_id}", headers=headers).json()["cameras"][0][
+        "serial"]
+    manifest = client.get(f"/api/sequences/{sequence_id}/views/{serial}/frames",
+                          headers=headers).json()
+    first = manifest["frames"][0]["url"]
+    assert first.startswith(f"/api/sequences/{sequence_id}/views/{serial}/frames/")
+    frame = client.get(first, headers=headers)
+    assert frame.status_code == 200 and frame.content[:2] == b"\xff\xd8"  # a JPEG

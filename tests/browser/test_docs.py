@@ -64,3 +64,28 @@ def test_swagger_ui_renders_every_operation_without_the_network(
     page.screenshot(path=str(output_dir / "docs-swagger.png"))
     assert not blocked, f"the page reached outside the app: {blocked}"
 
+
+
+def test_authorize_on_the_docs_page_sends_the_admin_token(
+    offline_page: tuple[Page, list[str]], live_server: LiveServer, output_dir: Path
+) -> None:
+    """A newcomer pastes a token from POST /api/auth/token into Authorize and tries an admin
+    operation from the page: it answers 200 with their account."""
+    page, blocked = offline_page
+    page.goto(f"{live_server.base}/docs")
+    page.locator(".swagger-ui .auth-wrapper button.authorize").click()
+    modal = page.locator(".swagger-ui .modal-ux")
+    expect(modal).to_contain_text("bearer")
+    modal.locator("input").first.fill(live_server.admin_token)
+    modal.locator("button.authorize").click()
+    modal.locator("button.btn-done").click()
+    operation = page.locator(".swagger-ui .opblock-get").filter(
+        has=page.locator(".opblock-summary-path[data-path='/api/auth/me']"))
+    operation.locator(".opblock-summary").click()
+    operation.locator("button.try-out__btn").click()
+    operation.locator("button.execute").click()
+    status = operation.locator(".live-responses-table tbody .response-col_status").first
+    expect(status).to_have_text("200")
+    expect(operation.locator(".live-responses-table")).to_contain_text("email")
+    page.screenshot(path=str(output_dir / "docs-authorized.png"))
+    assert not blocked, f"the page reached outside the app: {blocked}"

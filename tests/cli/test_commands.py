@@ -147,17 +147,6 @@ def test_jobs_list_shows_each_jobs_result_or_error(imported: int, cli: CliRunner
     assert "frame_stats:1" in lines
 
 
-def test_synth_refuses_a_folder_in_use_and_reports_its_timing(tmp_path: Path,
-                                                              cli: CliRunner) -> None:
-    (tmp_path / "taken").mkdir()
-    (tmp_path / "taken" / "file").touch()
-    done = cli.invoke(app, ["synth", str(tmp_path / "taken"), "--frames", "2", "--views", "1",
-                            "--objects", "1"])
-    assert done.exit_code == 2
-    assert done.output.splitlines()[-1].startswith("error: ")
-    assert "failed after" in done.output
-
-
 def test_progress_prints_a_plain_line_per_step_off_a_terminal(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
