@@ -64,6 +64,7 @@ class Deployment:
     database_url: str
     capture: Path
     isolated: bool
+    s3_endpoint: str
     notes: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -168,7 +169,7 @@ def deployment(tmp_path_factory: pytest.TempPathFactory, s3_endpoint: str
     api_host = Host("api-host", hosts_root, common, isolated, logs)
     workers = {name: Host(name, hosts_root, common, isolated, logs) for name in WORKER_HOSTS}
     deployment = Deployment(api_host, workers, Api(f"http://127.0.0.1:{port}"), database_url,
-                            capture, isolated)
+                            capture, isolated, s3_endpoint)
     try:
         migrate = Host("migrate", hosts_root, common, isolated, logs)
         migrate.start("migrate")
