@@ -86,6 +86,9 @@ def finished_archive(session: Session, export_id: int) -> StoredArchive:
                           f"{get_settings().export_retention_days:g} days, "
                           "DEXLABEL_EXPORT_RETENTION_DAYS); run the export again")
     key = result.get("key")
+    if job.status == "done" and not isinstance(key, str):
+        raise ArchiveGone(f"export {export_id} finished before archives were kept in storage; "
+                          "run the export again")
     if job.status != "done" or not isinstance(key, str):
         raise Conflict(f"export {export_id} is {job.status}; its archive can be downloaded "
                        "once it is done", state=job.status)

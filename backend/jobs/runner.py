@@ -11,18 +11,13 @@ database for a whole lease) stops at its next checkpoint without acting (``Lease
 A message the queue could not take (the queue was down) is recorded on the job's row, and the
 reaper sends it again once the queue answers.
 
-Each claim records the host that took the job (``host``, "name:pid") and opens an entry in the
-run's ``attempt_log``; a job records its actions there (``record_actions``) in the same unit of
-work as the actions themselves, so a job retried after its worker was killed reports the
-actions of every attempt (``actions`` summed, ``attempts`` one by one, in its result).
+Each claim records the host that took the job and opens an entry in the run's attempt log, where
+the job records its actions (backend.jobs.attempts).
 """
 
 from __future__ import annotations
 
-import contextvars
 import logging
-import os
-import socket
 import threading
 import time
 import traceback
@@ -31,11 +26,16 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar, cast
 
-from sqlalchemy import ColumnElement, CursorResult, Result, or_, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy import CursorResult, Result, or_, select, update
 
 from backend.config import get_settings
 from backend.db import session_scope
+from backend.jobs.attempts import (
+    Attempt,
+    current_attempt,
+    host_id,
+    with_every_attempt,
+)
 from backend.jobs.models import Job
 from backend.queue import huey
 
@@ -143,33 +143,6 @@ class LeaseLost(Exception):
     job. It stops where it is, acting no further; the attempt holding the job carries on."""
 
 
-@dataclass(frozen=True)
-class Attempt:
-    """One claimed run of a job: its key, its number and when it was claimed (as stored), which
-    together tell it from every other attempt, a later one of the same number included."""
-
-    key: str
-    number: int
-    started_at: datetime
-    lease_s: float
-
-    def held(self) -> ColumnElement[bool]:
-        """The row still belongs to this attempt."""
-        return ((Job.key == self.key) & (Job.status == "running")
-                & (Job.attempts == self.number) & (Job.started_at == self.started_at))
-
-
-# The attempt the current thread is running (checkpoint() checks that it still holds its job).
-_current: contextvars.ContextVar[Attempt | None] = contextvars.ContextVar(
-    "dexlabel_job_attempt", default=None)
-
-
-def host_id() -> str:
-    """This process as the job table names it: "name:pid", the name DEXLABEL_HOST_NAME or the
-    machine's hostname."""
-    return f"{get_settings().host_name or socket.gethostname()}:{os.getpid()}"
-
-
 def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
     """Take the job for this worker: (attempt, kind, args), or None when not ours to run."""
     settings = get_settings()
@@ -253,7 +226,7 @@ class _Heartbeat:
 def check_lease() -> None:
     """Raise LeaseLost unless the attempt this thread runs still holds its job (nothing to
     check outside a job). A job calls it before each action it must not repeat."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         return
     with session_scope() as session:
@@ -264,7 +237,7 @@ def check_lease() -> None:
 
 def current_job_id() -> int:
     """The id of the job this thread runs (its row); LookupError outside a job."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         raise LookupError("not inside a job")
     with session_scope() as session:
@@ -277,67 +250,13 @@ def current_job_id() -> int:
 def report_progress(done: int, total: int, stage: str = "") -> None:
     """Record how far the job this thread runs has come (one short committed UPDATE); a call
     outside a job, or from an attempt that lost its job, records nothing."""
-    attempt = _current.get()
+    attempt = current_attempt.get()
     if attempt is None:
         return
     with session_scope() as session:
         session.execute(update(Job).where(attempt.held())
                         .values(progress={"done": done, "total": total, "stage": stage})
                         .execution_options(synchronize_session=False))
-
-
-def record_actions(session: Session, counts: Mapping[str, int]) -> None:
-    """Add ``counts`` ({"approved": 1}) to the actions of the attempt this thread runs, in
-    ``session``: the unit of work that holds the actions themselves, so they are recorded
-    exactly when they commit. Nothing outside a job or for an attempt that lost its job."""
-    attempt = _current.get()
-    if attempt is None or not counts:
-        return
-    session.flush()  # the unit of work's own writes first
-    entries = session.scalar(select(Job.attempt_log).where(attempt.held()))
-    if not entries:
-        return
-    entries = list(entries)
-    last = dict(entries[-1])
-    actions = dict(last.get("actions") or {})
-    for what, n in counts.items():
-        actions[what] = actions.get(what, 0) + n
-    entries[-1] = {**last, "actions": actions}
-    session.execute(update(Job).where(attempt.held()).values(attempt_log=entries)
-                    .execution_options(synchronize_session=False))
-
-
-def run_actions() -> dict[str, int]:
-    """The actions every attempt of the current run of this thread's job recorded, summed
-    (empty outside a job)."""
-    attempt = _current.get()
-    if attempt is None:
-        return {}
-    with session_scope() as session:
-        entries = session.scalar(select(Job.attempt_log).where(Job.key == attempt.key))
-    return _summed(entries or [])
-
-
-def _summed(entries: list[dict[str, Any]]) -> dict[str, int]:
-    total: dict[str, int] = {}
-    for entry in entries:
-        for what, n in (entry.get("actions") or {}).items():
-            total[what] = total.get(what, 0) + int(n)
-    return total
-
-
-def _with_every_attempt(attempt: Attempt, result: dict[str, Any]) -> dict[str, Any]:
-    """A finished job's result with the actions of all its run's attempts (when any were
-    recorded): ``actions`` summed, and ``attempts`` one by one when there were several."""
-    with session_scope() as session:
-        entries = session.scalar(select(Job.attempt_log).where(attempt.held())) or []
-    if not any(entry.get("actions") for entry in entries):
-        return result
-    result = {**result, "actions": _summed(entries)}
-    if len(entries) > 1:
-        result["attempts"] = [{"attempt": e.get("attempt"), "host": e.get("host"),
-                               "actions": e.get("actions") or {}} for e in entries]
-    return result
 
 
 def checkpoint() -> None:
@@ -390,7 +309,7 @@ def execute(key: str) -> None:
     handler = handler_for(kind)
     failure: Exception | None = None
     result: dict[str, Any] = {}
-    token = _current.set(attempt)
+    token = current_attempt.set(attempt)
     try:
         with _Heartbeat(attempt):
             if handler is None:
@@ -407,11 +326,11 @@ def execute(key: str) -> None:
         log.exception("job %s attempt %d failed", key, attempt.number)
         failure = exc
     finally:
-        _current.reset(token)
+        current_attempt.reset(token)
     if failure is not None:
         _after_failure(attempt, failure)
         return
-    _finish(attempt, status="done", result=_with_every_attempt(attempt, result),
+    _finish(attempt, status="done", result=with_every_attempt(attempt, result),
             finished_at=utc_now())
 
 

@@ -23,7 +23,8 @@ from backend.crowd.client import MarketplaceError, MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
-from backend.jobs.runner import RetryLater, check_lease, checkpoint, record_actions, run_actions
+from backend.jobs.attempts import record_actions, run_actions
+from backend.jobs.runner import RetryLater, check_lease, checkpoint
 from backend.quality.models import QCReport
 from backend.quality.service import hit_of, score_target
 

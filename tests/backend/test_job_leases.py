@@ -16,16 +16,10 @@ from sqlalchemy import select, update
 
 from backend.config import Settings, get_settings
 from backend.db import session_scope
+from backend.jobs.attempts import record_actions
 from backend.jobs.consumer import REAP_EVERY_S, reap_jobs, requeue_stale
 from backend.jobs.models import Job
-from backend.jobs.runner import (
-    HEARTBEAT_FRACTION,
-    _claim,
-    checkpoint,
-    execute,
-    job_handler,
-    record_actions,
-)
+from backend.jobs.runner import HEARTBEAT_FRACTION, _claim, checkpoint, execute, job_handler
 from backend.jobs.service import enqueue_job
 from backend.queue import huey
 

@@ -57,3 +57,34 @@ def test_s3_presigned_url_serves_the_object(s3_endpoint: str, s3_bucket: str) ->
 
 def test_local_storage_has_no_direct_url(tmp_path: Path) -> None:
     assert LocalStorage(tmp_path).url_for("a/b.jpg") is None
+
+
+def test_a_file_goes_in_and_streams_out_in_chunks(storage, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from backend.storage import CHUNK_BYTES
+
+    data = bytes(range(256)) * (CHUNK_BYTES // 256 * 2 + 3)  # two whole chunks and a part
+    path = tmp_path / "archive.zip"
+    path.write_bytes(data)
+    storage.put_file("exports/export-000001.zip", path, "application/zip")
+    size, chunks = storage.open_stream("exports/export-000001.zip")
+    parts = list(chunks)
+    assert size == len(data) and b"".join(parts) == data and len(parts) >= 3
+    assert path.read_bytes() == data  # the source is left as it was
+    with pytest.raises(NotFound, match="export-000009"):
+        storage.open_stream("exports/export-000009.zip")
+
+
+def test_a_listing_names_each_object_under_a_folder_with_its_size_and_age(  # type: ignore[no-untyped-def]
+        storage) -> None:
+    from datetime import UTC, datetime, timedelta
+
+    storage.put_bytes("exports/export-000001.zip", b"12345")
+    storage.put_bytes("exports/sub/export-000002.tar", b"1")
+    storage.put_bytes("exportsx/other.zip", b"1")
+    listed = storage.list_prefix("exports")
+    assert [(o.key, o.size) for o in listed] == [("exports/export-000001.zip", 5),
+                                                 ("exports/sub/export-000002.tar", 1)]
+    now = datetime.now(UTC)
+    assert all(now - timedelta(minutes=5) < o.modified <= now + timedelta(minutes=1)
+               for o in listed)
+    assert storage.list_prefix("nothing") == []
