@@ -71,6 +71,12 @@ class Deployment:
     def hosts(self) -> list[Host]:
         return [self.api_host, *self.workers.values()]
 
+    def need(self, name: str) -> Any:
+        """What an earlier test of the walk recorded (they run in order on one deployment)."""
+        if name not in self.notes:
+            pytest.fail(f"an earlier step of the walk failed before it recorded {name!r}")
+        return self.notes[name]
+
     def logs(self) -> str:
         return "\n".join(h.log_tail() for h in self.hosts)
 
