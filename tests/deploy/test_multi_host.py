@@ -14,7 +14,8 @@ from __future__ import annotations
 import io
 import time
 import zipfile
-from typing import Any
+from datetime import timedelta
+from typing import Any, NamedTuple
 
 import pytest
 from sqlalchemy import create_engine, inspect, text
@@ -207,17 +208,29 @@ def _download(d: Deployment, export_id: int) -> tuple[int, bytes, dict[str, str]
         return exc.code, exc.read(), dict(exc.headers)
 
 
-def job_hosts(d: Deployment) -> list[tuple[Any, ...]]:
-    """(id, kind, key, status, attempts, host, last attempt's time) of every job; host None
-    where the job table has no host column."""
+class JobRow(NamedTuple):
+    id: int
+    kind: str
+    key: str
+    status: str
+    attempts: int
+    host: str | None  # the host of the last claim ("name:pid")
+    took: timedelta | None  # the last attempt's time
+    attempt_hosts: list[str]  # every attempt's host, in order
+
+
+def job_rows(d: Deployment) -> list[JobRow]:
+    """Every job with the hosts that ran it (None and [] where the job table records none)."""
     engine = create_engine(d.database_url)
     try:
-        has_host = "host" in {c["name"] for c in inspect(engine).get_columns("jobs")}
+        columns = {c["name"] for c in inspect(engine).get_columns("jobs")}
     finally:
         engine.dispose()
-    host = "host" if has_host else "NULL"
-    return [tuple(r) for r in query(d, f"SELECT id, kind, key, status, attempts, {host}, "
-                                       "finished_at - started_at FROM jobs ORDER BY id")]
+    host = "host" if "host" in columns else "NULL"
+    log = "attempt_log" if "attempt_log" in columns else "NULL"
+    rows = query(d, f"SELECT id, kind, key, status, attempts, {host}, finished_at - started_at, "
+                    f"{log} FROM jobs ORDER BY id")
+    return [JobRow(*r[:7], [e.get("host") for e in r[7] or []]) for r in rows]
 
 
 def host_of(d: Deployment, recorded: str | None) -> str | None:
@@ -233,28 +246,30 @@ def test_a_killed_worker_hosts_solve_is_taken_over_by_the_other(
     key = f"solve-run:{run['id']}"
     d.notes["killed_solve"] = key
 
-    def job() -> Any:
-        return query(d, "SELECT status, attempts, finished_at - started_at FROM jobs "
-                        "WHERE key = :key", key=key)[0]
+    def job() -> JobRow:
+        return next(r for r in job_rows(d) if r.key == key)
 
-    wait_until(f"{key} to run", lambda: job()[0] == "running", d, 120)
-    recorded = next(r[5] for r in job_hosts(d) if r[2] == key)
-    assert host_of(d, recorded) in WORKER_HOSTS, f"{key} runs on no known host: {recorded!r}"
-    victim = d.workers[host_of(d, recorded)]
+    wait_until(f"{key} to run", lambda: job().status == "running", d, 120)
+    running_on = host_of(d, job().host)
+    assert running_on in WORKER_HOSTS, f"{key} runs on no known host: {job().host!r}"
+    victim = d.workers[running_on]
     d.notes["victim"] = victim.name
     d.notes["victim_files"] = victim.files()  # its folder goes with it
     victim.kill()
     killed_at = time.monotonic()
-    wait_until(f"another attempt at {key}", lambda: job()[1] >= 2, d, TAKEOVER_LIMIT_S + 60)
+    wait_until(f"another attempt at {key}", lambda: job().attempts >= 2, d,
+               TAKEOVER_LIMIT_S + 60)
     claimed = time.monotonic() - killed_at
-    wait_until(f"{key} to finish", lambda: job()[0] in ("done", "failed"), d, 180)
+    wait_until(f"{key} to finish", lambda: job().status in ("done", "failed"), d, 180)
     finished = time.monotonic() - killed_at
-    status, attempts, took = job()
+    row = job()
     with capsys.disabled():
-        print(f"\n{key} ran on {victim.name}, killed (kill -9): attempt {attempts} "  # noqa: T201
-              f"claimed {claimed:.0f} s later, {status} {finished:.0f} s after the kill (that "
-              f"attempt {took.total_seconds():.0f} s)")
-    assert (status, attempts) == ("done", 2)
+        print(f"\n{key} ran on {victim.name}, killed (kill -9): attempt {row.attempts} "  # noqa: T201
+              f"claimed {claimed:.0f} s later, {row.status} {finished:.0f} s after the kill "
+              f"(that attempt {row.took.total_seconds() if row.took else 0:.0f} s)")
+    assert (row.status, row.attempts) == ("done", 2), row
+    survivor = next(n for n in WORKER_HOSTS if n != victim.name)
+    assert [host_of(d, h) for h in row.attempt_hosts] == [victim.name, survivor], row
     assert query(d, "SELECT status FROM solve_runs WHERE id = :id", id=run["id"])[0][0] == "done"
     assert claimed < TAKEOVER_LIMIT_S, f"taken over {claimed:.0f} s after the kill"
     assert finished < TAKEOVER_LIMIT_S, f"finished {finished:.0f} s after the kill"
@@ -264,19 +279,21 @@ def test_every_job_records_the_worker_host_that_ran_it(
         deployment: Deployment, capsys: pytest.CaptureFixture[str]) -> None:
     d = deployment
     wait_until("the queue to be idle", lambda: idle(d), d, 120)
-    rows = job_hosts(d)
-    lines = [f"{'id':>4}  {'kind':<12} {'key':<26} {'status':<8} {'tries':>5} {'took':>6}  host"]
-    lines += [f"{i:>4}  {kind:<12} {key:<26} {status:<8} {tries:>5} "
-              f"{took.total_seconds() if took else 0:>5.1f}s  {host or '(none)'}"
-              for i, kind, key, status, tries, host, took in rows]
+    rows = job_rows(d)
+    header = (f"{'id':>4}  {'kind':<12} {'key':<26} {'status':<8} {'tries':>5} {'took':>6}  "
+              "host (of each attempt)")
+    lines = [header]
+    lines += [f"{r.id:>4}  {r.kind:<12} {r.key:<26} {r.status:<8} {r.attempts:>5} "
+              f"{r.took.total_seconds() if r.took else 0:>5.1f}s  "
+              f"{' -> '.join(r.attempt_hosts) if len(r.attempt_hosts) > 1 else r.host}"
+              for r in rows]
     with capsys.disabled():
         print("\njobs and the host that ran each:\n" + "\n".join(lines))  # noqa: T201
-    assert {row[3] for row in rows} == {"done"}, rows
-    unrecorded = [key for _, _, key, status, _, host, _ in rows
-                  if status == "done" and host_of(d, host) not in WORKER_HOSTS]
-    assert not unrecorded, f"{len(unrecorded)} done jobs record no worker host: {unrecorded}"
-    ran_on = {key: host_of(d, host) for _, _, key, _, _, host, _ in rows}
-    by_id = {i: host_of(d, host) for i, _, _, _, _, host, _ in rows}
+    assert {r.status for r in rows} == {"done"}, rows
+    unrecorded = [r.key for r in rows if host_of(d, r.host) not in WORKER_HOSTS]
+    assert not unrecorded, f"{len(unrecorded)} jobs record no worker host: {unrecorded}"
+    ran_on = {r.key: host_of(d, r.host) for r in rows}
+    by_id = {r.id: host_of(d, r.host) for r in rows}
     assert {by_id[i] for i in d.need("exports").values()} <= set(WORKER_HOSTS)
     survivor = next(n for n in WORKER_HOSTS if n != d.need("victim"))
     assert ran_on[d.need("killed_solve")] == survivor
