@@ -173,7 +173,9 @@ def _claim(key: str) -> tuple[Attempt, str, dict[str, Any]] | None:
         job.attempt_log = [*earlier, {"attempt": job.attempts, "host": host,
                                       "started_at": now.isoformat(timespec="seconds")}]
         attempt = Attempt(key, job.attempts, job.started_at, lease)
-        return attempt, job.kind, dict(job.args or {})
+        kind, args = job.kind, dict(job.args or {})
+    log.info("job %s attempt %d runs on %s", key, attempt.number, host)
+    return attempt, kind, args
 
 
 def _renew(attempt: Attempt) -> bool:
