@@ -13,6 +13,7 @@ import urllib.error
 import urllib.request
 import uuid
 from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,7 @@ class Deployment:
         return "\n".join(h.log_tail() for h in self.hosts)
 
 
+@contextmanager
 def _database() -> Iterator[str]:
     from sqlalchemy import create_engine, text
     from sqlalchemy.engine import make_url
@@ -93,12 +95,15 @@ def _database() -> Iterator[str]:
             conn.execute(text(f'CREATE DATABASE "{name}"'))
     except Exception as exc:  # any connection failure means "not reachable"
         _unavailable("PostgreSQL", exc)
-    yield admin_url.set(database=name).render_as_string(hide_password=False)
-    with admin.connect() as conn:
-        conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-    admin.dispose()
+    try:
+        yield admin_url.set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as conn:
+            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
 
 
+@contextmanager
 def _redis_database() -> Iterator[str]:
     """A Redis database number no one uses now (the suite's own is left alone), claimed with
     a key and flushed afterwards."""
@@ -115,8 +120,10 @@ def _redis_database() -> Iterator[str]:
             pytest.fail("no empty Redis database among 1-14 for the multi-host test")
     except redis.RedisError as exc:
         _unavailable("Redis", exc)
-    yield f"{base}/{number}"
-    client.flushdb()
+    try:
+        yield f"{base}/{number}"
+    finally:
+        client.flushdb()
 
 
 def _bucket(endpoint: str) -> str:
@@ -151,12 +158,20 @@ def deployment(tmp_path_factory: pytest.TempPathFactory, s3_endpoint: str
     in; a small synthetic capture on the API host's own disk (3 views, 1 object)."""
     logging.getLogger("werkzeug").setLevel(logging.WARNING)  # moto's line per request
     root = tmp_path_factory.mktemp("multihost")
+    isolated = namespaces_available()
+    with ExitStack() as services:
+        database_url = services.enter_context(_database())
+        redis_url = services.enter_context(_redis_database())
+        yield from _deployment(root, isolated, database_url, redis_url, s3_endpoint)
+
+
+def _deployment(root: Path, isolated: bool, database_url: str, redis_url: str,
+                s3_endpoint: str) -> Iterator[Deployment]:
+    """The hosts on those services, each with every setting of the README's scale-out; each
+    host is stopped afterwards and its log's end printed."""
     hosts_root, logs = root / "hosts", root / "logs"
     hosts_root.mkdir()
     logs.mkdir()
-    isolated = namespaces_available()
-    databases, redis_dbs = _database(), _redis_database()
-    database_url, redis_url = next(databases), next(redis_dbs)
     port = free_port()
     access_key = "AKMULTIHOST" + secrets.token_hex(6).upper()
     requester_secret = secrets.token_hex(20)
@@ -196,5 +211,3 @@ def deployment(tmp_path_factory: pytest.TempPathFactory, s3_endpoint: str
         for host in deployment.hosts:
             host.stop()
         print(deployment.logs())  # noqa: T201 (the hosts' last words, shown on failure)
-        for generator in (databases, redis_dbs):
-            next(generator, None)
