@@ -202,7 +202,7 @@ def test_start_takes_only_an_assignment_the_marketplace_can_vouch_for(
 ) -> None:
     """No HIT id: refused (direct links are an admin's). A HIT id with no marketplace to ask:
     503 naming it. The genuine and forged starts against a live marketplace are in
-    tests/crowd/test_start.py."""
+    tests/backend/crowd/test_start.py."""
     task_token = client.post(f"/api/tasks/{tasks[0]['id']}/preview-token",
                              headers=admin_headers).json()["token"]
     body = {"task_token": task_token, "assignment_id": "FORGED0001", "worker_id": "NOBODY"}

@@ -11,7 +11,7 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
-from tests.backend.test_annotation_proposals import _bearer, _truth, fast_capture  # noqa: F401
+from tests.backend.annotation.test_annotation_proposals import _bearer, _truth, fast_capture  # noqa: F401
 
 URL = "/api/annotate/stretches"
 

@@ -7,7 +7,7 @@ from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
 from backend.captures.frames import parse_bundle
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 
 @pytest.fixture

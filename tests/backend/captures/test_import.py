@@ -12,7 +12,7 @@ from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, 
 from backend.db import session_scope
 from backend.errors import Conflict, InvalidCapture
 from backend.storage import LocalStorage, get_storage
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 
 def _counts() -> dict[str, int]:

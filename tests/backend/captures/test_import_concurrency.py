@@ -17,7 +17,7 @@ from backend.captures.models import Frame, SceneObject, Sequence
 from backend.captures.service import ImportResult
 from backend.db import session_scope
 from backend.storage import LocalStorage, Storage, get_storage
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 WAIT_S = 60
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from backend.cli import app
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 
 def test_import_of_a_truncated_jpeg_is_one_error_line_naming_the_file(

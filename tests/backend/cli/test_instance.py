@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from backend.cli import app
-from tests.cli.conftest import DEXLABEL, clean_env, free_port
+from tests.backend.cli.conftest import DEXLABEL, clean_env, free_port
 
 
 def _run(args: list[str], cwd: Path, **settings: str) -> subprocess.CompletedProcess[str]:

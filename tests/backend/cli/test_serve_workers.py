@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from tests.cli.conftest import DEXLABEL, clean_env, free_port
+from tests.backend.cli.conftest import DEXLABEL, clean_env, free_port
 
 
 def test_several_processes_are_refused_on_sqlite(cli: CliRunner, instance: Path) -> None:

@@ -10,9 +10,9 @@ from typing import Any
 
 import pytest
 
+from tests.backend.market.conftest import market_database_url, market_url, migrated_sqlite
+from tests.backend.market.helpers import REQUESTERS_SETTING
 from tests.conftest import reset_caches
-from tests.market.conftest import market_database_url, market_url, migrated_sqlite
-from tests.market.helpers import REQUESTERS_SETTING
 
 __all__ = ["market_database_url", "market_url", "migrated_sqlite"]
 
@@ -60,7 +60,7 @@ def crowd_url(market_url: str, monkeypatch: pytest.MonkeyPatch) -> str:
 @pytest.fixture
 def tasks(crowd_url: str) -> list[int]:
     """Five annotation tasks (one sequence, five views, one hand each); their ids."""
-    from tests.crowd.helpers import make_tasks
+    from tests.backend.crowd.helpers import make_tasks
 
     return make_tasks(5)
 
@@ -92,7 +92,7 @@ def api(crowd_url: str) -> Iterator[Any]:
     from fastapi.testclient import TestClient
 
     from backend.app import create_app
-    from tests.crowd.helpers import admin_headers
+    from tests.backend.crowd.helpers import admin_headers
 
     with TestClient(create_app()) as client:
         client.headers.update(admin_headers(client))

@@ -47,7 +47,7 @@ def worker_submits(base: str, hit_id: str, worker_id: str,
     from backend.annotation.models import Task
     from backend.annotation.service import start_assignment
     from backend.crowd.models import CrowdHit
-    from tests.market.helpers import accept, submit
+    from tests.backend.market.helpers import accept, submit
 
     market_id = accept(hit_id, worker_id)
     with session_scope() as session:

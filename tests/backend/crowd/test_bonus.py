@@ -16,8 +16,8 @@ from backend.crowd.client import MarketplaceError, make_client
 from backend.crowd.models import CrowdPayment
 from backend.db import session_scope
 from backend.market import clock, protocol
-from tests.crowd.helpers import synced_submission
-from tests.market.helpers import WORKER
+from tests.backend.crowd.helpers import synced_submission
+from tests.backend.market.helpers import WORKER
 
 REASON = "Careful work on occluded frames"
 

@@ -13,7 +13,7 @@ from sqlalchemy import func, select
 
 from backend.crowd import decisions, totals
 from backend.db import session_scope
-from tests.crowd.test_costs import reviewed
+from tests.backend.crowd.test_costs import reviewed
 
 __all__ = ["reviewed"]
 
@@ -86,7 +86,7 @@ def _approved(sequence_id: int) -> int:
 def test_concurrent_payments_add_up_on_postgresql(app_env: dict) -> None:
     from backend.annotation.models import Assignment
     from backend.crowd.models import CrowdPayment
-    from tests.crowd.helpers import make_tasks
+    from tests.backend.crowd.helpers import make_tasks
 
     task_ids = make_tasks(2)
     with session_scope() as session:

@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 from backend.crowd import actions, costs, decisions, flows
 from backend.crowd.schemas import CostLine, PublishOptions
 from backend.db import session_scope
-from tests.crowd.helpers import make_tasks, synced_submission
-from tests.market.helpers import WORKER, WORKER_2, WORKER_3
+from tests.backend.crowd.helpers import make_tasks, synced_submission
+from tests.backend.market.helpers import WORKER, WORKER_2, WORKER_3
 
 # spent: rewards, bonuses, fees, total; committed: rewards, bonuses, fees, total
 PROJECT = ("0.50", "1.00", "0.30", "1.80", "1.00", "0.50", "0.30", "1.80")

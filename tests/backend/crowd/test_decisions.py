@@ -14,8 +14,8 @@ from backend.crowd.sync import sync
 from backend.db import session_scope
 from backend.errors import Conflict
 from backend.market import protocol
-from tests.crowd.helpers import synced_submission, worker_submits
-from tests.market.helpers import WORKER, WORKER_2
+from tests.backend.crowd.helpers import synced_submission, worker_submits
+from tests.backend.market.helpers import WORKER, WORKER_2
 
 MTurk = Any
 

@@ -9,8 +9,8 @@ from typing import Any
 
 from backend.crowd import costs
 from backend.db import session_scope
-from tests.crowd.test_costs import PROJECT, _split, reviewed
-from tests.market.helpers import WORKER, WORKER_2, WORKER_3
+from tests.backend.crowd.test_costs import PROJECT, _split, reviewed
+from tests.backend.market.helpers import WORKER, WORKER_2, WORKER_3
 
 __all__ = ["reviewed"]
 

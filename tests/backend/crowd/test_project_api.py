@@ -12,8 +12,8 @@ from sqlalchemy import select, update
 
 from backend.annotation.models import Assignment, Task
 from backend.db import session_scope
-from tests.crowd.test_costs import reviewed  # noqa: F401  (fixture)
-from tests.market.helpers import WORKER, WORKER_2, WORKER_3
+from tests.backend.crowd.test_costs import reviewed  # noqa: F401  (fixture)
+from tests.backend.market.helpers import WORKER, WORKER_2, WORKER_3
 
 # WORKER's QC reports by date: (days before now, outcome, median error px or None).
 REPORTS = ((3, "approve", 2.0), (2, "review", None), (1, "approve", 4.0))

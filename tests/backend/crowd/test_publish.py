@@ -144,7 +144,7 @@ def test_publish_endpoint_needs_an_admin_and_names_the_assignment_rule(
     crowd_url: str, tasks: list[int],
 ) -> None:
     from backend.app import create_app
-    from tests.crowd.helpers import admin_headers
+    from tests.backend.crowd.helpers import admin_headers
 
     with TestClient(create_app()) as api:
         assert api.post("/api/crowd/publish", json={}).status_code == 401

@@ -14,8 +14,8 @@ from backend.crowd.publish import publish_task
 from backend.crowd.schemas import PublishOptions
 from backend.crowd.simulate import simulate
 from backend.db import session_scope
-from tests.crowd.helpers import ADMIN_EMAIL, ADMIN_PASSWORD
-from tests.market.helpers import make_client as boto3_client
+from tests.backend.crowd.helpers import ADMIN_EMAIL, ADMIN_PASSWORD
+from tests.backend.market.helpers import make_client as boto3_client
 
 
 def _publish_tasks(capture: Path, kinds: tuple[str, ...] = ("hand",)) -> list[str]:

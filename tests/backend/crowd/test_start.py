@@ -15,7 +15,7 @@ from sqlalchemy import select
 
 from backend.config import get_settings
 from backend.db import session_scope
-from tests.market.helpers import accept, submit
+from tests.backend.market.helpers import accept, submit
 
 TRACKS = [{"point": p, "keyframes": [[0, 10.0 + p, 20.0, 1], [5, 30.0 + p, 40.0, 1]]}
           for p in range(21)]

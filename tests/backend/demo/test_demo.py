@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli.conftest import DEXLABEL, clean_env, free_port
+from tests.backend.cli.conftest import DEXLABEL, clean_env, free_port
 
 DEMO_ARGS = ["--no-serve", "--frames", "12", "--views", "3", "--objects", "1"]
 LOGIN = re.compile(r"^(worker portal|admin page): +(http://\S+) +email (\S+) +password (\S+)$",

@@ -30,8 +30,8 @@ from backend.pipeline.deletion import delete_sequence_rows as delete_sequence
 from backend.solve.results import decode_result, hand_trust
 from backend.solve.service import current_run
 from backend.storage import get_storage
-from tests.backend import export_checks
-from tests.backend.test_solve_api import _solve, approved, sequence  # noqa: F401
+from tests.backend.exports import export_checks
+from tests.backend.solve.test_solve_api import _solve, approved, sequence  # noqa: F401
 from worker.formats import dexycb, dexycb_flags, jsonfmt
 from worker.geometry.transforms import invert_pose, transform_points
 

@@ -33,7 +33,7 @@ pytestmark = pytest.mark.postgres
 SEQUENCES = 100
 BIG_TABLES = {"tasks", "assignments", "tracks", "qc_reports", "crowd_hits", "jobs", "frames",
               "crowd_submissions"}
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "scale_db.py"
+BENCH = Path(__file__).resolve().parents[3] / "bench" / "scale_db.py"
 
 
 def _bench() -> ModuleType:

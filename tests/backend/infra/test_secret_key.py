@@ -17,10 +17,10 @@ from pydantic import ValidationError
 
 from backend.config import PLACEHOLDER_SECRETS, TEST_SECRET, InvalidSettings, Settings
 from backend.security import sign_token
-from tests.cli.conftest import clean_env
+from tests.backend.cli.conftest import clean_env
 from tests.conftest import reset_caches
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PUBLIC_DEFAULT = "dev-secret-change-me"  # the signing key every dev instance once shared
 
 

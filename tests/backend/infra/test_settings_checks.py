@@ -16,7 +16,7 @@ from pydantic import ValidationError
 from backend.config import InvalidSettings, Settings, get_settings
 from worker.quality.decide import QCThresholds
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+README = Path(__file__).resolve().parents[3] / "README.md"
 QC_KEYS = "k_reject, k_review, landmark_min_separation_mm, min_population, motion_ratio_high"
 
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.backend.market.helpers import REQUESTERS_SETTING, MTurk, make_client
 from tests.conftest import reset_caches
-from tests.market.helpers import REQUESTERS_SETTING, MTurk, make_client
 
 
 @pytest.fixture(scope="session")

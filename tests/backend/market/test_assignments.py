@@ -7,7 +7,7 @@ from datetime import timedelta
 
 import pytest
 
-from tests.market.helpers import (
+from tests.backend.market.helpers import (
     ANSWERS_NS,
     WORKER,
     WORKER_2,

@@ -12,7 +12,7 @@ from datetime import timedelta
 
 import pytest
 
-from tests.market.helpers import (
+from tests.backend.market.helpers import (
     WORKER,
     WORKER_2,
     WORKER_3,
@@ -104,7 +104,7 @@ def test_concurrent_retries_of_one_create_hit_make_one_hit(market_url: str) -> N
 
 
 def test_concurrent_bonuses_never_overdraw_the_balance(market_url: str) -> None:
-    from tests.market.helpers import POOR_REQUESTER
+    from tests.backend.market.helpers import POOR_REQUESTER
 
     poor = make_client(market_url, key=POOR_REQUESTER, retries=4)
     assignment_id = work(market_url, create_hit(poor, Reward="0.00")["HITId"])

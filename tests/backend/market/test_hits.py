@@ -7,7 +7,14 @@ from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from tests.market.helpers import MTurk, accept, create_hit, error_of, external_question, work
+from tests.backend.market.helpers import (
+    MTurk,
+    accept,
+    create_hit,
+    error_of,
+    external_question,
+    work,
+)
 
 
 def test_create_hit_returns_the_hit_as_published(mturk: MTurk) -> None:
@@ -101,7 +108,7 @@ def test_hit_moves_from_assignable_to_unassignable_to_reviewable(
     second = accept(hit_id, "A2WORKERTWO")
     hit = mturk.get_hit(HITId=hit_id)["HIT"]
     assert (hit["HITStatus"], hit["NumberOfAssignmentsPending"]) == ("Unassignable", 2)
-    from tests.market.helpers import submit
+    from tests.backend.market.helpers import submit
 
     assert submit(market_url, first, labels="a").status_code == 200
     assert mturk.get_hit(HITId=hit_id)["HIT"]["HITStatus"] == "Unassignable"
@@ -182,7 +189,7 @@ def test_delete_hit_follows_mturks_state_rules(market_url: str, mturk: MTurk) ->
     with pytest.raises(mturk.exceptions.RequestError, match="Unassignable"):
         mturk.delete_hit(HITId=hit_id)  # a worker still holds an assignment
     assert mturk.list_assignments_for_hit(HITId=hit_id)["Assignments"] == []
-    from tests.market.helpers import submit
+    from tests.backend.market.helpers import submit
 
     pending = mturk.get_hit(HITId=hit_id)["HIT"]["NumberOfAssignmentsPending"]
     assert pending == 1

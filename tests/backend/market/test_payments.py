@@ -7,7 +7,7 @@ from datetime import UTC, datetime
 import pytest
 
 from backend.market.money import assignment_cost, assignment_fee, bonus_cost, parse_amount
-from tests.market.helpers import (
+from tests.backend.market.helpers import (
     POOR_REQUESTER,
     WORKER,
     WORKER_2,

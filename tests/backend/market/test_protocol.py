@@ -10,7 +10,7 @@ import httpx
 import pytest
 from botocore.exceptions import ClientError, ParamValidationError
 
-from tests.market.helpers import (
+from tests.backend.market.helpers import (
     OTHER_REQUESTER,
     REQUESTER,
     MTurk,

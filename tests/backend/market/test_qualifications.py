@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.market.helpers import (
+from tests.backend.market.helpers import (
     OTHER_REQUESTER,
     WORKER,
     WORKER_2,

@@ -11,7 +11,7 @@ from backend.market.questions import (
     parse_answers,
     validate_question,
 )
-from tests.market.helpers import external_question
+from tests.backend.market.helpers import external_question
 
 HTML_QUESTION = ('<HTMLQuestion xmlns="http://mechanicalturk.amazonaws.com/'
                  'AWSMechanicalTurkDataSchemas/2011-11-11/HTMLQuestion.xsd">'

@@ -9,7 +9,7 @@ import numpy as np
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import crowd_submits, publish_hand_tasks
+from tests.backend.quality.helpers import crowd_submits, publish_hand_tasks
 
 
 def _job(key: str):
@@ -54,8 +54,8 @@ def test_confirm_retries_until_the_marketplace_has_the_submission(crowd_url: str
     from backend.crowd.models import CrowdHit
     from backend.jobs.runner import execute
     from backend.pipeline import submit
-    from tests.market.helpers import accept
-    from tests.market.helpers import submit as market_submit
+    from tests.backend.market.helpers import accept
+    from tests.backend.market.helpers import submit as market_submit
     from worker.synth.annotators import annotate
 
     _, hit_ids = publish_hand_tasks(training_capture, max_assignments=1)

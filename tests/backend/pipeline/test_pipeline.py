@@ -12,8 +12,8 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
+from tests.backend.quality.helpers import crowd_submits, publish_hand_tasks
 from tests.conftest import _drop_all
-from tests.quality.helpers import crowd_submits, publish_hand_tasks
 
 
 @pytest.fixture(params=["sqlite", "postgres"])

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import httpx
 import pytest
 
-from tests.market.conftest import (
+from tests.backend.market.conftest import (
     market_database_url,
     market_env,
     market_url,

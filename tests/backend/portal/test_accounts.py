@@ -10,7 +10,7 @@ from sqlalchemy import select
 from backend.db import session_scope
 from backend.market import clock
 from backend.market.models import Worker
-from tests.portal.conftest import WORKER_PASSWORD, Portal
+from tests.backend.portal.conftest import WORKER_PASSWORD, Portal
 
 
 def test_admin_created_worker_logs_in_as_a_new_marketplace_worker(portal: Portal) -> None:

@@ -22,9 +22,15 @@ from backend.crowd.schemas import PublishOptions
 from backend.crowd.titles import MAX_TITLE_CHARS, TaskFacts, hit_title, object_label
 from backend.db import session_scope
 from backend.security import sign_token
-from tests.crowd.helpers import ADMIN_EMAIL, ADMIN_PASSWORD
-from tests.market.helpers import create_hit, external_question, submit
-from tests.portal.conftest import Portal
+from tests.backend.crowd import conftest as crowd_fixtures
+from tests.backend.crowd.helpers import ADMIN_EMAIL, ADMIN_PASSWORD
+from tests.backend.market.helpers import create_hit, external_question, submit
+from tests.backend.portal.conftest import Portal
+
+# The crowd tests' served app (its requester is the built-in marketplace's dev pair), in place
+# of this folder's marketplace fixtures of the same names.
+crowd_url = crowd_fixtures.crowd_url
+market_env = crowd_fixtures.market_env
 
 FRAMES = 6  # small_capture: 3 views x 6 frames, one right hand and two objects
 

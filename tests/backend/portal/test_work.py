@@ -8,8 +8,8 @@ import pytest
 from sqlalchemy import select
 
 from backend.config import get_settings
-from tests.market.helpers import MTurk, create_hit, external_question, submit
-from tests.portal.conftest import Portal
+from tests.backend.market.helpers import MTurk, create_hit, external_question, submit
+from tests.backend.portal.conftest import Portal
 
 PAGE = "https://label.example.org/annotate/?task=T0K3N"
 

@@ -10,8 +10,13 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from backend.db import session_scope
-from tests.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, publish_hand_tasks
-from tests.quality.test_pipeline import _confirm, _drain
+from tests.backend.pipeline.test_pipeline import _confirm, _drain
+from tests.backend.quality.helpers import (
+    ADMIN_EMAIL,
+    ADMIN_PASSWORD,
+    crowd_submits,
+    publish_hand_tasks,
+)
 
 
 def _progress(base: str, sequence_id: int) -> tuple[int, dict]:

@@ -12,7 +12,7 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import store_solve, submit_direct
+from tests.backend.quality.helpers import store_solve, submit_direct
 
 # One careful worker per view but the last, whose worker puts both landmarks on one spot.
 VIEWS = 4

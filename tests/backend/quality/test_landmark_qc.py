@@ -10,7 +10,7 @@ import numpy as np
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import store_solve, submit_direct
+from tests.backend.quality.helpers import store_solve, submit_direct
 
 
 def test_a_finished_solve_checks_each_workers_landmarks_against_the_solved_object(

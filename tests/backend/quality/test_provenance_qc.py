@@ -18,7 +18,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import submit_direct
+from tests.backend.quality.helpers import submit_direct
 
 ADMIN = ("provenance-admin@example.org", "correct horse battery")
 BLIND_REASON = ("accepted 4 of 4 check suggestions unchanged (each shown 15 px off the point): "

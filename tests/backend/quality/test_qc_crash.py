@@ -14,7 +14,7 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
+from tests.backend.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
 from tests.servers import wait_for
 
 

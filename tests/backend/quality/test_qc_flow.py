@@ -11,8 +11,8 @@ from sqlalchemy import func, select
 
 from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
 from backend.db import session_scope
-from tests.market.helpers import make_client as boto3_client
-from tests.quality.helpers import (
+from tests.backend.market.helpers import make_client as boto3_client
+from tests.backend.quality.helpers import (
     ADMIN_EMAIL,
     ADMIN_PASSWORD,
     crowd_submits,

@@ -13,8 +13,8 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
-from tests.quality.test_qc_crash import _job
+from tests.backend.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
+from tests.backend.quality.test_qc_crash import _job
 from tests.servers import wait_for
 
 # A consumer whose reaper runs every second instead of every minute.

@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.db import session_scope
-from tests.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, store_solve, submit_direct
+from tests.backend.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, store_solve, submit_direct
 
 FRAMES = 16
 RING, LITTLE = [13, 14, 15, 16], [17, 18, 19, 20]

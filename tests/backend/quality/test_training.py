@@ -10,7 +10,12 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from backend.db import session_scope
-from tests.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, crowd_submits, sync_submissions
+from tests.backend.quality.helpers import (
+    ADMIN_EMAIL,
+    ADMIN_PASSWORD,
+    crowd_submits,
+    sync_submissions,
+)
 
 
 def _publish_with_training(capture: Path) -> tuple[int, int, list[str]]:

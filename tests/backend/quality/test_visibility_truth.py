@@ -13,7 +13,7 @@ import pytest
 from sqlalchemy import select
 
 from backend.db import session_scope
-from tests.quality.helpers import submit_direct
+from tests.backend.quality.helpers import submit_direct
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,7 @@ from backend.db import session_scope
 from backend.jobs.runner import execute
 from backend.rig.service import job_key
 from backend.solve.inputs import gather_inputs
-from tests.backend.test_solve_api import _approve_from_truth
+from tests.backend.solve.test_solve_api import _approve_from_truth
 
 pytestmark = pytest.mark.slow
 

@@ -49,7 +49,7 @@ def test_a_worker_killed_mid_solve_leaves_the_run_to_the_next_worker(
     from backend.solve.models import SolveRun
     from backend.solve.service import request_solve
     from backend.storage import get_storage
-    from tests.backend.test_solve_api import _approve_from_truth
+    from tests.backend.solve.test_solve_api import _approve_from_truth
 
     sequence_id = import_path(small_capture)[0].sequence_id
     with session_scope() as session:

@@ -13,8 +13,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_consensus import camera_ring, moving_hand, truth_pixels
-from tests.worker.test_qc_visibility import CaptureTruth
+from tests.worker.quality.test_qc_consensus import camera_ring, moving_hand, truth_pixels
+from tests.worker.quality.test_qc_visibility import CaptureTruth
 from worker.assist.prefill import (
     ViewWork,
     epipolar_guide,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.worker.test_assist_lk import _frames, _keys
+from tests.worker.assist.test_assist_lk import _frames, _keys
 from worker.assist.stretches import (
     EVIDENCE_CONFIRMED,
     EVIDENCE_CONTRADICTED,

@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from tests.worker.test_triangulate import _observe, _points, _ring
+from tests.worker.geometry.test_triangulate import _observe, _points, _ring
 from worker.geometry.cameras import CameraModel, project_points
 from worker.geometry.refine import CameraStack, project_stack, refine_points
 from worker.geometry.triangulate import leave_one_out_residuals, triangulate_points

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_anchored import FRAMES, HEIGHT, WIDTH, box, poses
+from tests.worker.quality.test_qc_anchored import FRAMES, HEIGHT, WIDTH, box, poses
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.anchored import score_anchored
 from worker.quality.decide import decide, learn_thresholds

@@ -7,7 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_consensus import camera_ring, make_label, moving_hand, truth_pixels
+from tests.worker.quality.test_qc_consensus import (
+    camera_ring,
+    make_label,
+    moving_hand,
+    truth_pixels,
+)
 from worker.hand import JOINT_NAMES
 from worker.quality.bounds import MetricBound
 from worker.quality.consensus import score_hand

@@ -1,8 +1,8 @@
 """worker.quality.landmark_points and the landmark rules of the decision: two landmarks of one
 object are distinct points of its surface, in plain view.
 
-The scene is tests/worker/test_qc_anchored.py's: a 10 cm box in front of one camera (640x480),
-sliding and turning, or standing still at its first pose; labels through the simulated
+The scene is tests/worker/quality/test_qc_anchored.py's: a 10 cm box in front of one camera
+(640x480), sliding and turning, or standing still at its first pose; labels through the simulated
 annotators' keyframes and interpolation.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_anchored import FRAMES, HALF, box, label, poses
+from tests.worker.quality.test_qc_anchored import FRAMES, HALF, box, label, poses
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.anchored import score_anchored
 from worker.quality.decide import QCThresholds, decide, learn_thresholds

@@ -9,7 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_consensus import camera_ring, make_label, moving_hand, truth_pixels
+from tests.worker.quality.test_qc_consensus import (
+    camera_ring,
+    make_label,
+    moving_hand,
+    truth_pixels,
+)
 from worker.geometry.refine import CameraStack
 from worker.quality.consensus import score_hand
 from worker.quality.decide import decide, learn_thresholds

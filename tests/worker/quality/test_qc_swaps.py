@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_qc_consensus import (
+from tests.worker.quality.test_qc_consensus import (
     FRAMES,
     camera_ring,
     make_label,

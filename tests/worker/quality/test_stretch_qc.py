@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.worker.test_assist_lk import _keys
-from tests.worker.test_assist_stretches import COUNT, _truth
+from tests.worker.assist.test_assist_lk import _keys
+from tests.worker.assist.test_assist_stretches import COUNT, _truth
 from worker.assist.stretches import check_stretches
 from worker.hand.joints import JOINT_NAMES
 from worker.quality.decide import decide, learn_thresholds

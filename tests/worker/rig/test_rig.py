@@ -1,4 +1,4 @@
-"""Rig health on a synthetic rig with known faults (tests/worker/rig_scene.py): every faulty
+"""Rig health on a synthetic rig with known faults (tests/worker/rig/rig_scene.py): every faulty
 view is named with the right figure and no healthy view is, and the refined calibration
 brings the faulty views' residuals back to the label noise."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.rig_scene import make_scene, one_frame_late, perturbed
+from tests.worker.rig.rig_scene import make_scene, one_frame_late, perturbed
 from worker.rig import apply_depth_correction, apply_time_offsets, estimate_rig
 from worker.rig.common import shift_frames
 from worker.rig.depth import correct_depth

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.worker.test_solver_scene import box, cameras, pose
+from tests.worker.solver.test_solver_scene import box, cameras, pose
 from worker.geometry.cameras import project_points
 from worker.hand import HandLayer, builtin_hand_model
 from worker.hand.posing import SubjectHand

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_solver_scene import cameras, hand_truth
+from tests.worker.solver.test_solver_scene import cameras, hand_truth
 from worker.solver import HandTarget, SolveInputs, SolveSettings, solve
 from worker.solver.default import neighbour_mean
 

@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 import pytest
 
-from tests.worker.test_solver_scene import box, cameras, pose
+from tests.worker.solver.test_solver_scene import box, cameras, pose
 from worker.geometry.cameras import CameraModel
 from worker.solver import ObjectTarget, SolveInputs, SolveSettings
 from worker.solver.init import initial_object_poses

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tests.worker.test_solver_scene import box, cameras, pose, render_depth, visible_vertices
+from tests.worker.solver.test_solver_scene import box, cameras, pose, render_depth, visible_vertices
 from worker.solver import Landmark
 from worker.solver.initial_pose import cube_rotations, fit_initial_pose
 

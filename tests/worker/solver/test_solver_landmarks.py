@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.worker.test_solver_scene import box, cameras, pose
+from tests.worker.solver.test_solver_scene import box, cameras, pose
 from worker.solver.landmarks import back_project, back_project_point, camera_ray, map_landmark
 from worker.solver.mesh_query import ray_hits
 

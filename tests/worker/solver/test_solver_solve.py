@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.worker.test_solver_scene import (
+from tests.worker.solver.test_solver_scene import (
     box,
     cameras,
     hand_pose_m,

@@ -22,7 +22,7 @@ from worker.tracks.readiness import completeness, suspicious
 from worker.tracks.sources import SOURCE_NAMES, decided_mask, keyframe_sources
 from worker.tracks.validate import checked_rows, validate_keyframes
 
-GOLDEN_PATH = Path(__file__).resolve().parents[1] / "fixtures" / "interpolation_golden.json"
+GOLDEN_PATH = Path(__file__).resolve().parents[2] / "fixtures" / "interpolation_golden.json"
 GOLDEN = json.loads(GOLDEN_PATH.read_text())
 
 
