@@ -106,7 +106,7 @@ def _crowd_qc(name: str) -> tuple[str, list[subprocess.Popen[bytes]], Path]:
     server, base = start_server(dict(os.environ))
     os.environ["DEXLABEL_PUBLIC_URL"] = base
     from backend.quality.service import qc_key
-    from tests.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
+    from tests.backend.quality.helpers import crowd_submits, publish_hand_tasks, sync_submissions
 
     sequence_id, _ = publish_hand_tasks(capture, max_assignments=1)
     crowd_submits(base, capture, ["careful"] * 5 + ["spammer"])
@@ -197,7 +197,7 @@ def drill_kill_solve() -> dict[str, Any]:
     from backend.solve.models import SolveRun
     from backend.solve.service import job_key, request_solve
     from backend.storage import get_storage
-    from tests.backend import test_solve_api
+    from tests.backend.solve import test_solve_api
     from worker.synth import generate_capture
 
     _migrate()

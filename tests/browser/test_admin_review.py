@@ -142,7 +142,7 @@ def reviewed(live_server: LiveServer, review_capture: tuple[Path, int, list[str]
 def _market_record(server: LiveServer, market_id: str) -> tuple[dict, list[dict]]:
     """The marketplace's record of an assignment and its bonus payments, through boto3."""
     from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
-    from tests.market.helpers import make_client
+    from tests.backend.market.helpers import make_client
 
     mturk = make_client(server.base, (DEV_MARKET_ACCESS_KEY,
                                       DEV_MARKET_REQUESTERS.split(":")[1]))

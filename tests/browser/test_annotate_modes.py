@@ -10,6 +10,7 @@ import httpx
 from playwright.sync_api import BrowserContext, Page, expect
 
 from backend.config import DEV_MARKET_REQUESTERS
+from tests.backend.market.helpers import external_question, make_client
 from tests.browser.conftest import LiveServer
 from tests.browser.helpers import (
     click_image,
@@ -23,7 +24,6 @@ from tests.browser.helpers import (
     value_at,
     wait_saved,
 )
-from tests.market.helpers import external_question, make_client
 
 
 def _where(page: Page) -> list[int]:

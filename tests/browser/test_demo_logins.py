@@ -15,8 +15,8 @@ import httpx
 import pytest
 from playwright.sync_api import Page, expect
 
+from tests.backend.cli.conftest import DEXLABEL, clean_env, free_port
 from tests.browser.conftest import VIEWPORT
-from tests.cli.conftest import DEXLABEL, clean_env, free_port
 
 NARROW = {"width": 1024, "height": 700}
 LOGIN = re.compile(r"^(worker portal|admin page): +(http://\S+) +email (\S+) +password (\S+)$",

@@ -13,6 +13,7 @@ from playwright.sync_api import Frame, Page, expect
 
 from backend.config import DEV_MARKET_ACCESS_KEY, DEV_MARKET_REQUESTERS
 from backend.market.questions import parse_answers
+from tests.backend.market.helpers import external_question, make_client
 from tests.browser.conftest import CLIP_FRAMES, LiveServer
 from tests.browser.helpers import (
     READY,
@@ -24,7 +25,6 @@ from tests.browser.helpers import (
     wait_saved,
     zoom_on_points,
 )
-from tests.market.helpers import external_question, make_client
 
 LAST = CLIP_FRAMES - 1
 VIEW = 1  # this view of the synthetic capture shows the whole hand in the first and last frame

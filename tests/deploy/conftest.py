@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-from tests.cli.conftest import clean_env, free_port
+from tests.backend.cli.conftest import clean_env, free_port
 from tests.conftest import POSTGRES_URL, REDIS_URL, _unavailable
 from tests.deploy.hosts import Host, namespaces_available
 

@@ -3,7 +3,7 @@ views whose figures exceed the thresholds.
 
 Thresholds (``RigThresholds``) come from the noise of a clean rig: on clean synthetic captures
 labelled by the simulated careful crowd (2 px), the estimates of healthy views stay below about
-half of them (tests/worker/test_rig.py checks a clean rig is named healthy), while the smallest
+half of them (tests/worker/rig/test_rig.py checks a clean rig is named healthy), while the smallest
 faults the rig meets (0.2 deg and 2 mm, one frame, 1 % depth scale, 2 px depth shift) exceed
 them. Time offsets and depth shifts are already gated by their cost gain in
 :mod:`worker.rig.timing` and :mod:`worker.rig.depth`.
