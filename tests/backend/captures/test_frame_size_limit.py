@@ -11,7 +11,7 @@ import yaml
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 HUGE = 16000
 

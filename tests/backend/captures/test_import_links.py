@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.captures.flows import import_path
-from tests.backend import capture_edits as edit
+from tests.backend.captures import capture_edits as edit
 
 
 def _import(client: TestClient, headers: dict, path: Path) -> tuple[int, dict]:
