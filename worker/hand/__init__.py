@@ -11,10 +11,10 @@ imports PyTorch.
 
 from __future__ import annotations
 
-from importlib import import_module
 from typing import TYPE_CHECKING
 
 from worker.hand.joints import FINGER_NAMES, JOINT_NAMES, JOINT_PARENTS, TIP_NAMES
+from worker.lazy import lazy_names
 
 if TYPE_CHECKING:
     from worker.hand.builtin import builtin_hand_model
@@ -47,11 +47,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> object:
-    """The lazily loaded names of ``__all__``, imported from their module on first use."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_names(globals(), _LAZY)
