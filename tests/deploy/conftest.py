@@ -21,7 +21,7 @@ from typing import Any
 import pytest
 
 from tests.backend.cli.conftest import clean_env, free_port
-from tests.conftest import POSTGRES_URL, REDIS_URL, _unavailable
+from tests.conftest import REDIS_URL, _unavailable, throwaway_database
 from tests.deploy.hosts import Host, namespaces_available
 
 WORKER_HOSTS = ("worker-a", "worker-b")
@@ -83,27 +83,6 @@ class Deployment:
 
 
 @contextmanager
-def _database() -> Iterator[str]:
-    from sqlalchemy import create_engine, text
-    from sqlalchemy.engine import make_url
-
-    admin_url = make_url(POSTGRES_URL)
-    name = f"dexlabel_multihost_{uuid.uuid4().hex[:10]}"
-    try:
-        admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
-        with admin.connect() as conn:
-            conn.execute(text(f'CREATE DATABASE "{name}"'))
-    except Exception as exc:  # any connection failure means "not reachable"
-        _unavailable("PostgreSQL", exc)
-    try:
-        yield admin_url.set(database=name).render_as_string(hide_password=False)
-    finally:
-        with admin.connect() as conn:
-            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-        admin.dispose()
-
-
-@contextmanager
 def _redis_database() -> Iterator[str]:
     """A Redis database number no one uses now (the suite's own is left alone), claimed with
     a key and flushed afterwards."""
@@ -160,7 +139,7 @@ def deployment(tmp_path_factory: pytest.TempPathFactory, s3_endpoint: str
     root = tmp_path_factory.mktemp("multihost")
     isolated = namespaces_available()
     with ExitStack() as services:
-        database_url = services.enter_context(_database())
+        database_url = services.enter_context(throwaway_database("dexlabel_multihost"))
         redis_url = services.enter_context(_redis_database())
         yield from _deployment(root, isolated, database_url, redis_url, s3_endpoint)
 
