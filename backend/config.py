@@ -196,7 +196,7 @@ class Settings(BaseSettings):
     export_retention_days: float = Field(default=7.0, ge=0)
     # This host's name in the job table (which host ran each job, as "name:pid"); unset, the
     # machine's hostname.
-    host_name: str = Field(default="", max_length=200)
+    host_name: str | None = Field(default=None, max_length=200)
     # Queue jobs (QC, solve): attempts before "failed", the first retry delay (doubled each
     # attempt), and the lease a running job holds; a job whose lease ran out (its worker died)
     # is queued again by the reaper. A lost queue message is re-sent after job_requeue_after_s.
