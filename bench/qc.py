@@ -311,6 +311,7 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
     solved = _SolvedCrowd(sequence_id, every, truth, crowd_seed) \
         if kind == "object" and object_poses == "solved" else None
     seconds = []
+    path = _HandPath(sequence_id, tasks, truth, crowd_seed) if kind == "hand" else None
     for draw in range(draws):
         _clear(sequence_id, kind)
         profile_of = {}
@@ -326,12 +327,53 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
             seconds += [_run_qc(sequence_id, target)[0]
                         for target in sorted({t["target_key"] for t in tasks})]
         tally.add(profile_of, tasks[0]["num_frames"], f"d{draw} ")
+        if path is not None:
+            path.run(draw, profile_of)
     out = {"views": _views_of(capture), "draws": draws, **tally.summary(kind == "hand")}
     if kind == "object":
         out["object_poses"] = object_poses
     if solved is not None:
         return {**out, **solved.summary()}
+    if path is not None:
+        out["settled"] = path.summary()
     return {**out, "qc_job_s_median": round(statistics.median(seconds), 3)}
+
+
+class _HandPath:
+    """The hand scenarios carried on from the first QC pass (bench/_hand_path.py): reviews
+    decided by an admin, rejected tasks re-opened to another worker of the same crowd."""
+
+    def __init__(self, sequence_id: int, tasks: list[dict], truth: Any, crowd_seed: int) -> None:
+        self.sequence_id, self.truth = sequence_id, truth
+        self.tasks = {t["id"]: t for t in tasks}
+        # Their own stream: each crowd's first workers stay those of the first pass.
+        self.rng = np.random.default_rng([crowd_seed, 2])
+        self.verdicts: list[tuple[str, str]] = []
+        self.counts: dict[str, int] = {}
+        self.draw = self.made = 0
+
+    def _resubmit(self, task_id: int) -> tuple[int, str]:
+        from worker.synth.annotators import draw_profiles
+
+        profile = draw_profiles(1, "mixed", self.rng, "hand")[0]
+        self.made += 1
+        key = _submit(self.tasks[task_id], profile,
+                      f"{profile}-d{self.draw}-r{self.made}-{task_id}", self.truth, self.rng)
+        return key, profile
+
+    def run(self, draw: int, first: dict[int, str]) -> None:
+        import _hand_path
+
+        self.draw = draw
+        verdict, counts = _hand_path.settle(self.sequence_id, dict(first), self._resubmit)
+        self.verdicts += [(first[key], v) for key, v in verdict.items()]
+        for name, value in counts.items():
+            self.counts[name] = self.counts.get(name, 0) + value
+
+    def summary(self) -> dict:
+        import _hand_path
+
+        return {**_hand_path.rates(self.verdicts), **self.counts}
 
 
 class _SolvedCrowd:
@@ -547,6 +589,9 @@ def _fault_rates(runs: dict[str, dict]) -> dict[str, dict]:
             continue
         out[label] = {"careful_flagged": run["good_flagged_rate"],
                       "bad_flagged": run["bad_flagged_rate"]}
+        if "settled" in run:
+            out[label].update({f"{name}_settled": run["settled"][name]
+                               for name in ("careful_flagged", "bad_flagged")})
         if run.get("solve_add_mm_median") is not None:
             out[label]["solve_add_mm_median"] = run["solve_add_mm_median"]
     return out

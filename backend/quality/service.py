@@ -145,7 +145,11 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
     "gold" for training clips) keyed by assignment id (str), whether provisional, and each
     result's replay record."""
     from worker.quality.consensus import score_hand
-    from worker.quality.stretch_qc import add_stretch_results, without_contradicted
+    from worker.quality.stretch_qc import (
+        add_stretch_results,
+        discredited,
+        without_contradicted,
+    )
 
     training = set(session.scalars(select(TrainingClip.task_id).where(
         TrainingClip.task_id.in_(inputs.tasks))))
@@ -163,7 +167,8 @@ def _score(session: Session, inputs: TargetInputs, timings: dict[str, float]
         crowd = [without_contradicted(lab, checks[lab.key]) for lab in crowd]
         timings["stretches_s"] = round(time.perf_counter() - started, 3)
         started = time.perf_counter()
-        report = score_hand(inputs.cameras, crowd, depth=depth)
+        report = score_hand(inputs.cameras, crowd, depth=depth,
+                            unreferenced=discredited(crowd, checks, inputs.keyframes))
         timings["score_s"] = round(time.perf_counter() - started, 3)
         results.update(report.assignments)
         add_stretch_results(report.assignments, checks, inputs.keyframes, sent)

@@ -26,6 +26,7 @@ Frames F, points P (21 joints, DexYCB order), views V; pixels x right, y down; w
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -270,6 +271,8 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
     """Consensus from ``fit_labels`` (updating ``previous`` where given), every label of
     ``labels`` judged against it; the report and the fit."""
     frames, points = np.shape(labels[0].xy)[:2]
+    fit_labels = [_unreferenced(lab) if lab.key in opts.unreferenced else lab
+                  for lab in fit_labels]
     fit = fit_consensus(cameras, fit_labels, opts, previous, reliability, also)
     fitted, inliers, loo, views = fit.points, fit.inliers, fit.loo, fit.views
     consensus = fitted.reshape(frames, points, 3)
@@ -289,7 +292,8 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
     # Only the workers' own decisions witness the hand's motion (a label of suggestions alone
     # is left out: it would count as a hand that stands still).
     motion = others_motion({lab.key: decided_xy(lab) for lab in labels
-                            if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
+                            if decided_of(lab).any() or not np.isfinite(lab.xy).any()},
+                           silent=opts.unreferenced)
     assignments = {}
     replay = {}
     for col, lab in enumerate(labels):
@@ -311,6 +315,12 @@ def _score(cameras: list[CameraModel], labels: list[ViewLabels], fit_labels: lis
     report = HandReport(consensus=consensus, support=support.reshape(frames, points),
                         assignments=assignments, provisional=provisional, replay=replay)
     return report, fit
+
+
+def _unreferenced(lab: ViewLabels) -> ViewLabels:
+    """The label as the fit sees one its own evidence discredits: no decision of its own
+    (it enters no consensus; it is judged as sent, by plain distances, see _as_sent)."""
+    return dataclasses.replace(lab, decided=np.zeros(np.shape(lab.visible), bool))
 
 
 def _references(cameras: list[CameraModel], labels: list[ViewLabels], fit: Fit) -> np.ndarray:

@@ -52,6 +52,9 @@ class HandOptions:
         interpolation included: what the simulated careful annotator measures against the
         truth); errors are normalised to it through the reference's spread (support.py).
     surface_margin_m, hidden_margin_m: depth margins of the visibility check (see metrics).
+    unreferenced: keys of labels their own evidence discredits (worker.quality.stretch_qc
+        .discredited): each is judged like any other, but enters no consensus and witnesses
+        no motion, so it never judges the others.
     """
 
     outlier_px: float = 10.0
@@ -66,6 +69,7 @@ class HandOptions:
     label_sigma_px: float = 2.0
     surface_margin_m: float = SURFACE_MARGIN_M
     hidden_margin_m: float = HIDDEN_MARGIN_M
+    unreferenced: frozenset[str] = frozenset()
 
     @classmethod
     def of(cls, options: dict[str, Any]) -> HandOptions:

@@ -51,12 +51,15 @@ WITNESS_JITTER_PX = 15.0
 FROZEN_JITTER_PX = 0.05
 
 
-def others_motion(tracks: dict[str, np.ndarray]) -> dict[str, TargetMotion | None]:
+def others_motion(tracks: dict[str, np.ndarray], silent: frozenset[str] = frozenset()
+                  ) -> dict[str, TargetMotion | None]:
     """For each label key, the target's motion as the other labels' tracks (F, P, 2) px show
-    it (random tracks, see WITNESS_JITTER_PX, left out); None with fewer than two others."""
+    it (random tracks, see WITNESS_JITTER_PX, and the ``silent`` keys left out); None with
+    fewer than two others."""
     motions = {key: track_motion(xy) for key, xy in tracks.items()}
     shakes = {key: track_jitter(xy) for key, xy in tracks.items()}
-    witnesses = {key for key, shake in shakes.items() if (shake or 0.0) <= WITNESS_JITTER_PX}
+    witnesses = {key for key, shake in shakes.items()
+                 if (shake or 0.0) <= WITNESS_JITTER_PX and key not in silent}
     moving = {key for key in witnesses if (shakes[key] or 0.0) > FROZEN_JITTER_PX}
     out: dict[str, TargetMotion | None] = {}
     for key in motions:

@@ -10,6 +10,10 @@ Each hand label's stretches between keyframes are checked against its own view's
 - ``decided_fraction`` keeps meaning what the worker took from pre-filled suggestions
   (decide.py's "mostly pre-filled" rule): it is measured on the label as sent, not on the
   positions the images took away;
+- a label whose own evidence fails it at the reject level (the images contradict most of its
+  stretches, or its track leaps like random clicks) judges no one: it enters no consensus and
+  witnesses no motion (``discredited``), so work checked against other views is never judged
+  by references the images already refuse;
 - the share of the label's tracked stretches the images contradict is a metric
   (``unfollowed_stretches``, judged in worker.quality.decide) and each such stretch an issue
   in words ("ring tip moves 14 px between frames 4 and 8 that the track does not follow").
@@ -27,7 +31,9 @@ import numpy as np
 
 from worker.assist.lk import tracked_spans
 from worker.assist.stretches import StretchCheck
+from worker.quality.bounds import METRIC_BOUNDS
 from worker.quality.metrics import AssignmentQC
+from worker.quality.motion import track_jitter
 from worker.quality.view_labels import ViewLabels
 
 
@@ -77,3 +83,28 @@ def add_stretch_results(results: Mapping[str, AssignmentQC], checks: Mapping[str
         if key in sent:
             qc.metrics["decided_fraction"] = decided_fraction(sent[key])
         qc.issues[:0] = stretch_issues(check)
+
+
+def _reject_floor(metric: str) -> float:
+    bound = METRIC_BOUNDS[metric].reject
+    assert bound is not None
+    return bound[0]
+
+
+def discredited(labels: Sequence[ViewLabels], checks: Mapping[str, StretchCheck],
+                keyframes: Mapping[str, Sequence[Sequence[Any]]]) -> frozenset[str]:
+    """Keys of the labels whose own evidence, read without any other view, fails them at the
+    lowest reject threshold: the images contradict that share of their tracked stretches
+    (``unfollowed_stretches``), or their shown track leaps as random clicks do
+    (``track_jitter_px``). Careful work stays far below both (bounds.py)."""
+    out = set()
+    for lab in labels:
+        check = checks.get(lab.key)
+        share = unfollowed_share(check, keyframes[lab.key]) if check is not None else None
+        shown = np.where(np.asarray(lab.visible, bool)[..., None],
+                         np.asarray(lab.xy, np.float64), np.nan)
+        shake = track_jitter(shown)
+        if (share is not None and share >= _reject_floor("unfollowed_stretches")) or \
+                (shake is not None and shake >= _reject_floor("track_jitter_px")):
+            out.add(lab.key)
+    return frozenset(out)
