@@ -36,6 +36,7 @@ from worker.quality.metrics import (
     num,
     per_point_and_frame,
 )
+from worker.quality.motion import track_jitter
 from worker.quality.object_views import (
     SHOWN_SHARE,
     PixelMap,
@@ -179,6 +180,10 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
     # Frames without a solved pose of the object judge nothing.
     known = np.isfinite(scene.poses[target]).all(axis=(1, 2))
     metrics = _anchored_metrics(found, xy, visible, decided_of(label), known)
+    shake = _anchored_shake(found, xy, visible)
+    if shake is not None:
+        # The object's known motion stands in for the other views' tracks (SUPERSEDED).
+        metrics["jitter_px"] = shake
     if not (visible & np.isfinite(xy).all(axis=2)).any() and known.any():
         metrics["anchored_visible_occluded"] = _hidden_while_shown(camera, label, scene, target,
                                                                    depth)
@@ -238,6 +243,23 @@ def _anchored_tracks(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
         out.reprojection[:, p] = camera.project(world)
         out.errors[both, p] = np.linalg.norm(out.reprojection[both, p] - xy[both, p], axis=1)
     return out
+
+
+def _anchored_shake(found: _Tracks, xy: np.ndarray, visible: np.ndarray) -> float | None:
+    """The track's shake (px per frame^2) beyond its anchored points' own, taken out in
+    quadrature as worker.quality.landmarks does with the other views' motion: the known
+    object's motion is what a track that follows the object shakes by."""
+    cols = sorted(found.points)
+    if not cols:
+        return None
+    reference = found.reprojection[:, cols]
+    shown = visible[:, cols] & np.isfinite(xy[:, cols]).all(axis=-1) \
+        & np.isfinite(reference).all(axis=-1)
+    shake = track_jitter(np.where(shown[..., None], xy[:, cols], np.nan))
+    expected = track_jitter(np.where(shown[..., None], reference, np.nan))
+    if shake is None or expected is None:
+        return shake
+    return num(np.sqrt(max(shake ** 2 - expected ** 2, 0.0)))
 
 
 def _anchored_metrics(found: _Tracks, xy: np.ndarray, visible: np.ndarray, decided: np.ndarray,
