@@ -330,7 +330,6 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
     from backend.annotation.models import Assignment, Task
     from backend.crowd.actions import add_assignments
     from backend.crowd.models import CrowdHit
-    from backend.crowd.pricing import LARGE_HIT_ASSIGNMENTS
     from backend.crowd.providers import get_provider
     from backend.labels import ACCEPTED
 
@@ -350,7 +349,8 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
         if extend and not available and hits[hit_id] not in accepted:
             with session_scope() as session, session.no_autoflush:
                 row = session.scalar(select(CrowdHit).where(CrowdHit.hit_id == hit_id))
-                if row is not None and row.max_assignments + 1 < LARGE_HIT_ASSIGNMENTS:
+                if row is not None and \
+                        row.max_assignments + 1 < marketplace.fees().large_unit_places:
                     add_assignments(session, marketplace, hit_id, 1)
                     offered[hit_id] = 1
     return sum(offered.values())

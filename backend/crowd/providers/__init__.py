@@ -33,7 +33,14 @@ def get_provider(name: str | None = None, settings: Settings | None = None) -> C
     if name not in PROVIDERS:
         raise UnknownProvider(f"no crowd provider {name!r}: choose one of "
                               f"{', '.join(PROVIDERS)}", field="provider")
-    module = importlib.import_module(f"{__name__}.{name}")
+    path = f"{__name__}.{name}"
+    try:
+        module = importlib.import_module(path)
+    except ModuleNotFoundError as exc:
+        if exc.name != path:
+            raise
+        raise UnknownProvider(f"the crowd provider {name!r} is not part of this installation",
+                              field="provider") from exc
     provider: CrowdProvider = module.make(settings)
     return provider
 

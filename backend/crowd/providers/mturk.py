@@ -3,9 +3,9 @@ built-in marketplace included; ``mturk_client`` chooses it from the settings).
 
 A unit is a HIT (its ExternalQuestion frames the unit's page), a submission an assignment, an
 allow-list a qualification type, and our keys are UniqueRequestTokens, which MTurk remembers
-for 24 hours (the caller's ledger outlives that). Fees are MTurk's published pricing
-(``backend.crowd.pricing``): 20% of rewards and bonuses, 40% of the rewards of HITs with 10 or
-more assignments, at least one cent.
+for 24 hours (the caller's ledger outlives that). Fees are MTurk's published pricing: 20% of
+rewards and bonuses, 40% of the rewards of HITs with 10 or more assignments, at least one cent
+per assignment or bonus (``FEES``).
 """
 
 from __future__ import annotations
@@ -64,11 +64,8 @@ WORKER_SUBMIT = {
         "https://workersandbox.mturk.com/mturk/externalSubmit",
 }
 
-FEES = FeeSchedule(
-    provider="mturk", currency="USD", reward_rate=float(pricing.BASE_FEE),
-    large_unit_rate=float(pricing.LARGE_HIT_FEE),
-    large_unit_places=pricing.LARGE_HIT_ASSIGNMENTS, bonus_rate=float(pricing.BASE_FEE),
-    min_fee_cents=pricing.MIN_FEE_CENTS)
+FEES = FeeSchedule(provider="mturk", currency="USD", reward_rate=0.20, large_unit_rate=0.40,
+                   large_unit_places=10, bonus_rate=0.20, min_fee_cents=1)
 
 
 def external_question(page_url: str, frame_height: int) -> str:
