@@ -150,13 +150,14 @@ def publish_tasks(session: Session, crowd: CrowdProvider, tasks: Sequence[Task],
         provider.check_publish(specs)
     published: dict[str, PublishedUnit] = {
         unit.key: unit for unit in (provider.publish(specs) if specs else [])}
+    spec_of = {spec.task_id: spec for spec in specs}
     out: list[tuple[str, str]] = []
     for task in tasks:
         row = rows[task.id]
         if row is not None and row.hit_id is not None:
             out.append((row.hit_id, "existing"))
             continue
-        spec = next(s for s in specs if s.task_id == task.id)
+        spec = spec_of[task.id]
         unit = published[spec.key]
         if row is None:
             row = CrowdHit(task_id=task.id, round=options.round, request_token=spec.key,

@@ -18,6 +18,7 @@ from backend.annotation.tokens import PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignm
 from backend.config import get_settings
 from backend.crowd import actions, flows, holds, pricing
 from backend.crowd.costs import costs
+from backend.crowd.models import CrowdHit
 from backend.crowd.schemas import (
     AddAssignmentsRequest,
     BlockRequest,
@@ -167,4 +168,8 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
     task = tasks.get_task_or_raise(session, task_id)
     assignment = tasks.start_assignment(session, task, body.assignment_id, body.worker_id,
                                           body.hit_id)
+    # The assignment's ids are those of the provider that published its HIT.
+    provider = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == body.hit_id))
+    if provider is not None and assignment.provider != provider:
+        assignment.provider = provider
     return TokenRead(token=assignment_token(task, assignment))
