@@ -182,6 +182,9 @@ class Settings(BaseSettings):
     market_start_balance: str = "10000.00"
     # Check every marketplace response against botocore's output shape before sending it.
     market_check_responses: bool = True
+    # Crowd providers: the one a publish goes to unless it names another (per publish:
+    # `dexlabel crowd publish --provider`, the API's PublishRequest.provider).
+    crowd_provider: Literal["mturk", "prolific", "team"] = "mturk"
     # The requester side: the MTurk endpoint HITs are published to. Unset = the built-in
     # marketplace at {PUBLIC_URL}/mturk; any other endpoint must be HTTPS.
     mturk_endpoint_url: str | None = None

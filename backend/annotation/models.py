@@ -68,9 +68,12 @@ class Assignment(TimestampMixin, Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     task_id: Mapped[int] = parent_key("tasks.id")
     worker_id: Mapped[str] = mapped_column(String(64))
-    # The marketplace's AssignmentId (or one we made for a direct link); unique everywhere.
+    # The crowd provider's id of this take (MTurk's AssignmentId, a Prolific submission; or one
+    # we made for a direct link); unique everywhere. ``hit_id`` is the provider's unit id and
+    # ``worker_id`` its worker id: opaque strings of the provider named in ``provider``.
     external_id: Mapped[str] = mapped_column(String(64), unique=True)
     hit_id: Mapped[str | None] = mapped_column(String(64))
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
     status: Mapped[str] = mapped_column(String(16), default="working")
     version: Mapped[int] = mapped_column(Integer, default=0)
     edit_count: Mapped[int] = mapped_column(Integer, default=0)

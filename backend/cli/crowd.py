@@ -2,7 +2,7 @@
 
     dexlabel tasks create SEQUENCE          one task per view and target
     dexlabel publish [--sequence S] [...]   publish tasks as HITs (--dry-run: the cost only)
-    dexlabel crowd sync|costs|bonus|simulate
+    dexlabel crowd publish|sync|costs|bonus|simulate
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ def tasks_create(sequence: SequenceArg) -> None:
 
 def _publish_options(  # type: ignore[no-untyped-def]
     reward: str, assignments: int, allow_large_hits: bool, round_: int,
-    min_approval_rate: int | None, require_training: bool,
+    min_approval_rate: int | None, require_training: bool, provider: str | None = None,
+    assignee: str | None = None,
 ):
     from pydantic import ValidationError
 
@@ -45,7 +46,8 @@ def _publish_options(  # type: ignore[no-untyped-def]
         return PublishOptions(reward=reward, max_assignments=assignments,
                               allow_large_hits=allow_large_hits, round=round_,
                               min_approval_rate=min_approval_rate,
-                              require_training=require_training)
+                              require_training=require_training, provider=provider,
+                              assignee=assignee)
     except ValidationError as exc:
         fail("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()))
 
@@ -63,49 +65,54 @@ def publish_command(
     min_approval_rate: Annotated[int | None, typer.Option(min=0, max=100)] = 95,
     require_training: Annotated[bool, typer.Option(
         help="require our training qualification")] = False,
+    provider: Annotated[str | None, typer.Option(
+        help="mturk, prolific or team (default: DEXLABEL_CROWD_PROVIDER)")] = None,
+    assignee: Annotated[str | None, typer.Option(
+        help="team only: the portal worker id the tasks are assigned to")] = None,
 ) -> None:
     """Publish a HIT per task not yet published (safe to re-run).
 
-    One HIT per task not yet published in this round; --dry-run prints the cost only."""
+    One HIT (unit of work of the provider) per task not yet published in this round;
+    --dry-run prints the cost only, in the provider's fees and currency."""
     from backend.crowd import flows
-    from backend.crowd.client import make_client
     from backend.db import session_scope
 
     options = _publish_options(reward, assignments, allow_large_hits, round_, min_approval_rate,
-                               require_training)
+                               require_training, provider, assignee)
     with refusing_bad_input():
         with session_scope() as session:
             sequence_id = resolve_sequence(session, sequence) if sequence else None
             plan = flows.plan(session, options, sequence_id)
         c = plan.cost
-        typer.echo(f"{c.hits} HITs x {c.assignments_per_hit} assignment(s) at ${c.reward} "
-                   f"(+ ${c.fee_per_assignment} fee each): rewards ${c.rewards} + fees ${c.fees}"
-                   f" = ${c.total}")
+        money = "$" if c.currency == "USD" else f"{c.currency} "
+        typer.echo(f"{c.hits} HITs x {c.assignments_per_hit} assignment(s) at {money}{c.reward} "
+                   f"(+ {money}{c.fee_per_assignment} fee each): rewards {money}{c.rewards} + "
+                   f"fees {money}{c.fees} = {money}{c.total} ({c.provider})")
         if dry_run:
             typer.echo("dry run: nothing published")
             return
         with progress(f"publishing {c.hits} HITs") as step:
-            result = flows.publish_each(make_client(get_settings()), options, sequence_id)
+            result = flows.publish_each(None, options, sequence_id)
             step(f"{result.created} created")
         typer.echo(f"published: {result.created} created, {result.recovered} recovered, "
                    f"{result.already_published} already published")
 
 
-crowd_app = typer.Typer(help="The crowd: HITs on the MTurk endpoint.",
+crowd_app = typer.Typer(help="The crowd: units of work (HITs) on the crowd providers.",
                         no_args_is_help=True, rich_markup_mode=None)
+crowd_app.command("publish")(publish_command)
 
 
 @crowd_app.command("sync")
 def crowd_sync() -> None:
     """Collect submitted assignments and queue their quality checks.
 
-    Each one is checked against the requester API's records first."""
-    from backend.crowd.client import make_client
+    Each one is checked against its provider's records first."""
     from backend.db import session_scope
     from backend.pipeline import sync
 
     with refusing_bad_input(), session_scope() as session:
-        result = sync(session, make_client(get_settings()))
+        result = sync(session)
     typer.echo(f"{result.hits} HITs: {result.accepted} new submissions accepted, "
                f"{result.already_accepted} known, {len(result.mismatched)} refused "
                f"(HIT or worker mismatch), {len(result.unknown)} unknown")
@@ -123,9 +130,9 @@ def _cost_row(label: str, line: Any) -> str:
 
 @crowd_app.command("costs")
 def crowd_costs() -> None:
-    """Spend so far and money committed, in US dollars.
+    """Spend so far and money committed, in each provider's currency.
 
-    Rewards, bonuses and fees apart, for the project, per sequence and per worker."""
+    Rewards, bonuses and fees apart, for the project, per sequence, worker and provider."""
     from backend.crowd.costs import costs
     from backend.db import session_scope
 
@@ -140,6 +147,8 @@ def crowd_costs() -> None:
         typer.echo(_cost_row(f"sequence {line.key}{named}", line))
     for line in report.by_worker:
         typer.echo(_cost_row(f"worker {line.key}", line))
+    for line in report.by_provider:
+        typer.echo(_cost_row(f"provider {line.key} ({line.currency})", line))
 
 
 @crowd_app.command("bonus")
@@ -153,7 +162,6 @@ def crowd_bonus(
 
     Its ledger row is committed before the payment, and one --key pays once."""
     from backend.crowd import flows, pricing
-    from backend.crowd.client import make_client
 
     try:
         cents = pricing.dollars_to_cents(amount)
@@ -162,7 +170,7 @@ def crowd_bonus(
     if cents <= 0:
         fail(f"a bonus is a dollar amount in whole cents above 0, like 1.00 (got {amount!r})")
     with refusing_bad_input():
-        paid = flows.pay_bonus(make_client(get_settings()), assignment, cents, reason, key)
+        paid = flows.pay_bonus(None, assignment, cents, reason, key)
     state = "already paid" if paid.already_done else "paid"
     typer.echo(f"bonus {key!r} of assignment {assignment} {state}: ${paid.amount} "
                f"(+ ${paid.fee} fee) to {paid.worker_id}")

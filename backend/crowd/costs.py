@@ -1,5 +1,7 @@
-"""Spend so far and money committed, from our own ledger, in US cents; rewards, bonuses and
-MTurk's fees apart, for the project (the whole database), per sequence and per worker.
+"""Spend so far and money committed, from our own ledger, in cents; rewards, bonuses and the
+providers' fees apart, for the project (the whole database), per sequence, per worker and per
+crowd provider (each in its own currency and fees; the project and sequence lines add the
+amounts up as they are, which is exact while every provider used shares one currency).
 
 Spent: approved rewards and paid bonuses with their fees; a rejection costs nothing.
 Committed: what is still held. Every open slot of a live HIT (MTurk holds reward + fee from the
@@ -27,14 +29,16 @@ from backend.crowd.models import (
     CrowdPayment,
     CrowdSubmission,
 )
+from backend.crowd.provider import FeeSchedule
+from backend.crowd.providers import fees_of
 from backend.crowd.schemas import CostLine, CostsRead
 
 FIELDS = ("spent_rewards", "spent_bonuses", "spent_fees",
           "committed_rewards", "committed_bonuses", "committed_fees")
 _Totals = dict[str, list[int]]  # key -> cents in the order of FIELDS
 _DECISIONS = ("approval", "rejection")
-# HITs of one price within a sequence: (sequence id, reward cents, max assignments).
-_Shape = tuple[int, int, int]
+# HITs of one price within a sequence: (sequence id, provider, reward cents, max assignments).
+_Shape = tuple[int, str, int, int]
 
 # The ledger's sums come from crowd_cost_totals (backend.crowd.totals: kept with each payment
 # row, a few rows per sequence and per worker), and a live HIT's open slots from its own
@@ -58,14 +62,21 @@ def _payment_parts(kind: str, state: str, amount: int, fee: int) -> dict[str, in
     return {"committed_bonuses": amount, "committed_fees": fee}
 
 
-def _payments(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    """The ledger's sums per sequence and per worker, from the running totals."""
+def _payments(session: Session, scopes: dict[str, _Totals]) -> None:
+    """The ledger's sums per sequence, worker and provider, from the running totals."""
     rows = session.execute(select(CrowdCostTotal.scope, CrowdCostTotal.key, CrowdCostTotal.kind,
                                   CrowdCostTotal.state, CrowdCostTotal.amount_cents,
                                   CrowdCostTotal.fee_cents))
     for scope, key, kind, state, amount, fee in rows:
-        target = by_sequence if scope == "sequence" else by_worker
-        _add(target, key, **_payment_parts(kind, state, int(amount), int(fee)))
+        _add(scopes[scope], key, **_payment_parts(kind, state, int(amount), int(fee)))
+
+
+class _Fees(dict[str, FeeSchedule]):
+    """Each provider's fee schedule, looked up once per report."""
+
+    def __missing__(self, name: str) -> FeeSchedule:
+        self[name] = fees_of(name)
+        return self[name]
 
 
 def _undecided() -> ColumnElement[bool]:
@@ -74,42 +85,51 @@ def _undecided() -> ColumnElement[bool]:
                            CrowdPayment.kind.in_(_DECISIONS))
 
 
-def _held(session: Session, by_sequence: _Totals, by_worker: _Totals) -> None:
-    """Money still held: per sequence, every live HIT's open slots and an expired HIT's
-    waiting submissions; per worker, their submitted work not decided yet."""
+def _held(session: Session, scopes: dict[str, _Totals]) -> None:
+    """Money still held: per sequence (and provider), every live unit's open places and a
+    closed unit's waiting submissions; per worker, their submitted work not decided yet."""
+    by_sequence, by_worker, by_provider = scopes["sequence"], scopes["worker"], scopes["provider"]
+    fees = _Fees()
     # Only HITs with open slots (ix_crowd_hits_open_task_id, a partial index, holds them) add
     # to the held money.
-    shapes = (select(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments,
+    shapes = (select(Task.sequence_id, CrowdHit.provider, CrowdHit.reward_cents,
+                     CrowdHit.max_assignments,
                      func.sum(CrowdHit.max_assignments - CrowdHit.decided))
               .join(Task, Task.id == CrowdHit.task_id)
               .where(CrowdHit.hit_id.is_not(None), CrowdHit.expired_at.is_(None),
                      CrowdHit.max_assignments > CrowdHit.decided)
-              .group_by(Task.sequence_id, CrowdHit.reward_cents, CrowdHit.max_assignments))
+              .group_by(Task.sequence_id, CrowdHit.provider, CrowdHit.reward_cents,
+                        CrowdHit.max_assignments))
     open_slots: dict[_Shape, int] = {}
-    for seq, reward, slots, live_open in session.execute(shapes):
-        open_slots[(seq, reward, slots)] = int(live_open)
-    waiting = (select(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
-                      CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None), func.count())
+    for seq, provider, reward, slots, live_open in session.execute(shapes):
+        open_slots[(seq, provider, reward, slots)] = int(live_open)
+    waiting = (select(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.provider,
+                      CrowdHit.reward_cents, CrowdHit.max_assignments,
+                      CrowdHit.expired_at.is_not(None), func.count())
                .join(CrowdHit, CrowdHit.hit_id == CrowdSubmission.hit_id)
                .join(Task, Task.id == CrowdHit.task_id)
                .where(_undecided())
-               .group_by(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.reward_cents,
-                         CrowdHit.max_assignments, CrowdHit.expired_at.is_not(None)))
-    for worker, seq, reward, slots, expired, n in session.execute(waiting):
-        fee = pricing.fee_cents(reward, slots)
+               .group_by(CrowdSubmission.worker_id, Task.sequence_id, CrowdHit.provider,
+                         CrowdHit.reward_cents, CrowdHit.max_assignments,
+                         CrowdHit.expired_at.is_not(None)))
+    for worker, seq, provider, reward, slots, expired, n in session.execute(waiting):
+        fee = fees[provider].reward_fee_cents(reward, slots)
         _add(by_worker, worker, committed_rewards=n * reward, committed_fees=n * fee)
         if expired:  # an expired HIT holds only its submitted, undecided work
-            open_slots[(seq, reward, slots)] = open_slots.get((seq, reward, slots), 0) + n
-    for (seq, reward, slots), n in open_slots.items():
-        fee = pricing.fee_cents(reward, slots)
-        _add(by_sequence, str(seq), committed_rewards=n * reward, committed_fees=n * fee)
+            shape = (seq, provider, reward, slots)
+            open_slots[shape] = open_slots.get(shape, 0) + n
+    for (seq, provider, reward, slots), n in open_slots.items():
+        fee = fees[provider].reward_fee_cents(reward, slots)
+        for target, key in ((by_sequence, str(seq)), (by_provider, provider)):
+            _add(target, key, committed_rewards=n * reward, committed_fees=n * fee)
 
 
-def _line(key: str, cents: list[int], label: str | None = None) -> CostLine:
+def _line(key: str, cents: list[int], label: str | None = None,
+          currency: str = "USD") -> CostLine:
     money = pricing.cents_to_dollars
     parts = {name: money(value) for name, value in zip(FIELDS, cents, strict=True)}
     return CostLine(key=key, name=key if label is None else label, spent=money(sum(cents[:3])),
-                    committed=money(sum(cents[3:])), **parts)
+                    committed=money(sum(cents[3:])), currency=currency, **parts)
 
 
 def _sequence_names(session: Session, keys: list[str]) -> dict[str, str]:
@@ -124,17 +144,19 @@ def keep_deleted(session: Session, sequence_id: int, name: str) -> int:
     """Copy the ledger of sequence ``sequence_id`` (about to be deleted with its work) into
     crowd_deleted_costs, per worker, kind and state; the number of payment rows kept."""
     rows = session.execute(
-        select(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state,
-               func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents),
-               func.count())
+        select(CrowdPayment.worker_id, CrowdPayment.provider, CrowdPayment.kind,
+               CrowdPayment.state, func.sum(CrowdPayment.amount_cents),
+               func.sum(CrowdPayment.fee_cents), func.count())
         .join(Assignment, Assignment.id == CrowdPayment.assignment_id)
         .join(Task, Task.id == Assignment.task_id).where(Task.sequence_id == sequence_id)
-        .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state)).all()
+        .group_by(CrowdPayment.worker_id, CrowdPayment.provider, CrowdPayment.kind,
+                  CrowdPayment.state)).all()
     totals.forget_sequence(session, sequence_id)
     session.add_all(CrowdDeletedCost(sequence_id=sequence_id, sequence_name=name,
-                                     worker_id=worker, kind=kind, state=state,
-                                     amount_cents=int(amount), fee_cents=int(fee), payments=n)
-                    for worker, kind, state, amount, fee, n in rows)
+                                     worker_id=worker, provider=provider, kind=kind,
+                                     state=state, amount_cents=int(amount), fee_cents=int(fee),
+                                     payments=n)
+                    for worker, provider, kind, state, amount, fee, n in rows)
     session.flush()
     return sum(int(n) for *_, n in rows)
 
@@ -158,18 +180,24 @@ def _order(key: str) -> tuple[int, int]:
 
 
 def costs(session: Session) -> CostsRead:
-    """Spend and commitments for the project, per sequence (keyed by id, named subject/name)
-    and per worker."""
-    by_sequence: _Totals = {}
-    by_worker: _Totals = {}
-    _payments(session, by_sequence, by_worker)
-    _held(session, by_sequence, by_worker)
+    """Spend and commitments for the project, per sequence (keyed by id, named subject/name),
+    per worker and per provider (in its currency)."""
+    scopes: dict[str, _Totals] = {"sequence": {}, "worker": {}, "provider": {}}
+    by_sequence = scopes["sequence"]
+    _payments(session, scopes)
+    _held(session, scopes)
     deleted_names = _deleted(session, by_sequence)
     total = [sum(column) for column in zip(*by_sequence.values(), strict=True)] \
         or [0] * len(FIELDS)
     names = _sequence_names(session, [k for k in by_sequence if k not in deleted_names])
     names.update(deleted_names)
-    return CostsRead(total=_line("project", total),
-                     by_sequence=[_line(k, by_sequence[k], names.get(k, f"sequence {k}"))
-                                  for k in sorted(by_sequence, key=_order)],
-                     by_worker=[_line(k, v) for k, v in sorted(by_worker.items())])
+    fees = _Fees()
+    currencies = {fees[name].currency for name in scopes["provider"]} or {"USD"}
+    return CostsRead(
+        total=_line("project", total,
+                    currency=currencies.pop() if len(currencies) == 1 else "mixed"),
+        by_sequence=[_line(k, by_sequence[k], names.get(k, f"sequence {k}"))
+                     for k in sorted(by_sequence, key=_order)],
+        by_worker=[_line(k, v) for k, v in sorted(scopes["worker"].items())],
+        by_provider=[_line(k, v, currency=fees[k].currency)
+                     for k, v in sorted(scopes["provider"].items())])

@@ -1,15 +1,17 @@
 """Review of submitted work: approve, reject and bonus, each recorded once in the ledger.
 
 Approvals and rejections are one per assignment (a second one is a clear Conflict); the
-marketplace call comes before our writes, since a write transaction held across an HTTP call
+provider call comes before our writes, since a write transaction held across an HTTP call
 would lock the embedded SQLite database the built-in marketplace shares.
 
 A bonus is keyed by (assignment, key) and paid in three steps, each its own unit of work (see
-``flows.pay_bonus``): ``begin_bonus`` commits a pending ledger row, ``send_bonus`` calls
-SendBonus with the deterministic token, ``finish_bonus`` marks the row done. botocore's retries
-replay the token ("already been processed"); a run that lost the reply or its last commit
-leaves the row pending, and the next run asks ListBonusPayments before paying, so even after
-the marketplace forgot the token (24 h) nothing is paid twice.
+``flows.pay_bonus``): ``begin_bonus`` commits a pending ledger row, ``send_bonus`` has the
+provider pay it under the deterministic key, ``finish_bonus`` marks the row done. A run that
+lost the reply or its last commit leaves the row pending, and the next run asks the provider
+whether it shows the bonus paid (``bonus_paid``) before paying, so even after the provider
+forgot the key (MTurk: 24 h) nothing is paid twice.
+
+Each call goes to the provider of the assignment's row unless the caller hands one in.
 """
 
 from __future__ import annotations
@@ -27,16 +29,14 @@ from backend.annotation.models import Assignment
 from backend.annotation.service import get_assignment_or_raise
 from backend.config import get_settings
 from backend.crowd import pricing, totals
-from backend.crowd.client import MarketplaceError, MTurkClient, call, paginate
 from backend.crowd.models import CrowdHit, CrowdPayment
+from backend.crowd.provider import BonusOrder, CrowdProvider
+from backend.crowd.providers import fees_of, get_provider, provider_of
 from backend.crowd.schemas import PaymentRead
-from backend.crowd.sync import verified_submission
+from backend.crowd.sync import LEDGER_STATUS, verified_submission
 from backend.errors import Conflict, DexlabelError, NotFound
 
-INVALID_ASSIGNMENT_STATE = "AWS.MechanicalTurk.InvalidAssignmentState"
-_REPLAYED = "already been processed"
 _DONE = {"approval": "approved", "rejection": "rejected"}
-_MARKET_STATUS = {"approval": "Approved", "rejection": "Rejected"}
 
 
 class MissingFeedback(DexlabelError, status_code=422, code="validation_error"):
@@ -55,9 +55,17 @@ def _decision(session: Session, assignment: Assignment) -> CrowdPayment | None:
         CrowdPayment.kind.in_(("approval", "rejection"))))
 
 
-def _market_status(client: MTurkClient, assignment: Assignment) -> str:
-    reply = call(client, "get_assignment", AssignmentId=assignment.external_id)
-    return str(reply["Assignment"]["AssignmentStatus"])
+def crowd_of(crowd: CrowdProvider | None, assignment: Assignment) -> CrowdProvider:
+    """The provider to ask about ``assignment``: the one given, else the assignment's own."""
+    return provider_of(crowd) if crowd is not None else get_provider(assignment.provider)
+
+
+def _market_status(crowd: CrowdProvider | None, assignment: Assignment) -> str:
+    """The provider's status of the assignment, as the ledger spells it ("Rejected")."""
+    record = crowd_of(crowd, assignment).submission(assignment.external_id)
+    if record is None:
+        raise NotFound(f"the crowd provider has no submission {assignment.external_id}")
+    return LEDGER_STATUS[record.status]
 
 
 # The most a marketplace takes as a decision's feedback (MTurk's RequesterFeedback: 1024).
@@ -82,48 +90,45 @@ def fit_feedback(text: str, limit: int = FEEDBACK_LIMIT) -> str:
     return f"{kept} ..."
 
 
-def _decide(session: Session, client: MTurkClient, assignment_id: int, kind: str,
-            feedback: str | None) -> PaymentRead:
+def _decide(session: Session, crowd: CrowdProvider | None, assignment_id: int, kind: str,
+            feedback: str | None, category: str | None = None) -> PaymentRead:
     assignment = get_assignment_or_raise(session, assignment_id)
     earlier = _decision(session, assignment)
     if earlier is not None:
         raise Conflict(f"assignment {assignment_id} is already {_DONE[earlier.kind]}",
                        state=_DONE[earlier.kind])
     submission = verified_submission(session, assignment)
-    params = {"AssignmentId": assignment.external_id}
-    if feedback:
-        params["RequesterFeedback"] = feedback
-    operation = "approve_assignment" if kind == "approval" else "reject_assignment"
-    try:
-        call(client, operation, **params)
-    except MarketplaceError as exc:
-        # Decided on the marketplace by an earlier run whose commit was lost: record it.
-        if exc.turk_code != INVALID_ASSIGNMENT_STATE or \
-                _market_status(client, assignment) != _MARKET_STATUS[kind]:
-            raise
+    provider = crowd_of(crowd, assignment)
+    # Decided with the provider by an earlier run whose commit was lost: not an error there.
+    if kind == "approval":
+        provider.approve(assignment.external_id, feedback)
+    else:
+        provider.reject(assignment.external_id, feedback or "", category)
     hit = session.scalar(select(CrowdHit).where(CrowdHit.hit_id == submission.hit_id))
     amount = hit.reward_cents if hit is not None and kind == "approval" else 0
-    fee = pricing.fee_cents(amount, hit.max_assignments) if amount and hit else 0
+    fee = provider.fees().reward_fee_cents(amount, hit.max_assignments) \
+        if amount and hit else 0
     row = CrowdPayment(kind=kind, assignment_id=assignment.id, worker_id=assignment.worker_id,
                        request_token=f"{kind}-{assignment.id}", amount_cents=amount,
-                       fee_cents=fee, feedback=feedback)
+                       fee_cents=fee, feedback=feedback, provider=provider.name)
     session.add(row)
     assignment.status = _DONE[kind]
-    submission.market_status = _MARKET_STATUS[kind]
+    submission.market_status = LEDGER_STATUS["approved" if kind == "approval" else "rejected"]
     totals.record(session, row)
     return _payment_read(row)
 
 
-def approve(session: Session, client: MTurkClient, assignment_id: int,
+def approve(session: Session, crowd: CrowdProvider | None, assignment_id: int,
             feedback: str | None = None) -> PaymentRead:
-    return _decide(session, client, assignment_id, "approval", feedback)
+    return _decide(session, crowd, assignment_id, "approval", feedback)
 
 
-def reject(session: Session, client: MTurkClient, assignment_id: int, feedback: str) -> PaymentRead:
+def reject(session: Session, crowd: CrowdProvider | None, assignment_id: int, feedback: str,
+           category: str | None = None) -> PaymentRead:
     if not feedback.strip():
         raise MissingFeedback("a rejection needs feedback that tells the worker why",
                               field="feedback")
-    return _decide(session, client, assignment_id, "rejection", feedback)
+    return _decide(session, crowd, assignment_id, "rejection", feedback, category)
 
 
 def bonus_token(assignment_id: int, key: str) -> str:
@@ -134,12 +139,12 @@ def bonus_token(assignment_id: int, key: str) -> str:
 
 @dataclass(frozen=True)
 class BonusIntent:
-    """A bonus about to be paid, as recorded (pending) in the ledger before the marketplace call.
+    """A bonus about to be paid, as recorded (pending) in the ledger before the provider call.
 
     ``state``: "new" (the row was just written), "pending" (an earlier run wrote it and lost the
-    marketplace's reply or its own commit) or "done" (``payment`` holds the recorded one).
+    provider's reply or its own commit) or "done" (``payment`` holds the recorded one).
     ``same_paid``: other done bonuses of this assignment with the same amount and reason,
-    so a pending one is matched against the marketplace's list without counting them.
+    so a pending one is matched against the provider's list without counting them.
     """
 
     token: str
@@ -150,6 +155,14 @@ class BonusIntent:
     reason: str
     same_paid: int = 0
     payment: PaymentRead | None = None
+    provider: str = "mturk"
+    unit_id: str = ""
+
+    def order(self) -> BonusOrder:
+        return BonusOrder(key=self.token, assignment_id=self.market_assignment_id,
+                          unit_id=self.unit_id, worker_id=self.worker_id,
+                          amount_cents=self.amount_cents, reason=self.reason,
+                          same_paid=self.same_paid)
 
 
 def begin_bonus(session: Session, assignment_id: int, amount_cents: int, reason: str,
@@ -169,17 +182,19 @@ def begin_bonus(session: Session, assignment_id: int, amount_cents: int, reason:
                        f"${pricing.cents_to_dollars(row.amount_cents)}; use another key")
     intent: dict[str, Any] = {"token": token, "market_assignment_id": assignment.external_id,
                               "worker_id": submission.worker_id, "amount_cents": amount_cents,
-                              "reason": reason}
+                              "reason": reason, "provider": assignment.provider,
+                              "unit_id": submission.hit_id}
     if row is not None and row.state == "done":
         return BonusIntent(state="done", payment=_payment_read(row, already_done=True), **intent)
     if row is not None:
-        # Checked and resent with the reason it was started with: the marketplace lists it so.
+        # Checked and resent with the reason it was started with: the provider lists it so.
         intent["reason"] = row.feedback or reason
         return BonusIntent(state="pending", same_paid=_same_paid(session, row), **intent)
     row = CrowdPayment(kind="bonus", assignment_id=assignment.id,
                        worker_id=submission.worker_id, request_token=token,
-                       amount_cents=amount_cents, fee_cents=pricing.fee_cents(amount_cents),
-                       feedback=reason, state="pending")
+                       amount_cents=amount_cents,
+                       fee_cents=fees_of(assignment.provider).bonus_fee_cents(amount_cents),
+                       feedback=reason, state="pending", provider=assignment.provider)
     session.add(row)
     try:
         totals.record(session, row)
@@ -197,32 +212,16 @@ def _same_paid(session: Session, row: CrowdPayment) -> int:
     return int(count or 0)
 
 
-def _paid_on_market(client: MTurkClient, intent: BonusIntent) -> bool:
-    """Whether the marketplace lists this bonus: more payments with its amount and reason than
-    our ledger has done rows for (ListBonusPayments does not show tokens)."""
-    matching = sum(
-        1 for p in paginate(client, "list_bonus_payments", "BonusPayments",
-                            AssignmentId=intent.market_assignment_id)
-        if pricing.dollars_to_cents(p["BonusAmount"]) == intent.amount_cents
-        and p["Reason"] == intent.reason)
-    return matching > intent.same_paid
-
-
-def send_bonus(client: MTurkClient, intent: BonusIntent) -> None:
-    """Pay the bonus on the marketplace unless an earlier run already did (no DB access)."""
+def send_bonus(crowd: CrowdProvider | None, intent: BonusIntent) -> None:
+    """Have the provider pay the bonus unless an earlier run already did (no DB access).
+    ``crowd``: the provider (None: the assignment's own)."""
     if intent.state == "done":
         return
-    if intent.state == "pending" and _paid_on_market(client, intent):
+    provider = provider_of(crowd) if crowd is not None else get_provider(intent.provider)
+    order = intent.order()
+    if intent.state == "pending" and provider.bonus_paid(order):
         return
-    try:
-        call(client, "send_bonus", WorkerId=intent.worker_id,
-             AssignmentId=intent.market_assignment_id,
-             BonusAmount=pricing.cents_to_dollars(intent.amount_cents), Reason=intent.reason,
-             UniqueRequestToken=intent.token)
-    except MarketplaceError as exc:
-        # The token was used within 24 hours by an attempt whose reply was lost: paid.
-        if _REPLAYED not in exc.detail:
-            raise
+    provider.pay_bonus(order)
 
 
 def finish_bonus(session: Session, token: str) -> PaymentRead:

@@ -1,9 +1,11 @@
 """Crowd runs: which tasks are due, what they cost, publishing them, and paying bonuses.
 
-``publish`` works inside the caller's unit of work (the API request). ``publish_each`` is the
-CLI's run: one unit of work per task, so an interrupted run keeps every HIT it recorded and a
-re-run only has the rest to do. ``pay_bonus`` commits its ledger row before it pays and again
-after, so a bonus is never paid twice (decisions.py says how).
+``publish`` works inside the caller's unit of work (the API request), one provider batch for
+all due tasks. ``publish_each`` is the CLI's run: one unit of work per provider call (per task
+on MTurk, whose every HIT is a call of its own; one batch where the provider makes one), so an
+interrupted run keeps every unit it recorded and a re-run only has the rest to do.
+``pay_bonus`` commits its ledger row before it pays and again after, so a bonus is never paid
+twice (decisions.py says how).
 """
 
 from __future__ import annotations
@@ -14,9 +16,10 @@ from sqlalchemy.orm import Session
 from backend.annotation.models import Task
 from backend.config import get_settings
 from backend.crowd import actions, decisions, pricing
-from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.models import CrowdHit
-from backend.crowd.publish import check_assignments, publish_task, requirements
+from backend.crowd.provider import CrowdProvider
+from backend.crowd.providers import fees_of, get_provider, provider_of
+from backend.crowd.publish import check_assignments, publish_tasks, requirements
 from backend.crowd.schemas import CostRead, PaymentRead, PublishOptions, PublishResult
 from backend.db import session_scope
 
@@ -36,73 +39,94 @@ def due_task_ids(session: Session, round_: int, sequence_id: int | None = None,
     return list(session.scalars(stmt))
 
 
-def cost_read(hits: int, options: PublishOptions) -> CostRead:
-    cost = pricing.estimate(hits, options.max_assignments, pricing.dollars_to_cents(options.reward))
+def _provider(crowd: CrowdProvider | None, options: PublishOptions) -> CrowdProvider:
+    """The provider a publish goes to: the one given, else the options' (else the setting's)."""
+    return provider_of(crowd) if crowd is not None else get_provider(options.provider)
+
+
+def cost_read(hits: int, options: PublishOptions, provider: str = "mturk") -> CostRead:
+    """The cost of ``hits`` units of ``options`` in the fees and currency of ``provider``."""
+    fees = fees_of(provider)
+    reward = pricing.dollars_to_cents(options.reward)
+    places = options.max_assignments
+    fee = fees.reward_fee_cents(reward, places)
+    rewards, fees_total = hits * places * reward, hits * places * fee
     money = pricing.cents_to_dollars
-    return CostRead(hits=hits, assignments_per_hit=options.max_assignments,
-                    reward=money(cost.reward_cents),
-                    fee_per_assignment=money(cost.fee_cents_per_assignment),
-                    rewards=money(cost.rewards_cents), fees=money(cost.fees_cents),
-                    total=money(cost.total_cents))
+    return CostRead(provider=fees.provider, currency=fees.currency, hits=hits,
+                    assignments_per_hit=places, reward=money(reward),
+                    fee_per_assignment=money(fee), rewards=money(rewards),
+                    fees=money(fees_total), total=money(rewards + fees_total))
 
 
 def plan(session: Session, options: PublishOptions, sequence_id: int | None,
-         kind: str | None = None) -> PublishResult:
-    """What a publish would do: the HIT count and cost, nothing sent."""
-    check_assignments(options.max_assignments, options.allow_large_hits)
+         kind: str | None = None, provider: str | None = None) -> PublishResult:
+    """What a publish would do: the unit count and cost, nothing sent."""
+    name = provider or options.provider or get_settings().crowd_provider
+    check_assignments(options.max_assignments, options.allow_large_hits, fees_of(name))
     due = due_task_ids(session, options.round, sequence_id, kind)
-    return PublishResult(cost=cost_read(len(due), options))
+    return PublishResult(cost=cost_read(len(due), options, name))
 
 
 def publish(
-    session: Session, client: MTurkClient, options: PublishOptions, sequence_id: int | None,
+    session: Session, crowd: CrowdProvider | None, options: PublishOptions,
+    sequence_id: int | None,
 ) -> PublishResult:
-    """Publish every due task in this unit of work (safe to re-run after any failure).
+    """Publish every due task in this unit of work, in one provider batch (safe to re-run
+    after any failure). ``crowd``: the provider (None: ``options.provider``, else the
+    setting's).
 
-    Rows are written only after the last marketplace call (no autoflush in between), so no
+    Rows are written only after the last provider call (no autoflush in between), so no
     write transaction is held open across HTTP calls.
     """
-    result = plan(session, options, sequence_id)
+    provider = _provider(crowd, options)
+    result = plan(session, options, sequence_id, provider=provider.name)
     with session.no_autoflush:
         task_ids = due_task_ids(session, options.round, sequence_id)
-        reqs = requirements(session, client, options) if task_ids else []
-        for task_id in task_ids:
-            task = session.get_one(Task, task_id)
-            _count(result, *publish_task(session, client, task, options, reqs))
+        if task_ids:
+            reqs = requirements(session, provider, options)
+            tasks = [session.get_one(Task, task_id) for task_id in task_ids]
+            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs):
+                _count(result, unit_id, outcome)
     session.flush()
     return result
 
 
 def publish_each(
-    client: MTurkClient, options: PublishOptions, sequence_id: int | None,
+    crowd: CrowdProvider | None, options: PublishOptions, sequence_id: int | None,
     kind: str | None = None,
 ) -> PublishResult:
     """Publish every due task (of ``kind``: "hand", "object"; None: all), one unit of work
-    (and commit) per HIT."""
+    (and commit) per provider call: per task where the provider makes a call per unit
+    (``publish_chunk``), else all in one."""
+    provider = _provider(crowd, options)
     with session_scope() as session:
-        result = plan(session, options, sequence_id, kind)
+        result = plan(session, options, sequence_id, kind, provider.name)
         with session.no_autoflush:
             task_ids = due_task_ids(session, options.round, sequence_id, kind)
-            reqs = requirements(session, client, options) if task_ids else []
-    for task_id in task_ids:
+            reqs = requirements(session, provider, options) if task_ids else None
+    chunk = int(getattr(provider, "publish_chunk", 0)) or max(len(task_ids), 1)
+    for start in range(0, len(task_ids), chunk):
         with session_scope() as session, session.no_autoflush:
-            task = session.get_one(Task, task_id)
-            _count(result, *publish_task(session, client, task, options, reqs))
+            tasks = [session.get_one(Task, task_id)
+                     for task_id in task_ids[start:start + chunk]]
+            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs):
+                _count(result, unit_id, outcome)
     return result
 
 
-def pay_bonus(client: MTurkClient, assignment_id: int, amount_cents: int, reason: str,
+def pay_bonus(crowd: CrowdProvider | None, assignment_id: int, amount_cents: int, reason: str,
               key: str = "1") -> PaymentRead:
     """Pay a bonus once per (assignment, key): commit a pending row, pay, commit it done.
+    ``crowd``: the provider (None: the assignment's own).
 
     A repeat returns the recorded payment (``already_done``); a run that died after the first
-    commit is finished by the next one, which checks the marketplace before paying.
+    commit is finished by the next one, which asks the provider before paying.
     """
     with session_scope() as session:
         intent = decisions.begin_bonus(session, assignment_id, amount_cents, reason, key)
     if intent.payment is not None:
         return intent.payment
-    decisions.send_bonus(client, intent)
+    decisions.send_bonus(crowd, intent)
     with session_scope() as session:
         return decisions.finish_bonus(session, intent.token)
 
@@ -113,13 +137,13 @@ def _count(result: PublishResult, hit_id: str, outcome: str) -> None:
     result.hit_ids.append(hit_id)
 
 
-def expire_sequence_hits(sequence_id: int, client: MTurkClient | None = None) -> list[str]:
-    """Expire every open HIT of the sequence's tasks on the marketplace (no more work is taken;
-    submitted work can still be decided), one committed unit each; their ids.
+def expire_sequence_hits(sequence_id: int, crowd: CrowdProvider | None = None) -> list[str]:
+    """Close every open unit of the sequence's tasks with its provider (no more work is taken;
+    submitted work can still be decided), one committed unit of work each; their ids.
 
-    A marketplace that refuses or cannot be reached stops here with its error, so a delete
-    that needs the HITs closed first does not go on. The client is made only when there is a
-    HIT to expire.
+    A provider that refuses or cannot be reached stops here with its error, so a delete that
+    needs the units closed first does not go on. ``crowd``: the provider (None: each unit's
+    own).
     """
     with session_scope() as session:
         open_hits = list(session.scalars(
@@ -127,11 +151,9 @@ def expire_sequence_hits(sequence_id: int, client: MTurkClient | None = None) ->
             .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None),
                    CrowdHit.expired_at.is_(None)).order_by(CrowdHit.id)))
     done: list[str] = []
-    if open_hits and client is None:
-        client = make_client(get_settings())
     for hit_id in open_hits:
         assert hit_id is not None
         with session_scope() as session, session.no_autoflush:
-            actions.expire_hit(session, client, hit_id)
+            actions.expire_hit(session, crowd, hit_id)
         done.append(hit_id)
     return done

@@ -1,8 +1,8 @@
-"""Before the annotation page opens a marketplace assignment: does the marketplace know it?
+"""Before the annotation page opens a marketplace assignment: does the provider know it?
 
 The page learns its assignment from its address (MTurk's ``assignmentId``, ``hitId`` and
-``workerId``), which anyone can type. So the first time an assignment is opened, the requester
-API is asked:
+``workerId``), which anyone can type. So the first time an assignment is opened, the provider
+is asked (``unit`` and ``submission``; MTurk's requester API below):
 
 - GetHIT: the HIT exists for this requester and its page (the ExternalQuestion's URL) is this
   task's page, with a task token for this task;
@@ -18,24 +18,20 @@ confirm job, ``backend.crowd.confirm``), and only confirmed marketplace work is 
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
-from typing import Any, NamedTuple
-from urllib.parse import parse_qs, urlsplit
+from collections.abc import Callable
+from typing import NamedTuple, TypeVar
 
-from backend.annotation.tokens import TASK_SCOPE
-from backend.config import get_settings
-from backend.crowd.client import (
-    MarketplaceError,
-    MarketplaceUnreachable,
-    MTurkClient,
-    call,
-    make_client,
-)
-from backend.errors import DexlabelError, Forbidden, NotFound, Unauthorized
-from backend.security import verify_token
+from sqlalchemy import select
+
+from backend.crowd.models import CrowdHit
+from backend.crowd.provider import CrowdProvider, ProviderUnreachable
+from backend.crowd.providers import get_provider
+from backend.db import session_scope
+from backend.errors import DexlabelError, Forbidden, NotFound
 
 # How long a page should wait before asking again when the marketplace did not answer.
 RETRY_AFTER_S = 30
+_T = TypeVar("_T")
 
 
 class MarketplaceDown(DexlabelError):
@@ -49,38 +45,20 @@ class MarketplaceDown(DexlabelError):
         self.headers = {"Retry-After": str(RETRY_AFTER_S)}
 
 
-def _missing(exc: MarketplaceError) -> bool:
-    return "DoesNotExist" in exc.turk_code or "does not exist" in exc.detail
-
-
-def _ask(client: MTurkClient, operation: str, **params: Any) -> dict[str, Any] | None:
-    """The reply of ``operation``; None when the marketplace says the record does not exist."""
+def _ask(question: Callable[[], _T]) -> _T:
+    """The provider's answer; MarketplaceDown (503) when it did not answer."""
     try:
-        return call(client, operation, **params)
-    except MarketplaceUnreachable as exc:
+        return question()
+    except ProviderUnreachable as exc:
         raise MarketplaceDown(f"the assignment cannot be checked with the marketplace now: "
                               f"{exc.detail}") from exc
-    except MarketplaceError as exc:
-        if _missing(exc):
-            return None
-        raise
 
 
-def task_of_question(question: str) -> int | None:
-    """The task whose page an ExternalQuestion shows (the task token in its URL), or None."""
-    try:
-        root = ET.fromstring(question)
-    except ET.ParseError:
-        return None
-    url = next((node.text or "" for node in root.iter() if node.tag.endswith("ExternalURL")), "")
-    tokens = parse_qs(urlsplit(url.strip()).query).get("task", [])
-    if not tokens:
-        return None
-    try:
-        claims = verify_token(tokens[0], get_settings().signing_key, TASK_SCOPE)
-    except Unauthorized:
-        return None
-    return int(claims["task_id"])
+def provider_of_unit(unit_id: str) -> CrowdProvider:
+    """The provider that published ``unit_id`` (a unit we did not publish: the setting's)."""
+    with session_scope() as session:
+        name = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == unit_id))
+    return get_provider(name)
 
 
 class HeldSlots(NamedTuple):
@@ -91,35 +69,33 @@ class HeldSlots(NamedTuple):
     duration_s: int
 
 
-def confirm_held(task_id: int, hit_id: str, assignment_id: str,
-                 worker_id: str) -> HeldSlots | None:
-    """Returns when the marketplace vouches, as far as its requester API can, that
-    ``worker_id`` holds ``assignment_id`` of ``hit_id``, a HIT showing task ``task_id``:
-    None when it names the assignment's worker, else the HIT's held slots, which bound how
-    many assignments of it may be opened (the caller counts those already opened).
+def confirm_held(task_id: int, hit_id: str, assignment_id: str, worker_id: str,
+                 crowd: CrowdProvider | None = None) -> HeldSlots | None:
+    """Returns when the provider (``crowd``, else the unit's) vouches, as far as it can,
+    that ``worker_id`` holds ``assignment_id`` of ``hit_id``, a unit showing task
+    ``task_id``: None when it names the assignment's worker, else the unit's held places,
+    which bound how many assignments of it may be opened (the caller counts those already
+    opened).
 
     Raises:
-        NotFound: the marketplace has no such HIT.
-        Forbidden: the HIT shows another page, the assignment is another HIT's or worker's,
-            or nobody holds an assignment of the HIT.
-        MarketplaceDown: the marketplace did not answer (503, Retry-After).
+        NotFound: the provider has no such unit.
+        Forbidden: the unit shows another page, the assignment is another unit's or
+            worker's, or nobody holds a place of the unit.
+        MarketplaceDown: the provider did not answer (503, Retry-After).
     """
-    client = make_client(get_settings())
-    reply = _ask(client, "get_hit", HITId=hit_id)
-    if reply is None:
+    provider = crowd or provider_of_unit(hit_id)
+    unit = _ask(lambda: provider.unit(hit_id))
+    if unit is None:
         raise NotFound(f"the marketplace has no HIT {hit_id}")
-    hit = reply["HIT"]
-    if task_of_question(str(hit.get("Question", ""))) != task_id:
+    if unit.task_id != task_id:
         raise Forbidden(f"HIT {hit_id} is not a HIT of this task")
-    found = _ask(client, "get_assignment", AssignmentId=assignment_id)
-    if found is not None:
-        record = found["Assignment"]
-        if record.get("HITId") != hit_id or record.get("WorkerId") != worker_id:
+    record = _ask(lambda: provider.submission(assignment_id))
+    if record is not None:
+        if record.unit_id != hit_id or record.worker_id != worker_id:
             raise Forbidden(f"the marketplace's assignment {assignment_id} is not worker "
                             f"{worker_id}'s on HIT {hit_id}")
         return None
-    held = int(hit.get("NumberOfAssignmentsPending") or 0)
-    if held < 1:
+    if unit.held < 1:
         raise Forbidden(f"the marketplace knows no assignment {assignment_id}: no worker holds "
                         f"an assignment of HIT {hit_id} (accept the HIT first)")
-    return HeldSlots(held, int(hit.get("AssignmentDurationInSeconds") or 0))
+    return HeldSlots(unit.held, unit.allotted_s)

@@ -1,7 +1,10 @@
 """The requester's own records: published HITs, verified submissions, and the payment ledger.
 
-Amounts are integer US cents. The ledger is what makes re-runs safe: marketplace tokens expire
-after 24 hours, these rows do not.
+Each row names the crowd ``provider`` that holds it (backend.crowd.providers); its ids
+(``hit_id``: the provider's unit, ``worker_id``: its worker, ``target``: its allow-list) are
+that provider's opaque strings, kept under the column names of the MTurk-only days. Amounts
+are integer cents in the provider's currency. The ledger is what makes re-runs safe:
+marketplace tokens expire after 24 hours, these rows do not.
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ class CrowdHit(TimestampMixin, Base):
     # Approvals and rejections of its assignments in our ledger, counted as each is written
     # (backend.crowd.totals): a live HIT's open slots are max_assignments - decided.
     decided: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
 
 
 class CrowdSubmission(TimestampMixin, Base):
@@ -61,7 +65,9 @@ class CrowdSubmission(TimestampMixin, Base):
     assignment_id: Mapped[int] = parent_key("assignments.id", unique=True)
     hit_id: Mapped[str] = mapped_column(String(64))
     worker_id: Mapped[str] = mapped_column(String(64))
+    # The provider's status word as the ledger spells it ("Submitted", "Approved", "Rejected").
     market_status: Mapped[str] = mapped_column(String(16))
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
 
 
 class CrowdPayment(TimestampMixin, Base):
@@ -86,6 +92,7 @@ class CrowdPayment(TimestampMixin, Base):
     # "pending": written and committed before the marketplace call, so a run whose reply or
     # commit was lost finds it and checks the marketplace instead of paying again; "done" after.
     state: Mapped[str] = mapped_column(String(16), default="done", server_default="done")
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
 
 
 class CrowdQualification(TimestampMixin, Base):
@@ -114,6 +121,7 @@ class CrowdWorkerAction(TimestampMixin, Base):
     target: Mapped[str] = mapped_column(String(64), default="")
     value: Mapped[int | None] = mapped_column(Integer)
     reason: Mapped[str | None] = mapped_column(Text)
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
 
 
 class CrowdDeletedCost(TimestampMixin, Base):
@@ -131,6 +139,7 @@ class CrowdDeletedCost(TimestampMixin, Base):
     amount_cents: Mapped[int] = mapped_column(BigInteger)
     fee_cents: Mapped[int] = mapped_column(BigInteger)
     payments: Mapped[int] = mapped_column(Integer)
+    provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
 
 
 class CrowdCostTotal(Base):
@@ -142,12 +151,12 @@ class CrowdCostTotal(Base):
     __tablename__ = "crowd_cost_totals"
     __table_args__ = (
         UniqueConstraint("scope", "key", "kind", "state"),
-        one_of("scope", ("sequence", "worker")),
+        one_of("scope", ("sequence", "worker", "provider")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
     scope: Mapped[str] = mapped_column(String(16))
-    key: Mapped[str] = mapped_column(String(64))  # the sequence id, or the worker id
+    key: Mapped[str] = mapped_column(String(64))  # the sequence id, worker id or provider
     kind: Mapped[str] = mapped_column(String(16))
     state: Mapped[str] = mapped_column(String(16))
     amount_cents: Mapped[int] = mapped_column(BigInteger, default=0)

@@ -1,10 +1,13 @@
-"""Admin endpoints of the crowd: publish, sync, review, HIT and worker actions, costs."""
+"""Admin endpoints of the crowd: publish, sync, review, HIT and worker actions, costs.
+
+Each action goes to the crowd provider of the row it acts on (a publish: the request's
+``provider``, else the setting's; a worker action: the setting's)."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Query
+from fastapi import APIRouter, Query
 from sqlalchemy import select
 
 from backend.accounts.deps import CurrentAdmin
@@ -14,8 +17,8 @@ from backend.annotation.schemas import StartRequest, TokenRead
 from backend.annotation.tokens import PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token
 from backend.config import get_settings
 from backend.crowd import actions, flows, holds, pricing
-from backend.crowd.client import MTurkClient, make_client
 from backend.crowd.costs import costs
+from backend.crowd.models import CrowdHit
 from backend.crowd.schemas import (
     AddAssignmentsRequest,
     BlockRequest,
@@ -38,13 +41,6 @@ from backend.validation import Id, Key, QueryKey
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
 
-def get_mturk() -> MTurkClient:
-    return make_client(get_settings())
-
-
-MTurk = Annotated[MTurkClient, Depends(get_mturk)]
-
-
 def _hit_read(hit: Any) -> dict[str, Any]:
     return {"hit_id": hit.hit_id, "task_id": hit.task_id, "round": hit.round,
             "max_assignments": hit.max_assignments,
@@ -53,72 +49,70 @@ def _hit_read(hit: Any) -> dict[str, Any]:
 
 
 @router.post("/publish", response_model=PublishResult)
-def publish(body: PublishRequest, session: SessionDep, _: CurrentAdmin,
-            client: MTurk) -> PublishResult:
+def publish(body: PublishRequest, session: SessionDep, _: CurrentAdmin) -> PublishResult:
     options = PublishOptions.model_validate(body.model_dump(exclude={"sequence_id", "dry_run"}))
     if body.dry_run:
         return flows.plan(session, options, body.sequence_id)
-    return flows.publish(session, client, options, body.sequence_id)
+    return flows.publish(session, None, options, body.sequence_id)
 
 
 @router.post("/assignments/{assignment_id}/bonus", response_model=PaymentRead)
-def bonus(assignment_id: Id, body: BonusRequest, _: CurrentAdmin, client: MTurk) -> PaymentRead:
+def bonus(assignment_id: Id, body: BonusRequest, _: CurrentAdmin) -> PaymentRead:
     # The flow commits its own units of work: the ledger row before paying, and after.
-    return flows.pay_bonus(client, assignment_id, pricing.dollars_to_cents(body.amount),
+    return flows.pay_bonus(None, assignment_id, pricing.dollars_to_cents(body.amount),
                            body.reason, body.key)
 
 
 @router.post("/hits/{hit_id}/extend")
-def extend_hit(hit_id: Key, body: ExtendRequest, session: SessionDep, _: CurrentAdmin,
-               client: MTurk) -> dict[str, Any]:
-    return _hit_read(actions.extend_hit(session, client, hit_id, body.seconds))
+def extend_hit(hit_id: Key, body: ExtendRequest, session: SessionDep,
+               _: CurrentAdmin) -> dict[str, Any]:
+    return _hit_read(actions.extend_hit(session, None, hit_id, body.seconds))
 
 
 @router.post("/hits/{hit_id}/expire")
-def expire_hit(hit_id: Key, session: SessionDep, _: CurrentAdmin,
-               client: MTurk) -> dict[str, Any]:
-    return _hit_read(actions.expire_hit(session, client, hit_id))
+def expire_hit(hit_id: Key, session: SessionDep, _: CurrentAdmin) -> dict[str, Any]:
+    return _hit_read(actions.expire_hit(session, None, hit_id))
 
 
 @router.post("/hits/{hit_id}/assignments")
 def add_assignments(hit_id: Key, body: AddAssignmentsRequest, session: SessionDep,
-                    _: CurrentAdmin, client: MTurk) -> dict[str, Any]:
-    hit = actions.add_assignments(session, client, hit_id, body.count, body.allow_large_hits)
+                    _: CurrentAdmin) -> dict[str, Any]:
+    hit = actions.add_assignments(session, None, hit_id, body.count, body.allow_large_hits)
     return _hit_read(hit)
 
 
 @router.post("/workers/{worker_id}/qualifications")
-def grant(worker_id: Key, body: QualificationRequest, session: SessionDep, _: CurrentAdmin,
-          client: MTurk) -> dict[str, str]:
-    type_id = actions.grant_qualification(session, client, worker_id, body.qualification_type_id,
+def grant(worker_id: Key, body: QualificationRequest, session: SessionDep,
+          _: CurrentAdmin) -> dict[str, str]:
+    type_id = actions.grant_qualification(session, None, worker_id, body.qualification_type_id,
                                           body.value, body.notify)
     return {"worker_id": worker_id, "qualification_type_id": type_id, "state": "granted"}
 
 
 @router.delete("/workers/{worker_id}/qualifications")
-def revoke(worker_id: Key, session: SessionDep, _: CurrentAdmin, client: MTurk,
+def revoke(worker_id: Key, session: SessionDep, _: CurrentAdmin,
            qualification_type_id: QueryKey = None) -> dict[str, str]:
-    type_id = actions.revoke_qualification(session, client, worker_id, qualification_type_id)
+    type_id = actions.revoke_qualification(session, None, worker_id, qualification_type_id)
     return {"worker_id": worker_id, "qualification_type_id": type_id, "state": "revoked"}
 
 
 @router.post("/workers/{worker_id}/block")
-def block(worker_id: Key, body: BlockRequest, session: SessionDep, _: CurrentAdmin,
-          client: MTurk) -> dict[str, str]:
-    actions.block_worker(session, client, worker_id, body.reason)
+def block(worker_id: Key, body: BlockRequest, session: SessionDep,
+          _: CurrentAdmin) -> dict[str, str]:
+    actions.block_worker(session, None, worker_id, body.reason)
     return {"worker_id": worker_id, "state": "blocked"}
 
 
 @router.delete("/workers/{worker_id}/block")
-def unblock(worker_id: Key, session: SessionDep, _: CurrentAdmin, client: MTurk,
+def unblock(worker_id: Key, session: SessionDep, _: CurrentAdmin,
             reason: Annotated[str | None, Query(max_length=1024)] = None) -> dict[str, str]:
-    actions.unblock_worker(session, client, worker_id, reason)
+    actions.unblock_worker(session, None, worker_id, reason)
     return {"worker_id": worker_id, "state": "unblocked"}
 
 
 @router.post("/notify")
-def notify(body: NotifyRequest, _: CurrentAdmin, client: MTurk) -> dict[str, Any]:
-    failures = actions.notify_workers(client, body.worker_ids, body.subject, body.message)
+def notify(body: NotifyRequest, _: CurrentAdmin) -> dict[str, Any]:
+    failures = actions.notify_workers(None, body.worker_ids, body.subject, body.message)
     return {"sent": len(body.worker_ids) - len(failures), "failures": failures}
 
 
@@ -174,4 +168,8 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
     task = tasks.get_task_or_raise(session, task_id)
     assignment = tasks.start_assignment(session, task, body.assignment_id, body.worker_id,
                                           body.hit_id)
+    # The assignment's ids are those of the provider that published its HIT.
+    provider = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == body.hit_id))
+    if provider is not None and assignment.provider != provider:
+        assignment.provider = provider
     return TokenRead(token=assignment_token(task, assignment))

@@ -8,6 +8,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, Field
 
+from backend.crowd.provider import ProviderName
 from backend.validation import BodyId, Int32
 
 # MTurk's own bounds: lifetime 30 s to 1 year, assignment duration 30 s to 1 year,
@@ -34,6 +35,10 @@ class PublishOptions(BaseModel):
     min_approval_rate: int | None = Field(default=95, ge=0, le=100)
     locales: list[Annotated[str, Field(pattern=r"^[A-Z]{2}$")]] = Field(default_factory=list)
     require_training: bool = False
+    # The crowd to publish to (unset: the setting DEXLABEL_CROWD_PROVIDER).
+    provider: ProviderName | None = None
+    # team only: the portal worker id of the one annotator the tasks are assigned to.
+    assignee: str | None = Field(default=None, min_length=1, max_length=64)
 
 
 class PublishRequest(PublishOptions):
@@ -42,6 +47,11 @@ class PublishRequest(PublishOptions):
 
 
 class CostRead(BaseModel):
+    """What a publish costs when every place is approved, in the provider's fees and
+    currency (amounts as decimal strings in that currency)."""
+
+    provider: ProviderName = "mturk"
+    currency: str = "USD"
     hits: int
     assignments_per_hit: int
     reward: str
@@ -122,7 +132,7 @@ class BlockRequest(BaseModel):
 class CostLine(BaseModel):
     """Money of one project, sequence or worker, in dollars.
 
-    spent: approved rewards and paid bonuses, each with MTurk's fee. committed: what is still
+    spent: approved rewards and paid bonuses, each with the provider's fee. committed: what is still
     held for it: open slots of live HITs and submitted work not yet decided (reward + fee), and
     bonuses started but not yet confirmed paid (bonus + fee).
     """
@@ -138,12 +148,16 @@ class CostLine(BaseModel):
     committed_rewards: str
     committed_bonuses: str
     committed_fees: str
+    # The currency of the amounts ("mixed" on a total over providers of different ones).
+    currency: str = "USD"
 
 
 class CostsRead(BaseModel):
     total: CostLine
     by_sequence: list[CostLine]
     by_worker: list[CostLine]
+    # Per crowd provider, each in its own currency and fees.
+    by_provider: list[CostLine] = Field(default_factory=list)
 
 
 class WorkerReportPoint(BaseModel):

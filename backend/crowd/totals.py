@@ -1,5 +1,6 @@
-"""Running totals of the payment ledger for the cost report (crowd_cost_totals, and each HIT's
-``decided`` count), written in the same transaction as the payment row they count.
+"""Running totals of the payment ledger for the cost report (crowd_cost_totals per sequence,
+worker and provider, and each HIT's ``decided`` count), written in the same transaction as the
+payment row they count.
 
 Every write is one atomic statement (an upsert that adds to the stored sums, or an UPDATE
 ``decided = decided + 1``), so concurrent payments on PostgreSQL add up without a lost update;
@@ -15,7 +16,7 @@ from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Assignment, Task
-from backend.crowd.models import CrowdCostTotal, CrowdHit, CrowdPayment
+from backend.crowd.models import CrowdCostTotal, CrowdDeletedCost, CrowdHit, CrowdPayment
 
 DECISIONS = ("approval", "rejection")
 
@@ -40,6 +41,7 @@ def _count(session: Session, row: CrowdPayment, state: str, sign: int) -> None:
     amount, fee = sign * row.amount_cents, sign * row.fee_cents
     _add(session, "sequence", str(sequence_id), row.kind, state, amount, fee, sign)
     _add(session, "worker", row.worker_id, row.kind, state, amount, fee, sign)
+    _add(session, "provider", row.provider, row.kind, state, amount, fee, sign)
 
 
 def record(session: Session, row: CrowdPayment) -> None:
@@ -83,6 +85,12 @@ REBUILD_SQL = (
      "FROM (SELECT worker_id, kind, state, amount_cents AS amount, fee_cents AS fee, 1 AS n "
      "FROM crowd_payments UNION ALL SELECT worker_id, kind, state, amount_cents, fee_cents, "
      "payments FROM crowd_deleted_costs) AS x GROUP BY x.worker_id, x.kind, x.state"),
+    # So does a provider's.
+    ("INSERT INTO crowd_cost_totals (scope, key, kind, state, amount_cents, fee_cents, payments) "
+     "SELECT 'provider', x.provider, x.kind, x.state, SUM(x.amount), SUM(x.fee), SUM(x.n) "
+     "FROM (SELECT provider, kind, state, amount_cents AS amount, fee_cents AS fee, 1 AS n "
+     "FROM crowd_payments UNION ALL SELECT provider, kind, state, amount_cents, fee_cents, "
+     "payments FROM crowd_deleted_costs) AS x GROUP BY x.provider, x.kind, x.state"),
     # One grouped pass (a subquery per HIT would scan the assignments once per HIT).
     ("UPDATE crowd_hits SET decided = d.n FROM (SELECT a.hit_id AS hit_id, COUNT(*) AS n "
      "FROM crowd_payments p JOIN assignments a ON a.id = p.assignment_id "
@@ -112,4 +120,23 @@ def from_rows(session: Session) -> dict[tuple[str, str, str, str], tuple[int, in
                   .group_by(CrowdPayment.worker_id, CrowdPayment.kind, CrowdPayment.state))
     for worker, kind, state, amount, fee, n in session.execute(per_worker):
         out[("worker", worker, kind, state)] = (int(amount), int(fee), int(n))
+    _per_provider(session, out)
     return out
+
+
+def _per_provider(session: Session,
+                  out: dict[tuple[str, str, str, str], tuple[int, int, int]]) -> None:
+    """A provider's sums keep the money of deleted sequences, as the workers' do."""
+    sums = (func.sum(CrowdPayment.amount_cents), func.sum(CrowdPayment.fee_cents), func.count())
+    rows = list(session.execute(
+        select(CrowdPayment.provider, CrowdPayment.kind, CrowdPayment.state, *sums)
+        .group_by(CrowdPayment.provider, CrowdPayment.kind, CrowdPayment.state)))
+    rows += session.execute(
+        select(CrowdDeletedCost.provider, CrowdDeletedCost.kind, CrowdDeletedCost.state,
+               func.sum(CrowdDeletedCost.amount_cents), func.sum(CrowdDeletedCost.fee_cents),
+               func.sum(CrowdDeletedCost.payments))
+        .group_by(CrowdDeletedCost.provider, CrowdDeletedCost.kind, CrowdDeletedCost.state))
+    for provider, kind, state, amount, fee, n in rows:
+        key = ("provider", provider, kind, state)
+        old = out.get(key, (0, 0, 0))
+        out[key] = (old[0] + int(amount), old[1] + int(fee), old[2] + int(n))

@@ -182,13 +182,13 @@ def demo_publish(sequence_id: int, assignments: int) -> None:
     """Publish the sequence's tasks on the built-in marketplace, hand tasks first (so they
     are offered first), then the object tasks."""
     from backend.crowd import flows
-    from backend.crowd.client import make_client
+    from backend.crowd.providers import get_provider
     from backend.crowd.schemas import PublishOptions
 
-    client = make_client(get_settings())
-    options = PublishOptions(max_assignments=assignments)
+    marketplace = get_provider("mturk")
+    options = PublishOptions(max_assignments=assignments, provider="mturk")
     for kind in ("hand", "object"):
-        result = flows.publish_each(client, options, sequence_id, kind)
+        result = flows.publish_each(marketplace, options, sequence_id, kind)
         typer.echo(f"{kind} tasks: {result.created} HITs created, {result.recovered} "
                    f"recovered, {_hits(sequence_id, kind)} published in all")
 
@@ -230,7 +230,6 @@ def approve_reviewed(sequence_id: int) -> int:
     assignment QC left for review with the smallest error (as the admin page's Approve does),
     saying which; the number approved."""
     from backend.annotation.models import Assignment
-    from backend.crowd.client import make_client
     from backend.labels import ACCEPTED
     from backend.pipeline import approve
     from backend.quality.models import QCReport
@@ -251,21 +250,19 @@ def approve_reviewed(sequence_id: int) -> int:
                (feedback or "").split(". ")[0])
         if task_id not in accepted and (task_id not in best or key < best[task_id]):
             best[task_id] = key
-    client = make_client(get_settings())
     for task_id, (_error, assignment_id, target, why) in sorted(best.items()):
         with session_scope() as session:
-            approve(session, client, assignment_id, None)
+            approve(session, None, assignment_id, None)
         typer.echo(f"  demo admin approved assignment {assignment_id} (task {task_id}, "
                    f"{target}), left for review: {why}")
     return len(best)
 
 
 def _sync() -> int:
-    from backend.crowd.client import make_client
     from backend.pipeline import sync
 
     with session_scope() as session:
-        return sync(session, make_client(get_settings())).accepted
+        return sync(session).accepted
 
 
 def wait_for_jobs(timeout_s: float = JOBS_TIMEOUT_S) -> bool:
@@ -332,26 +329,29 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
     first one more on each HIT whose task has no accepted work and nothing left on offer."""
     from backend.annotation.models import Assignment, Task
     from backend.crowd.actions import add_assignments
-    from backend.crowd.client import make_client, paginate
     from backend.crowd.models import CrowdHit
-    from backend.crowd.pricing import LARGE_HIT_ASSIGNMENTS
+    from backend.crowd.providers import get_provider
     from backend.labels import ACCEPTED
 
-    client = make_client(get_settings())
+    marketplace = get_provider("mturk")
     with session_scope() as session:
         hits = dict(session.execute(
             select(CrowdHit.hit_id, CrowdHit.task_id).join(Task, Task.id == CrowdHit.task_id)
             .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))).all())
         accepted = set(session.scalars(select(Assignment.task_id).where(
             Assignment.task_id.in_(hits.values()), Assignment.status == ACCEPTED)))
-    offered = {h["HITId"]: int(h.get("NumberOfAssignmentsAvailable", 0))
-               for h in paginate(client, "list_hits", "HITs") if h["HITId"] in hits}
+    offered: dict[str, int] = {}
+    for hit_id in hits:
+        unit = marketplace.unit(hit_id) if hit_id is not None else None
+        if unit is not None:  # the places no worker holds or has submitted
+            offered[unit.unit_id] = max(unit.places - unit.held - unit.submitted, 0)
     for hit_id, available in offered.items():
         if extend and not available and hits[hit_id] not in accepted:
             with session_scope() as session, session.no_autoflush:
                 row = session.scalar(select(CrowdHit).where(CrowdHit.hit_id == hit_id))
-                if row is not None and row.max_assignments + 1 < LARGE_HIT_ASSIGNMENTS:
-                    add_assignments(session, client, hit_id, 1)
+                if row is not None and \
+                        row.max_assignments + 1 < marketplace.fees().large_unit_places:
+                    add_assignments(session, marketplace, hit_id, 1)
                     offered[hit_id] = 1
     return sum(offered.values())
 

@@ -25,7 +25,7 @@ from backend.annotation.schemas import TracksSave
 from backend.crowd import confirm as crowd_confirm
 from backend.crowd import decisions
 from backend.crowd import sync as crowd_sync
-from backend.crowd.client import MTurkClient
+from backend.crowd.provider import CrowdProvider
 from backend.crowd.schemas import PaymentRead, SyncResult
 from backend.db import session_scope
 from backend.errors import DexlabelError
@@ -71,15 +71,16 @@ def _confirmed(session: Session, assignment_ids: list[int]) -> None:
             request_qc(session, assignment.task)
 
 
-def sync(session: Session, client: MTurkClient) -> SyncResult:
-    """Collect the marketplace's submissions (``crowd sync``) and queue QC for the new ones."""
-    result = crowd_sync.sync(session, client)
+def sync(session: Session, crowd: CrowdProvider | None = None) -> SyncResult:
+    """Collect the providers' submissions (``crowd sync``; ``crowd``: only that provider's)
+    and queue QC for the new ones."""
+    result = crowd_sync.sync(session, crowd)
     _confirmed(session, result.accepted_ids)
     return result
 
 
 def confirm(assignment_id: int) -> dict[str, Any]:
-    """The confirm job: ask the requester API for one submission, then queue its QC."""
+    """The confirm job: ask the provider for one submission, then queue its QC."""
     record = crowd_confirm.submitted_record(assignment_id)
     if isinstance(record, str):
         state = record
@@ -101,16 +102,16 @@ def _decided(session: Session, assignment_id: int, decision: str) -> None:
     request_qc(session, session.get_one(Assignment, assignment_id).task)
 
 
-def approve(session: Session, client: MTurkClient, assignment_id: int,
+def approve(session: Session, crowd: CrowdProvider | None, assignment_id: int,
             feedback: str | None = None) -> PaymentRead:
-    payment = decisions.approve(session, client, assignment_id, feedback)
+    payment = decisions.approve(session, crowd, assignment_id, feedback)
     _decided(session, assignment_id, "approved")
     return payment
 
 
-def reject(session: Session, client: MTurkClient, assignment_id: int,
+def reject(session: Session, crowd: CrowdProvider | None, assignment_id: int,
            feedback: str) -> PaymentRead:
-    payment = decisions.reject(session, client, assignment_id, feedback)
+    payment = decisions.reject(session, crowd, assignment_id, feedback)
     _decided(session, assignment_id, "rejected")
     return payment
 

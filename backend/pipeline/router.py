@@ -14,7 +14,6 @@ from backend.accounts.deps import CurrentAdmin
 from backend.annotation.deps import WriterClaims, assignment_of
 from backend.annotation.schemas import MAX_SAVE_BYTES, SaveResult, TracksSave
 from backend.captures.schemas import SequenceDeletedRead
-from backend.crowd.router import MTurk
 from backend.crowd.schemas import ApproveRequest, PaymentRead, RejectRequest, SyncResult
 from backend.db import SessionDep
 from backend.middleware import JSONBodyRoute, body_limit
@@ -38,22 +37,22 @@ def submit(body: TracksSave, claims: WriterClaims, session: SessionDep) -> SaveR
 
 
 @router.post("/crowd/sync", response_model=SyncResult, tags=["crowd"])
-def sync_submissions(session: SessionDep, _: CurrentAdmin, client: MTurk) -> SyncResult:
-    return pipeline.sync(session, client)
+def sync_submissions(session: SessionDep, _: CurrentAdmin) -> SyncResult:
+    return pipeline.sync(session)
 
 
 @router.post("/crowd/assignments/{assignment_id}/approve", response_model=PaymentRead,
              tags=["crowd"])
-def approve(assignment_id: Id, body: ApproveRequest, session: SessionDep, _: CurrentAdmin,
-            client: MTurk) -> PaymentRead:
-    return pipeline.approve(session, client, assignment_id, body.feedback)
+def approve(assignment_id: Id, body: ApproveRequest, session: SessionDep,
+            _: CurrentAdmin) -> PaymentRead:
+    return pipeline.approve(session, None, assignment_id, body.feedback)
 
 
 @router.post("/crowd/assignments/{assignment_id}/reject", response_model=PaymentRead,
              tags=["crowd"])
-def reject(assignment_id: Id, body: RejectRequest, session: SessionDep, _: CurrentAdmin,
-           client: MTurk) -> PaymentRead:
-    return pipeline.reject(session, client, assignment_id, body.feedback)
+def reject(assignment_id: Id, body: RejectRequest, session: SessionDep,
+           _: CurrentAdmin) -> PaymentRead:
+    return pipeline.reject(session, None, assignment_id, body.feedback)
 
 
 @router.post("/sequences/{sequence_id}/calibrations/{number}/adopt",

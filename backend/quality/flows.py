@@ -19,8 +19,9 @@ from sqlalchemy import func, select
 from backend.annotation.models import Assignment
 from backend.config import get_settings
 from backend.crowd import actions, decisions
-from backend.crowd.client import MarketplaceError, MTurkClient, make_client
 from backend.crowd.models import CrowdWorkerAction
+from backend.crowd.provider import CrowdProvider, ProviderError
+from backend.crowd.providers import get_provider
 from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
 from backend.jobs.attempts import record_actions, run_actions
@@ -47,9 +48,9 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
     acted: dict[str, int] = {}
     started = time.perf_counter()
     if settings.qc_auto_actions:
-        client = make_client(settings)
-        acted = act_on_reports(client, sequence_id, target_key)
-        block_repeat_failures(client, sequence_id, target_key)
+        # Each action goes to the provider of the work it acts on.
+        acted = act_on_reports(None, sequence_id, target_key)
+        block_repeat_failures(None, sequence_id, target_key)
     timings["act_s"] = round(time.perf_counter() - started, 3)
     # Inside a job: the actions of every attempt of this run (a worker killed after some).
     return {"scored": counts, "actions": run_actions() or acted, "timings": timings}
@@ -66,18 +67,19 @@ def _pending(sequence_id: int, target_key: str) -> list[tuple[int, int]]:
         return [(int(r), int(a)) for r, a in rows]
 
 
-def act_on_reports(client: MTurkClient, sequence_id: int, target_key: str) -> dict[str, int]:
+def act_on_reports(crowd: CrowdProvider | None, sequence_id: int,
+                   target_key: str) -> dict[str, int]:
     done: dict[str, int] = {}
     for report_id, assignment_id in _pending(sequence_id, target_key):
         check_lease()  # an attempt that lost its job to a newer one stops before acting
-        outcome = _act(client, report_id, assignment_id)
+        outcome = _act(crowd, report_id, assignment_id)
         if outcome:
             done[outcome] = done.get(outcome, 0) + 1
             checkpoint()
     return done
 
 
-def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
+def _act(crowd: CrowdProvider | None, report_id: int, assignment_id: int) -> str | None:
     """One report's action (at most one marketplace decision, then the re-open)."""
     with session_scope() as session, session.no_autoflush:
         report = session.get_one(QCReport, report_id)
@@ -102,29 +104,31 @@ def _act(client: MTurkClient, report_id: int, assignment_id: int) -> str | None:
             record_actions(session, {"recorded": 1})
             return "recorded"
         elif report.outcome == "approve":
-            decisions.approve(session, client, assignment_id, None)
+            decisions.approve(session, crowd, assignment_id, None)
             report.action, report.action_detail = "approved", "approved automatically"
             record_actions(session, {"approved": 1})
             if report.method != "gold":
                 return "approved"
             report.action_detail, follow_up = GRANT_PENDING, _grant
         else:
-            decisions.reject(session, client, assignment_id,
+            decisions.reject(session, crowd, assignment_id,
                              decisions.fit_feedback(report.feedback))
             report.action, report.action_detail = "rejected", REOPEN_PENDING
             record_actions(session, {"rejected": 1})
             follow_up = _reopen
-    follow_up(client, report_id, assignment_id)
+    follow_up(crowd, report_id, assignment_id)
     return report.action
 
 
-def _grant(client: MTurkClient, report_id: int, assignment_id: int) -> None:
+def _grant(crowd: CrowdProvider | None, report_id: int, assignment_id: int) -> None:
     """The worker passed a training clip: grant our "passed training" qualification."""
     with session_scope() as session, session.no_autoflush:
-        worker_id = session.get_one(Assignment, assignment_id).worker_id
+        assignment = session.get_one(Assignment, assignment_id)
+        provider = crowd if crowd is not None else get_provider(assignment.provider)
         # Conflict: granted by an earlier run whose commit was lost, or by an admin.
         with contextlib.suppress(Conflict):
-            actions.grant_qualification(session, client, worker_id, None, notify=True)
+            actions.grant_qualification(session, provider, assignment.worker_id, None,
+                                        notify=True)
         session.get_one(QCReport, report_id).action_detail = GRANTED
 
 
@@ -132,7 +136,7 @@ class ReopenNotDone(RetryLater):
     """The marketplace did not answer a re-open; the job is retried and tries again."""
 
 
-def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
+def _reopen(crowd: CrowdProvider | None, report_id: int, assignment_id: int) -> None:
     """One more assignment on the rejected work's HIT (its token makes a repeat add nothing).
 
     The report says what happened: re-opened; not re-opened because the HIT has expired or the
@@ -140,7 +144,7 @@ def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
     answer, still pending: the job fails this attempt and its retry (or the target's next QC
     run) tries the re-open again.
     """
-    retry: MarketplaceError | None = None
+    retry: ProviderError | None = None
     with session_scope() as session, session.no_autoflush:
         hit = hit_of(session, session.get_one(Assignment, assignment_id))
         report = session.get_one(QCReport, report_id)
@@ -153,10 +157,10 @@ def _reopen(client: MTurkClient, report_id: int, assignment_id: int) -> None:
                                     "publish the task again for more work")
             return
         try:
-            actions.add_assignments(session, client, hit.hit_id, 1, allow_large_hits=True)
+            actions.add_assignments(session, crowd, hit.hit_id, 1, allow_large_hits=True)
             report.action_detail = REOPENED
             return
-        except MarketplaceError as exc:
+        except ProviderError as exc:
             if exc.retryable:
                 retry = exc
                 report.action_detail = (f"{REOPEN_PENDING}: the marketplace could not take it now "
@@ -175,7 +179,8 @@ def _refused(hit_id: str, reason: object) -> str:
             f"{hit_id} ({reason}); add one by hand or publish the task again")
 
 
-def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str) -> list[str]:
+def block_repeat_failures(crowd: CrowdProvider | None, sequence_id: int,
+                          target_key: str) -> list[str]:
     """Block the target's workers whose final rejected reports reached the limit."""
     limit = get_settings().qc_block_after_failures
     if limit <= 0:
@@ -196,7 +201,7 @@ def block_repeat_failures(client: MTurkClient, sequence_id: int, target_key: str
         check_lease()
         with session_scope() as session, session.no_autoflush:
             try:
-                actions.block_worker(session, client, worker_id,
+                actions.block_worker(session, crowd, worker_id,
                                      f"{limit} or more assignments failed the quality check")
                 done.append(worker_id)
             except Conflict:

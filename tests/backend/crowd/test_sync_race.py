@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from sqlalchemy import func, select
 from backend.annotation.service import create_assignment, create_tasks
 from backend.captures.flows import import_path
 from backend.crowd.models import CrowdSubmission
+from backend.crowd.provider import SubmissionRecord
 from backend.crowd.sync import accept_record
 from backend.db import get_sessionmaker, session_scope
 from backend.storage import get_storage
@@ -28,8 +30,8 @@ def test_a_submission_recorded_by_two_at_once_is_recorded_once(
         task = create_tasks(s, get_storage(), seq_id)[0]
         ours = create_assignment(s, task, "W-RACE", external_id="A-RACE", hit_id="H-RACE")
         assignment_id = ours.id
-    record = {"AssignmentId": "A-RACE", "HITId": "H-RACE", "WorkerId": "W-RACE",
-              "AssignmentStatus": "Submitted"}
+    record = SubmissionRecord(assignment_id="A-RACE", unit_id="H-RACE", worker_id="W-RACE",
+                              status="submitted")
     first = get_sessionmaker()()
     try:
         assert accept_record(first, record)[0] == "accepted"  # inserted, not committed yet
@@ -38,8 +40,7 @@ def test_a_submission_recorded_by_two_at_once_is_recorded_once(
         def second() -> None:
             try:
                 with session_scope() as s:
-                    outcome.append(accept_record(s, {**record,
-                                                     "AssignmentStatus": "Approved"})[0])
+                    outcome.append(accept_record(s, replace(record, status="approved"))[0])
             except Exception as exc:  # the failure this test is about
                 outcome.append(exc)
 
