@@ -1,0 +1,1 @@
+"""The crowd providers: each implements ``backend.crowd.provider.CrowdProvider``."""
