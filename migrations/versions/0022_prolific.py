@@ -46,6 +46,8 @@ def upgrade() -> None:
         sa.Column('task_id', sa.Integer(), nullable=False),
         sa.Column('places', sa.Integer(), nullable=False),
         sa.Column('external_url', sa.String(2000), nullable=False),
+        sa.Column('place_keys', sa.JSON(), nullable=False),
+        sa.Column('closed_at', sa.DateTime(timezone=True), nullable=True),
         _created_at(),
         sa.UniqueConstraint('study_row_id', 'position'),
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from sqlalchemy import Integer, String, UniqueConstraint
+from sqlalchemy import JSON, Integer, String, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key
@@ -56,6 +56,12 @@ class ProlificUnit(TimestampMixin, Base):
     task_id: Mapped[int] = mapped_column(Integer)
     places: Mapped[int] = mapped_column(Integer)
     external_url: Mapped[str] = mapped_column(String(2000))
+    # The add-places requests already counted into ``places`` (their keys): asked again, the
+    # study's total is sent again as it stands, never raised twice.
+    place_keys: Mapped[list[str]] = mapped_column(JSON, default=list)
+    # Closed by us: Prolific cannot close one access detail of a running study, so the unit
+    # reports itself closed and the study is stopped once every unit of it is closed.
+    closed_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
 
 class ProlificBonus(TimestampMixin, Base):
