@@ -4,7 +4,7 @@ documentation describes it."""
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from fastapi import Body, FastAPI, Request
 
@@ -12,6 +12,7 @@ if TYPE_CHECKING:
     from tests.backend.crowd.prolific_double import ProlificDouble
 
 EDITABLE_AFTER_PUBLISH = {"internal_name", "total_available_places"}
+JsonBody = Annotated[dict[str, Any], Body()]
 
 
 def add_routes(app: FastAPI, double: ProlificDouble) -> None:
@@ -47,7 +48,7 @@ def _page(request: Request, items: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _study_routes(app: FastAPI, double: ProlificDouble) -> None:
     @app.post("/api/v1/studies/", status_code=201)
-    def create_study(request: Request, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def create_study(request: Request, body: JsonBody) -> dict[str, Any]:
         access = body.get("access_details") or []
         if body.get("total_available_places") != sum(a["total_allocation"] for a in access):
             raise _refuse(400, "total_available_places must equal the sum of the "
@@ -76,7 +77,7 @@ def _study_routes(app: FastAPI, double: ProlificDouble) -> None:
         return _shown(_study(double, study_id))
 
     @app.patch("/api/v1/studies/{study_id}/")
-    def update_study(study_id: str, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def update_study(study_id: str, body: JsonBody) -> dict[str, Any]:
         with double.lock:
             study = _study(double, study_id)
             if study["status"] != "UNPUBLISHED":
@@ -90,7 +91,7 @@ def _study_routes(app: FastAPI, double: ProlificDouble) -> None:
             return _shown(study)
 
     @app.post("/api/v1/studies/{study_id}/transition/")
-    def transition_study(study_id: str, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def transition_study(study_id: str, body: JsonBody) -> dict[str, Any]:
         moves = {("PUBLISH", "UNPUBLISHED"): "ACTIVE", ("PAUSE", "ACTIVE"): "PAUSED",
                  ("START", "PAUSED"): "ACTIVE", ("STOP", "ACTIVE"): "COMPLETED",
                  ("STOP", "PAUSED"): "COMPLETED"}
@@ -135,7 +136,7 @@ def _submission_routes(app: FastAPI, double: ProlificDouble) -> None:
         return dict(double.submissions[submission_id])
 
     @app.post("/api/v1/submissions/{submission_id}/transition/")
-    def transition(submission_id: str, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def transition(submission_id: str, body: JsonBody) -> dict[str, Any]:
         action = body.get("action")
         if action == "REJECT":
             if len(str(body.get("message", ""))) < 100:
@@ -156,7 +157,7 @@ def _submission_routes(app: FastAPI, double: ProlificDouble) -> None:
 
 def _bonus_routes(app: FastAPI, double: ProlificDouble) -> None:
     @app.post("/api/v1/submissions/bonus-payments/", status_code=201)
-    def set_up_bonuses(body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def set_up_bonuses(body: JsonBody) -> dict[str, Any]:
         _study(double, str(body.get("study_id")))
         rows = [line.split(",") for line in str(body.get("csv_bonuses", "")).splitlines()]
         with double.lock:
@@ -206,33 +207,33 @@ def _group_routes(app: FastAPI, double: ProlificDouble) -> None:
                                for g in double.groups.values()])
 
     @app.post("/api/v1/participant-groups/", status_code=201)
-    def create_group(body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def create_group(body: JsonBody) -> dict[str, Any]:
         with double.lock:
             group_id = double.new_id("pg")
             double.groups[group_id] = {"id": group_id, "name": body["name"], "members": set()}
             return {"id": group_id, "name": body["name"]}
 
     @app.post("/api/v1/participant-groups/{group_id}/participants/")
-    def add(group_id: str, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def add(group_id: str, body: JsonBody) -> dict[str, Any]:
         if group_id not in double.groups:
             raise _refuse(404, "Not found.")
         double.groups[group_id]["members"].update(body["participant_ids"])
         return {"results": sorted(double.groups[group_id]["members"])}
 
     @app.delete("/api/v1/participant-groups/{group_id}/participants/")
-    def remove(group_id: str, body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def remove(group_id: str, body: JsonBody) -> dict[str, Any]:
         if group_id not in double.groups:
             raise _refuse(404, "Not found.")
         double.groups[group_id]["members"].difference_update(body["participant_ids"])
         return {"results": sorted(double.groups[group_id]["members"])}
 
     @app.post("/api/v1/messages/", status_code=201)
-    def message(body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def message(body: JsonBody) -> dict[str, Any]:
         double.messages.append(body)
         return {"id": double.new_id("msg")}
 
     @app.post("/api/v1/hooks/secrets/", status_code=201)
-    def make_secret(body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def make_secret(body: JsonBody) -> dict[str, Any]:
         double.secret = f"whsec-{double.new_id('')}"
         return {"id": double.new_id("sec"), "value": double.secret,
                 "workspace_id": body["workspace_id"]}
@@ -242,7 +243,7 @@ def _group_routes(app: FastAPI, double: ProlificDouble) -> None:
         return _page(request, list(double.subscriptions))
 
     @app.post("/api/v1/hooks/subscriptions/", status_code=201)
-    def subscribe(body: dict[str, Any] = Body(...)) -> dict[str, Any]:
+    def subscribe(body: JsonBody) -> dict[str, Any]:
         made = {"id": double.new_id("hook"), "event_type": body["event_type"],
                 "target_url": body["target_url"], "workspace_id": body["workspace_id"]}
         double.subscriptions.append(made)
