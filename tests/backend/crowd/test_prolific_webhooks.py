@@ -152,3 +152,15 @@ def test_a_study_status_change_updates_our_study(prolific: Any, prolific_provide
         status = session.scalar(select(ProlificStudy.status)
                                 .where(ProlificStudy.study_id == study_id))
     assert status == "AWAITING REVIEW"
+
+
+def test_subscribing_without_a_secret_makes_the_workspaces_secret(
+        prolific: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    from backend.config import get_settings
+    from backend.crowd.providers.prolific.webhooks import EVENT_TYPES, subscribe
+
+    monkeypatch.delenv("DEXLABEL_PROLIFIC_WEBHOOK_SECRET")
+    get_settings.cache_clear()
+    made = subscribe(get_settings(), "https://labs.example.org/api/crowd/prolific/webhook")
+    assert made["secret"] == prolific.secret != WEBHOOK_SECRET
+    assert sorted(s["event_type"] for s in prolific.subscriptions) == sorted(EVENT_TYPES)

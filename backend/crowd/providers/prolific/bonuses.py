@@ -28,7 +28,7 @@ from sqlalchemy import CursorResult, or_, select, update
 from sqlalchemy.dialects.postgresql import insert as pg_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 
-from backend.crowd.provider import BonusOrder, ProviderError
+from backend.crowd.provider import BonusOrder, ProviderError, ProviderRefused
 from backend.crowd.providers.prolific.client import ProlificClient
 from backend.crowd.providers.prolific.models import ProlificBonus, ProlificLease
 from backend.db import session_scope, utcnow
@@ -103,7 +103,8 @@ def bonus_paid(client: ProlificClient, order: BonusOrder) -> bool:
 def pay_bonus(client: ProlificClient, order: BonusOrder, study_id: str) -> None:
     """Pay ``order`` once, one payment at a time across the deployment."""
     if order.amount_cents <= 0:
-        raise ProviderError("a bonus must be more than 0", "pay_bonus", "refused")
+        raise ProviderRefused("a bonus must be more than 0", "pay_bonus",
+                              fields=[{"field": "amount", "message": "must be more than 0"}])
     _record(order, study_id)
     with wallet():
         if bonus_paid(client, order):

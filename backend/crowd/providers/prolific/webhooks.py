@@ -102,7 +102,11 @@ def receive(settings: Settings, timestamp: str | None, signature: str | None,
     kind, resource = event["event_type"], event["resource_id"]
     record = None
     if kind == "submission.status.change":
-        record = ProlificProvider(settings).submission(resource)
+        provider = ProlificProvider(settings)
+        try:
+            record = provider.submission(resource)
+        finally:
+            provider.client.close()
     try:
         with session_scope() as session:
             session.add(ProlificWebhookEvent(digest=digest, event_type=kind[:64],
@@ -165,8 +169,16 @@ def subscribe(settings: Settings, target_url: str) -> dict[str, Any]:
         raise DexlabelError("set DEXLABEL_PROLIFIC_WORKSPACE_ID to subscribe to Prolific's "
                             "webhooks", field="prolific_workspace_id")
     client = ProlificClient.from_settings(settings)
+    try:
+        return _subscribe(client, workspace, settings.prolific_webhook_secret, target_url)
+    finally:
+        client.close()
+
+
+def _subscribe(client: ProlificClient, workspace: str, secret_set: str | None,
+               target_url: str) -> dict[str, Any]:
     secret = None
-    if not settings.prolific_webhook_secret:
+    if not secret_set:
         secret = str(client.post("/api/v1/hooks/secrets/", {"workspace_id": workspace})["value"])
     listed = client.get("/api/v1/hooks/subscriptions/", workspace_id=workspace)
     have = {(item.get("event_type"), item.get("target_url")): str(item["id"])
