@@ -164,3 +164,16 @@ def test_subscribing_without_a_secret_makes_the_workspaces_secret(
     made = subscribe(get_settings(), "https://labs.example.org/api/crowd/prolific/webhook")
     assert made["secret"] == prolific.secret != WEBHOOK_SECRET
     assert sorted(s["event_type"] for s in prolific.subscriptions) == sorted(EVENT_TYPES)
+
+
+def test_the_app_serves_the_route_and_refuses_an_unsigned_event(prolific: Any) -> None:
+    from fastapi.testclient import TestClient
+
+    from backend.app import create_app
+
+    with TestClient(create_app()) as client:
+        reply = client.post("/api/crowd/prolific/webhook",
+                            json={"event_type": "study.status.change", "resource_id": "x"})
+    assert reply.status_code == 401
+    assert reply.json()["error"] == "unauthorized"
+    assert events() == 0

@@ -37,6 +37,7 @@ from backend.crowd.providers.prolific.provider import ProlificProvider
 from backend.crowd.sync import accept_record
 from backend.db import session_scope
 from backend.errors import DexlabelError, Unauthorized
+from backend.middleware import body_limit
 
 EVENT_TYPES = ("submission.status.change", "study.status.change")
 SIGNATURE = "X-Prolific-Request-Signature"
@@ -81,8 +82,12 @@ def verify(settings: Settings, timestamp: str | None, signature: str | None, bod
         raise Unauthorized(f"the webhook's {TIMESTAMP} is {-age:.0f} s ahead of our clock")
 
 
-@router.post("/webhook", responses={401: {"description": "not signed by Prolific, stale, "
-                                                         "or a replay"}})
+# An event is a few hundred bytes.
+WEBHOOK_MAX_BODY_BYTES = 64_000
+
+
+@router.post("/webhook", openapi_extra=body_limit(WEBHOOK_MAX_BODY_BYTES),
+             responses={401: {"description": "not signed by Prolific, stale, or a replay"}})
 async def webhook(request: Request) -> dict[str, str]:
     """A Prolific event (``submission.status.change``, ``study.status.change``)."""
     body = await request.body()
