@@ -89,3 +89,14 @@ def test_blocks_groups_and_messages(prolific: Any, prolific_provider: Any) -> No
     prolific_provider.revoke("PID-y", group, None)
     assert all(not g["members"] for g in prolific.groups.values())
     assert prolific_provider.notify(["PID-1", "PID-2"], "Hello", "New work is up") == []
+
+
+def test_submissions_are_read_page_by_page(prolific: Any, prolific_provider: Any) -> None:
+    (unit,) = prolific_provider.publish(units(1))
+    study_id = unit.unit_id.split(":")[0]
+    for n in range(450):  # three pages of 200
+        prolific.take(study_id, 0, f"PID{n:03d}")
+    found = list(prolific_provider.submissions([unit.unit_id]))
+    assert sorted(r.worker_id for r in found) == [f"PID{n:03d}" for n in range(450)]
+    pages = [path for _, path in prolific.requests if path.endswith("/submissions/")]
+    assert len(pages) == 3
