@@ -20,6 +20,7 @@ bonus payment can be read back (``GET /api/v1/bulk-bonus-payments/{id}/``) with 
 from __future__ import annotations
 
 import itertools
+import json
 import socket
 import threading
 import time
@@ -104,8 +105,8 @@ class ProlificDouble:
                 attempts: int = 3) -> list[int]:
         """Send the event to each subscription of its type, signed, and again on failure
         (up to ``attempts`` times each); the answers' status codes (0: no answer)."""
-        body = httpx.Request("POST", "http://x", json={
-            "event_type": event_type, "resource_id": resource_id, "status": status}).content
+        body = json.dumps({"event_type": event_type, "resource_id": resource_id,
+                           "status": status}).encode()
         timestamp = str(int(time.time()))
         headers = {TIMESTAMP: timestamp, SIGNATURE: sign(self.secret, timestamp, body),
                    "Content-Type": "application/json"}
