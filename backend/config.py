@@ -194,6 +194,21 @@ class Settings(BaseSettings):
     # With an AWS endpoint (mturk_endpoint_url unset and mturk_use_aws): sandbox or production.
     mturk_sandbox: bool = True
     mturk_use_aws: bool = False
+    # Prolific (backend.crowd.providers.prolific): the API token ("Authorization: Token ..."),
+    # the API's address, the workspace that owns studies and webhook subscriptions, and the
+    # secret that signs Prolific's webhooks to us; a webhook whose timestamp is older than
+    # prolific_webhook_max_age_s is refused. The pay floor: a unit whose reward for its
+    # expected time pays under prolific_min_hourly_rate (in prolific_currency, an hour) is
+    # refused before any call (Prolific's own minimum: GBP 6.00 / USD 8.00 an hour). The fee:
+    # Prolific's service fee on rewards and bonuses (33.3 % at the time of writing).
+    prolific_token: str | None = Field(default=None, repr=False)
+    prolific_api_url: str = "https://api.prolific.com"
+    prolific_workspace_id: str | None = None
+    prolific_webhook_secret: str | None = Field(default=None, repr=False)
+    prolific_webhook_max_age_s: float = Field(default=300.0, gt=0)
+    prolific_min_hourly_rate: float = Field(default=6.0, ge=0)
+    prolific_currency: Literal["GBP", "USD"] = "GBP"
+    prolific_fee_rate: float = Field(default=0.333, ge=0, le=1)
     # Days an export's archive is kept in storage after the export finished; the hourly
     # clean-up job deletes older ones (0: keep them all).
     export_retention_days: float = Field(default=7.0, ge=0)

@@ -5,6 +5,7 @@ from backend.annotation.models import Assignment, Task, Track, TrainingClip
 from backend.captures.calibration import CalibrationVersion
 from backend.captures.models import Camera, Frame, Hand, SceneObject, Sequence, Subject
 from backend.crowd import models as crowd
+from backend.crowd.providers.prolific import models as prolific
 from backend.db import Base
 from backend.jobs.models import Job
 from backend.market import models as market
@@ -14,5 +15,5 @@ from backend.solve.models import SolveRun
 __all__ = [
     "Admin", "Assignment", "Base", "CalibrationVersion", "Camera", "Frame", "Hand", "Job",
     "PortalAccount", "PortalInvite", "QCReport", "SceneObject", "Sequence", "SolveRun",
-    "Subject", "Task", "Track", "TrainingClip", "crowd", "market",
+    "Subject", "Task", "Track", "TrainingClip", "crowd", "market", "prolific",
 ]

@@ -97,3 +97,48 @@ def api(crowd_url: str) -> Iterator[Any]:
     with TestClient(create_app()) as client:
         client.headers.update(admin_headers(client))
         yield client
+
+
+# ----- Prolific: the provider against the Prolific test double --------------------------------
+
+WEBHOOK_SECRET = "prolific-test-webhook-secret"
+
+
+@pytest.fixture
+def prolific_db_url(market_database_url: str) -> str:
+    """The database of a Prolific test (a migrated SQLite copy; a module may override it)."""
+    return market_database_url
+
+
+@pytest.fixture
+def prolific(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+             prolific_db_url: str) -> Iterator[Any]:
+    """The Prolific double served on loopback, and our settings pointing at it."""
+    from backend.migrate import upgrade
+    from tests.backend.crowd.prolific_double import TOKEN, ProlificDouble, serve
+
+    double = ProlificDouble()
+    double.secret = WEBHOOK_SECRET
+    with serve(double.app) as url:
+        double.url = url
+        env = {"DEXLABEL_VAR_DIR": str(tmp_path / "var"), "DEXLABEL_ENV": "test",
+               "DEXLABEL_DATABASE_URL": prolific_db_url,
+               "DEXLABEL_STORAGE_URL": str(tmp_path / "storage"),
+               "DEXLABEL_PROLIFIC_TOKEN": TOKEN, "DEXLABEL_PROLIFIC_API_URL": url,
+               "DEXLABEL_PROLIFIC_WORKSPACE_ID": "ws-test",
+               "DEXLABEL_PROLIFIC_WEBHOOK_SECRET": WEBHOOK_SECRET}
+        for key, value in env.items():
+            monkeypatch.setenv(key, value)
+        reset_caches()
+        upgrade(prolific_db_url)
+        yield double
+        reset_caches()
+
+
+@pytest.fixture
+def prolific_provider(prolific: Any) -> Any:
+    """Our Prolific provider as ``make`` builds it from the settings."""
+    from backend.config import get_settings
+    from backend.crowd.providers.prolific import make
+
+    return make(get_settings())
