@@ -1,7 +1,7 @@
 """prolific: our records of Taskflow studies, their units, bonuses, webhooks and the wallet lease
 
 Revision ID: 0022
-Revises: 0020
+Revises: 0021
 Create Date: 2026-12-04 14:00:00
 """
 

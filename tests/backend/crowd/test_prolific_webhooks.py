@@ -182,13 +182,11 @@ def test_the_app_serves_the_route_and_refuses_an_unsigned_event(prolific: Any) -
 def test_a_missed_webhook_is_caught_by_reading_the_submissions(
         prolific: Any, prolific_provider: Any, submitted: tuple[str, int]) -> None:
     """No delivery at all: the periodic sync's read of ``submissions()`` records it alike."""
-    from backend.crowd.providers.prolific.webhooks import sync_record
-    from backend.crowd.sync import accept_record
+    from backend.crowd.sync import sync
 
     submission, ours = submitted
     unit_id = f"{prolific.submissions[submission]['study_id']}:0"
-    (record,) = prolific_provider.submissions([unit_id])
     with session_scope() as session:
-        outcome, assignment = accept_record(session, sync_record(record))
-        assert (outcome, assignment.id if assignment else None) == ("accepted", ours)
+        result = sync(session, prolific_provider, [unit_id])
+        assert (result.accepted, result.accepted_ids) == (1, [ours])
     assert [status for _, _, status in recorded()] == ["Submitted"]

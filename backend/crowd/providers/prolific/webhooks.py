@@ -137,15 +137,9 @@ def _act(session: Session, kind: str, resource: str, event: dict[str, Any],
             return "unknown"
         if record.status not in COLLECTED:
             return record.status
-        outcome, _ = accept_record(session, sync_record(record))
+        outcome, _ = accept_record(session, record)
         return outcome
     return "ignored"
-
-
-def sync_record(record: SubmissionRecord) -> dict[str, str]:
-    """A provider's submission as ``crowd sync``'s check reads it."""
-    return {"AssignmentId": record.assignment_id, "HITId": record.unit_id,
-            "WorkerId": record.worker_id, "AssignmentStatus": record.status.capitalize()}
 
 
 def _seen(digest: str) -> bool:
