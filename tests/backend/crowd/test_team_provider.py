@@ -31,10 +31,13 @@ class Member:
         return httpx.request(method, f"{self.base}/api/portal{path}", timeout=10,
                              headers={"Authorization": f"Bearer {self.token}"})
 
-    def listed(self) -> list[str]:
+    def hits(self) -> list[dict[str, Any]]:
         resp = self.call("GET", "/hits")
         assert resp.status_code == 200, resp.text
-        return [hit["hit_id"] for hit in resp.json()]
+        return list(resp.json())
+
+    def listed(self) -> list[str]:
+        return [hit["hit_id"] for hit in self.hits()]
 
 
 @pytest.fixture
@@ -84,8 +87,9 @@ def test_a_unit_assigned_to_a_member_is_theirs_alone_and_pays_nothing_anywhere(
         spec("dxhit-7-1-assigned", reward_cents=40, assignee=amy.worker_id),
         spec("dxhit-8-1-open", task_id=8, note="dexlabel task 8 round 1")])
     assert (assigned.outcome, open_.outcome) == ("created", "created")
-    assert amy.listed() == [assigned.unit_id, open_.unit_id]
-    assert ben.listed() == [open_.unit_id]
+    assert [(h["hit_id"], h["assigned_to_me"]) for h in amy.hits()] == [
+        (assigned.unit_id, True), (open_.unit_id, False)]
+    assert [(h["hit_id"], h["assigned_to_me"]) for h in ben.hits()] == [(open_.unit_id, False)]
     assert ben.call("GET", f"/hits/{assigned.unit_id}").status_code == 404
     assert ben.call("POST", f"/hits/{assigned.unit_id}/accept").status_code == 403
 
