@@ -354,11 +354,15 @@ class Settings(BaseSettings):
 
     @property
     def market_requester_accounts(self) -> dict[str, MarketRequester]:
-        """The marketplace's requester accounts keyed by access key id: those of
+        """The marketplace's requester accounts keyed by access key id."""
+        return parse_market_requesters(self.market_requesters, self.market_start_balance)
+
+    @property
+    def market_accounts(self) -> dict[str, MarketRequester]:
+        """Every requester account the marketplace answers, keyed by access key id: those of
         DEXLABEL_MARKET_REQUESTERS and the team crowd's."""
         team = team_market_requester(self.signing_key)
-        return {**parse_market_requesters(self.market_requesters, self.market_start_balance),
-                team.access_key: team}
+        return {**self.market_requester_accounts, team.access_key: team}
 
     @property
     def is_sqlite(self) -> bool:

@@ -166,3 +166,21 @@ def test_the_team_uses_the_built_in_marketplace_whatever_the_mturk_endpoint_says
     get_settings.cache_clear()
     [unit] = make(get_settings()).publish([spec("dxhit-12-1-builtin")])
     assert members["amy"].listed() == [unit.unit_id]
+
+
+def test_the_team_account_is_the_marketplace_s_own_and_not_one_to_configure(
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pydantic import ValidationError
+
+    from backend.config import TEAM_MARKET_ACCESS_KEY, Settings
+
+    monkeypatch.setenv("DEXLABEL_ENV", "test")
+    monkeypatch.delenv("DEXLABEL_MARKET_REQUESTERS", raising=False)
+    settings = Settings()
+    team = settings.market_accounts[TEAM_MARKET_ACCESS_KEY]
+    assert team.unpaid and team.start_balance_cents == 0
+    assert TEAM_MARKET_ACCESS_KEY not in settings.market_requester_accounts
+    monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", f"{TEAM_MARKET_ACCESS_KEY}:a-secret-of-mine")
+    with pytest.raises(ValidationError, match="team crowd's own account"):
+        Settings()
