@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import Page, expect
 
-from backend.crowd.provider import Requirements, UnitSpec
+from backend.crowd.provider import CrowdProvider, Requirements, UnitSpec
 from tests.browser.conftest import LiveServer
 from tests.conftest import reset_caches
 
@@ -18,7 +18,7 @@ PASSWORD = "team member password"
 
 
 @pytest.fixture
-def team(live_server: LiveServer, monkeypatch: pytest.MonkeyPatch) -> Iterator[object]:
+def team(live_server: LiveServer, monkeypatch: pytest.MonkeyPatch) -> Iterator[CrowdProvider]:
     """The team provider on the live server's settings (its database and address)."""
     from backend.config import get_settings
     from backend.crowd.providers.team import make
@@ -45,7 +45,7 @@ def _sign_in(page: Page, server: LiveServer, email: str) -> None:
 
 
 def test_a_team_task_is_marked_for_its_assignee_and_hidden_from_the_others(
-    live_server: LiveServer, team, browser, output_dir: Path
+    live_server: LiveServer, team: CrowdProvider, browser, output_dir: Path
 ) -> None:
     server = live_server
     eve = _member(server, "team-eve@example.org")

@@ -49,6 +49,7 @@ from backend.crowd.models import CrowdQualification
 from backend.crowd.provider import (
     BonusOrder,
     Completion,
+    CrowdProvider,
     FeeSchedule,
     ProviderError,
     ProviderName,
@@ -336,7 +337,7 @@ def team_settings(settings: Settings) -> Settings:
         "mturk_access_key_id": team.access_key, "mturk_secret_access_key": team.secret_key})
 
 
-def make(settings: Settings) -> TeamProvider:
+def make(settings: Settings) -> CrowdProvider:
     """The team provider of this instance."""
     portal = public_url(settings).rstrip("/") + "/market/"
     return TeamProvider(make_client(team_settings(settings)), portal)

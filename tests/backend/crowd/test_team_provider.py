@@ -11,8 +11,15 @@ import pytest
 
 from backend.config import get_settings, team_market_requester
 from backend.crowd import client as requester
-from backend.crowd.provider import BonusOrder, ProviderRefused, Requirements, UnitSpec
-from backend.crowd.providers.team import TeamProvider, external_question, make
+from backend.crowd.provider import (
+    BonusOrder,
+    CrowdProvider,
+    ProviderError,
+    ProviderRefused,
+    Requirements,
+    UnitSpec,
+)
+from backend.crowd.providers.team import external_question, make
 from tests.backend.crowd.helpers import admin_headers
 from tests.backend.market.helpers import make_client, submit
 
@@ -58,8 +65,10 @@ def members(crowd_url: str) -> dict[str, Member]:
 
 
 @pytest.fixture
-def provider(crowd_url: str) -> TeamProvider:
-    return make(get_settings())
+def provider(crowd_url: str) -> CrowdProvider:
+    made = make(get_settings())
+    assert isinstance(made, CrowdProvider) and made.name == "team"
+    return made
 
 
 def spec(key: str, reward_cents: int = 0, assignee: str | None = None, **changes: Any) -> UnitSpec:
@@ -80,7 +89,7 @@ def team_client(base: str) -> Any:
 
 
 def test_a_unit_assigned_to_a_member_is_theirs_alone_and_pays_nothing_anywhere(
-    provider: TeamProvider, members: dict[str, Member], crowd_url: str
+    provider: CrowdProvider, members: dict[str, Member], crowd_url: str
 ) -> None:
     amy, ben = members["amy"], members["ben"]
     assigned, open_ = provider.publish([
@@ -125,7 +134,7 @@ def test_a_unit_assigned_to_a_member_is_theirs_alone_and_pays_nothing_anywhere(
 
 
 def test_publishing_again_recovers_the_unit_and_the_completion_is_the_portal(
-    provider: TeamProvider, members: dict[str, Member], crowd_url: str
+    provider: CrowdProvider, members: dict[str, Member], crowd_url: str
 ) -> None:
     first = provider.publish([spec("dxhit-9-1-again", assignee=members["ben"].worker_id)])
     again = provider.publish([spec("dxhit-9-1-again", assignee=members["ben"].worker_id)])
@@ -136,7 +145,7 @@ def test_publishing_again_recovers_the_unit_and_the_completion_is_the_portal(
 
 
 def test_a_reward_of_0_is_taken_for_team_units_and_refused_on_the_mturk_path(
-    provider: TeamProvider, crowd_url: str
+    provider: CrowdProvider, crowd_url: str
 ) -> None:
     [unit] = provider.publish([spec("dxhit-10-1-free")])
     assert team_client(crowd_url).get_hit(HITId=unit.unit_id)["HIT"]["Reward"] == "0.00"
@@ -148,7 +157,7 @@ def test_a_reward_of_0_is_taken_for_team_units_and_refused_on_the_mturk_path(
 
 
 def test_an_assignee_without_a_portal_account_or_a_locale_is_refused_before_any_call(
-    provider: TeamProvider, members: dict[str, Member]
+    provider: CrowdProvider, members: dict[str, Member]
 ) -> None:
     with pytest.raises(ProviderRefused, match="no portal account") as refused:
         provider.publish([spec("dxhit-11-1-x", assignee="A0NOBODY")])
@@ -184,3 +193,37 @@ def test_the_team_account_is_the_marketplace_s_own_and_not_one_to_configure(
     monkeypatch.setenv("DEXLABEL_MARKET_REQUESTERS", f"{TEAM_MARKET_ACCESS_KEY}:a-secret-of-mine")
     with pytest.raises(ValidationError, match="team crowd's own account"):
         Settings()
+
+
+def test_places_closing_blocks_and_groups_act_on_the_members_lists(
+    provider: CrowdProvider, members: dict[str, Member]
+) -> None:
+    amy, ben = members["amy"], members["ben"]
+    [unit] = provider.publish([spec("dxhit-13-1-life")])
+    provider.add_places(unit.unit_id, 1, "dxadd-13-1")
+    with pytest.raises(ProviderError) as replayed:  # the same key adds nothing more
+        provider.add_places(unit.unit_id, 1, "dxadd-13-1")
+    assert replayed.value.reason == "replayed"
+    state = provider.unit(unit.unit_id)
+    assert state is not None and (state.places, state.open) == (2, True)
+
+    provider.block(ben.worker_id, "left the lab")
+    assert (amy.listed(), ben.listed()) == ([unit.unit_id], [])
+    provider.unblock(ben.worker_id, None)
+    assert ben.listed() == [unit.unit_id]
+
+    provider.close(unit.unit_id)
+    assert provider.unit(unit.unit_id).open is False  # type: ignore[union-attr]
+    assert amy.listed() == []
+    provider.extend(unit.unit_id, 3600)
+    assert amy.listed() == [unit.unit_id]
+
+    group = provider.training_group()
+    assert provider.training_group() == group
+    [gated] = provider.publish([spec("dxhit-14-1-gated", requirements=Requirements(group=group))])
+    assert gated.unit_id not in ben.listed()
+    provider.grant(ben.worker_id, group, 1, notify=False)
+    assert gated.unit_id in ben.listed()
+    provider.revoke(ben.worker_id, group, "training to redo")
+    assert gated.unit_id not in ben.listed()
+    assert provider.unit("3NOSUCHHIT0000000000000000000") is None
