@@ -8,6 +8,8 @@ PostgreSQL, Redis and S3 (see docker-compose.yml).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import hmac
 import ipaddress
 import json
 import logging
@@ -53,11 +55,28 @@ _AMOUNT_RE = re.compile(r"[0-9]{1,10}(\.[0-9]{1,2})?")
 
 @dataclass(frozen=True)
 class MarketRequester:
-    """One requester account of the built-in marketplace: a SigV4 key pair and its funds."""
+    """One requester account of the built-in marketplace: a SigV4 key pair and its funds.
+    ``unpaid``: its HITs may offer a reward of 0 (the team crowd's account, below)."""
 
     access_key: str
     secret_key: str
     start_balance_cents: int
+    unpaid: bool = False
+
+
+# Team crowd provider: the lab's own annotators take its units in the worker portal, through the
+# built-in marketplace's one unpaid requester account. Its key pair is derived from the signing
+# key, which every process of the instance holds, so it needs no setting and nobody without that
+# key can use it; it starts with no funds and its HITs pay nothing (team pay is recorded in the
+# crowd ledger, never sent anywhere).
+TEAM_MARKET_ACCESS_KEY = "AKDEXLABELTEAMREQUESTER"
+
+
+def team_market_requester(signing_key: str) -> MarketRequester:
+    """The team crowd's requester account of the built-in marketplace."""
+    secret = hmac.new(signing_key.encode(), b"dexlabel team requester",
+                      hashlib.sha256).hexdigest()
+    return MarketRequester(TEAM_MARKET_ACCESS_KEY, secret, 0, unpaid=True)
 
 
 def _cents(amount: str) -> int:
@@ -319,6 +338,9 @@ class Settings(BaseSettings):
                 "several hosts, which must all sign with one key: set it on every host (e.g. "
                 "`openssl rand -hex 32`)")
         requesters = parse_market_requesters(self.market_requesters, self.market_start_balance)
+        if TEAM_MARKET_ACCESS_KEY in requesters:
+            raise ValueError(f"DEXLABEL_MARKET_REQUESTERS lists {TEAM_MARKET_ACCESS_KEY}, the team "
+                             "crowd's own account; choose another access key")
         if self.env == "prod":
             if DEV_MARKET_ACCESS_KEY in requesters:
                 raise ValueError("DEXLABEL_MARKET_REQUESTERS holds the dev key pair; set real ones")
@@ -352,6 +374,13 @@ class Settings(BaseSettings):
     def market_requester_accounts(self) -> dict[str, MarketRequester]:
         """The marketplace's requester accounts keyed by access key id."""
         return parse_market_requesters(self.market_requesters, self.market_start_balance)
+
+    @property
+    def market_accounts(self) -> dict[str, MarketRequester]:
+        """Every requester account the marketplace answers, keyed by access key id: those of
+        DEXLABEL_MARKET_REQUESTERS and the team crowd's."""
+        team = team_market_requester(self.signing_key)
+        return {**self.market_requester_accounts, team.access_key: team}
 
     @property
     def is_sqlite(self) -> bool:

@@ -64,7 +64,7 @@ def _type_properties(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     return {
         "title": params["Title"], "description": params["Description"],
         "keywords": params.get("Keywords"),
-        "reward_cents": _reward_cents(params["Reward"]),
+        "reward_cents": _reward_cents(call, params["Reward"]),
         "assignment_duration_s": params["AssignmentDurationInSeconds"],
         "auto_approval_delay_s": params.get(
             "AutoApprovalDelayInSeconds", DEFAULT_AUTO_APPROVAL_DELAY_S),
@@ -72,10 +72,12 @@ def _type_properties(call: Call, params: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _reward_cents(text: str) -> int:
-    """A HIT's reward in cents: at least one (an assignment that pays nothing is refused)."""
+def _reward_cents(call: Call, text: str) -> int:
+    """A HIT's reward in cents: at least one, as on MTurk (an assignment that pays nothing is
+    refused), except from an unpaid requester account (the team crowd's), whose HITs may pay
+    0."""
     cents = parse_amount(text, "Reward")
-    if cents < 1:
+    if cents < 1 and not call.requester.unpaid:
         raise invalid(f"Reward {text} is less than the smallest reward, 0.01")
     return cents
 

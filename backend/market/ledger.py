@@ -71,8 +71,10 @@ def require_funds(session: Session, requester: MarketRequester, cost_cents: int,
 
 
 def unit_cost(hit: Hit) -> int:
-    """Reward plus fee of one assignment of ``hit``."""
-    return assignment_cost(hit.hit_type.reward_cents, hit.max_assignments)
+    """Reward plus fee of one assignment of ``hit``; nothing for a HIT that pays nothing
+    (only an unpaid account's HITs may: the team crowd's, which holds and pays no money)."""
+    reward = hit.hit_type.reward_cents
+    return assignment_cost(reward, hit.max_assignments) if reward else 0
 
 
 def hold_slots(

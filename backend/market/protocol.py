@@ -96,7 +96,7 @@ def _parse_body(request: SignedRequest) -> Any:
 
 def _process(request: SignedRequest, request_id: str) -> dict[str, Any]:
     settings = get_settings()
-    requester = authenticate(request, settings.market_requester_accounts, datetime.now(UTC))
+    requester = authenticate(request, settings.market_accounts, datetime.now(UTC))
     name, model = _operation(request)
     params = _parse_body(request)
     found = validation.problems(model.input_shape, params)

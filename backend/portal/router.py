@@ -51,16 +51,19 @@ def _account_read(account: PortalAccount) -> AccountRead:
     return AccountRead(id=account.id, email=account.email, worker_id=account.worker_id)
 
 
-def _hit_reads(session: Session, listed: list[tuple[WorkerHit, MarketAssignment | None]]
-               ) -> list[HitRead]:
-    """Rows of a HIT list: each HIT with what it is about and the worker's own assignment on
-    it (if any)."""
-    facts = tasks.hit_facts(session, [view.hit for view, _ in listed])
-    return [_hit_read(view, facts[view.hit.hit_id], mine) for view, mine in listed]
+def _hit_reads(session: Session, worker_id: str,
+               listed: list[tuple[WorkerHit, MarketAssignment | None]]) -> list[HitRead]:
+    """Rows of a HIT list: each HIT with what it is about, whether it is assigned to this
+    worker alone, and the worker's own assignment on it (if any)."""
+    hits = [view.hit for view, _ in listed]
+    facts = tasks.hit_facts(session, hits)
+    assigned = service.assigned_to(session, worker_id, hits)
+    return [_hit_read(view, facts[view.hit.hit_id], mine, view.hit.hit_id in assigned)
+            for view, mine in listed]
 
 
 def _hit_read(view: WorkerHit, facts: TaskFacts | None,
-              mine: MarketAssignment | None = None) -> HitRead:
+              mine: MarketAssignment | None = None, assigned: bool = False) -> HitRead:
     hit_type = view.hit.hit_type
     task = None if facts is None else HitTaskRead(
         kind=facts.kind, target=facts.target, view=facts.serial, frames=facts.num_frames)
@@ -69,6 +72,7 @@ def _hit_read(view: WorkerHit, facts: TaskFacts | None,
                    assignment_duration_s=hit_type.assignment_duration_s,
                    available=view.state.available, expiration=view.hit.expiration,
                    can_accept=view.can_accept and mine is None, task=task,
+                   assigned_to_me=assigned,
                    thumbnail_url=None if facts is None else tasks.thumbnail_url(view.hit.hit_id),
                    mine=None if mine is None else HitMineRead(
                        assignment_id=mine.assignment_id, status=mine.status))
@@ -130,11 +134,12 @@ def list_hits(
     """Assignable HITs this worker qualifies for and has not worked on; each names its task
     (target, view, frames) and links a thumbnail of the view's first frame."""
     if mine:
-        return _hit_reads(session, [(listed.view, listed.mine) for listed
-                                    in service.worklist(session, worker.worker_id, clock.now())])
-    return _hit_reads(session, [(v, None) for v
-                                in service.list_hits(session, worker.worker_id, clock.now())
-                                if v.can_accept])
+        worklist = service.worklist(session, worker.worker_id, clock.now())
+        return _hit_reads(session, worker.worker_id,
+                          [(listed.view, listed.mine) for listed in worklist])
+    return _hit_reads(session, worker.worker_id,
+                      [(v, None) for v in service.list_hits(session, worker.worker_id, clock.now())
+                       if v.can_accept])
 
 
 @router.get("/hits/{hit_id}/thumbnail.jpg", response_class=Response,
@@ -157,7 +162,7 @@ def hit_thumbnail(
 @router.get("/hits/{hit_id}", response_model=HitPreview)
 def preview_hit(hit_id: Key, session: SessionDep, worker: CurrentWorker) -> HitPreview:
     view = service.preview(session, worker.worker_id, hit_id, clock.now())
-    return HitPreview(**_hit_reads(session, [(view, None)])[0].model_dump(),
+    return HitPreview(**_hit_reads(session, worker.worker_id, [(view, None)])[0].model_dump(),
                       preview_url=service.preview_url(view),
                       frame_height=service.frame_height(view.hit))
 

@@ -61,6 +61,8 @@ class HitRead(BaseModel):
     # The view's first frame, small; the URL works without a bearer header for 15 minutes.
     thumbnail_url: str | None = None
     mine: HitMineRead | None = None
+    # A team task assigned to this worker alone (others are not offered it).
+    assigned_to_me: bool = False
     description: str
     keywords: str | None
     reward: str

@@ -18,9 +18,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 from sqlalchemy.orm.exc import StaleDataError
 
+from backend.config import TEAM_MARKET_ACCESS_KEY
+from backend.crowd.providers.team import ASSIGNEE_PREFIX
 from backend.errors import Busy, Forbidden, NotFound
 from backend.market import lifecycle, workers
-from backend.market.models import Bonus, Hit, MarketAssignment
+from backend.market.models import Bonus, Hit, MarketAssignment, QualificationType
 from backend.market.questions import EXTERNAL_QUESTION_NS, external_url
 from backend.market.workers import WorkerHit
 
@@ -118,6 +120,19 @@ def _worklist(session: Session, worker_id: str, now: datetime) -> list[ListedHit
         (held if assignment.status == "Accepted" else submitted).append(
             ListedHit(view, assignment))
     return [*held, *available, *submitted]
+
+
+def assigned_to(session: Session, worker_id: str, hits: list[Hit]) -> set[str]:
+    """The ids of the team tasks among ``hits`` assigned to this worker alone: those that
+    require the worker's own assignee qualification type (backend.crowd.providers.team)."""
+    own = session.scalar(select(QualificationType.type_id).where(
+        QualificationType.requester == TEAM_MARKET_ACCESS_KEY,
+        QualificationType.name == ASSIGNEE_PREFIX + worker_id))
+    if own is None:
+        return set()
+    return {hit.hit_id for hit in hits
+            if any(req["QualificationTypeId"] == own
+                   for req in hit.hit_type.qualification_requirements)}
 
 
 def preview(session: Session, worker_id: str, hit_id: str, now: datetime) -> WorkerHit:

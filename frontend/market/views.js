@@ -12,18 +12,32 @@ export function taskFacts(task) {
 }
 
 /**
- * The worker's own mark on a HIT: a link back to an accepted assignment, or "submitted".
- * @param {{assignment_id: string, status: string} | null} mine
- * @returns {HTMLElement | null}
+ * The marks on a HIT's row, as data: "assigned to you" on a team task assigned to this worker
+ * alone, then the worker's own assignment (a link back to an accepted one, or "submitted").
+ * @param {{assigned_to_me?: boolean, mine: {assignment_id: string, status: string} | null}} hit
+ * @returns {{text: string, kind: string, href?: string}[]}
  */
-export function mineMark(mine) {
-  if (!mine) return null;
-  if (mine.status === "Accepted") {
-    return el("a", { class: "mark mark-accepted",
-      href: `#/work/${encodeURIComponent(mine.assignment_id)}` }, ["accepted · continue"]);
+export function hitMarks(hit) {
+  const marks = [];
+  if (hit.assigned_to_me) marks.push({ text: "assigned to you", kind: "assigned" });
+  const mine = hit.mine;
+  if (mine?.status === "Accepted") {
+    marks.push({ text: "accepted · continue", kind: "accepted",
+      href: `#/work/${encodeURIComponent(mine.assignment_id)}` });
+  } else if (mine) {
+    marks.push({ text: mine.status.toLowerCase(), kind: mine.status.toLowerCase() });
   }
-  return el("span", { class: `mark mark-${mine.status.toLowerCase()}` },
-    [mine.status.toLowerCase()]);
+  return marks;
+}
+
+/**
+ * One mark as an element: a link where it has one.
+ * @param {{text: string, kind: string, href?: string}} mark
+ * @returns {HTMLElement}
+ */
+function markElement(mark) {
+  const attrs = { class: `mark mark-${mark.kind}`, ...(mark.href ? { href: mark.href } : {}) };
+  return el(mark.href ? "a" : "span", attrs, [mark.text]);
 }
 
 /**
@@ -41,12 +55,12 @@ export function renderHits(body, hits) {
       ? el("img", { class: "thumb", src: hit.thumbnail_url, width: "96",
         alt: `first frame of view ${hit.task.view}` })
       : el("div", { class: "thumb thumb-none" });
-    const mark = mineMark(hit.mine);
+    const marks = hitMarks(hit).flatMap((mark) => [" ", markElement(mark)]);
     const row = el("tr", { "data-hit": hit.hit_id }, [
       el("td", { class: "thumb-cell" }, [thumb]),
       el("td", {}, [
         el("a", { href: link, class: "hit-title" }, [hit.title]),
-        el("div", { class: "facts" }, [taskFacts(hit.task), ...(mark ? [" ", mark] : [])]),
+        el("div", { class: "facts" }, [taskFacts(hit.task), ...marks]),
         el("div", { class: "muted" }, [hit.description]),
       ]),
       el("td", { class: "num" }, [dollars(hit.reward)]),

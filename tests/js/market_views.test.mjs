@@ -1,7 +1,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { fittedHeight, taskFacts } from "../../frontend/market/views.js";
+import { fittedHeight, hitMarks, taskFacts } from "../../frontend/market/views.js";
 
 test("the task frame fills the window below its top edge", () => {
   assert.equal(fittedHeight(700, 64), 630);
@@ -16,4 +16,15 @@ test("a HIT row names its target, view and frame count", () => {
   assert.equal(taskFacts({ target: "right hand", view: "800007060125", frames: 72 }),
     "right hand · view 800007060125 · 72 frames");
   assert.equal(taskFacts(null), "");
+});
+
+test("a team task assigned to the worker says so before their own assignment's mark", () => {
+  assert.deepEqual(hitMarks({ assigned_to_me: true,
+    mine: { assignment_id: "3AB", status: "Accepted" } }), [
+    { text: "assigned to you", kind: "assigned" },
+    { text: "accepted · continue", kind: "accepted", href: "#/work/3AB" },
+  ]);
+  assert.deepEqual(hitMarks({ assigned_to_me: false, mine: { assignment_id: "3AB",
+    status: "Submitted" } }), [{ text: "submitted", kind: "submitted" }]);
+  assert.deepEqual(hitMarks({ mine: null }), []);
 });
