@@ -22,6 +22,7 @@ from backend.accounts.deps import CurrentAdmin
 from backend.accounts.models import PortalAccount
 from backend.annotation.models import Assignment, Task
 from backend.captures.models import Camera
+from backend.config import get_settings
 from backend.crowd import pricing
 from backend.crowd.models import CrowdHit
 from backend.db import SessionDep
@@ -32,9 +33,17 @@ router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
 # What a unit published before providers were chosen was published to.
 DEFAULT_PROVIDER = "mturk"
+PROVIDERS = ("mturk", "prolific", "team")
 # Our status of work an admin closed: it holds no place, and its saved labels stay.
 CLOSED = "closed"
 Limit = Annotated[int, Query(ge=1, le=5000)]
+
+
+class ProvidersRead(BaseModel):
+    """The providers a task can be published to, and the one a publish uses unless told."""
+
+    default: str
+    choices: list[str]
 
 
 class UnitRead(BaseModel):
@@ -178,6 +187,13 @@ def team_accounts(session: Session, worker_id: str | None, offset: int,
         id=a.id, email=a.email, worker_id=a.worker_id, active=a.active, created_at=a.created_at,
         approved=counts[a.worker_id].get("approved", 0),
         rejected=counts[a.worker_id].get("rejected", 0)) for a in accounts]
+
+
+@router.get("/providers", response_model=ProvidersRead)
+def providers(_: CurrentAdmin) -> ProvidersRead:
+    """What the publish form offers, its default the setting ``DEXLABEL_CROWD_PROVIDER``."""
+    default = str(getattr(get_settings(), "crowd_provider", DEFAULT_PROVIDER))
+    return ProvidersRead(default=default, choices=list(PROVIDERS))
 
 
 @router.get("/units", response_model=list[UnitRead])

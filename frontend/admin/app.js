@@ -1,7 +1,8 @@
 /**
  * The admins' review page: sign in, pick a sequence, read its QC reports (waiting work first),
  * open one to see its per-point and per-frame errors and approve or reject it; worker quality,
- * the job table with retries, costs, and the overlays of finished solve runs.
+ * the job table with retries, costs, the crowd's units and the team's accounts, and the overlays
+ * of finished solve runs.
  */
 
 import { ApiError } from "../common/api.js";
@@ -9,6 +10,7 @@ import { $ } from "../common/dom.js";
 import { errorText, noticeLine, showNotice } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { AdminApi } from "./api.js";
+import { initCrowd, showCrowd } from "./crowd.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
@@ -19,11 +21,12 @@ import {
   barChart, renderCosts, renderFacts, renderReports, renderSequences,
   renderSwaps, renderWorkers,
 } from "./views.js";
+import { initTeam, showTeam } from "./team.js";
 import { crowdWorkers, initWorkers, openWorker } from "./workers.js";
 
 const api = new AdminApi(window.sessionStorage);
 const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
-  "costs-view", "queue-view"];
+  "costs-view", "queue-view", "crowd-view", "team-view"];
 
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
@@ -211,6 +214,8 @@ async function route() {
     } else if (where.view === "workers") await showWorkers(where.offset);
     else if (where.view === "jobs") await showJobs();
     else if (where.view === "costs") await showCosts();
+    else if (where.view === "crowd") await showCrowd().then(() => show("crowd-view"));
+    else if (where.view === "team") await showTeam().then(() => show("team-view"));
     else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
     else await showSequences(where.offset);
   } catch (err) {
@@ -281,6 +286,8 @@ function start() {
   initRig(api, fail);
   initProject(api, fail, route);
   initWorkers(api, fail);
+  initCrowd(api, fail);
+  initTeam(api, fail);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route });
 }
 

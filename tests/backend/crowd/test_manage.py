@@ -90,7 +90,12 @@ def test_closing_work_left_working_frees_its_place_and_keeps_its_labels(
 def test_the_crowd_views_are_for_admins_only(crowd_url: str) -> None:
     import httpx
 
-    for path in ("/api/crowd/units", "/api/crowd/team"):
+    for path in ("/api/crowd/units", "/api/crowd/team", "/api/crowd/providers"):
         assert httpx.get(crowd_url + path, timeout=30).status_code == 401
     assert httpx.post(crowd_url + "/api/crowd/assignments/1/close",
                       timeout=30).status_code == 401
+
+
+def test_the_publish_form_offers_each_provider_with_the_setting_as_default(api: Any) -> None:
+    got = api.get("/api/crowd/providers").json()
+    assert got == {"default": "mturk", "choices": ["mturk", "prolific", "team"]}
