@@ -48,8 +48,8 @@ export class ConfirmBox {
    * Ask before ``action``; its focus on Confirm.
    * @param {string} question
    * @param {() => Promise<void>} action
-   * @param {{detail?: string, yes?: string}} [options]  what the worker will read (quoted),
-   *   and Confirm's label
+   * @param {{detail?: string, yes?: string, danger?: boolean}} [options]  what the worker
+   *   will read (quoted), Confirm's label, and whether it takes something away (shown red)
    */
   ask(question, action, options = {}) {
     if (!this.open) {
@@ -61,6 +61,7 @@ export class ConfirmBox {
     this.detail.textContent = options.detail || "";
     this.detail.hidden = !options.detail;
     this.yes.textContent = options.yes || "Confirm";
+    this.yes.className = options.danger ? "danger" : "ok";
     this.box.hidden = false;
     this.yes.focus();
     this.box.scrollIntoView({ block: "nearest" });

@@ -42,13 +42,21 @@ function actionButton(hitId, action, label) {
     class: action === "expire" ? "danger" : "" }, [label]);
 }
 
+/** A time whose date and hour each stay whole where the column is narrow.
+ * @param {string|null} iso */
+function stamp(iso) {
+  const [day, hour = ""] = when(iso).split(" ");
+  return [el("span", { class: "nowrap" }, [day]), " ", el("span", { class: "nowrap" }, [hour])];
+}
+
 /** @param {any} u  a row of GET /api/crowd/units */
 function unitRow(u) {
   const open = u.state === "open";
   return el("tr", { "data-unit": u.hit_id, "data-task": String(u.task_id), "data-state": u.state,
     class: u.hit_id === state.open ? "selected" : "" }, [
-    el("td", { class: "clip", title: u.hit_id }, [el("button", { type: "button", class: "link",
-      "data-unit": u.hit_id, "data-action": "assignments" }, [u.hit_id]),
+    el("td", { class: "unit-id" }, [el("button", { type: "button", class: "link", title:
+      `${u.hit_id}: its assignments`, "data-unit": u.hit_id, "data-action": "assignments" },
+    [u.hit_id]),
     el("div", { class: "muted small" }, [`round ${u.round} · ${dollars(u.reward)}`])]),
     el("td", {}, [el("a", { href: `#/sequences/${u.sequence_id}` }, [`task ${u.task_id}`]),
       el("div", { class: "muted small" }, [`${u.serial} · ${u.target_key}`])]),
@@ -59,13 +67,11 @@ function unitRow(u) {
     el("td", { class: "num", "data-col": "holders" }, [String(u.holders)]),
     el("td", { class: "num", "data-col": "submitted" }, [String(u.submitted)]),
     el("td", { "data-col": "state" }, [badge(u.state, open ? "approve" : "reject")]),
-    el("td", { class: "nowrap", "data-col": "expiry" }, [open
-      ? el("span", { class: "muted", title: "the provider holds the expiry time" },
-        [`published ${when(u.published_at)}`])
-      : `expired ${when(u.expired_at)}`]),
-    el("td", { class: "unit-actions" }, [actionButton(u.hit_id, "extend", "Extend"),
-      actionButton(u.hit_id, "add", "Add places"),
-      open ? actionButton(u.hit_id, "expire", "Expire") : ""]),
+    el("td", { "data-col": "dates" }, [...stamp(u.published_at), open ? "" : el("div", {
+      class: "expired-at" }, ["expired ", ...stamp(u.expired_at)])]),
+    el("td", {}, [el("div", { class: "unit-actions" }, [
+      actionButton(u.hit_id, "extend", "Extend"), actionButton(u.hit_id, "add", "Add places"),
+      open ? actionButton(u.hit_id, "expire", "Expire") : ""])]),
   ]);
 }
 
@@ -148,7 +154,7 @@ function unitAction(hitId, action) {
   } else if (action === "expire") {
     state.confirm?.ask(`Expire ${hitId}? No one can take its free places any more; work `
       + "already taken can still be submitted.", () => send(`${hitId} is expired.`,
-      `${path}/expire`), { yes: "Expire" });
+      `${path}/expire`), { yes: "Expire", danger: true });
   }
 }
 
@@ -164,7 +170,7 @@ function askClose(assignmentId) {
     } catch (err) {
       showFailure($("crowd-result"), "Closing", err, state.fail);
     }
-  }, { yes: "Close it" });
+  }, { yes: "Close it", danger: true });
 }
 
 /**

@@ -125,7 +125,7 @@ export class ReviewQueue {
       say("", "info");
       this.confirm.ask(`Reject assignment ${assignmentId}? This is final for the worker: it `
         + "counts against their approval rate and pays nothing. They will read:",
-      () => this.run(kind, assignmentId, text, amount), { detail: text, yes: "Reject" });
+      () => this.run(kind, assignmentId, text, amount), { detail: text, yes: "Reject", danger: true });
       return;
     }
     await this.run(kind, assignmentId, text, amount);

@@ -88,40 +88,6 @@ def _posts(page: Page, path: str) -> list[dict]:
     return sent
 
 
-def test_publish_offers_each_provider_and_shows_the_cost_in_its_fees_first(
-    admin_page: Page, live_server: LiveServer, crowd: dict, output_dir: Path,  # noqa: F811
-) -> None:
-    page, sid = admin_page, crowd["sequence_id"]
-    page.goto(f"{live_server.base}/admin/#/sequences/{sid}")
-    provider = page.locator("#publish-provider")
-    expect(provider).to_have_value("mturk")
-    assert provider.locator("option").evaluate_all("o => o.map(x => x.value)") == [
-        "mturk", "prolific", "team"]
-    assignee = page.locator("#publish-assignee-field")
-    expect(assignee).to_be_hidden()
-    provider.select_option("team")
-    expect(assignee).to_be_visible()
-    provider.select_option("mturk")
-    expect(assignee).to_be_hidden()
-
-    sent = _posts(page, "/api/crowd/publish")
-    page.locator("#publish-reward").fill("0.40")
-    page.locator("#publish-approval").fill("")
-    page.locator("#publish-check").click()
-    cost = page.locator("#publish-cost")
-    expect(cost).to_contain_text(f"MTurk-compatible marketplace: {UNITS} HITs × 1 assignment "
-                                 "at $0.40 + $0.08 fee")
-    assert sent == [{"sequence_id": sid, "provider": "mturk", "reward": "0.40",
-                     "max_assignments": 1, "min_approval_rate": None, "dry_run": True}]
-    assert _units(live_server, sid) == []  # a dry run publishes nothing
-    _shots(page, output_dir, "publish")
-
-    page.locator("#publish-confirm").click()
-    expect(page.locator("#project-status")).to_contain_text(f"Published {UNITS} HITs")
-    assert sent[-1]["provider"] == "mturk" and "dry_run" not in sent[-1]
-    assert len(_units(live_server, sid)) == UNITS
-
-
 def test_team_view_makes_an_account_and_an_invite_a_member_registers_with(
     admin_page: Page, live_server: LiveServer, browser, crowd: dict,  # noqa: F811
     output_dir: Path,
@@ -159,6 +125,44 @@ def test_team_view_makes_an_account_and_an_invite_a_member_registers_with(
     page.locator("#nav-crowd").click()
     page.locator("#nav-team").click()
     expect(page.locator("#team-rows [data-col=email]", has_text=INVITED)).to_have_count(1)
+
+
+def test_publish_offers_each_provider_and_shows_the_cost_in_its_fees_first(
+    admin_page: Page, live_server: LiveServer, crowd: dict, output_dir: Path,  # noqa: F811
+) -> None:
+    page, sid = admin_page, crowd["sequence_id"]
+    page.goto(f"{live_server.base}/admin/#/sequences/{sid}")
+    provider = page.locator("#publish-provider")
+    expect(provider).to_have_value("mturk")
+    assert provider.locator("option").evaluate_all("o => o.map(x => x.value)") == [
+        "mturk", "prolific", "team"]
+    assignee = page.locator("#publish-assignee-field")
+    expect(assignee).to_be_hidden()
+    # The team: an assignee field, its choices the team's accounts.
+    provider.select_option("team")
+    expect(assignee).to_be_visible()
+    expect(page.locator(f'#publish-team option[value="{crowd["member"]}"]')).to_have_count(1)
+    page.locator("#publish-assignee").fill(crowd["member"])
+    _shots(page, output_dir, "publish-team")
+    provider.select_option("mturk")
+    expect(assignee).to_be_hidden()
+
+    sent = _posts(page, "/api/crowd/publish")
+    page.locator("#publish-reward").fill("0.40")
+    page.locator("#publish-approval").fill("")
+    page.locator("#publish-check").click()
+    cost = page.locator("#publish-cost")
+    expect(cost).to_contain_text(f"MTurk-compatible marketplace: {UNITS} HITs \u00d7 1 assignment "
+                                 "at $0.40 + $0.08 fee")
+    assert sent == [{"sequence_id": sid, "provider": "mturk", "reward": "0.40",
+                     "max_assignments": 1, "min_approval_rate": None, "dry_run": True}]
+    assert _units(live_server, sid) == []  # a dry run publishes nothing
+    _shots(page, output_dir, "publish")
+
+    page.locator("#publish-confirm").click()
+    expect(page.locator("#project-status")).to_contain_text(f"Published {UNITS} HITs")
+    assert sent[-1]["provider"] == "mturk" and "dry_run" not in sent[-1]
+    assert len(_units(live_server, sid)) == UNITS
 
 
 def _hold(server: LiveServer, hit_id: str, worker_id: str) -> int:
