@@ -67,6 +67,7 @@ def test_closing_work_left_working_frees_its_place_and_keeps_its_labels(
     api: Any, hit_ids: list[str],
 ) -> None:
     from backend.annotation.service import require_open_slot
+    from backend.annotation.tokens import assignment_token
 
     ours = _open_work(hit_ids[0], "AWORKERWALKEDAWAY")
     closed = api.post(f"/api/crowd/assignments/{ours}/close")
@@ -80,6 +81,15 @@ def test_closing_work_left_working_frees_its_place_and_keeps_its_labels(
         kept = session.get_one(Assignment, ours)
         assert kept.status == "closed"
         assert [t.keyframes for t in kept.tracks] == [[[0, 1.0, 2.0, 1]]]
+
+    # The worker's page can no longer change or submit it.
+    with session_scope() as session:
+        kept = session.get_one(Assignment, ours)
+        token = assignment_token(kept.task, kept)
+    saved = api.put("/api/annotate/tracks", headers={"Authorization": f"Bearer {token}"},
+                    json={"version": 0, "edit_count": 1, "working_time_s": 5.0, "tracks": []})
+    assert saved.status_code == 409, saved.text
+    assert "assignment is closed" in saved.json()["detail"]
 
     again = api.post(f"/api/crowd/assignments/{ours}/close")
     assert again.status_code == 409
