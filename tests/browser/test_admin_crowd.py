@@ -2,9 +2,9 @@
 provider (the team with an assignee) and shows the cost in that provider's fees before
 anything is published; the Team view makes an account and an invite link (its token in the
 fragment) that a new member registers with; the Crowd view shows each unit's places, holders
-and state as the API gives them, adds a place to one unit, expires another once confirmed,
-and closes work left "working"; in the review queue R asks before it rejects, and R alone
-sends nothing. Screenshots of each view at 1440x900 and 1024x700.
+and state as the API gives them, adds a place to one unit, expires another once confirmed
+(and extends it open again), and closes work left "working"; in the review queue R asks
+before it rejects, and R alone sends nothing. Screenshots of each view at 1440x900 and 1024x700.
 
 The capture is its own (seed 23), imported into the live server; its units are expired and
 its sequence deleted when the module ends, so the other browser tests see the server as
@@ -224,6 +224,11 @@ def test_crowd_view_adds_a_place_expires_a_unit_and_closes_work_left_working(
         "data-state", "expired")
     for unit in _units(server, sid):
         _row_matches_the_api(page, unit)
+    # Extended, an expired unit is open again, for 24 h from now.
+    page.locator(f'#unit-rows tr[data-unit="{expired}"] button[data-action="extend"]').click()
+    expect(page.locator("#crowd-result")).to_have_text(f"{expired} stays open 24 h from now.")
+    expect(page.locator(f'#unit-rows tr[data-unit="{expired}"]')).to_have_attribute(
+        "data-state", "open")
 
     # The unit's assignments: the member's work, still "working", with their email; closed.
     page.locator(f'#unit-rows tr[data-unit="{held}"] button[data-action="assignments"]').click()
@@ -239,6 +244,7 @@ def test_crowd_view_adds_a_place_expires_a_unit_and_closes_work_left_working(
         .to_have_text("0")
     listed = server.admin("GET", f"/api/crowd/units/{held}/assignments")
     assert [a["status"] for a in listed] == ["closed"]  # type: ignore[index]
+    _shots(page, output_dir, "units-closed")
 
 
 def _waiting_report(server: LiveServer, task_id: int) -> int:
