@@ -214,7 +214,10 @@ async function route() {
     } else if (where.view === "workers") await showWorkers(where.offset);
     else if (where.view === "jobs") await showJobs();
     else if (where.view === "costs") await showCosts();
-    else if (where.view === "crowd") await showCrowd().then(() => show("crowd-view"));
+    else if (where.view === "crowd") {
+      await showCrowd(where.sequence);
+      show("crowd-view");
+    }
     else if (where.view === "team") await showTeam().then(() => show("team-view"));
     else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
     else await showSequences(where.offset);

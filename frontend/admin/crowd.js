@@ -20,6 +20,8 @@ const state = {
   /** @type {(err: unknown) => void} */ fail: () => {},
   /** @type {ConfirmBox|null} */ confirm: null,
   /** The units listed. @type {any[]} */ units: [],
+  /** The sequence whose units are listed (null: every sequence's). @type {number|null} */
+  sequence: null,
   /** The unit whose assignments are open. @type {string|null} */ open: null,
 };
 
@@ -75,9 +77,16 @@ function unitRow(u) {
   ]);
 }
 
-/** The units, of every task, newest task first. */
-export async function showCrowd() {
-  state.units = await api().request("GET", "/crowd/units?limit=1000");
+/**
+ * The units, newest task first: a sequence's, or (null) the newest thousand tasks' of all.
+ * @param {number|null} [sequenceId]  the shown sequence's when not given
+ */
+export async function showCrowd(sequenceId = state.sequence) {
+  const only = sequenceId === null ? "" : `&sequence_id=${sequenceId}`;
+  state.units = await api().request("GET", `/crowd/units?limit=1000${only}`);
+  state.sequence = sequenceId;
+  $("crowd-title").textContent = sequenceId === null ? "Crowd" : `Crowd · sequence #${sequenceId}`;
+  $("crowd-all").hidden = sequenceId === null;
   $("unit-rows").replaceChildren(...state.units.map(unitRow));
   $("no-units").hidden = state.units.length > 0;
   if (state.open && !state.units.some((u) => u.hit_id === state.open)) closeUnit();

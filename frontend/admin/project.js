@@ -99,6 +99,7 @@ export async function showProgress(sequenceId) {
   $("progress-grid").hidden = p.tasks.length === 0;
   $("no-tasks").hidden = p.tasks.length > 0;
   $("progress-summary").replaceChildren(progressSummary(p));
+  $("sequence-units").setAttribute("href", `#/crowd/${sequenceId}`);
   return p;
 }
 

@@ -197,7 +197,11 @@ def test_crowd_view_adds_a_place_expires_a_unit_and_closes_work_left_working(
     page, server, sid = admin_page, live_server, crowd["sequence_id"]
     held, grown, expired = [u["hit_id"] for u in _units(server, sid)][:3]
     ours = _hold(server, held, crowd["member"])
-    page.locator("#nav-crowd").click()
+    # From the sequence's page to its units, and only its units.
+    page.goto(f"{server.base}/admin/#/sequences/{sid}")
+    page.locator("#sequence-units").click()
+    expect(page.locator("#crowd-title")).to_have_text(f"Crowd \u00b7 sequence #{sid}")
+    expect(page.locator("#unit-rows tr")).to_have_count(UNITS)
     for unit in _units(server, sid):
         _row_matches_the_api(page, unit)
     by_id = {u["hit_id"]: u for u in _units(server, sid)}

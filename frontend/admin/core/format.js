@@ -171,7 +171,7 @@ export function barLayout(values, labels, size = {}) {
 /**
  * The page's place from its hash: #/sequences, #/sequences/from/<offset>, #/sequences/<id>,
  * #/sequences/<id>/reports/<assignment>, #/workers, #/workers/from/<offset>, #/jobs, #/costs,
- * #/crowd, #/team.
+ * #/crowd, #/crowd/<sequence id> (its units only), #/team.
  * ``offset``: where the page of a paged listing (sequences, workers) starts; 0 elsewhere.
  * @param {string} hash
  * @returns {Route}
@@ -184,7 +184,8 @@ export function parseRoute(hash) {
   const none = { sequence: null, assignment: null, offset: 0 };
   const offset = seq === "from" ? Math.min(id(sub) ?? 0, MAX_OFFSET) : 0;
   if (view === "workers") return { view, ...none, offset };
-  if (["jobs", "costs", "crowd", "team"].includes(view)) {
+  if (view === "crowd") return { view, ...none, sequence: id(seq) };
+  if (["jobs", "costs", "team"].includes(view)) {
     return { view: /** @type {Route["view"]} */ (view), ...none };
   }
   const sequence = view === "sequences" ? id(seq) : null;
