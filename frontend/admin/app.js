@@ -10,8 +10,10 @@ import { $ } from "../common/dom.js";
 import { errorText, noticeLine, showNotice } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { AdminApi } from "./api.js";
+import { ConfirmBox } from "./confirm.js";
 import { initCrowd, showCrowd } from "./crowd.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
+import { rejectQuestion } from "./core/queue-core.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import { initProject, sequencesProgress, showJobRows, showProgress } from "./project.js";
@@ -31,6 +33,8 @@ const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", 
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
 const queue = new ReviewQueue(api, fail);
+/** Asks before a report's Reject. */
+const rejectBox = new ConfirmBox($("decision-confirm"), fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
 const state = {
@@ -134,14 +138,21 @@ async function showReport(assignmentId) {
   await showReviewIn($("report-review"), api, report.assignment_id);
 }
 
-/** @param {"approve"|"reject"} kind */
-async function decide(kind) {
+/** @param {"approve"|"reject"} kind  @param {boolean} [confirmed]  a rejection was confirmed */
+async function decide(kind, confirmed = false) {
   const assignmentId = Number($("approve").dataset.assignment);
   const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback")).value.trim();
   const say = (/** @type {string} */ text, /** @type {"info"|"error"} */ kind) =>
     showNotice($("decision-result"), text, kind);
   if (kind === "reject" && !feedback) {
     say("A rejection needs feedback: tell the worker what was wrong.", "error");
+    return;
+  }
+  if (kind === "reject" && !confirmed) {
+    // Final for the worker (their approval rate, their pay): asked first, nothing sent before.
+    say("", "info");
+    rejectBox.ask(rejectQuestion(assignmentId), () => decide("reject", true),
+      { detail: feedback, yes: "Reject", danger: true });
     return;
   }
   const buttons = [$("approve"), $("reject")].map((b) => /** @type {HTMLButtonElement} */ (b));

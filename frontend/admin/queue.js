@@ -12,7 +12,7 @@ import { $, el } from "../common/dom.js";
 import { errorText, showNotice } from "../common/notice.js";
 import {
   bonusPaidText, decidedText, decisionProblem, itemToOpen, movedTo, nextAfterDecision,
-  queueKeyAction, queueRowText, queueTally,
+  queueKeyAction, queueRowText, queueTally, rejectQuestion,
 } from "./core/queue-core.js";
 import { evidenceFeedback } from "./core/replay.js";
 import { ConfirmBox } from "./confirm.js";
@@ -123,9 +123,8 @@ export class ReviewQueue {
       // A rejection is final for the worker (their approval rate, their pay): asked first,
       // with the feedback they will read; nothing is sent before Confirm.
       say("", "info");
-      this.confirm.ask(`Reject assignment ${assignmentId}? This is final for the worker: it `
-        + "counts against their approval rate and pays nothing. They will read:",
-      () => this.run(kind, assignmentId, text, amount), { detail: text, yes: "Reject", danger: true });
+      this.confirm.ask(rejectQuestion(assignmentId), () => this.run(kind, assignmentId, text,
+        amount), { detail: text, yes: "Reject", danger: true });
       return;
     }
     await this.run(kind, assignmentId, text, amount);
