@@ -26,6 +26,7 @@ from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.config import get_settings
 from backend.crowd.providers.prolific.webhooks import router as prolific_webhook_router
+from backend.crowd.manage import router as crowd_manage_router
 from backend.crowd.router import page_router as crowd_page_router
 from backend.crowd.router import router as crowd_router
 from backend.db import get_engine, install_request_limits
@@ -81,6 +82,7 @@ def create_app() -> FastAPI:
     app.include_router(pipeline_page_router)
     app.include_router(crowd_router)
     app.include_router(prolific_webhook_router)
+    app.include_router(crowd_manage_router)
     app.include_router(pipeline_router)
     app.include_router(jobs_router)
     app.include_router(review_router)

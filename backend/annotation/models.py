@@ -62,7 +62,8 @@ class Assignment(TimestampMixin, Base):
         # A task's work, and its work in one state (the approved labels, the submitted work).
         Index("ix_assignments_task_id_status", "task_id", "status"),
         CheckConstraint("version >= 0", name="version_nonnegative"),
-        one_of("status", ("working", "submitted", "approved", "rejected")),
+        # "closed": work an admin closed while it was still being done (its labels kept).
+        one_of("status", ("working", "submitted", "approved", "rejected", "closed")),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)

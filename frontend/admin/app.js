@@ -1,7 +1,8 @@
 /**
  * The admins' review page: sign in, pick a sequence, read its QC reports (waiting work first),
  * open one to see its per-point and per-frame errors and approve or reject it; worker quality,
- * the job table with retries, costs, and the overlays of finished solve runs.
+ * the job table with retries, costs, the crowd's units and the team's accounts, and the overlays
+ * of finished solve runs.
  */
 
 import { ApiError } from "../common/api.js";
@@ -9,7 +10,10 @@ import { $ } from "../common/dom.js";
 import { errorText, noticeLine, showNotice } from "../common/notice.js";
 import { startSession } from "../common/session.js";
 import { AdminApi } from "./api.js";
+import { ConfirmBox } from "./confirm.js";
+import { initCrowd, showCrowd } from "./crowd.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
+import { rejectQuestion } from "./core/queue-core.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import { initProject, sequencesProgress, showJobRows, showProgress } from "./project.js";
@@ -19,15 +23,18 @@ import {
   barChart, renderCosts, renderFacts, renderReports, renderSequences,
   renderSwaps, renderWorkers,
 } from "./views.js";
+import { initTeam, showTeam } from "./team.js";
 import { crowdWorkers, initWorkers, openWorker } from "./workers.js";
 
 const api = new AdminApi(window.sessionStorage);
 const VIEWS = ["login-view", "sequences-view", "sequence-view", "workers-view", "jobs-view",
-  "costs-view", "queue-view"];
+  "costs-view", "queue-view", "crowd-view", "team-view"];
 
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
 const queue = new ReviewQueue(api, fail);
+/** Asks before a report's Reject. */
+const rejectBox = new ConfirmBox($("decision-confirm"), fail);
 
 /** What the sequence view shows, kept so the outcome filter re-renders without a request. */
 const state = {
@@ -131,14 +138,21 @@ async function showReport(assignmentId) {
   await showReviewIn($("report-review"), api, report.assignment_id);
 }
 
-/** @param {"approve"|"reject"} kind */
-async function decide(kind) {
+/** @param {"approve"|"reject"} kind  @param {boolean} [confirmed]  a rejection was confirmed */
+async function decide(kind, confirmed = false) {
   const assignmentId = Number($("approve").dataset.assignment);
   const feedback = /** @type {HTMLTextAreaElement} */ ($("decision-feedback")).value.trim();
   const say = (/** @type {string} */ text, /** @type {"info"|"error"} */ kind) =>
     showNotice($("decision-result"), text, kind);
   if (kind === "reject" && !feedback) {
     say("A rejection needs feedback: tell the worker what was wrong.", "error");
+    return;
+  }
+  if (kind === "reject" && !confirmed) {
+    // Final for the worker (their approval rate, their pay): asked first, nothing sent before.
+    say("", "info");
+    rejectBox.ask(rejectQuestion(assignmentId), () => decide("reject", true),
+      { detail: feedback, yes: "Reject", danger: true });
     return;
   }
   const buttons = [$("approve"), $("reject")].map((b) => /** @type {HTMLButtonElement} */ (b));
@@ -211,6 +225,11 @@ async function route() {
     } else if (where.view === "workers") await showWorkers(where.offset);
     else if (where.view === "jobs") await showJobs();
     else if (where.view === "costs") await showCosts();
+    else if (where.view === "crowd") {
+      await showCrowd(where.sequence);
+      show("crowd-view");
+    }
+    else if (where.view === "team") await showTeam().then(() => show("team-view"));
     else if (where.sequence !== null) await showSequence(where.sequence, where.assignment);
     else await showSequences(where.offset);
   } catch (err) {
@@ -281,6 +300,8 @@ function start() {
   initRig(api, fail);
   initProject(api, fail, route);
   initWorkers(api, fail);
+  initCrowd(api, fail);
+  initTeam(api, fail);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route });
 }
 

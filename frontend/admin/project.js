@@ -1,13 +1,15 @@
 /**
  * Project control on the admin page: import a capture, each sequence's progress (a summary
  * per listed sequence, the view x target grid on its page), create its tasks, publish them
- * with the count and cost shown first; the job table's filters and whole results. Each
+ * to the provider chosen (the team: to a member or to all) with the count and the cost in its
+ * fees shown first; the job table's filters and whole results. Each
  * worker's record is workers.js's.
  */
 
 import { $, el } from "../common/dom.js";
 import { showFailure, showNotice } from "../common/notice.js";
-import { JOB_STATUSES, costLine, jobQuery } from "./core/project-format.js";
+import { PROVIDERS } from "./core/crowd-format.js";
+import { JOB_STATUSES, costLine, inCurrency, jobQuery } from "./core/project-format.js";
 import { progressSummary, renderJobs, renderProgressGrid } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
@@ -91,11 +93,13 @@ export async function showProgress(sequenceId) {
     forgetPlan();
     say("project-status", "");
   }
-  const p = await api().request("GET", `/sequences/${sequenceId}/progress`);
+  const [p] = await Promise.all([api().request("GET", `/sequences/${sequenceId}/progress`),
+    fillProviders()]);
   renderProgressGrid(/** @type {HTMLTableElement} */ ($("progress-grid")), p);
   $("progress-grid").hidden = p.tasks.length === 0;
   $("no-tasks").hidden = p.tasks.length > 0;
   $("progress-summary").replaceChildren(progressSummary(p));
+  $("sequence-units").setAttribute("href", `#/crowd/${sequenceId}`);
   return p;
 }
 
@@ -114,14 +118,39 @@ async function createTasks() {
   }
 }
 
-/** The publish options of the form, as the API takes them. */
+/** The publish options of the form, as the API takes them: the provider chosen, and for the
+ * team the member it is assigned to (none: open to the whole team). */
 function publishOptions() {
   const approval = input("publish-approval").value.trim();
+  const provider = input("publish-provider").value;
+  const assignee = provider === "team" ? input("publish-assignee").value.trim() : "";
   return {
-    sequence_id: state.sequence, reward: input("publish-reward").value.trim(),
+    sequence_id: state.sequence, provider, reward: input("publish-reward").value.trim(),
     max_assignments: Number(input("publish-assignments").value),
     min_approval_rate: approval === "" ? null : Number(approval),
+    ...(assignee ? { assignee } : {}),
   };
+}
+
+/** The providers to choose from, the setting's default chosen (asked once). */
+async function fillProviders() {
+  const select = /** @type {HTMLSelectElement} */ ($("publish-provider"));
+  if (select.options.length) return;
+  const offered = await api().request("GET", "/crowd/providers");
+  select.replaceChildren(...PROVIDERS.filter(([key]) => offered.choices.includes(key))
+    .map(([key, name]) => el("option", { value: key }, [name])));
+  select.value = offered.default;
+}
+
+/** The assignee field shows for the team only, its choices the team's accounts. */
+async function providerChanged() {
+  forgetPlan();
+  const team = input("publish-provider").value === "team";
+  $("publish-assignee-field").hidden = !team;
+  if (!team || $("publish-team").childElementCount) return;
+  const members = await api().request("GET", "/crowd/team");
+  $("publish-team").replaceChildren(...members.map((/** @type {any} */ m) =>
+    el("option", { value: m.worker_id }, [m.email])));
 }
 
 function forgetPlan() {
@@ -139,7 +168,10 @@ async function checkCost() {
   const options = publishOptions();
   try {
     const plan = await api().request("POST", "/crowd/publish", { ...options, dry_run: true });
-    $("publish-cost").textContent = costLine(plan);
+    const provider = /** @type {HTMLSelectElement} */ ($("publish-provider"));
+    $("publish-cost").textContent = plan.cost.hits
+      ? `${provider.selectedOptions[0]?.textContent}: ${costLine(plan)}` : costLine(plan);
+    $("publish-cost").dataset.provider = provider.value;
     $("publish-cost").dataset.hits = String(plan.cost.hits);
     $("publish-cost").dataset.total = plan.cost.total;
     say("project-status", "");
@@ -148,7 +180,8 @@ async function checkCost() {
       state.plannedHits = plan.cost.hits;
       const button = /** @type {HTMLButtonElement} */ ($("publish-confirm"));
       button.disabled = false;
-      button.textContent = `Publish ${plan.cost.hits} HITs for $${plan.cost.total}`;
+      button.textContent = `Publish ${plan.cost.hits} HITs for `
+        + inCurrency(plan.cost.total, plan.cost.currency);
     }
   } catch (err) {
     failed("project-status", "Checking the cost", err);
@@ -171,7 +204,7 @@ async function publish() {
       done.already_published ? `${done.already_published} already published` : ""]
       .filter(Boolean).join(", ");
     say("project-status", `Published ${done.created} HITs${extra ? ` (${extra})` : ""} `
-      + `for $${done.cost.total}.`);
+      + `for ${inCurrency(done.cost.total, done.cost.currency)}.`);
     $("project-status").dataset.created = String(done.created);
     await showProgress(Number(state.sequence));
   } catch (err) {
@@ -223,9 +256,11 @@ export function initProject(client, fail, refresh) {
   $("create-tasks").addEventListener("click", createTasks);
   $("publish-check").addEventListener("click", checkCost);
   $("publish-confirm").addEventListener("click", publish);
-  for (const id of ["publish-reward", "publish-assignments", "publish-approval"]) {
+  for (const id of ["publish-reward", "publish-assignments", "publish-approval",
+    "publish-assignee"]) {
     $(id).addEventListener("input", forgetPlan);
   }
+  $("publish-provider").addEventListener("change", () => providerChanged().catch(fail));
   $("job-status").replaceChildren(el("option", { value: "" }, ["all"]),
     ...JOB_STATUSES.map((s) => el("option", { value: s }, [s])));
   for (const id of ["job-status", "job-kind"]) {

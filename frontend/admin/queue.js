@@ -1,9 +1,10 @@
 /**
  * The review queue (#/queue, #/queue/{assignment_id}): every report waiting for an admin
  * across sequences, worst first; the open one replayed in the review panel, decided with the
- * keyboard: A approve, R reject (with the feedback shown, prefilled from the evidence), B pay a
- * bonus, J or N next, K previous, Space play or pause, ← → step frames. Keys are ignored
- * while typing in a field. After a decision the next waiting report opens.
+ * keyboard: A approve, R reject (asked first, with the feedback shown, prefilled from the
+ * evidence; Enter confirms, Escape cancels), B pay a bonus, J or N next, K previous, Space
+ * play or pause, ← → step frames. Keys are ignored while typing in a field or while a
+ * rejection is asked about. After a decision the next waiting report opens.
  */
 
 import { ApiError } from "../common/api.js";
@@ -11,9 +12,10 @@ import { $, el } from "../common/dom.js";
 import { errorText, showNotice } from "../common/notice.js";
 import {
   bonusPaidText, decidedText, decisionProblem, itemToOpen, movedTo, nextAfterDecision,
-  queueKeyAction, queueRowText, queueTally,
+  queueKeyAction, queueRowText, queueTally, rejectQuestion,
 } from "./core/queue-core.js";
 import { evidenceFeedback } from "./core/replay.js";
+import { ConfirmBox } from "./confirm.js";
 import { ReviewPanel } from "./review.js";
 import { badge } from "./views.js";
 
@@ -64,6 +66,8 @@ export class ReviewQueue {
     this.api = api;
     this.fail = fail;
     /** @type {ReviewPanel|null} */ this.panel = null;
+    /** Asks before a rejection. */
+    this.confirm = new ConfirmBox($("queue-confirm"), fail);
     /** @type {any[]} */ this.items = [];
     /** @type {number|null} */ this.current = null;
     this.busy = false;
@@ -115,6 +119,24 @@ export class ReviewQueue {
       say(problem, "error");
       return;
     }
+    if (kind === "reject") {
+      // A rejection is final for the worker (their approval rate, their pay): asked first,
+      // with the feedback they will read; nothing is sent before Confirm.
+      say("", "info");
+      this.confirm.ask(rejectQuestion(assignmentId), () => this.run(kind, assignmentId, text,
+        amount), { detail: text, yes: "Reject", danger: true });
+      return;
+    }
+    await this.run(kind, assignmentId, text, amount);
+  }
+
+  /**
+   * Send a decision already checked (and for a rejection, confirmed).
+   * @param {"approve"|"reject"|"bonus"} kind @param {number} assignmentId
+   * @param {string} text  feedback  @param {string} amount  a bonus, dollars
+   */
+  async run(kind, assignmentId, text, amount) {
+    if (this.busy || this.current !== assignmentId) return;
     this.busy = true;
     disableDecisions(true);
     try {
@@ -152,7 +174,9 @@ export class ReviewQueue {
 
   /** @param {KeyboardEvent} e */
   onKey(e) {
-    if ($("queue-view").hidden || e.ctrlKey || e.metaKey || e.altKey) return;
+    if ($("queue-view").hidden || this.confirm.open || e.ctrlKey || e.metaKey || e.altKey) {
+      return;
+    }
     const target = /** @type {HTMLElement} */ (e.target);
     if (target.closest("input, textarea, select, [contenteditable]")) return;
     const action = queueKeyAction(e.key);
@@ -174,8 +198,10 @@ export class ReviewQueue {
     window.addEventListener("resize", () => this.panel?.layout());
   }
 
-  /** Stop the replay when the page leaves the queue. */
+  /** Stop the replay when the page leaves the queue (or moves on): a question still asked
+   * is dropped. */
   leave() {
+    if (this.confirm.open) this.confirm.cancel();
     this.panel?.close();
   }
 }

@@ -7,6 +7,8 @@
 import { $, el } from "../common/dom.js";
 import { dollars } from "../common/format.js";
 import { showFailure, showNotice } from "../common/notice.js";
+import { ConfirmBox } from "./confirm.js";
+import { workerName } from "./core/crowd-format.js";
 import { renderWorkerDetail } from "./views.js";
 
 /** @typedef {import("./api.js").AdminApi} AdminApi */
@@ -17,8 +19,7 @@ const state = {
   /** @type {AdminApi|null} */ api: null,
   /** @type {(err: unknown) => void} */ fail: () => {},
   /** The worker whose record is open. @type {string|null} */ worker: null,
-  /** What the confirmation under a worker's record would do when confirmed. */
-  /** @type {(() => Promise<void>)|null} */ pending: null,
+  /** The question under a worker's record. @type {ConfirmBox|null} */ confirm: null,
   /** Names the bonus the form describes: the same bonus confirmed again (after an error)
    * pays once; changing the assignment, amount or reason makes it another bonus. */
   bonusKey: newKey(),
@@ -58,9 +59,12 @@ export function openWorker() {
 
 /** @param {string} workerId */
 async function showWorker(workerId) {
-  const w = await api().request("GET", `/crowd/workers/${encodeURIComponent(workerId)}`);
+  const id = encodeURIComponent(workerId);
+  const [w, accounts] = await Promise.all([api().request("GET", `/crowd/workers/${id}`),
+    api().request("GET", `/crowd/team?worker_id=${id}`)]);
   state.worker = workerId;
-  $("worker-title").textContent = w.worker_id;
+  // A portal account's email beside the provider's worker id: who the team member is.
+  $("worker-title").textContent = workerName(w.worker_id, accounts[0]?.email);
   renderWorkerDetail({ facts: $("worker-facts"), chart: $("worker-chart"),
     assignments: $("worker-assignments"),
     bonusFor: /** @type {HTMLSelectElement} */ ($("bonus-assignment")) }, w);
@@ -80,22 +84,12 @@ async function showWorker(workerId) {
  * @param {string} question  @param {() => Promise<void>} action
  */
 function confirmFirst(question, action) {
-  state.pending = action;
-  $("worker-confirm-text").textContent = question;
-  $("worker-confirm").hidden = false;
   say("");
-  $("worker-confirm-yes").focus();
+  state.confirm?.ask(question, action);
 }
 
 function cancelConfirm() {
-  state.pending = null;
-  $("worker-confirm").hidden = true;
-}
-
-async function confirmed() {
-  const action = state.pending;
-  cancelConfirm();
-  if (action) await action();
+  if (state.confirm?.open) state.confirm.cancel();
 }
 
 /** @param {"block"|"unblock"} kind */
@@ -192,6 +186,5 @@ export function initWorkers(client, fail) {
   for (const id of ["bonus-assignment", "bonus-amount", "bonus-reason"]) {
     $(id).addEventListener("input", () => { state.bonusKey = newKey(); });
   }
-  $("worker-confirm-yes").addEventListener("click", () => confirmed().catch(fail));
-  $("worker-confirm-no").addEventListener("click", cancelConfirm);
+  state.confirm = new ConfirmBox($("worker-confirm"), fail);
 }

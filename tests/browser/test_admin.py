@@ -388,6 +388,10 @@ def test_admin_rejects_marketplace_work_with_edited_feedback_and_nothing_is_spen
     why = "The index tip drifts off the finger in the last frames; please recheck them."
     page.locator("#decision-feedback").fill(why)
     page.locator("#reject").click()
+    # Asked first, with the feedback the worker will read; nothing sent before Reject.
+    expect(page.locator("#decision-confirm-detail")).to_have_text(why)
+    assert server.admin("GET", f"/api/qc/reports/{aid}")["action"] is None
+    page.locator("#decision-confirm-yes").click()
     expect(page.locator("#decision-result")).to_have_text(f"Rejected assignment {aid}.")
 
     again = httpx.post(f"{server.base}/api/crowd/assignments/{aid}/reject", json={"feedback": "x"},

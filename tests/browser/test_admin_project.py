@@ -178,9 +178,9 @@ def test_import_create_tasks_and_publish_with_the_cost_shown_first(
     total = plan["cost"]["total"]
     assert float(total) == pytest.approx(HITS * (float(REWARD) + float(FEE)))
     cost = page.locator("#publish-cost")
-    expect(cost).to_have_text(f"{HITS} HITs \u00d7 1 assignment at ${REWARD} + ${FEE} fee: rewards "
-                              f"${plan['cost']['rewards']} + fees ${plan['cost']['fees']} = "
-                              f"${total}")
+    expect(cost).to_have_text(f"MTurk-compatible marketplace: {HITS} HITs \u00d7 1 assignment "
+                              f"at ${REWARD} + ${FEE} fee: rewards ${plan['cost']['rewards']} "
+                              f"+ fees ${plan['cost']['fees']} = ${total}")
     confirm = page.locator("#publish-confirm")
     expect(confirm).to_have_text(f"Publish {HITS} HITs for ${total}")
     # Shown before anything is sent: the tasks are still open.
@@ -230,7 +230,9 @@ def test_worked_tasks_show_in_the_grid_and_a_worker_is_blocked_then_unblocked(
     expect(row.locator("td").nth(6)).to_have_text(f"{minutes} min {seconds:02d} s" if minutes
                                                   else f"{seconds} s")
     row.locator("button[data-open-worker]").click()
-    expect(page.locator("#worker-title")).to_have_text(worker)
+    # The provider's worker id, and beside it the portal account's email.
+    expect(page.locator("#worker-title")).to_have_text(
+        f"{worker} \u00b7 {WORKER_EMAIL.format(index=FIRST_WORKER)}")
     expect(page.locator(f'#worker-assignments tr[data-assignment="{ours["assignment_id"]}"]')) \
         .to_contain_text(project["sequence"]["subject"] + "/" + NAME)
     offered = _portal_hits(server, FIRST_WORKER)

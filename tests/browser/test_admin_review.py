@@ -285,7 +285,7 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
     page.locator('#queue-review button[data-act="points"]').click()
 
     # The rejection's feedback is prefilled from the evidence; typing a key into it decides
-    # nothing; R rejects, and the next waiting report opens.
+    # nothing; R asks (the feedback shown), Enter rejects, and the next waiting report opens.
     feedback = page.locator("#queue-feedback")
     expect(feedback).to_have_value(re.compile(r"[Rr]ing and little swapped in frames \d+-\d+"))
     feedback.press("End")
@@ -294,6 +294,9 @@ def test_queue_replays_a_swapper_and_decides_from_the_keyboard(
     sent = feedback.input_value()
     page.locator("#queue-keys").click()
     page.keyboard.press("r")
+    expect(page.locator("#queue-confirm-detail")).to_have_text(sent.strip())
+    assert server.admin("GET", f"/api/qc/reports/{swapper}")["action"] is None
+    page.keyboard.press("Enter")
     expect(page.locator("#queue-result")).to_contain_text(f"Rejected assignment {swapper}")
     expect(panel).not_to_have_attribute("data-assignment", str(swapper))
     report = server.admin("GET", f"/api/qc/reports/{swapper}")

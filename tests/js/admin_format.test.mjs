@@ -162,6 +162,10 @@ test("parseRoute maps each hash to its view, sequence, assignment and page", () 
   assert.deepEqual(parseRoute("#/workers"), { view: "workers", ...none });
   assert.deepEqual(parseRoute("#/jobs"), { view: "jobs", ...none });
   assert.deepEqual(parseRoute("#/costs"), { view: "costs", ...none });
+  assert.deepEqual(parseRoute("#/crowd"), { view: "crowd", ...none });
+  assert.deepEqual(parseRoute("#/crowd/3"), { view: "crowd", ...none, sequence: 3 });
+  assert.deepEqual(parseRoute("#/crowd/x"), { view: "crowd", ...none });
+  assert.deepEqual(parseRoute("#/team"), { view: "team", ...none });
   assert.deepEqual(parseRoute("#/nowhere"), { view: "sequences", ...none });
   // Pages of the paged listings; a page address that is not a number is the first page.
   assert.deepEqual(parseRoute("#/sequences/from/50"), { view: "sequences", ...none, offset: 50 });

@@ -5,7 +5,7 @@ import { test } from "node:test";
 
 import { costCells } from "../../frontend/admin/core/format.js";
 import {
-  TASK_STATES, costLine, jobDetail, jobQuery, progressLine, progressSegments, solveLine,
+  TASK_STATES, costLine, inCurrency, jobDetail, jobQuery, progressLine, progressSegments, solveLine,
   sparkline, taskCounts,
 } from "../../frontend/admin/core/project-format.js";
 
@@ -48,6 +48,11 @@ test("costLine writes the HIT count and the cost before anything is published", 
   assert.equal(costLine({ cost: { ...cost, hits: 1, assignments_per_hit: 3 } }).slice(0, 18),
     "1 HIT × 3 assignme");
   assert.match(costLine({ cost: { ...cost, hits: 0 } }), /^Nothing to publish/);
+  // A provider that charges in its own currency: every amount in it.
+  assert.equal(costLine({ cost: { ...cost, currency: "GBP" } }),
+    "4 HITs × 1 assignment at 0.40 GBP + 0.08 GBP fee: rewards 1.60 GBP + fees 0.32 GBP = "
+    + "1.92 GBP");
+  assert.equal(inCurrency("2.5", "USD"), "$2.50");
 });
 
 test("sparkline puts the largest error at the top, unmeasured reports on the base", () => {

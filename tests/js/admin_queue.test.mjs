@@ -5,7 +5,7 @@ import { test } from "node:test";
 
 import {
   bonusPaidText, decidedText, decisionProblem, itemToOpen, movedTo, nextAfterDecision,
-  queueKeyAction, queueRowText, queueTally,
+  queueKeyAction, queueRowText, queueTally, rejectQuestion,
 } from "../../frontend/admin/core/queue-core.js";
 
 const ITEMS = [3, 6, 4].map((id) => ({ assignment_id: id }));
@@ -78,4 +78,9 @@ test("keys map to queue actions in either case; others do nothing", () => {
   for (const key of ["x", "Enter", "arrowleft", "toString", "Escape"]) {
     assert.equal(queueKeyAction(key), null, key);
   }
+});
+
+test("a rejection is asked about first, naming the assignment and why it is final", () => {
+  assert.match(rejectQuestion(17), /^Reject assignment 17\? This is final for the worker/);
+  assert.match(rejectQuestion(17), /They will read:$/);
 });

@@ -164,13 +164,14 @@ export function barLayout(values, labels, size = {}) {
 }
 
 /**
- * @typedef {{view: "sequences"|"sequence"|"report"|"workers"|"jobs"|"costs",
+ * @typedef {{view: "sequences"|"sequence"|"report"|"workers"|"jobs"|"costs"|"crowd"|"team",
  *            sequence: number|null, assignment: number|null, offset: number}} Route
  */
 
 /**
  * The page's place from its hash: #/sequences, #/sequences/from/<offset>, #/sequences/<id>,
- * #/sequences/<id>/reports/<assignment>, #/workers, #/workers/from/<offset>, #/jobs, #/costs.
+ * #/sequences/<id>/reports/<assignment>, #/workers, #/workers/from/<offset>, #/jobs, #/costs,
+ * #/crowd, #/crowd/<sequence id> (its units only), #/team.
  * ``offset``: where the page of a paged listing (sequences, workers) starts; 0 elsewhere.
  * @param {string} hash
  * @returns {Route}
@@ -183,7 +184,8 @@ export function parseRoute(hash) {
   const none = { sequence: null, assignment: null, offset: 0 };
   const offset = seq === "from" ? Math.min(id(sub) ?? 0, MAX_OFFSET) : 0;
   if (view === "workers") return { view, ...none, offset };
-  if (["jobs", "costs"].includes(view)) {
+  if (view === "crowd") return { view, ...none, sequence: id(seq) };
+  if (["jobs", "costs", "team"].includes(view)) {
     return { view: /** @type {Route["view"]} */ (view), ...none };
   }
   const sequence = view === "sequences" ? id(seq) : null;

@@ -66,15 +66,26 @@ export function progressSegments(counts) {
 /**
  * A publish's plan or result for people (backend/crowd/schemas.py PublishResult).
  * @param {{cost: {hits: number, assignments_per_hit: number, reward: string,
- *          fee_per_assignment: string, rewards: string, fees: string, total: string}}} plan
+ *          fee_per_assignment: string, rewards: string, fees: string, total: string,
+ *          currency?: string}}} plan  amounts in the provider's currency (unset: USD)
  */
 export function costLine(plan) {
   const c = plan.cost;
   if (!c.hits) return "Nothing to publish: every task of this sequence already has a HIT.";
   const hits = `${c.hits} HIT${c.hits === 1 ? "" : "s"}`;
   const each = `${c.assignments_per_hit} assignment${c.assignments_per_hit === 1 ? "" : "s"}`;
-  return `${hits} × ${each} at ${dollars(c.reward)} + ${dollars(c.fee_per_assignment)} fee: `
-    + `rewards ${dollars(c.rewards)} + fees ${dollars(c.fees)} = ${dollars(c.total)}`;
+  const money = (/** @type {string} */ amount) => inCurrency(amount, c.currency);
+  return `${hits} × ${each} at ${money(c.reward)} + ${money(c.fee_per_assignment)} fee: `
+    + `rewards ${money(c.rewards)} + fees ${money(c.fees)} = ${money(c.total)}`;
+}
+
+/**
+ * An amount in a provider's currency: dollars as every page writes them, any other currency
+ * by its code ("12.00 GBP").
+ * @param {string} amount  @param {string|undefined} currency  ISO 4217; unset: US dollars
+ */
+export function inCurrency(amount, currency) {
+  return !currency || currency === "USD" ? dollars(amount) : `${amount} ${currency}`;
 }
 
 /**

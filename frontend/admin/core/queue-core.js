@@ -118,3 +118,13 @@ export function decidedText(kind, assignmentId, done) {
   return `${kind === "approve" ? "Approved" : "Rejected"} assignment ${assignmentId}`
     + `${done.already_done ? " (already done)" : ""}.`;
 }
+
+/**
+ * What an admin is asked before a rejection, which is final for the worker; the feedback they
+ * will read is shown under it.
+ * @param {number} assignmentId
+ */
+export function rejectQuestion(assignmentId) {
+  return `Reject assignment ${assignmentId}? This is final for the worker: it counts against `
+    + "their approval rate and pays nothing. They will read:";
+}
