@@ -3,6 +3,7 @@
  * the annotation page framed exactly as MTurk frames it, and see earnings and feedback.
  */
 
+import { SUBMITTED_MESSAGE } from "../annotate/core/completion.js";
 import { $ } from "../common/dom.js";
 import { errorText, noticeLine } from "../common/notice.js";
 import { startSession } from "../common/session.js";
@@ -14,8 +15,6 @@ const api = new PortalApi(window.sessionStorage);
 const VIEWS = ["login-view", "hits-view", "preview-view", "work-view", "earnings-view"];
 /** The views that frame an annotation page, and the box its frame sits in. */
 const FRAME_BOXES = { "preview-view": "preview-frame", "work-view": "work-frame" };
-/** What the framed annotation page posts when its work is submitted (core/completion.js). */
-const SUBMITTED_MESSAGE = "dexlabel:submitted";
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
 
