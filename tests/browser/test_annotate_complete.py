@@ -1,6 +1,6 @@
 """The page completes the way its crowd expects, after the server accepted the submission:
 Prolific's redirect takes the worker to the crowd's completion page (a stand-in served on
-loopback); the portal's kind sends the framed page's worker back to the portal's list. In the
+loopback), the whole window when the page is framed; the portal's kind sends the framed page's worker back to the portal's list. In the
 portal, one annotation app runs at a time: the preview's is unloaded after Accept.
 
 The completion is the one the start reply gave, as the page keeps it in its address's fragment
@@ -120,15 +120,13 @@ def _shots(page: Page, name: str) -> None:
         page.screenshot(path=str(SHOTS / f"{name}-{width}x{height}.png"))
 
 
-def test_in_the_portal_one_app_runs_and_a_portal_completion_returns_to_the_list(
-    live_server: LiveServer, portal_page: Page
-) -> None:
-    page, server = portal_page, live_server
-    server.admin("POST", "/api/portal/workers", {"email": PORTAL_EMAIL,
-                                                 "password": PORTAL_PASSWORD})
+def _accept_in_portal(page: Page, server: LiveServer, email: str) -> tuple[Frame, dict]:
+    """A new portal worker previews a new hand HIT and accepts it: (the work frame, the task).
+    The preview's app is gone once the work's runs."""
+    server.admin("POST", "/api/portal/workers", {"email": email, "password": PORTAL_PASSWORD})
     task = server.task("hand", VIEW)
     _mturk, hit_id = _publish(server, task)
-    _sign_in(page, server, PORTAL_EMAIL, PORTAL_PASSWORD)
+    _sign_in(page, server, email, PORTAL_PASSWORD)
     page.locator(f'tr[data-hit="{hit_id}"] a.hit-title').click()
     preview = page.wait_for_selector("#preview-frame iframe").content_frame()
     assert preview is not None
@@ -142,21 +140,48 @@ def test_in_the_portal_one_app_runs_and_a_portal_completion_returns_to_the_list(
     assert page.locator("iframe").count() == 1
     assert page.locator("#preview-frame").evaluate("box => box.childElementCount") == 0
     assert len(page.frames) == 2  # the portal and the work: the preview's app is gone
-    _shots(page, "portal-accepted")
+    return work, task
 
-    # The page as a team's HIT starts it: completion back to the portal's list.
+
+def _reopen_completing(work: Frame, server: LiveServer, task: dict, kind: str,
+                       url: str) -> str:
+    """The whole hand saved, the work page opened again with the completion ``kind`` a HIT
+    of another crowd starts it with; the assignment token."""
     token = parse_qs(urlsplit(work.url).fragment)["token"][0]
     _save_whole_hand(server, task, token)
     query = urlsplit(work.url).query
-    fragment = urlencode({"token": token, "completion": "portal",
-                          "completion_url": "/market/#/hits"})
+    fragment = urlencode({"token": token, "completion": kind, "completion_url": url})
     work.goto("about:blank")  # a new load (the address differs in its fragment only)
     work.goto(f"{server.base}/annotate/?{query}#{fragment}")
     work.wait_for_function(READY)
-    assert work.evaluate("window.__dexlabel.page.params.completion")["kind"] == "portal"
+    assert work.evaluate("window.__dexlabel.page.params.completion")["kind"] == kind
+    return token
+
+
+def test_in_the_portal_one_app_runs_and_a_portal_completion_returns_to_the_list(
+    live_server: LiveServer, portal_page: Page
+) -> None:
+    page, server = portal_page, live_server
+    work, task = _accept_in_portal(page, server, PORTAL_EMAIL)
+    _shots(page, "portal-accepted")
+
+    token = _reopen_completing(work, server, task, "portal", "/market/#/hits")
     _submit(work)
     expect(page.locator("#notice")).to_contain_text("Submitted")
     expect(page.locator("#hits-view")).to_be_visible()
     assert page.locator("iframe").count() == 0
     assert server.worker_get_task(token)["mode"] == "submitted"
     _shots(page, "portal-submitted")
+
+
+def test_a_framed_redirect_completion_takes_the_whole_window(
+    live_server: LiveServer, portal_page: Page, crowd_site: str
+) -> None:
+    page, server = portal_page, live_server
+    work, task = _accept_in_portal(page, server, "portal-redirect@example.org")
+    done = f"{crowd_site}/submissions/complete?cc={CODE}"
+    token = _reopen_completing(work, server, task, "redirect", done)
+    _submit(work)
+    page.wait_for_url(done)
+    expect(page.locator("h1")).to_have_text(f"Completed with code {CODE}")
+    assert server.worker_get_task(token)["mode"] == "submitted"
