@@ -1,7 +1,8 @@
 """The page completes the way its crowd expects, after the server accepted the submission:
 Prolific's redirect takes the worker to the crowd's completion page (a stand-in served on
-loopback), the whole window when the page is framed; the portal's kind sends the framed page's worker back to the portal's list. In the
-portal, one annotation app runs at a time: the preview's is unloaded after Accept.
+loopback), the whole window when the page is framed; the portal's kind sends the framed page's
+worker back to the portal's list. In the portal, one annotation app runs at a time: the
+preview's is unloaded after Accept.
 
 The completion is the one the start reply gave, as the page keeps it in its address's fragment
 beside the token (tests/backend/crowd/test_completion.py covers the reply)."""
