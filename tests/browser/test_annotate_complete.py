@@ -96,6 +96,22 @@ def test_redirect_completion_takes_the_worker_to_the_crowds_completion_page(
     assert server.worker_get_task(link["token"])["mode"] == "submitted"
 
 
+def test_a_portal_completion_of_a_page_standing_alone_opens_the_portals_list(
+    live_server: LiveServer, page: Page
+) -> None:
+    server = live_server
+    task = server.task("hand", VIEW)
+    link = server.assign(task, "W-portal-alone")
+    _save_whole_hand(server, task, link["token"])
+    fragment = urlencode({"token": link["token"], "completion": "portal",
+                          "completion_url": "/market/#/hits"})
+    open_task(page, f"{server.base}/annotate/?assignmentId={link['external_id']}#{fragment}")
+    _submit(page)
+    page.wait_for_url(f"{server.base}/market/#/hits")
+    expect(page.locator("#login-view")).to_be_visible()  # the portal, asking to sign in
+    assert server.worker_get_task(link["token"])["mode"] == "submitted"
+
+
 def test_a_redirect_to_a_script_url_is_not_followed(live_server: LiveServer, page: Page) -> None:
     """A forged fragment cannot turn the completion into a script: the page completes as
     before (no turkSubmitTo: it stays, submitted)."""
