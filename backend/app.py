@@ -25,8 +25,8 @@ from backend.accounts.router import router as auth_router
 from backend.annotation.router import router as annotation_router
 from backend.captures.router import router as captures_router
 from backend.config import get_settings
-from backend.crowd.providers.prolific.webhooks import router as prolific_webhook_router
 from backend.crowd.manage import router as crowd_manage_router
+from backend.crowd.providers.prolific.webhooks import router as prolific_webhook_router
 from backend.crowd.router import page_router as crowd_page_router
 from backend.crowd.router import router as crowd_router
 from backend.db import get_engine, install_request_limits

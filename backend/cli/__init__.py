@@ -326,14 +326,17 @@ def _demo_capture(capture: Path, database_url: str, frames: int, views: int,
 
 def _demo_work(server: Any, sequence_id: int, capture: Path, admin_login: Any,
                assignments: int, workers: int | None, simulate: bool) -> None:
-    """Start the demo's server, publish, let the simulated crowd work, wait for the quality
-    checks and the solve (when this process runs a queue consumer)."""
+    """Start the demo's server, publish, let the simulated crowd work, leave a hand HIT open
+    in the worker portal for the demo worker, wait for the quality checks and the solve (when
+    this process runs a queue consumer)."""
     from backend import demo as d
+    from backend.demo.portal_hit import leave_hand_hit
 
     server.start()
     d.demo_publish(sequence_id, assignments)
     if simulate:
         d.demo_crowd(sequence_id, capture, admin_login, workers, server.has_consumer)
+    leave_hand_hit(sequence_id)
     if server.has_consumer:
         d.wait_for_jobs()
         d.wait_for_solve(sequence_id)

@@ -13,10 +13,11 @@ from sqlalchemy import select
 from backend.accounts.deps import CurrentAdmin
 from backend.annotation import service as tasks
 from backend.annotation.models import Assignment
-from backend.annotation.schemas import StartRequest, TokenRead
+from backend.annotation.schemas import StartRequest
 from backend.annotation.tokens import PREVIEW_ASSIGNMENT_ID, TASK_SCOPE, assignment_token
 from backend.config import get_settings
 from backend.crowd import actions, flows, holds, pricing
+from backend.crowd.completion import StartRead, completion_for
 from backend.crowd.costs import costs
 from backend.crowd.models import CrowdHit
 from backend.crowd.schemas import (
@@ -143,9 +144,10 @@ def _opened_before(task_id: int, body: StartRequest) -> bool:
         return True
 
 
-@page_router.post("/annotate/start", response_model=TokenRead)
-def start(body: StartRequest, session: SessionDep) -> TokenRead:
-    """Exchange a HIT's task token and the marketplace's ids for an assignment token.
+@page_router.post("/annotate/start", response_model=StartRead)
+def start(body: StartRequest, session: SessionDep) -> StartRead:
+    """Exchange a HIT's task token and the marketplace's ids for an assignment token, and
+    say how the page completes (``completion``: the HIT's provider decides).
 
     Only a marketplace assignment is started here, and only one the marketplace confirms
     (backend.crowd.holds): its HIT shows this task and a worker holds an assignment of it, or
@@ -172,4 +174,5 @@ def start(body: StartRequest, session: SessionDep) -> TokenRead:
     provider = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == body.hit_id))
     if provider is not None and assignment.provider != provider:
         assignment.provider = provider
-    return TokenRead(token=assignment_token(task, assignment))
+    return StartRead(token=assignment_token(task, assignment),
+                     completion=completion_for(session, body.hit_id, body.assignment_id))

@@ -7,6 +7,7 @@
  */
 
 import { ApiError, jsonOrNull, requestInit } from "../common/api.js";
+import { checkedCompletion, completionFromFragment } from "./core/completion.js";
 
 /** Marketplace placeholder for an assignment that has not been accepted yet (preview). */
 export const PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE";
@@ -23,11 +24,14 @@ const REQUEST_TIMEOUT_MS = 15000;
  * @property {string|null} workerId
  * @property {string|null} turkSubmitTo
  * @property {boolean} preview           the HIT has not been accepted yet
+ * @property {import("./core/completion.js").Completion|null} completion  how the page
+ *   completes (the start reply's, kept in the fragment beside the token)
  */
 
 /**
- * Reads the page's address: the marketplace's parameters from the query string, the token from
- * the fragment (#token=, never sent to a server; an older ?token= link is still read).
+ * Reads the page's address: the marketplace's parameters from the query string, the token and
+ * the completion from the fragment (#token=, never sent to a server; an older ?token= link is
+ * still read).
  * @param {string} search  location.search
  * @param {string} [hash]  location.hash
  * @returns {PageParams}
@@ -44,6 +48,7 @@ export function readPageParams(search, hash = "") {
     workerId: q.get("workerId"),
     turkSubmitTo: q.get("turkSubmitTo"),
     preview: assignmentId === PREVIEW_ASSIGNMENT_ID,
+    completion: completionFromFragment(h),
   };
 }
 
@@ -87,9 +92,11 @@ export class AnnotateApi {
   }
 
   /**
-   * Exchanges an MTurk-style task link for an assignment token.
+   * Exchanges an MTurk-style task link for an assignment token, and learns how the page
+   * completes (null: the HIT's provider did not say; an unusable completion counts as none).
    * @param {PageParams} params
-   * @returns {Promise<string>} the assignment token
+   * @returns {Promise<{token: string,
+   *   completion: import("./core/completion.js").Completion|null}>}
    */
   async start(params) {
     const data = await this.request("POST", "/api/annotate/start", {
@@ -98,7 +105,7 @@ export class AnnotateApi {
       hit_id: params.hitId,
       worker_id: params.workerId,
     });
-    return data.token;
+    return { token: data.token, completion: checkedCompletion(data.completion) };
   }
 
   /** The task, its frames and the assignment's saved tracks. */
@@ -156,18 +163,19 @@ export class AnnotateApi {
 }
 
 /**
- * Posts the marketplace's completion form ({turkSubmitTo}/mturk/externalSubmit) from the page.
- * The labels stay in our database; the marketplace only learns that the work is done.
+ * Posts the marketplace's completion form (MTurk's {turkSubmitTo}/mturk/externalSubmit: the
+ * action comes from core/completion.js) from the page. The labels stay in our database; the
+ * marketplace only learns that the work is done.
  * @param {Document} doc
- * @param {string} turkSubmitTo
+ * @param {string} action  the form's address
  * @param {string} assignmentId
  * @param {string} result
  * @returns {HTMLFormElement} the form (already submitted)
  */
-export function postExternalSubmit(doc, turkSubmitTo, assignmentId, result) {
+export function postCompletionForm(doc, action, assignmentId, result) {
   const form = doc.createElement("form");
   form.method = "POST";
-  form.action = `${turkSubmitTo.replace(/\/+$/, "")}/mturk/externalSubmit`;
+  form.action = action;
   form.hidden = true;
   for (const [name, value] of [["assignmentId", assignmentId], ["result", result]]) {
     const input = doc.createElement("input");

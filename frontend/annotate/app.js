@@ -10,8 +10,9 @@
 
 import { ApiError } from "../common/api.js";
 import { $ } from "../common/dom.js";
-import { AnnotateApi, postExternalSubmit, readPageParams } from "./api.js";
+import { AnnotateApi, readPageParams } from "./api.js";
 import { startAssist } from "./assist-draw.js";
+import { completionEntries } from "./core/completion.js";
 import { loadBundle } from "./core/loader.js";
 import { AnnotationStore } from "./core/store.js";
 import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./core/sync.js";
@@ -21,7 +22,7 @@ import { pointLabels, renderInstructions, renderShortcuts } from "./instructions
 import { bindKeys } from "./keys.js";
 import { PointList, showBanner, showLoadProgress, showSaveStatus } from "./panels.js";
 import { bindPointer } from "./pointer.js";
-import { openSubmitDialog } from "./submit.js";
+import { completeSubmitted, openSubmitDialog } from "./submit.js";
 import { Timeline } from "./timeline.js";
 import { wireControls, wireObjectSteps } from "./wiring.js";
 
@@ -64,13 +65,14 @@ function localStorageOrNull() {
 
 /**
  * The bearer token: from #token=, or exchanged for a task link (?task=) once the HIT is
- * accepted; the assignment token then replaces the task link, in the address's fragment, so a
- * reload reopens the same assignment and no request carries the token in its URL.
+ * accepted; the assignment token then replaces the task link, in the address's fragment with
+ * how the page completes (``params.completion``, from the start reply), so a reload reopens the
+ * same assignment and completes it the same way, and no request carries the token in its URL.
  * @param {import("./api.js").PageParams} params
  */
 async function resolveToken(params) {
   if (params.token) {
-    keepTokenInFragment(params.token);
+    keepTokenInFragment(params.token, params.completion);
     return params.token;
   }
   if (!params.taskToken) {
@@ -78,22 +80,25 @@ async function resolveToken(params) {
     throw new ApiError(401, { detail });
   }
   if (params.preview) return params.taskToken;
-  const token = await new AnnotateApi(null).start(params);
-  keepTokenInFragment(token);
-  return token;
+  const started = await new AnnotateApi(null).start(params);
+  params.completion = started.completion;
+  keepTokenInFragment(started.token, started.completion);
+  return started.token;
 }
 
 /**
- * Puts the token in the address's fragment (a reload reopens the same assignment) and takes
- * it and the task link out of the query string, which the browser would send to the server.
+ * Puts the token and the completion in the address's fragment (a reload reopens the same
+ * assignment) and takes the token and the task link out of the query string, which the
+ * browser would send to the server.
  * @param {string} token
+ * @param {import("./core/completion.js").Completion|null} completion
  */
-function keepTokenInFragment(token) {
+function keepTokenInFragment(token, completion) {
   const q = new URLSearchParams(location.search);
   q.delete("task");
   q.delete("token");
   const query = q.toString();
-  const hash = new URLSearchParams({ token }).toString();
+  const hash = new URLSearchParams([["token", token], ...completionEntries(completion)]);
   history.replaceState(null, "", `${location.pathname}${query ? `?${query}` : ""}#${hash}`);
 }
 
@@ -206,13 +211,20 @@ function stopEditing(page, message, kind = "error") {
   refreshPanels(page, { frame: page.editor.frame, active: page.editor.active, tracks: false });
 }
 
-/** After the server accepted the submission: lock the page and complete the HIT. */
+/**
+ * After the server accepted the submission: lock the page and hand the assignment back to its
+ * crowd; where that leaves the page, a link says where to go on.
+ */
 function onSubmitted(page, resp) {
   stopEditing(page, "Submitted. Thank you!", "ok");
   showSaveStatus($("save-status"), { state: "saved", message: "Submitted" });
-  const { turkSubmitTo, assignmentId, preview } = page.params;
-  if (turkSubmitTo && assignmentId && !preview) {
-    postExternalSubmit(document, turkSubmitTo, assignmentId, `submitted:${resp.version}`);
+  const step = completeSubmitted(window, page.params, resp);
+  if (step.action === "top" || step.action === "navigate") {
+    const link = document.createElement("a");
+    link.href = step.url;
+    link.target = "_top";
+    link.textContent = "Continue";
+    showBanner($("banner"), "ok", "Submitted. Thank you!", link);
   }
 }
 

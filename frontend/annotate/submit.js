@@ -2,11 +2,14 @@
  * Submitting: check the work (core/checks.js: completeness and suspicious tracks, then the
  * stretches between keyframes against the view's images, from the server), say what is
  * missing frame by frame, and only then send it. Incomplete work cannot be submitted; suspicious work needs the
- * worker to confirm. After the server accepts it, a marketplace HIT is completed by posting
- * {turkSubmitTo}/mturk/externalSubmit.
+ * worker to confirm. After the server accepts it, the assignment is handed back the way its
+ * crowd expects (core/completion.js): MTurk's externalSubmit form, Prolific's completion link,
+ * the portal's list.
  */
 
+import { postCompletionForm } from "./api.js";
 import { checkWork, imageWarnings } from "./core/checks.js";
+import { SUBMITTED_MESSAGE, completionStep } from "./core/completion.js";
 import { displayName, escapeHtml } from "./instructions.js";
 
 /** @param {import("./core/checks.js").FrameProblem} p @param {string[]} names */
@@ -130,4 +133,32 @@ function handleSubmitError(ctx, err) {
   const lines = problems.map((p) => (typeof p === "string" ? p : p.message || JSON.stringify(p)));
   setError(dialog, [`The server did not accept the submission: ${err.message}`, ...lines]
     .join("\n"));
+}
+
+/**
+ * Hands a submitted assignment back to its crowd (after the server accepted the submission).
+ * A framed page that may not navigate the whole window (the frame's sandbox wants the worker's
+ * click, and the save took too long) goes to the url in its frame instead.
+ * @param {Window} win  the page's window
+ * @param {import("./api.js").PageParams} params
+ * @param {{version: number}} resp  the submit reply
+ * @returns {import("./core/completion.js").CompletionStep} the step taken
+ */
+export function completeSubmitted(win, params, resp) {
+  const step = completionStep(params, { framed: win.top !== win, base: win.location.href });
+  if (step.action === "form") {
+    postCompletionForm(win.document, step.url, step.assignmentId, `submitted:${resp.version}`);
+  } else if (step.action === "parent") {
+    win.parent.postMessage({ type: SUBMITTED_MESSAGE, assignmentId: params.assignmentId },
+      step.origin);
+  } else if (step.action === "navigate") {
+    win.location.assign(step.url);
+  } else if (step.action === "top") {
+    try {
+      /** @type {Window} */ (win.top).location.href = step.url;
+    } catch {
+      win.location.assign(step.url);
+    }
+  }
+  return step;
 }

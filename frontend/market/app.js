@@ -3,6 +3,7 @@
  * the annotation page framed exactly as MTurk frames it, and see earnings and feedback.
  */
 
+import { SUBMITTED_MESSAGE } from "../annotate/core/completion.js";
 import { $ } from "../common/dom.js";
 import { errorText, noticeLine } from "../common/notice.js";
 import { startSession } from "../common/session.js";
@@ -12,12 +13,21 @@ import { renderEarnings, renderHits, taskFrame } from "./views.js";
 
 const api = new PortalApi(window.sessionStorage);
 const VIEWS = ["login-view", "hits-view", "preview-view", "work-view", "earnings-view"];
+/** The views that frame an annotation page, and the box its frame sits in. */
+const FRAME_BOXES = { "preview-view": "preview-frame", "work-view": "work-frame" };
 const notice = noticeLine($("notice"), () => show("login-view"));
 const { notify, fail } = notice;
 
-/** @param {string} id */
+/**
+ * Shows one view. A framed page leaves with its view: the preview's annotation app is
+ * unloaded once the HIT is accepted, so one app runs at a time.
+ * @param {string} id
+ */
 function show(id) {
   for (const view of VIEWS) $(view).hidden = view !== id;
+  for (const [view, box] of Object.entries(FRAME_BOXES)) {
+    if (view !== id) $(box).replaceChildren();
+  }
   // The HIT pages keep their chrome compact so the framed page gets the window.
   document.body.dataset.view = id;
   $("nav").hidden = id === "login-view";
@@ -68,6 +78,20 @@ async function checkSubmitted(assignmentId) {
   const assignment = await api.assignment(assignmentId);
   if (assignment.status === "Accepted") return;
   notify(`Submitted: “${assignment.title}”. Thank you!`, "info", true);
+  location.hash = "#/hits";
+}
+
+/**
+ * The framed page says its work is submitted (a crowd that completes "back to the portal's
+ * list"): believed only from the work frame, at the origin its page was loaded from.
+ * @param {MessageEvent} event
+ */
+function onFrameMessage(event) {
+  const frame = /** @type {HTMLIFrameElement | null} */ ($("work-frame").querySelector("iframe"));
+  if (!frame || event.source !== frame.contentWindow) return;
+  if (event.origin !== new URL(frame.src, location.href).origin) return;
+  if (!event.data || event.data.type !== SUBMITTED_MESSAGE) return;
+  notify(`Submitted: “${$("work-title").textContent}”. Thank you!`, "info", true);
   location.hash = "#/hits";
 }
 
@@ -144,6 +168,7 @@ function start() {
   $("register").hidden = !invite;
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
+  window.addEventListener("message", onFrameMessage);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
 }
 

@@ -57,10 +57,11 @@ def _publish(server: LiveServer, task: dict) -> tuple[object, str]:
     return mturk, hit["HITId"]
 
 
-def _sign_in(page: Page, server: LiveServer) -> None:
+def _sign_in(page: Page, server: LiveServer, email: str = EMAIL,
+             password: str = PASSWORD) -> None:
     page.goto(f"{server.base}/market/")
-    page.locator("#login input[name=email]").fill(EMAIL)
-    page.locator("#login input[name=password]").fill(PASSWORD)
+    page.locator("#login input[name=email]").fill(email)
+    page.locator("#login input[name=password]").fill(password)
     page.locator("#login button[type=submit]").click()
     expect(page.locator("#hits-view")).to_be_visible()
 

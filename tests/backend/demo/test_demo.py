@@ -51,6 +51,10 @@ def test_the_demo_reaches_a_finished_solve_and_prints_links_and_logins(tmp_path:
     assert summary, out
     assert int(summary[1]) == int(summary[2])  # every submission has its QC report
     assert "--no-serve: nothing is being served" in out
+    # A hand HIT stays open for the demo worker in the portal (tests/backend/demo/
+    # test_portal_hit.py checks the portal's list).
+    assert re.search(r"^hand HIT \S+ is open in the worker portal for the demo worker$", out,
+                     re.MULTILINE), out
     saved = var_dir / "demo-logins.json"
     assert stat.S_IMODE(saved.stat().st_mode) == 0o600
     assert json.loads(saved.read_text())["worker"]["password"] == first["worker portal"][2]
