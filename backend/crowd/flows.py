@@ -10,16 +10,16 @@ twice (decisions.py says how).
 
 from __future__ import annotations
 
-from sqlalchemy import select
+from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
 from backend.config import get_settings
 from backend.crowd import actions, decisions, pricing
 from backend.crowd.models import CrowdHit
-from backend.crowd.provider import CrowdProvider
+from backend.crowd.provider import CrowdProvider, Requirements
 from backend.crowd.providers import fees_of, get_provider, provider_of
-from backend.crowd.publish import check_assignments, publish_tasks, requirements
+from backend.crowd.publish import check_assignments, publish_tasks, requirements, unit_spec
 from backend.crowd.schemas import CostRead, PaymentRead, PublishOptions, PublishResult
 from backend.db import session_scope
 
@@ -29,14 +29,18 @@ _COUNTERS = {"created": "created", "recovered": "recovered", "existing": "alread
 def due_task_ids(session: Session, round_: int, sequence_id: int | None = None,
                  kind: str | None = None) -> list[int]:
     """Tasks with no HIT yet in ``round_`` (optionally of one sequence, of one kind), by id."""
+    return list(session.scalars(_due(round_, sequence_id, kind).order_by(Task.id)))
+
+
+def _due(round_: int, sequence_id: int | None, kind: str | None) -> Select[int]:
     published = select(CrowdHit.task_id).where(
         CrowdHit.round == round_, CrowdHit.hit_id.is_not(None))
-    stmt = select(Task.id).where(Task.id.not_in(published)).order_by(Task.id)
+    stmt = select(Task.id).where(Task.id.not_in(published))
     if sequence_id is not None:
         stmt = stmt.where(Task.sequence_id == sequence_id)
     if kind is not None:
         stmt = stmt.where(Task.kind == kind)
-    return list(session.scalars(stmt))
+    return stmt
 
 
 def _provider(crowd: CrowdProvider | None, options: PublishOptions) -> CrowdProvider:
@@ -64,7 +68,22 @@ def plan(session: Session, options: PublishOptions, sequence_id: int | None,
     name = provider or options.provider or get_settings().crowd_provider
     check_assignments(options.max_assignments, options.allow_large_hits, fees_of(name))
     due = due_task_ids(session, options.round, sequence_id, kind)
+    check_due(session, _due(options.round, sequence_id, kind), options, name)
     return PublishResult(cost=cost_read(len(due), options, name))
+
+
+def check_due(session: Session, due: Select[int], options: PublishOptions,
+              name: str) -> None:
+    """The provider's checks before publishing (its reward floor, its requirements) on one
+    unit of each kind of task ``due`` selects, so a dry run refuses what the publish would."""
+    firsts = session.execute(select(Task.kind, func.min(Task.id)).where(Task.id.in_(due))
+                             .group_by(Task.kind)).all()
+    if not firsts:
+        return
+    reqs = Requirements(locales=tuple(options.locales), assignee=options.assignee)
+    get_provider(name).check_publish(
+        [unit_spec(session, session.get_one(Task, task_id), options, reqs)
+         for _, task_id in firsts])
 
 
 def publish(

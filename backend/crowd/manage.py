@@ -3,8 +3,9 @@ with their places, holders and states; a unit's assignments with the portal acco
 each worker; closing work left "working"; the team's portal accounts.
 
 A unit of work is a published HIT (``crowd_hits``), whichever provider holds it: its
-``provider`` column where the row has one, else "mturk" (every unit published before
-providers were chosen). Extending, expiring and adding places stay the crowd router's
+``provider`` column (migration 0021 made every unit published before providers were chosen
+"mturk"). The providers offered are the registry's (``backend.crowd.provider.PROVIDERS``).
+Extending, expiring and adding places stay the crowd router's
 (POST /api/crowd/hits/{hit_id}/...): this module only reads, and closes our own records.
 """
 
@@ -25,15 +26,13 @@ from backend.captures.models import Camera
 from backend.config import get_settings
 from backend.crowd import pricing
 from backend.crowd.models import CrowdHit
+from backend.crowd.provider import PROVIDERS, ProviderName
 from backend.db import SessionDep
 from backend.errors import Conflict, NotFound
 from backend.validation import Id, Key, Offset, QueryId, QueryKey
 
 router = APIRouter(prefix="/api/crowd", tags=["crowd"])
 
-# What a unit published before providers were chosen was published to.
-DEFAULT_PROVIDER = "mturk"
-PROVIDERS = ("mturk", "prolific", "team")
 # Our status of work an admin closed: it holds no place, and its saved labels stay.
 CLOSED = "closed"
 Limit = Annotated[int, Query(ge=1, le=5000)]
@@ -42,8 +41,8 @@ Limit = Annotated[int, Query(ge=1, le=5000)]
 class ProvidersRead(BaseModel):
     """The providers a task can be published to, and the one a publish uses unless told."""
 
-    default: str
-    choices: list[str]
+    default: ProviderName
+    choices: list[ProviderName]
 
 
 class UnitRead(BaseModel):
@@ -119,7 +118,7 @@ def list_units(session: Session, sequence_id: int | None, task_id: int | None,
     counts = _status_counts(session, Assignment.hit_id, [hit.hit_id for hit, *_ in rows])
     return [UnitRead(
         hit_id=str(hit.hit_id), task_id=hit.task_id, sequence_id=sequence, target_key=target,
-        serial=serial, round=hit.round, provider=getattr(hit, "provider", DEFAULT_PROVIDER),
+        serial=serial, round=hit.round, provider=hit.provider,
         reward=pricing.cents_to_dollars(hit.reward_cents), places=hit.max_assignments,
         decided=hit.decided, holders=counts[hit.hit_id].get("working", 0),
         submitted=counts[hit.hit_id].get("submitted", 0),
@@ -192,8 +191,7 @@ def team_accounts(session: Session, worker_id: str | None, offset: int,
 @router.get("/providers", response_model=ProvidersRead)
 def providers(_: CurrentAdmin) -> ProvidersRead:
     """What the publish form offers, its default the setting ``DEXLABEL_CROWD_PROVIDER``."""
-    default = str(getattr(get_settings(), "crowd_provider", DEFAULT_PROVIDER))
-    return ProvidersRead(default=default, choices=list(PROVIDERS))
+    return ProvidersRead(default=get_settings().crowd_provider, choices=list(PROVIDERS))
 
 
 @router.get("/units", response_model=list[UnitRead])

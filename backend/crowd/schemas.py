@@ -14,8 +14,10 @@ from backend.validation import BodyId, Int32
 # MTurk's own bounds: lifetime 30 s to 1 year, assignment duration 30 s to 1 year,
 # auto-approval delay 0 to 30 days.
 Seconds = Annotated[int, Field(ge=30, le=31_536_000)]
-# A reward is at least one cent: a $0.00 assignment pays nothing and the marketplace refuses it.
-Reward = Annotated[Decimal, Field(ge=Decimal("0.01"), le=1000, decimal_places=2)]
+# A reward may be 0 (a team unit's, pay being optional for the lab's own annotators); each
+# provider refuses what is under its own floor in check_publish (MTurk: one cent, Prolific:
+# its minimum hourly rate), naming the field reward.
+Reward = Annotated[Decimal, Field(ge=Decimal(0), le=1000, decimal_places=2)]
 Feedback = Annotated[str, Field(min_length=1, max_length=1024)]
 
 

@@ -25,6 +25,7 @@ from backend.crowd.provider import (
     Completion,
     FeeSchedule,
     ProviderName,
+    ProviderRefused,
     PublishedUnit,
     Requirements,
     SubmissionRecord,
@@ -63,6 +64,9 @@ WORKER_SUBMIT = {
     "https://mturk-requester-sandbox.us-east-1.amazonaws.com":
         "https://workersandbox.mturk.com/mturk/externalSubmit",
 }
+
+# MTurk's smallest reward per assignment (the built-in marketplace keeps it too).
+MIN_REWARD_CENTS = 1
 
 FEES = FeeSchedule(provider="mturk", currency="USD", reward_rate=0.20, large_unit_rate=0.40,
                    large_unit_places=10, bonus_rate=0.20, min_fee_cents=1)
@@ -152,24 +156,34 @@ class MTurkProvider:
         return FEES
 
     def check_publish(self, units: Sequence[UnitSpec]) -> None:
-        """Nothing to check before the calls: the endpoint refuses what it cannot take."""
+        """Refuse a reward under MTurk's smallest, one cent (the schema takes 0, which only
+        the team pays); the endpoint refuses the rest of what it cannot take."""
+        for unit in units:
+            if unit.reward_cents < MIN_REWARD_CENTS:
+                detail = (f"reward: {pricing.cents_to_dollars(unit.reward_cents)} is less than "
+                          f"the smallest reward MTurk pays, "
+                          f"{pricing.cents_to_dollars(MIN_REWARD_CENTS)} (only team units may "
+                          "pay 0)")
+                raise ProviderRefused(detail, "check_publish",
+                                      [{"field": "reward", "message": detail}])
 
     def publish(self, units: Sequence[UnitSpec]) -> list[PublishedUnit]:
         """One CreateHIT per unit; HitAlreadyExists (the token was used) recovers its HIT."""
-        done = []
-        for unit in units:
-            try:
-                reply = call(self.client, "create_hit", **hit_params(unit))
-                done.append(PublishedUnit(unit.key, reply["HIT"]["HITId"], "created"))
-            except MarketplaceError as exc:
-                if exc.reason != "already_exists":
-                    raise
-                if exc.unit_id is None:
-                    raise MarketplaceError(
-                        f"HIT already exists but its id is not in the reply: {exc.detail}",
-                        exc.operation, exc.turk_code) from exc
-                done.append(PublishedUnit(unit.key, exc.unit_id, "recovered"))
-        return done
+        return [self._create(unit.key, hit_params(unit)) for unit in units]
+
+    def _create(self, key: str, params: Mapping[str, Any]) -> PublishedUnit:
+        """CreateHIT with ``params``; a HIT already made with this token is recovered."""
+        try:
+            reply = call(self.client, "create_hit", **params)
+        except MarketplaceError as exc:
+            if exc.reason != "already_exists":
+                raise
+            if exc.unit_id is None:
+                raise MarketplaceError(
+                    f"HIT already exists but its id is not in the reply: {exc.detail}",
+                    exc.operation, exc.turk_code) from exc
+            return PublishedUnit(key, exc.unit_id, "recovered")
+        return PublishedUnit(key, reply["HIT"]["HITId"], "created")
 
     def unit(self, unit_id: str) -> UnitState | None:
         try:

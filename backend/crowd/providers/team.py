@@ -14,6 +14,12 @@ alone: it requires, to discover, preview and accept it, a qualification type of 
 message on every publish, and remembered in ``crowd_qualifications``. Nobody else holds it, so
 the portal does not even list the unit to anyone else.
 
+The provider is the mturk provider on that account, differing only where the team does: no
+fees, its own checks before publishing (locales, assignees), the assignee's qualification,
+bonuses recorded and never sent, its own training allow-list and the portal as the place a
+finished page goes back to. A minimum approval rate is ignored: every member is the lab's own,
+and a new member has no approval record to meet it with.
+
 Pay is optional and never sent anywhere. The marketplace HIT offers 0 (the team account holds
 and pays nothing there); the reward the lab chose, 0 or more, and every approval and bonus are
 the crowd ledger's, written by the crowd domain. Fees are zero. Approvals and rejections reach
@@ -27,86 +33,45 @@ portal account's worker id.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator, Mapping, Sequence
-from datetime import UTC, datetime, timedelta
-from typing import Any
-from xml.sax.saxutils import escape
+from collections.abc import Sequence
+from datetime import UTC, datetime
 
 from sqlalchemy import select
 
 from backend.accounts.models import PortalAccount
 from backend.config import Settings, team_market_requester
-from backend.crowd.client import (
-    MarketplaceError,
-    MarketplaceRefused,
-    MarketplaceUnreachable,
-    MTurkClient,
-    call_naming,
-    make_client,
-    paginate,
-)
 from backend.crowd.models import CrowdQualification
 from backend.crowd.provider import (
     BonusOrder,
     Completion,
-    CrowdProvider,
     FeeSchedule,
     ProviderError,
     ProviderName,
     ProviderRefused,
-    ProviderUnreachable,
     PublishedUnit,
     Requirements,
-    SubmissionRecord,
-    SubmissionStatus,
     UnitSpec,
     UnitState,
 )
+from backend.crowd.providers.mturk import (
+    MTurkProvider,
+    external_question,
+    hit_params,
+    qualification_requirements,
+)
+from backend.crowd.providers.mturk_client import MarketplaceError, call
 from backend.db import session_scope
 from backend.instance import public_url
 
-EXTERNAL_QUESTION_NS = ("http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/"
-                        "2006-07-14/ExternalQuestion.xsd")
-PERCENT_APPROVED = "000000000000000000L0"  # MTurk's system qualification type
+__all__ = ["TeamProvider", "external_question", "make", "team_settings"]
+
 ASSIGNEE_PREFIX = "dexlabel team: "  # + the assignee's worker id: their own qualification type
 TRAINING_GROUP = "dexlabel team: passed training"
-COLLECTED_STATUSES = ["Submitted", "Approved", "Rejected"]
-_STATUS: dict[str, SubmissionStatus] = {"Submitted": "submitted", "Approved": "approved",
-                                        "Rejected": "rejected"}
-_REASONS = {
-    "AWS.MechanicalTurk.HitAlreadyExists": "already_exists",
-    "AWS.MechanicalTurk.InvalidAssignmentState": "invalid_state",
-    "AWS.MechanicalTurk.InvalidHITState": "invalid_state",
-    "AWS.MechanicalTurk.DuplicateRequest": "replayed",
-}
-_HIT_ID_IN_MESSAGE = re.compile(r"HIT\s?Id\W*([A-Za-z0-9]+)", re.IGNORECASE)
 _TASK_IN_NOTE = re.compile(r"\btask (\d+)\b")
-# The marketplace expires a HIT at once when ExpireAt lies in the past.
-_PAST = datetime(2015, 1, 1, tzinfo=UTC)
-NOTIFY_BATCH = 100  # NotifyWorkers takes at most 100 worker ids a call
 FREE = FeeSchedule(provider="team", currency="USD", reward_rate=0.0, large_unit_rate=0.0,
                    large_unit_places=0, bonus_rate=0.0, min_fee_cents=0)
-
-
-def _provider_error(exc: MarketplaceError) -> ProviderError:
-    """The marketplace's refusal in the protocol's words."""
-    if isinstance(exc, MarketplaceUnreachable):
-        return ProviderUnreachable(exc.detail, exc.operation)
-    if isinstance(exc, MarketplaceRefused):
-        return ProviderRefused(exc.detail, exc.operation, exc.extra.get("fields"), exc.turk_code)
-    reason = _REASONS.get(exc.turk_code) or (
-        "not_found" if exc.turk_code.endswith("DoesNotExist") else
-        "throttled" if exc.retryable else "other")
-    match = _HIT_ID_IN_MESSAGE.search(exc.detail) if reason == "already_exists" else None
-    return ProviderError(exc.detail, exc.operation, reason, exc.retryable,
-                         unit_id=match.group(1) if match else None, provider_code=exc.turk_code)
-
-
-def external_question(page_url: str, frame_height: int) -> str:
-    """The ExternalQuestion XML that frames the annotation page in the portal."""
-    return (f'<ExternalQuestion xmlns="{EXTERNAL_QUESTION_NS}">'
-            f"<ExternalURL>{escape(page_url)}</ExternalURL>"
-            f"<FrameHeight>{frame_height}</FrameHeight></ExternalQuestion>")
+# The portal's list of HITs, where a finished team page goes back to.
+PORTAL_HITS = "/market/#/hits"
 
 
 def _refused(detail: str, field: str) -> ProviderRefused:
@@ -126,28 +91,19 @@ def check_assignee(worker_id: str) -> None:
                            "deactivated", "assignee")
 
 
-class TeamProvider:
-    """The team crowd on the built-in marketplace's team requester account."""
+class TeamProvider(MTurkProvider):
+    """The team crowd: the mturk provider on the built-in marketplace's team requester
+    account (``settings`` are the team's: see ``team_settings``)."""
 
     name: ProviderName = "team"
-
-    def __init__(self, client: MTurkClient, portal_url: str) -> None:
-        self._client = client
-        self._portal_url = portal_url
-
-    def _call(self, operation: str, fields: Mapping[str, str] | None = None, /,
-              **params: Any) -> dict[str, Any]:
-        try:
-            return call_naming(self._client, operation, fields, **params)
-        except MarketplaceError as exc:
-            raise _provider_error(exc) from exc
 
     def fees(self) -> FeeSchedule:
         return FREE
 
     def check_publish(self, units: Sequence[UnitSpec]) -> None:
-        """Refuse a negative reward, no places, a locale requirement (portal accounts have no
-        locale, so nobody could take the unit) and an assignee without a portal account."""
+        """Refuse a negative reward (0 is a team unit's own), no places, a locale requirement
+        (portal accounts have no locale, so nobody could take the unit) and an assignee
+        without a portal account."""
         for unit in units:
             if unit.reward_cents < 0:
                 raise _refused(f"reward {unit.reward_cents} cents is negative", "reward")
@@ -161,6 +117,8 @@ class TeamProvider:
             check_assignee(assignee)
 
     def publish(self, units: Sequence[UnitSpec]) -> list[PublishedUnit]:
+        """The units as HITs that offer 0 on the marketplace (the lab's reward is the
+        ledger's), an assigned one behind its assignee's own qualification."""
         self.check_publish(units)
         granted: dict[str, str] = {}
         for assignee in {u.requirements.assignee for u in units} - {None}:
@@ -168,36 +126,10 @@ class TeamProvider:
             granted[assignee] = self._group(ASSIGNEE_PREFIX + assignee,
                                             f"Team tasks assigned to {assignee}")
             self.grant(assignee, granted[assignee], 1, notify=False)
-        return [self._publish_one(unit, granted) for unit in units]
-
-    def _requirements(self, wanted: Requirements, granted: dict[str, str]) -> list[dict]:
-        reqs: list[dict] = []
-        if wanted.min_approval_rate is not None:
-            reqs.append({"QualificationTypeId": PERCENT_APPROVED,
-                         "Comparator": "GreaterThanOrEqualTo",
-                         "IntegerValues": [wanted.min_approval_rate], "ActionsGuarded": "Accept"})
-        reqs.extend({"QualificationTypeId": type_id, "Comparator": "Exists",
-                     "ActionsGuarded": "DiscoverPreviewAndAccept"}
-                    for type_id in (wanted.group, granted.get(wanted.assignee or "")) if type_id)
-        return reqs
-
-    def _publish_one(self, unit: UnitSpec, granted: dict[str, str]) -> PublishedUnit:
-        try:
-            reply = self._call(
-                "create_hit", {"MaxAssignments": "max_assignments"},
-                Title=unit.title, Description=unit.description, Keywords=unit.keywords,
-                Reward="0.00", MaxAssignments=unit.places, LifetimeInSeconds=unit.lifetime_s,
-                AssignmentDurationInSeconds=unit.allotted_s,
-                AutoApprovalDelayInSeconds=unit.auto_approve_s,
-                Question=external_question(unit.page_url, unit.frame_height),
-                RequesterAnnotation=unit.note,
-                QualificationRequirements=self._requirements(unit.requirements, granted),
-                UniqueRequestToken=unit.key)
-        except ProviderError as exc:
-            if exc.reason != "already_exists" or exc.unit_id is None:
-                raise
-            return PublishedUnit(unit.key, exc.unit_id, "recovered")
-        return PublishedUnit(unit.key, reply["HIT"]["HITId"], "created")
+        return [self._create(unit.key, {
+            **hit_params(unit), "Reward": "0.00",
+            "QualificationRequirements": _requirements(unit.requirements, granted)})
+            for unit in units]
 
     def _group(self, name: str, description: str) -> str:
         """The team account's qualification type ``name``, made on the marketplace once and
@@ -208,17 +140,20 @@ class TeamProvider:
                 CrowdQualification.name == name))
         if known is not None:
             return known
-        reply = self._call("create_qualification_type", Name=name, Description=description,
-                           Keywords="dexlabel, team", QualificationTypeStatus="Active")
+        reply = call(self.client, "create_qualification_type", Name=name,
+                     Description=description, Keywords="dexlabel, team",
+                     QualificationTypeStatus="Active")
         type_id: str = reply["QualificationType"]["QualificationTypeId"]
         with session_scope() as session:
             session.add(CrowdQualification(name=name, qualification_type_id=type_id))
         return type_id
 
     def unit(self, unit_id: str) -> UnitState | None:
+        """The task from the HIT's note; open until closed or expired (a unit whose places
+        are all taken stays the team's open work)."""
         try:
-            hit = self._call("get_hit", HITId=unit_id)["HIT"]
-        except ProviderError as exc:
+            hit = call(self.client, "get_hit", HITId=unit_id)["HIT"]
+        except MarketplaceError as exc:
             if exc.reason == "not_found":
                 return None
             raise
@@ -229,42 +164,6 @@ class TeamProvider:
             submitted=sum(1 for _ in self.submissions([unit_id])),
             allotted_s=hit["AssignmentDurationInSeconds"],
             open=hit["HITStatus"] != "Disposed" and hit["Expiration"] > datetime.now(UTC))
-
-    def submissions(self, unit_ids: Sequence[str]) -> Iterator[SubmissionRecord]:
-        for unit_id in unit_ids:
-            try:
-                for item in paginate(self._client, "list_assignments_for_hit", "Assignments",
-                                     HITId=unit_id, AssignmentStatuses=COLLECTED_STATUSES):
-                    yield _record(item)
-            except MarketplaceError as exc:
-                raise _provider_error(exc) from exc
-
-    def submission(self, assignment_id: str) -> SubmissionRecord | None:
-        try:
-            reply = self._call("get_assignment", AssignmentId=assignment_id)
-        except ProviderError as exc:
-            if exc.reason == "not_found":
-                return None
-            raise
-        return _record(reply["Assignment"])
-
-    def _decide(self, operation: str, assignment_id: str, feedback: str | None,
-                done: SubmissionStatus) -> None:
-        params = {"RequesterFeedback": feedback} if feedback else {}
-        try:
-            self._call(operation, {"RequesterFeedback": "feedback"},
-                       AssignmentId=assignment_id, **params)
-        except ProviderError as exc:
-            # Decided by an earlier call whose reply was lost: the same decision is done.
-            found = self.submission(assignment_id) if exc.reason == "invalid_state" else None
-            if found is None or found.status != done:
-                raise
-
-    def approve(self, assignment_id: str, feedback: str | None) -> None:
-        self._decide("approve_assignment", assignment_id, feedback, "approved")
-
-    def reject(self, assignment_id: str, feedback: str, category: str | None) -> None:
-        self._decide("reject_assignment", assignment_id, feedback, "rejected")
 
     def bonus_paid(self, order: BonusOrder) -> bool:
         """Never: a team bonus is paid nowhere, so the ledger's row is the whole of it."""
@@ -277,56 +176,22 @@ class TeamProvider:
             raise ProviderError(f"assignment {order.assignment_id} is not a team submission",
                                 "pay_bonus", "not_found")
 
-    def extend(self, unit_id: str, seconds: int) -> None:
-        self._call("update_expiration_for_hit", {"ExpireAt": "seconds"}, HITId=unit_id,
-                   ExpireAt=datetime.now(UTC) + timedelta(seconds=seconds))
-
-    def close(self, unit_id: str) -> None:
-        self._call("update_expiration_for_hit", HITId=unit_id, ExpireAt=_PAST)
-
-    def add_places(self, unit_id: str, count: int, key: str) -> None:
-        self._call("create_additional_assignments_for_hit",
-                   {"NumberOfAdditionalAssignments": "count"}, HITId=unit_id,
-                   NumberOfAdditionalAssignments=count, UniqueRequestToken=key)
-
-    def block(self, worker_id: str, reason: str) -> None:
-        self._call("create_worker_block", WorkerId=worker_id, Reason=reason)
-
-    def unblock(self, worker_id: str, reason: str | None) -> None:
-        self._call("delete_worker_block", WorkerId=worker_id,
-                   **({"Reason": reason} if reason else {}))
-
     def training_group(self) -> str:
         return self._group(TRAINING_GROUP, "Team members who passed the dexlabel training task.")
 
-    def grant(self, worker_id: str, group: str, value: int, notify: bool) -> None:
-        self._call("associate_qualification_with_worker", QualificationTypeId=group,
-                   WorkerId=worker_id, IntegerValue=value, SendNotification=notify)
-
-    def revoke(self, worker_id: str, group: str, reason: str | None) -> None:
-        self._call("disassociate_qualification_from_worker", QualificationTypeId=group,
-                   WorkerId=worker_id, **({"Reason": reason} if reason else {}))
-
-    def notify(self, worker_ids: Sequence[str], subject: str,
-               message: str) -> list[dict[str, str]]:
-        failures: list[dict[str, str]] = []
-        for start in range(0, len(worker_ids), NOTIFY_BATCH):
-            reply = self._call("notify_workers", {"MessageText": "message"}, Subject=subject,
-                               MessageText=message,
-                               WorkerIds=list(worker_ids[start:start + NOTIFY_BATCH]))
-            failures += [{"worker_id": f["WorkerId"], "code": f["NotifyWorkersFailureCode"],
-                          "message": f["NotifyWorkersFailureMessage"]}
-                         for f in reply.get("NotifyWorkersFailureStatuses", [])]
-        return failures
-
     def completion(self, unit_id: str, assignment_id: str) -> Completion:
-        """Back to the portal's list of tasks."""
-        return Completion("portal", self._portal_url)
+        """Back to the portal's list of HITs."""
+        return Completion("portal", public_url(self._settings).rstrip("/") + PORTAL_HITS)
 
 
-def _record(item: dict[str, Any]) -> SubmissionRecord:
-    return SubmissionRecord(assignment_id=item["AssignmentId"], unit_id=item["HITId"],
-                            worker_id=item["WorkerId"], status=_STATUS[item["AssignmentStatus"]])
+def _requirements(wanted: Requirements, granted: dict[str, str]) -> list[dict]:
+    """The allow-list and the assignee's own qualification; no approval rate (ignored for
+    the team) and no locales (refused by check_publish)."""
+    reqs: list[dict] = []
+    for type_id in (wanted.group, granted.get(wanted.assignee or "")):
+        if type_id:
+            reqs += qualification_requirements(Requirements(group=type_id))
+    return reqs
 
 
 def team_settings(settings: Settings) -> Settings:
@@ -337,7 +202,6 @@ def team_settings(settings: Settings) -> Settings:
         "mturk_access_key_id": team.access_key, "mturk_secret_access_key": team.secret_key})
 
 
-def make(settings: Settings) -> CrowdProvider:
+def make(settings: Settings) -> TeamProvider:
     """The team provider of this instance."""
-    portal = public_url(settings).rstrip("/") + "/market/"
-    return TeamProvider(make_client(team_settings(settings)), portal)
+    return TeamProvider(team_settings(settings))

@@ -1,5 +1,7 @@
-"""A reward is at least $0.01 wherever it is given: the command line, the API and the
-built-in marketplace's CreateHIT each refuse $0.00 with a clear error, and publish nothing."""
+"""A reward on MTurk is at least $0.01 wherever it is given: the command line, the API (the
+mturk provider's check before publishing; the schema takes 0, which a team unit may pay) and
+the built-in marketplace's CreateHIT each refuse $0.00 with a clear error, and publish
+nothing."""
 
 from __future__ import annotations
 
@@ -25,8 +27,9 @@ def test_the_api_refuses_a_reward_under_one_cent(api: Any, tasks: list[int]) -> 
     resp = api.post("/api/crowd/publish", json={"reward": "0.00", "min_approval_rate": None})
     assert resp.status_code == 422, resp.text
     body = resp.json()
-    assert body["error"] == "validation_error" and body["fields"][0]["field"] == "reward"
+    assert body["error"] == "provider_refused" and body["fields"][0]["field"] == "reward"
     assert "0.01" in body["fields"][0]["message"]
+    assert api.get("/api/crowd/hits").json() == []
     one_cent = api.post("/api/crowd/publish",
                         json={"reward": "0.01", "min_approval_rate": None, "dry_run": True})
     assert one_cent.status_code == 200, one_cent.text

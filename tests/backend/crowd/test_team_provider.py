@@ -141,7 +141,7 @@ def test_publishing_again_recovers_the_unit_and_the_completion_is_the_portal(
     assert again[0].outcome == "recovered" and again[0].unit_id == first[0].unit_id
     assert members["ben"].listed() == [first[0].unit_id]
     completion = provider.completion(first[0].unit_id, "ANY")
-    assert (completion.kind, completion.url) == ("portal", f"{crowd_url}/market/")
+    assert (completion.kind, completion.url) == ("portal", f"{crowd_url}/market/#/hits")
 
 
 def test_a_reward_of_0_is_taken_for_team_units_and_refused_on_the_mturk_path(

@@ -1,0 +1,190 @@
+"""The crowd's loop on each provider, over HTTP against the app served on loopback: publish the
+hand tasks with that provider, a worker takes a unit the provider's way, the annotation page
+starts the assignment with the ids its address carries and learns how to complete, saves and
+submits tracks, crowd sync (Prolific: its webhook) records the submission, the QC job scores
+it, an admin approves it, rejects a second unit's work and pays a bonus, and the costs show each
+provider's amounts in its own fees and currency.
+
+mturk and team run on the built-in marketplace (the mturk worker through the marketplace's
+worker service, the team member through the portal); prolific against the Prolific test double.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+import httpx
+import numpy as np
+import pytest
+from sqlalchemy import select
+
+from backend.db import session_scope
+from tests.backend.crowd.conftest import WEBHOOK_SECRET
+from tests.backend.crowd.helpers import admin_headers
+from tests.backend.market.helpers import accept
+
+__all__ = ["WEBHOOK_SECRET"]
+
+REWARD = "0.50"
+BONUS = "0.20"
+PROLIFIC_REWARD = "1.50"  # over Prolific's hourly floor for a hand task's expected time
+REJECTION = ("The tracked joints sit far from the hand in most frames of this view, so the "
+             "work cannot be used; please look at the examples before trying again.")
+
+
+@dataclass
+class Work:
+    """One worker's take of one unit, as the page saw it."""
+
+    unit_id: str
+    ids: dict[str, str]  # what the page sends to /api/annotate/start
+    completion: dict[str, str]
+    assignment_id: int  # ours
+
+
+class Loop:
+    """The admin's side, over HTTP, and the annotation page's calls."""
+
+    def __init__(self, base: str, capture: Path) -> None:
+        from backend.captures.truth import CaptureTruth
+
+        self.base = base
+        self.http = httpx.Client(base_url=base, timeout=60)
+        self.http.headers.update(admin_headers(self.http))
+        self.truth = CaptureTruth(capture)
+        self.rng = np.random.default_rng(3)
+
+    def publish(self, provider: str, reward: str, **extra: Any) -> list[str]:
+        """Publish every task with ``provider``; the units of the first two hand tasks."""
+        from backend.annotation.models import Task
+        from backend.crowd.models import CrowdHit
+
+        reply = self.http.post("/api/crowd/publish", json={
+            "provider": provider, "reward": reward, "min_approval_rate": None, **extra})
+        assert reply.status_code == 200, reply.text
+        assert reply.json()["cost"]["provider"] == provider
+        with session_scope() as session:
+            hands = list(session.scalars(
+                select(CrowdHit.hit_id).join(Task, Task.id == CrowdHit.task_id)
+                .where(Task.kind == "hand", CrowdHit.provider == provider)
+                .order_by(Task.id)))
+        assert set(hands) <= set(reply.json()["hit_ids"])
+        return hands[:2]
+
+    def page(self, unit_id: str, task_token: str, ids: dict[str, str], profile: str) -> Work:
+        """The page: start with the address's ids, save half the tracks, submit them all."""
+        from backend.crowd.simulate import annotate
+
+        started = httpx.post(f"{self.base}/api/annotate/start", timeout=30,
+                             json={"task_token": task_token, **ids})
+        assert started.status_code == 200, started.text
+        auth = {"Authorization": f"Bearer {started.json()['token']}"}
+        task = httpx.get(f"{self.base}/api/annotate/task", headers=auth, timeout=30).json()
+        xy, visible = self.truth.points(task["task"], self.rng)
+        work = annotate(xy, visible, (task["task"]["width"], task["task"]["height"]), profile,
+                        self.rng)
+        body = [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]
+        version = task["assignment"]["version"]
+        saved = httpx.put(f"{self.base}/api/annotate/tracks", headers=auth, timeout=30, json={
+            "version": version, "tracks": body[:10], "edit_count": 10, "working_time_s": 60.0})
+        assert saved.status_code == 200, saved.text
+        done = httpx.post(f"{self.base}/api/annotate/submit", headers=auth, timeout=30, json={
+            "version": saved.json()["version"], "tracks": body, "edit_count": 25,
+            "working_time_s": 150.0})
+        assert done.status_code == 200 and done.json()["status"] == "submitted", done.text
+        return Work(unit_id, ids, started.json()["completion"], task["assignment"]["id"])
+
+    def sync(self) -> int:
+        reply = self.http.post("/api/crowd/sync")
+        assert reply.status_code == 200, reply.text
+        return int(reply.json()["accepted"])
+
+    def decide(self, careful: Work, careless: Work) -> None:
+        """Approve the careful work with a bonus, reject the careless work."""
+        approved = self.http.post(f"/api/crowd/assignments/{careful.assignment_id}/approve",
+                                  json={"feedback": "Clean joints, thank you."})
+        assert approved.status_code == 200, approved.text
+        rejected = self.http.post(f"/api/crowd/assignments/{careless.assignment_id}/reject",
+                                  json={"feedback": REJECTION})
+        assert rejected.status_code == 200, rejected.text
+        bonus = self.http.post(f"/api/crowd/assignments/{careful.assignment_id}/bonus",
+                               json={"amount": BONUS, "reason": "careful work"})
+        assert bonus.status_code == 200, bonus.text
+
+    def costs(self, provider: str) -> dict[str, str]:
+        reply = self.http.get("/api/crowd/costs")
+        assert reply.status_code == 200, reply.text
+        (line,) = [line for line in reply.json()["by_provider"] if line["key"] == provider]
+        return {k: line[k] for k in ("currency", "spent_rewards", "spent_bonuses", "spent_fees",
+                                     "spent")}
+
+
+@pytest.fixture
+def hands(crowd_url: str, qc_capture: Path) -> int:
+    """The synthetic capture imported with its tasks; the sequence id."""
+    from backend.annotation.service import create_tasks
+    from backend.captures.flows import import_path
+    from backend.storage import get_storage
+
+    sequence_id = import_path(qc_capture)[0].sequence_id
+    with session_scope() as session:
+        create_tasks(session, get_storage(), sequence_id)
+    return sequence_id
+
+
+@pytest.fixture
+def loop(crowd_url: str, qc_capture: Path, hands: int) -> Loop:
+    return Loop(crowd_url, qc_capture)
+
+
+def task_token(page_url: str) -> str:
+    return parse_qs(urlsplit(page_url).query)["task"][0]
+
+
+def hit_page(unit_id: str) -> str:
+    from backend.config import get_settings
+    from backend.crowd.providers.mturk_client import make_client
+
+    question = make_client(get_settings()).get_hit(HITId=unit_id)["HIT"]["Question"]
+    return question.split("<ExternalURL>")[1].split("</ExternalURL>")[0].replace("&amp;", "&")
+
+
+def scored(sequence_id: int, works: list[Work]) -> dict[int, Any]:
+    """Run the target's QC job (queued by the sync); the reports of ``works`` by our id."""
+    from backend.jobs.runner import execute
+    from backend.quality.models import QCReport
+    from backend.quality.service import qc_key
+
+    execute(qc_key(sequence_id, "hand:0"))
+    ids = [work.assignment_id for work in works]
+    with session_scope() as session:
+        return {r.assignment_id: (r.outcome, r.metrics.get("median_error_px"))
+                for r in session.scalars(select(QCReport).where(QCReport.assignment_id.in_(ids)))}
+
+
+def test_mturk_loop_completes_by_form_and_costs_usd_with_twenty_percent(
+    loop: Loop, hands: int, crowd_url: str
+) -> None:
+    from tests.backend.market.helpers import submit
+
+    units = loop.publish("mturk", REWARD, sequence_id=hands)
+    works = []
+    for unit_id, worker, profile in ((units[0], "AMTURKLOOP1", "careful"),
+                                     (units[1], "AMTURKLOOP2", "spammer")):
+        market_id = accept(unit_id, worker)  # the marketplace's worker service
+        ids = {"assignment_id": market_id, "hit_id": unit_id, "worker_id": worker}
+        work = loop.page(unit_id, task_token(hit_page(unit_id)), ids, profile)
+        assert work.completion == {"kind": "form_post",
+                                   "url": f"{crowd_url}/mturk/externalSubmit"}
+        assert submit(crowd_url, market_id, result="submitted").status_code == 200
+        works.append(work)
+    assert loop.sync() == 2
+    reports = scored(hands, works)
+    assert set(reports) == {w.assignment_id for w in works}
+    loop.decide(*works)
+    assert loop.costs("mturk") == {"currency": "USD", "spent_rewards": "0.50",
+                                   "spent_bonuses": "0.20", "spent_fees": "0.14",
+                                   "spent": "0.84"}
