@@ -188,3 +188,22 @@ export function postCompletionForm(doc, action, assignmentId, result) {
   form.submit();
   return form;
 }
+
+/**
+ * The completion form sent in the background (the page stays): resolves true when the
+ * marketplace took it, false when it refused or could not be reached (the page goes on; the
+ * work is saved and submitted here, and an admin sees the assignment left "working").
+ * @param {typeof fetch} fetchFn @param {string} action @param {string} assignmentId
+ * @param {string} result
+ * @returns {Promise<boolean>}
+ */
+export async function sendCompletionForm(fetchFn, action, assignmentId, result) {
+  try {
+    const resp = await fetchFn(action, {
+      method: "POST", body: new URLSearchParams({ assignmentId, result }),
+      credentials: "same-origin", keepalive: true });
+    return resp.ok;
+  } catch {
+    return false;
+  }
+}

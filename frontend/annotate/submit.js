@@ -7,7 +7,7 @@
  * the portal's list.
  */
 
-import { postCompletionForm } from "./api.js";
+import { postCompletionForm, sendCompletionForm } from "./api.js";
 import { checkWork, imageWarnings } from "./core/checks.js";
 import { SUBMITTED_MESSAGE, completionStep } from "./core/completion.js";
 import { displayName, escapeHtml } from "./instructions.js";
@@ -138,7 +138,8 @@ function handleSubmitError(ctx, err) {
 /**
  * Hands a submitted assignment back to its crowd (after the server accepted the submission).
  * A framed page that may not navigate the whole window (the frame's sandbox wants the worker's
- * click, and the save took too long) goes to the url in its frame instead.
+ * click, and the save took too long) goes to the url in its frame instead. A portal
+ * completion first sends the marketplace's form in the background (``handIn``).
  * @param {Window} win  the page's window
  * @param {import("./api.js").PageParams} params
  * @param {{version: number}} resp  the submit reply
@@ -146,8 +147,24 @@ function handleSubmitError(ctx, err) {
  */
 export function completeSubmitted(win, params, resp) {
   const step = completionStep(params, { framed: win.top !== win, base: win.location.href });
+  const result = `submitted:${resp.version}`;
+  const go = () => takeStep(win, params, step, result);
+  if ("handIn" in step && step.handIn) {
+    sendCompletionForm(win.fetch.bind(win), step.handIn.url, step.handIn.assignmentId, result)
+      .finally(go);
+  } else {
+    go();
+  }
+  return step;
+}
+
+/**
+ * @param {Window} win @param {import("./api.js").PageParams} params
+ * @param {import("./core/completion.js").CompletionStep} step @param {string} result
+ */
+function takeStep(win, params, step, result) {
   if (step.action === "form") {
-    postCompletionForm(win.document, step.url, step.assignmentId, `submitted:${resp.version}`);
+    postCompletionForm(win.document, step.url, step.assignmentId, result);
   } else if (step.action === "parent") {
     win.parent.postMessage({ type: SUBMITTED_MESSAGE, assignmentId: params.assignmentId },
       step.origin);
@@ -160,5 +177,4 @@ export function completeSubmitted(win, params, resp) {
       win.location.assign(step.url);
     }
   }
-  return step;
 }

@@ -3,7 +3,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { readPageParams } from "../../frontend/annotate/api.js";
+import { readPageParams, sendCompletionForm } from "../../frontend/annotate/api.js";
 import {
   checkedCompletion,
   completionEntries,
@@ -51,14 +51,32 @@ test("redirect sends the whole window when framed, the page itself when alone", 
 
 test("portal tells the framing portal, to its origin only; alone it opens the list", () => {
   const team = { kind: "portal", url: "/market/#/hits" };
+  const handIn = { url: "https://market.example/mturk/externalSubmit", assignmentId: "A1" };
   assert.deepEqual(completionStep(params(team), FRAMED), {
     action: "parent", url: "https://labels.example.org/market/#/hits",
-    origin: "https://labels.example.org" });
+    origin: "https://labels.example.org", handIn });
   const elsewhere = { kind: "portal", url: "https://portal.example.org:8443/market/" };
   assert.equal(completionStep(params(elsewhere), FRAMED).origin,
     "https://portal.example.org:8443");
   assert.deepEqual(completionStep(params(team), ALONE),
+    { action: "navigate", url: "https://labels.example.org/market/#/hits", handIn });
+  assert.deepEqual(completionStep(params(team, { turkSubmitTo: null }), ALONE),
     { action: "navigate", url: "https://labels.example.org/market/#/hits" });
+});
+
+test("a portal completion hands the assignment to the marketplace's form first", async () => {
+  const sent = [];
+  const fetchFn = async (url, init) => {
+    sent.push([url, init.method, String(init.body)]);
+    return { ok: url.endsWith("/externalSubmit") };
+  };
+  assert.equal(await sendCompletionForm(fetchFn, "https://m.example/mturk/externalSubmit",
+    "A1", "submitted:7"), true);
+  assert.deepEqual(sent, [["https://m.example/mturk/externalSubmit", "POST",
+    "assignmentId=A1&result=submitted%3A7"]]);
+  assert.equal(await sendCompletionForm(fetchFn, "https://m.example/other", "A1", "x"), false);
+  const down = async () => { throw new TypeError("network"); };
+  assert.equal(await sendCompletionForm(down, "https://m.example/x", "A1", "x"), false);
 });
 
 test("a completion the page cannot follow is dropped: unknown kind, no web address", () => {

@@ -17,9 +17,16 @@
 
 /**
  * @typedef {{action: "form", url: string, assignmentId: string}
- *   | {action: "top" | "navigate", url: string}
- *   | {action: "parent", url: string, origin: string}
+ *   | {action: "top" | "navigate", url: string, handIn?: HandIn}
+ *   | {action: "parent", url: string, origin: string, handIn?: HandIn}
  *   | {action: "none"}} CompletionStep
+ */
+
+/**
+ * The marketplace form a portal completion posts in the background before going back to the
+ * portal (the team's HITs are the built-in marketplace's: its record of the assignment must
+ * say submitted, as MTurk's form post would make it, for crowd sync to collect the work).
+ * @typedef {{url: string, assignmentId: string}} HandIn
  */
 
 /** The message a framed page posts to the portal when its work is submitted. */
@@ -103,7 +110,12 @@ export function completionStep(params, where) {
   }
   const target = completion && webUrl(completion.url, where.base);
   if (!target) return { action: "none" };
-  if (!where.framed) return { action: "navigate", url: target.href };
-  if (kind === "redirect") return { action: "top", url: target.href };
-  return { action: "parent", url: target.href, origin: target.origin };
+  if (kind === "redirect") {
+    return { action: where.framed ? "top" : "navigate", url: target.href };
+  }
+  const handIn = turkSubmitTo && assignmentId
+    ? { handIn: { url: `${turkSubmitTo.replace(/\/+$/, "")}/mturk/externalSubmit`, assignmentId } }
+    : {};
+  if (!where.framed) return { action: "navigate", url: target.href, ...handIn };
+  return { action: "parent", url: target.href, origin: target.origin, ...handIn };
 }

@@ -188,3 +188,42 @@ def test_mturk_loop_completes_by_form_and_costs_usd_with_twenty_percent(
     assert loop.costs("mturk") == {"currency": "USD", "spent_rewards": "0.50",
                                    "spent_bonuses": "0.20", "spent_fees": "0.14",
                                    "spent": "0.84"}
+
+
+def portal_member(base: str, loop: Loop, name: str) -> tuple[str, dict[str, str]]:
+    """A portal account the admin made, signed in; (worker id, auth header)."""
+    email, password = f"{name}@lab.example.org", "team member password"
+    made = loop.http.post("/api/portal/workers", json={"email": email, "password": password})
+    assert made.status_code == 200, made.text
+    login = httpx.post(f"{base}/api/portal/login", json={"email": email, "password": password})
+    assert login.status_code == 200, login.text
+    return made.json()["worker_id"], {"Authorization": f"Bearer {login.json()['access_token']}"}
+
+
+def test_team_loop_completes_to_the_portal_and_costs_nothing_in_fees(
+    loop: Loop, hands: int, crowd_url: str
+) -> None:
+    units = loop.publish("team", "0.00", sequence_id=hands)
+    works = []
+    for unit_id, name, profile in ((units[0], "amy", "careful"), (units[1], "ben", "spammer")):
+        worker_id, auth = portal_member(crowd_url, loop, name)
+        taken = httpx.post(f"{crowd_url}/api/portal/hits/{unit_id}/accept", headers=auth)
+        assert taken.status_code == 200, taken.text
+        query = {k: v[0] for k, v in parse_qs(urlsplit(taken.json()["work_url"]).query).items()}
+        ids = {"assignment_id": query["assignmentId"], "hit_id": query["hitId"],
+               "worker_id": query["workerId"]}
+        assert (ids["hit_id"], ids["worker_id"]) == (unit_id, worker_id)
+        work = loop.page(unit_id, query["task"], ids, profile)
+        assert work.completion == {"kind": "portal", "url": f"{crowd_url}/market/#/hits"}
+        # The page hands the assignment in (completion.js's handIn), then goes to the portal.
+        handed = httpx.post(f"{query['turkSubmitTo']}/mturk/externalSubmit",
+                            data={"assignmentId": ids["assignment_id"], "result": "submitted:2"})
+        assert handed.status_code == 200, handed.text
+        works.append(work)
+    assert loop.sync() == 2
+    reports = scored(hands, works)
+    assert set(reports) == {w.assignment_id for w in works}
+    loop.decide(*works)
+    assert loop.costs("team") == {"currency": "USD", "spent_rewards": "0.00",
+                                  "spent_bonuses": "0.20", "spent_fees": "0.00",
+                                  "spent": "0.20"}
