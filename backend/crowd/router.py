@@ -128,6 +128,18 @@ def read_costs(session: SessionDep, _: CurrentAdmin) -> CostsRead:
 page_router = APIRouter(prefix="/api", tags=["annotation"], route_class=JSONBodyRoute)
 
 
+def unit_named(task_id: int, named: str) -> str:
+    """The unit the page's address names: its HIT id (MTurk, the team), or, for a page whose
+    address carries its batch's id instead (Prolific's STUDY_ID; a unit there is
+    "<study id>:<position>"), this task's unit in that batch; else ``named`` as it is."""
+    with session_scope() as session:
+        found = list(session.scalars(select(CrowdHit.hit_id).where(
+            CrowdHit.task_id == task_id,
+            (CrowdHit.hit_id == named)
+            | CrowdHit.hit_id.startswith(f"{named}:", autoescape=True))))
+    return found[0] or named if len(found) == 1 else named
+
+
 def _opened_before(task_id: int, body: StartRequest) -> bool:
     """Whether the assignment was opened here before (then for this task, worker and HIT);
     read in a unit of work of its own, closed before the marketplace is asked."""
@@ -151,7 +163,8 @@ def start(body: StartRequest, session: SessionDep) -> StartRead:
 
     Only a marketplace assignment is started here, and only one the marketplace confirms
     (backend.crowd.holds): its HIT shows this task and a worker holds an assignment of it, or
-    the marketplace's record of the assignment names that HIT and worker. A direct link
+    the marketplace's record of the assignment names that HIT and worker (a Prolific page
+    sends its STUDY_ID as the HIT id: ``unit_named`` finds the task's unit). A direct link
     (no HIT) is made by an admin only (POST /api/tasks/{id}/assignments). 403/404 say why an
     assignment is refused; 503 when the marketplace cannot be reached.
     """
@@ -163,16 +176,18 @@ def start(body: StartRequest, session: SessionDep) -> StartRead:
         raise Forbidden("no HIT id: an assignment starts here only from its marketplace HIT "
                         "(hitId, assignmentId and workerId in the page address); a direct "
                         "link is made by an admin (POST /api/tasks/{id}/assignments)")
+    hit_id = unit_named(task_id, body.hit_id)
+    body = body.model_copy(update={"hit_id": hit_id})
     if not _opened_before(task_id, body):
-        slots = holds.confirm_held(task_id, body.hit_id, body.assignment_id, body.worker_id)
+        slots = holds.confirm_held(task_id, hit_id, body.assignment_id, body.worker_id)
         if slots is not None:
-            tasks.require_open_slot(session, body.hit_id, slots.held, slots.duration_s)
+            tasks.require_open_slot(session, hit_id, slots.held, slots.duration_s)
     task = tasks.get_task_or_raise(session, task_id)
     assignment = tasks.start_assignment(session, task, body.assignment_id, body.worker_id,
-                                          body.hit_id)
+                                          hit_id)
     # The assignment's ids are those of the provider that published its HIT.
-    provider = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == body.hit_id))
+    provider = session.scalar(select(CrowdHit.provider).where(CrowdHit.hit_id == hit_id))
     if provider is not None and assignment.provider != provider:
         assignment.provider = provider
     return StartRead(token=assignment_token(task, assignment),
-                     completion=completion_for(session, body.hit_id, body.assignment_id))
+                     completion=completion_for(session, hit_id, body.assignment_id))

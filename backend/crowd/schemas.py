@@ -87,6 +87,10 @@ class ApproveRequest(BaseModel):
 
 class RejectRequest(BaseModel):
     feedback: Feedback
+    # The provider's reason code where it wants one (Prolific's rejection_category, e.g.
+    # LOW_EFFORT); MTurk and the team take none.
+    category: str | None = Field(default=None, min_length=1, max_length=32,
+                                 pattern=r"^[A-Z_]+$")
 
 
 class BonusRequest(BaseModel):

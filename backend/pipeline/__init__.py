@@ -32,6 +32,7 @@ from backend.errors import DexlabelError
 from backend.jobs.service import enqueue_job, mark_waiting
 from backend.labels import accepted_digest
 from backend.quality import flows as quality_flows
+from backend.quality.models import QCReport
 from backend.quality.service import record_decision, request_landmark_qc, request_qc
 from backend.rig.service import adopt
 from backend.solve.models import SolveRun
@@ -82,7 +83,15 @@ def sync(session: Session, crowd: CrowdProvider | None = None) -> SyncResult:
 def confirm(assignment_id: int) -> dict[str, Any]:
     """The confirm job: ask the provider for one submission, then queue its QC."""
     record = crowd_confirm.submitted_record(assignment_id)
-    if isinstance(record, str):
+    if record == "already_accepted":
+        state = record
+        # Recorded by another path (crowd sync, a provider's webhook, which sits below QC):
+        # its QC is queued here unless it was scored already.
+        with session_scope() as session:
+            if session.scalar(select(QCReport.id).where(
+                    QCReport.assignment_id == assignment_id)) is None:
+                _confirmed(session, [assignment_id])
+    elif isinstance(record, str):
         state = record
     else:
         with session_scope() as session:
@@ -110,8 +119,8 @@ def approve(session: Session, crowd: CrowdProvider | None, assignment_id: int,
 
 
 def reject(session: Session, crowd: CrowdProvider | None, assignment_id: int,
-           feedback: str) -> PaymentRead:
-    payment = decisions.reject(session, crowd, assignment_id, feedback)
+           feedback: str, category: str | None = None) -> PaymentRead:
+    payment = decisions.reject(session, crowd, assignment_id, feedback, category)
     _decided(session, assignment_id, "rejected")
     return payment
 

@@ -52,7 +52,7 @@ def approve(assignment_id: Id, body: ApproveRequest, session: SessionDep,
              tags=["crowd"])
 def reject(assignment_id: Id, body: RejectRequest, session: SessionDep,
            _: CurrentAdmin) -> PaymentRead:
-    return pipeline.reject(session, None, assignment_id, body.feedback)
+    return pipeline.reject(session, None, assignment_id, body.feedback, body.category)
 
 
 @router.post("/sequences/{sequence_id}/calibrations/{number}/adopt",

@@ -36,6 +36,10 @@ REOPENED = "rejected; the task was re-opened with one more assignment"
 GRANT_PENDING = "passed training; granting the qualification"
 GRANTED = "passed training; the training qualification was granted"
 
+# The reason code of a rejection by QC where the provider wants one (Prolific's
+# rejection_category): the work is far from what the other views agree on.
+QC_REJECTION_CATEGORY = "LOW_EFFORT"
+
 
 def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
     """The whole QC job of one target; returns counts for the job table."""
@@ -112,7 +116,7 @@ def _act(crowd: CrowdProvider | None, report_id: int, assignment_id: int) -> str
             report.action_detail, follow_up = GRANT_PENDING, _grant
         else:
             decisions.reject(session, crowd, assignment_id,
-                             decisions.fit_feedback(report.feedback))
+                             decisions.fit_feedback(report.feedback), QC_REJECTION_CATEGORY)
             report.action, report.action_detail = "rejected", REOPEN_PENDING
             record_actions(session, {"rejected": 1})
             follow_up = _reopen

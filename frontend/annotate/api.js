@@ -39,13 +39,15 @@ const REQUEST_TIMEOUT_MS = 15000;
 export function readPageParams(search, hash = "") {
   const q = new URLSearchParams(search);
   const h = new URLSearchParams(hash.replace(/^#/, ""));
-  const assignmentId = q.get("assignmentId");
+  // MTurk's names (the built-in marketplace's too), else Prolific's: its submission is the
+  // assignment, its study names the unit (the server finds the task's unit in it).
+  const assignmentId = q.get("assignmentId") ?? q.get("SESSION_ID");
   return {
     token: h.get("token") ?? q.get("token"),
     taskToken: q.get("task"),
     assignmentId,
-    hitId: q.get("hitId"),
-    workerId: q.get("workerId"),
+    hitId: q.get("hitId") ?? q.get("STUDY_ID"),
+    workerId: q.get("workerId") ?? q.get("PROLIFIC_PID"),
     turkSubmitTo: q.get("turkSubmitTo"),
     preview: assignmentId === PREVIEW_ASSIGNMENT_ID,
     completion: completionFromFragment(h),

@@ -31,6 +31,9 @@ __all__ = ["WEBHOOK_SECRET"]
 REWARD = "0.50"
 BONUS = "0.20"
 PROLIFIC_REWARD = "1.50"  # over Prolific's hourly floor for a hand task's expected time
+# Two views of six in: the careful work passes on its own evidence, the careless one waits
+# for an admin (no consensus yet to reject it on), which is why the admin decides here.
+QC_SEES = [("approve", True), ("review", True)]
 REJECTION = ("The tracked joints sit far from the hand in most frames of this view, so the "
              "work cannot be used; please look at the examples before trying again.")
 
@@ -102,13 +105,13 @@ class Loop:
         assert reply.status_code == 200, reply.text
         return int(reply.json()["accepted"])
 
-    def decide(self, careful: Work, careless: Work) -> None:
+    def decide(self, careful: Work, careless: Work, category: str | None = None) -> None:
         """Approve the careful work with a bonus, reject the careless work."""
         approved = self.http.post(f"/api/crowd/assignments/{careful.assignment_id}/approve",
                                   json={"feedback": "Clean joints, thank you."})
         assert approved.status_code == 200, approved.text
         rejected = self.http.post(f"/api/crowd/assignments/{careless.assignment_id}/reject",
-                                  json={"feedback": REJECTION})
+                                  json={"feedback": REJECTION, "category": category})
         assert rejected.status_code == 200, rejected.text
         bonus = self.http.post(f"/api/crowd/assignments/{careful.assignment_id}/bonus",
                                json={"amount": BONUS, "reason": "careful work"})
@@ -152,8 +155,22 @@ def hit_page(unit_id: str) -> str:
     return question.split("<ExternalURL>")[1].split("</ExternalURL>")[0].replace("&amp;", "&")
 
 
-def scored(sequence_id: int, works: list[Work]) -> dict[int, Any]:
-    """Run the target's QC job (queued by the sync); the reports of ``works`` by our id."""
+def confirmed(works: list[Work]) -> list[str]:
+    """Run the confirm jobs the page's submits queued; their states."""
+    from backend.jobs.models import Job
+    from backend.jobs.runner import execute
+    from backend.pipeline import confirm_key
+
+    for work in works:
+        execute(confirm_key(work.assignment_id))
+    with session_scope() as session:
+        return [str(session.scalar(select(Job.status).where(
+            Job.key == confirm_key(work.assignment_id)))) for work in works]
+
+
+def scored(sequence_id: int, works: list[Work]) -> list[Any]:
+    """Run the target's QC job (queued by the sync or the confirm job); per work, its
+    report's (outcome, provisional)."""
     from backend.jobs.runner import execute
     from backend.quality.models import QCReport
     from backend.quality.service import qc_key
@@ -161,8 +178,9 @@ def scored(sequence_id: int, works: list[Work]) -> dict[int, Any]:
     execute(qc_key(sequence_id, "hand:0"))
     ids = [work.assignment_id for work in works]
     with session_scope() as session:
-        return {r.assignment_id: (r.outcome, r.metrics.get("median_error_px"))
-                for r in session.scalars(select(QCReport).where(QCReport.assignment_id.in_(ids)))}
+        found = {r.assignment_id: (r.outcome, r.provisional) for r in
+                 session.scalars(select(QCReport).where(QCReport.assignment_id.in_(ids)))}
+    return [found.get(i) for i in ids]
 
 
 def test_mturk_loop_completes_by_form_and_costs_usd_with_twenty_percent(
@@ -182,8 +200,7 @@ def test_mturk_loop_completes_by_form_and_costs_usd_with_twenty_percent(
         assert submit(crowd_url, market_id, result="submitted").status_code == 200
         works.append(work)
     assert loop.sync() == 2
-    reports = scored(hands, works)
-    assert set(reports) == {w.assignment_id for w in works}
+    assert scored(hands, works) == QC_SEES
     loop.decide(*works)
     assert loop.costs("mturk") == {"currency": "USD", "spent_rewards": "0.50",
                                    "spent_bonuses": "0.20", "spent_fees": "0.14",
@@ -221,9 +238,55 @@ def test_team_loop_completes_to_the_portal_and_costs_nothing_in_fees(
         assert handed.status_code == 200, handed.text
         works.append(work)
     assert loop.sync() == 2
-    reports = scored(hands, works)
-    assert set(reports) == {w.assignment_id for w in works}
+    assert scored(hands, works) == QC_SEES
     loop.decide(*works)
     assert loop.costs("team") == {"currency": "USD", "spent_rewards": "0.00",
                                   "spent_bonuses": "0.20", "spent_fees": "0.00",
                                   "spent": "0.20"}
+
+
+def participant_page(external_url: str, participant: str, study_id: str,
+                     submission: str) -> dict[str, str]:
+    """The page's address as Prolific opens it (its placeholders filled in); the query."""
+    url = (external_url.replace("{%PROLIFIC_PID%}", participant)
+           .replace("{%STUDY_ID%}", study_id).replace("{%SESSION_ID%}", submission))
+    return {k: v[0] for k, v in parse_qs(urlsplit(url).query).items()}
+
+
+def test_prolific_loop_completes_by_redirect_with_its_code_and_costs_gbp_with_a_third(
+    prolific: Any, loop: Loop, hands: int, crowd_url: str
+) -> None:
+    from backend.config import get_settings
+    from backend.crowd.providers.prolific.webhooks import subscribe
+
+    subscribe(get_settings(), f"{crowd_url}/api/crowd/prolific/webhook")
+    units = loop.publish("prolific", PROLIFIC_REWARD, sequence_id=hands)
+    (study,) = prolific.studies.values()
+    works = []
+    for unit_id, participant, profile in ((units[0], "PIDCAREFUL", "careful"),
+                                          (units[1], "PIDCARELESS", "spammer")):
+        position = int(unit_id.rpartition(":")[2])
+        submission = prolific.take(study["id"], position, participant, status="ACTIVE")
+        query = participant_page(study["access_details"][position]["external_url"],
+                                 participant, study["id"], submission)
+        # What the page sends (api.js readPageParams): Prolific's names for the ids.
+        ids = {"assignment_id": query["SESSION_ID"], "hit_id": query["STUDY_ID"],
+               "worker_id": query["PROLIFIC_PID"]}
+        work = loop.page(unit_id, query["task"], ids, profile)
+        code = study["completion_codes"][0]["code"]
+        assert work.completion == {
+            "kind": "redirect",
+            "url": f"https://app.prolific.com/submissions/complete?cc={code}"}
+        prolific.submissions[submission]["status"] = "AWAITING REVIEW"
+        assert prolific.deliver("submission.status.change", submission,
+                                "AWAITING REVIEW") == [200]
+        works.append(work)
+    assert loop.sync() == 0  # the webhook recorded both already
+    confirmed(works)  # the page's submit queued each one's confirm job: it queues the QC
+    assert scored(hands, works) == QC_SEES
+    loop.decide(*works, category="LOW_EFFORT")
+    assert [prolific.submissions[s]["status"] for s in prolific.submissions] == [
+        "APPROVED", "REJECTED"]
+    assert loop.costs("prolific") == {"currency": "GBP", "spent_rewards": "1.50",
+                                      "spent_bonuses": "0.20", "spent_fees": "0.57",
+                                      "spent": "2.27"}
