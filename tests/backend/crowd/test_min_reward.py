@@ -29,7 +29,7 @@ def test_the_api_refuses_a_reward_under_one_cent(api: Any, tasks: list[int]) -> 
     body = resp.json()
     assert body["error"] == "provider_refused" and body["fields"][0]["field"] == "reward"
     assert "0.01" in body["fields"][0]["message"]
-    assert api.get("/api/crowd/hits").json() == []
+    assert api.get("/api/crowd/units").json() == []  # nothing published
     one_cent = api.post("/api/crowd/publish",
                         json={"reward": "0.01", "min_approval_rate": None, "dry_run": True})
     assert one_cent.status_code == 200, one_cent.text
