@@ -29,11 +29,13 @@ from backend.crowd.provider import CrowdProvider
 from backend.crowd.schemas import PaymentRead, SyncResult
 from backend.db import session_scope
 from backend.errors import DexlabelError
+from backend.jobs.models import Job
+from backend.jobs.runner import ACTIVE
 from backend.jobs.service import enqueue_job, mark_waiting
 from backend.labels import accepted_digest
 from backend.quality import flows as quality_flows
 from backend.quality.models import QCReport
-from backend.quality.service import record_decision, request_landmark_qc, request_qc
+from backend.quality.service import qc_key, record_decision, request_landmark_qc, request_qc
 from backend.rig.service import adopt
 from backend.solve.models import SolveRun
 from backend.solve.service import request_solve
@@ -72,6 +74,16 @@ def _confirmed(session: Session, assignment_ids: list[int]) -> None:
             request_qc(session, assignment.task)
 
 
+def _qc_covered(session: Session, assignment_id: int) -> bool:
+    """Whether the assignment has a QC report, or its target's QC job is queued or running."""
+    if session.scalar(select(QCReport.id).where(QCReport.assignment_id == assignment_id)):
+        return True
+    task = session.get_one(Assignment, assignment_id).task
+    status = session.scalar(select(Job.status).where(
+        Job.key == qc_key(task.sequence_id, task.target_key)))
+    return status in ACTIVE
+
+
 def sync(session: Session, crowd: CrowdProvider | None = None) -> SyncResult:
     """Collect the providers' submissions (``crowd sync``; ``crowd``: only that provider's)
     and queue QC for the new ones."""
@@ -85,11 +97,10 @@ def confirm(assignment_id: int) -> dict[str, Any]:
     record = crowd_confirm.submitted_record(assignment_id)
     if record == "already_accepted":
         state = record
-        # Recorded by another path (crowd sync, a provider's webhook, which sits below QC):
-        # its QC is queued here unless it was scored already.
+        # Recorded by another path: crowd sync queued its QC, a provider's webhook (which sits
+        # below QC) did not; queued here when it is neither scored nor waiting to be.
         with session_scope() as session:
-            if session.scalar(select(QCReport.id).where(
-                    QCReport.assignment_id == assignment_id)) is None:
+            if not _qc_covered(session, assignment_id):
                 _confirmed(session, [assignment_id])
     elif isinstance(record, str):
         state = record
