@@ -11,6 +11,7 @@ worker service, the team member through the portal); prolific against the Prolif
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -139,8 +140,10 @@ def hands(crowd_url: str, qc_capture: Path) -> int:
 
 
 @pytest.fixture
-def loop(crowd_url: str, qc_capture: Path, hands: int) -> Loop:
-    return Loop(crowd_url, qc_capture)
+def loop(crowd_url: str, qc_capture: Path, hands: int) -> Iterator[Loop]:
+    made = Loop(crowd_url, qc_capture)
+    yield made
+    made.http.close()
 
 
 def task_token(page_url: str) -> str:
@@ -282,7 +285,8 @@ def test_prolific_loop_completes_by_redirect_with_its_code_and_costs_gbp_with_a_
                                 "AWAITING REVIEW") == [200]
         works.append(work)
     assert loop.sync() == 0  # the webhook recorded both already
-    confirmed(works)  # the page's submit queued each one's confirm job: it queues the QC
+    # The page's submit queued each one's confirm job: it finds them recorded, queues the QC.
+    assert confirmed(works) == ["done", "done"]
     assert scored(hands, works) == QC_SEES
     loop.decide(*works, category="LOW_EFFORT")
     assert [prolific.submissions[s]["status"] for s in prolific.submissions] == [
