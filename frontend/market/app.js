@@ -83,14 +83,19 @@ async function checkSubmitted(assignmentId) {
 
 /**
  * The framed page says its work is submitted (a crowd that completes "back to the portal's
- * list"): believed only from the work frame, at the origin its page was loaded from.
+ * list"): believed only from the work frame, at the origin its page was loaded from. The
+ * portal hands the shown assignment in to the marketplace, as an MTurk page's own form would.
  * @param {MessageEvent} event
  */
-function onFrameMessage(event) {
+async function onFrameMessage(event) {
   const frame = /** @type {HTMLIFrameElement | null} */ ($("work-frame").querySelector("iframe"));
   if (!frame || event.source !== frame.contentWindow) return;
   if (event.origin !== new URL(frame.src, location.href).origin) return;
   if (!event.data || event.data.type !== SUBMITTED_MESSAGE) return;
+  const id = String($("return").dataset.assignment);
+  const result = /^submitted:\d+$/.test(String(event.data.result)) ? event.data.result
+    : "submitted";
+  await api.handIn(id, result);
   notify(`Submitted: “${$("work-title").textContent}”. Thank you!`, "info", true);
   location.hash = "#/hits";
 }
@@ -168,7 +173,7 @@ function start() {
   $("register").hidden = !invite;
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
-  window.addEventListener("message", onFrameMessage);
+  window.addEventListener("message", (e) => onFrameMessage(e).catch(fail));
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
 }
 
