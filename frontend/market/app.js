@@ -126,15 +126,23 @@ async function route() {
 /** The invite token of the registration link this page was opened with ("" if none). */
 let invite = "";
 
-/** @param {SubmitEvent} event */
+/**
+ * A new member registers with their invite and is signed in at once, on the list of HITs.
+ * @param {SubmitEvent} event
+ */
 async function onRegister(event) {
   event.preventDefault();
   const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
+  const [email, password] = [String(data.get("email")), String(data.get("password"))];
   try {
-    await api.register(invite, String(data.get("email")), String(data.get("password")));
+    await api.register(invite, email, password);
     invite = "";
     $("register").hidden = true;
-    notify("Account created: sign in with your email and password.");
+    await api.login(email, password);
+    await loadMe();
+    notify(`Account created: you are signed in as ${email}.`, "info", true);
+    location.hash = "#/hits";
+    await route();
   } catch (err) {
     notify(errorText(err), "error");
   }
@@ -171,6 +179,8 @@ function start() {
   if (invite) history.replaceState(null, "", location.pathname);
   $("register").addEventListener("submit", (e) => onRegister(/** @type {SubmitEvent} */ (e)));
   $("register").hidden = !invite;
+  // An invited newcomer has no account yet: creating it comes first.
+  if (invite) $("login-view").prepend($("register"));
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
   window.addEventListener("message", (e) => onFrameMessage(e).catch(fail));

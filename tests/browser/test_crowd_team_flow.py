@@ -93,15 +93,17 @@ def _invite_and_register(admin: Page, server: LiveServer, browser: Browser) -> P
     member.context.set_default_timeout(15000)
     member.goto(link.input_value())
     form = member.locator("#register")
+    # A newcomer's page starts with making the account, above the sign-in form.
+    assert member.locator("#login-view > form").first.get_attribute("id") == "register"
     form.locator("input[name=email]").fill(MEMBER)
     form.locator("input[name=password]").fill(PASSWORD)
     _shots(member, "1-member-register")
     form.locator("button[type=submit]").click()
-    expect(member.locator("#notice")).to_contain_text("Account created")
-    member.locator("#login input[name=email]").fill(MEMBER)
-    member.locator("#login input[name=password]").fill(PASSWORD)
-    member.locator("#login button[type=submit]").click()
+    # Signed in at once, on the list of HITs (none for them yet).
+    expect(member.locator("#notice")).to_contain_text(
+        f"Account created: you are signed in as {MEMBER}.")
     expect(member.locator("#hits-view")).to_be_visible()
+    expect(member.locator("#who")).to_contain_text(MEMBER)
     _shots(member, "1-member-signed-in")
     return member
 
@@ -115,11 +117,14 @@ def _publish_to_member(admin: Page, server: LiveServer, sequence_id: int,
     expect(admin.locator("#publish-assignee-field")).to_be_visible()
     expect(admin.locator(f'#publish-team option[value="{worker_id}"]')).to_have_text(MEMBER)
     admin.locator("#publish-assignee").fill(worker_id)
+    # The team's members are the lab's own: no approval rate to meet.
+    expect(admin.locator("#publish-approval-field")).to_be_hidden()
     admin.locator("#publish-check").click()
     cost = admin.locator("#publish-cost")
     expect(cost).to_contain_text("Our team (portal): 4 HITs \u00d7 1 assignment")
     expect(cost).to_contain_text("+ $0.00 fee")
     expect(cost).to_contain_text("fees $0.00")
+    expect(cost).to_contain_text("recorded only: the team is paid nothing through dexlabel")
     _shots(admin, "2-admin-publish-team")
     admin.locator("#publish-confirm").click()
     expect(admin.locator("#project-status")).to_contain_text("Published 4 HITs")
@@ -179,7 +184,10 @@ def _add_a_place_and_expire(admin: Page, server: LiveServer, sequence_id: int, g
     assert _units(server, sequence_id)[grown]["places"] == 2
 
     _unit_row(admin, expired).locator('button[data-action="expire"]').click()
-    expect(admin.locator("#crowd-confirm-text")).to_contain_text(f"Expire {expired}?")
+    unit = _units(server, sequence_id)[expired]
+    expect(admin.locator("#crowd-confirm-text")).to_contain_text(
+        f"Expire {expired}? It is task {unit['task_id']} (view {unit['serial']}, "
+        f"{unit['target_key']}).")
     _shots(admin, "4-admin-crowd-expire-asked")
     assert _units(server, sequence_id)[expired]["state"] == "open"
     admin.locator("#crowd-confirm-yes").click()
