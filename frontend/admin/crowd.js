@@ -145,6 +145,13 @@ async function send(what, path, body) {
   }
 }
 
+/** Which task a listed unit is of, as a question names it (the unit's id alone is opaque).
+ * @param {string} hitId */
+function unitNamed(hitId) {
+  const u = state.units.find((unit) => unit.hit_id === hitId);
+  return u ? ` It is task ${u.task_id} (view ${u.serial}, ${u.target_key}).` : "";
+}
+
 /** @param {string} hitId  @param {string} action */
 function unitAction(hitId, action) {
   const path = `/crowd/hits/${encodeURIComponent(hitId)}`;
@@ -161,9 +168,9 @@ function unitAction(hitId, action) {
     send(`Added ${count} place${count === 1 ? "" : "s"} to ${hitId}.`, `${path}/assignments`,
       { count });
   } else if (action === "expire") {
-    state.confirm?.ask(`Expire ${hitId}? No one can take its free places any more; work `
-      + "already taken can still be submitted.", () => send(`${hitId} is expired.`,
-      `${path}/expire`), { yes: "Expire", danger: true });
+    state.confirm?.ask(`Expire ${hitId}?${unitNamed(hitId)} No one can take its free places `
+      + "any more; work already taken can still be submitted.", () => send(
+      `${hitId} is expired.`, `${path}/expire`), { yes: "Expire", danger: true });
   }
 }
 

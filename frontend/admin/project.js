@@ -119,11 +119,13 @@ async function createTasks() {
 }
 
 /** The publish options of the form, as the API takes them: the provider chosen, and for the
- * team the member it is assigned to (none: open to the whole team). */
+ * team the member it is assigned to (none: open to the whole team) and no approval rate (a
+ * new member has no record to meet it with). */
 function publishOptions() {
-  const approval = input("publish-approval").value.trim();
   const provider = input("publish-provider").value;
-  const assignee = provider === "team" ? input("publish-assignee").value.trim() : "";
+  const team = provider === "team";
+  const approval = team ? "" : input("publish-approval").value.trim();
+  const assignee = team ? input("publish-assignee").value.trim() : "";
   return {
     sequence_id: state.sequence, provider, reward: input("publish-reward").value.trim(),
     max_assignments: Number(input("publish-assignments").value),
@@ -142,11 +144,13 @@ async function fillProviders() {
   select.value = offered.default;
 }
 
-/** The assignee field shows for the team only, its choices the team's accounts. */
+/** The assignee field shows for the team only, its choices the team's accounts; the
+ * approval rate for the others only. */
 async function providerChanged() {
   forgetPlan();
   const team = input("publish-provider").value === "team";
   $("publish-assignee-field").hidden = !team;
+  $("publish-approval-field").hidden = team;
   if (!team || $("publish-team").childElementCount) return;
   const members = await api().request("GET", "/crowd/team");
   $("publish-team").replaceChildren(...members.map((/** @type {any} */ m) =>
@@ -169,8 +173,12 @@ async function checkCost() {
   try {
     const plan = await api().request("POST", "/crowd/publish", { ...options, dry_run: true });
     const provider = /** @type {HTMLSelectElement} */ ($("publish-provider"));
+    // The team's pay is the lab's own record: nothing reaches anyone's account.
+    const recorded = provider.value === "team" ? " (recorded only: the team is paid nothing "
+      + "through dexlabel)" : "";
     $("publish-cost").textContent = plan.cost.hits
-      ? `${provider.selectedOptions[0]?.textContent}: ${costLine(plan)}` : costLine(plan);
+      ? `${provider.selectedOptions[0]?.textContent}: ${costLine(plan)}${recorded}`
+      : costLine(plan);
     $("publish-cost").dataset.provider = provider.value;
     $("publish-cost").dataset.hits = String(plan.cost.hits);
     $("publish-cost").dataset.total = plan.cost.total;

@@ -83,14 +83,19 @@ async function checkSubmitted(assignmentId) {
 
 /**
  * The framed page says its work is submitted (a crowd that completes "back to the portal's
- * list"): believed only from the work frame, at the origin its page was loaded from.
+ * list"): believed only from the work frame, at the origin its page was loaded from. The
+ * portal hands the shown assignment in to the marketplace, as an MTurk page's own form would.
  * @param {MessageEvent} event
  */
-function onFrameMessage(event) {
+async function onFrameMessage(event) {
   const frame = /** @type {HTMLIFrameElement | null} */ ($("work-frame").querySelector("iframe"));
   if (!frame || event.source !== frame.contentWindow) return;
   if (event.origin !== new URL(frame.src, location.href).origin) return;
   if (!event.data || event.data.type !== SUBMITTED_MESSAGE) return;
+  const id = String($("return").dataset.assignment);
+  const result = /^submitted:\d+$/.test(String(event.data.result)) ? event.data.result
+    : "submitted";
+  await api.handIn(id, result);
   notify(`Submitted: “${$("work-title").textContent}”. Thank you!`, "info", true);
   location.hash = "#/hits";
 }
@@ -121,15 +126,23 @@ async function route() {
 /** The invite token of the registration link this page was opened with ("" if none). */
 let invite = "";
 
-/** @param {SubmitEvent} event */
+/**
+ * A new member registers with their invite and is signed in at once, on the list of HITs.
+ * @param {SubmitEvent} event
+ */
 async function onRegister(event) {
   event.preventDefault();
   const data = new FormData(/** @type {HTMLFormElement} */ (event.target));
+  const [email, password] = [String(data.get("email")), String(data.get("password"))];
   try {
-    await api.register(invite, String(data.get("email")), String(data.get("password")));
+    await api.register(invite, email, password);
     invite = "";
     $("register").hidden = true;
-    notify("Account created: sign in with your email and password.");
+    await api.login(email, password);
+    await loadMe();
+    notify(`Account created: you are signed in as ${email}.`, "info", true);
+    location.hash = "#/hits";
+    await route();
   } catch (err) {
     notify(errorText(err), "error");
   }
@@ -166,9 +179,11 @@ function start() {
   if (invite) history.replaceState(null, "", location.pathname);
   $("register").addEventListener("submit", (e) => onRegister(/** @type {SubmitEvent} */ (e)));
   $("register").hidden = !invite;
+  // An invited newcomer has no account yet: creating it comes first.
+  if (invite) $("login-view").prepend($("register"));
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
-  window.addEventListener("message", onFrameMessage);
+  window.addEventListener("message", (e) => onFrameMessage(e).catch(fail));
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
 }
 
