@@ -166,8 +166,8 @@ function takeStep(win, params, step, result) {
   if (step.action === "form") {
     postCompletionForm(win.document, step.url, step.assignmentId, result);
   } else if (step.action === "parent") {
-    win.parent.postMessage({ type: SUBMITTED_MESSAGE, assignmentId: params.assignmentId,
-      result: `submitted:${resp.version}` }, step.origin);
+    win.parent.postMessage({ type: SUBMITTED_MESSAGE, assignmentId: params.assignmentId },
+      step.origin);
   } else if (step.action === "navigate") {
     win.location.assign(step.url);
   } else if (step.action === "top") {

@@ -3,7 +3,7 @@
  * kept in sessionStorage, never in a cookie.
  */
 
-import { ApiError, BearerClient } from "../common/api.js";
+import { BearerClient } from "../common/api.js";
 
 export class PortalApi extends BearerClient {
   /** @param {Storage} storage */
@@ -30,18 +30,4 @@ export class PortalApi extends BearerClient {
   /** @param {string} id */
   giveBack(id) { return this.request("POST", `/assignments/${encodeURIComponent(id)}/return`); }
 
-  /**
-   * Hands in the work of a page that completes back to the portal (a team HIT): the
-   * marketplace's ExternalQuestion form, as an MTurk page posts it itself, so the assignment
-   * is Submitted there (for the requester, and in this worker's list).
-   * @param {string} id  the assignment  @param {string} result  the page's "submitted:{version}"
-   */
-  async handIn(id, result) {
-    const resp = await fetch("/mturk/externalSubmit", { method: "POST", credentials: "omit",
-      body: new URLSearchParams({ assignmentId: id, result }) });
-    if (!resp.ok) {
-      throw new ApiError(resp.status, { detail: `the marketplace did not take assignment ${id} `
-        + `(${resp.status}); your work is saved: open the HIT again and submit` });
-    }
-  }
 }

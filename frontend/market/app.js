@@ -83,19 +83,15 @@ async function checkSubmitted(assignmentId) {
 
 /**
  * The framed page says its work is submitted (a crowd that completes "back to the portal's
- * list"): believed only from the work frame, at the origin its page was loaded from. The
- * portal hands the shown assignment in to the marketplace, as an MTurk page's own form would.
+ * list"): believed only from the work frame, at the origin its page was loaded from. The page
+ * has already handed its assignment in to the marketplace (annotate/core/completion.js).
  * @param {MessageEvent} event
  */
-async function onFrameMessage(event) {
+function onFrameMessage(event) {
   const frame = /** @type {HTMLIFrameElement | null} */ ($("work-frame").querySelector("iframe"));
   if (!frame || event.source !== frame.contentWindow) return;
   if (event.origin !== new URL(frame.src, location.href).origin) return;
   if (!event.data || event.data.type !== SUBMITTED_MESSAGE) return;
-  const id = String($("return").dataset.assignment);
-  const result = /^submitted:\d+$/.test(String(event.data.result)) ? event.data.result
-    : "submitted";
-  await api.handIn(id, result);
   notify(`Submitted: “${$("work-title").textContent}”. Thank you!`, "info", true);
   location.hash = "#/hits";
 }
@@ -183,7 +179,7 @@ function start() {
   if (invite) $("login-view").prepend($("register"));
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
-  window.addEventListener("message", (e) => onFrameMessage(e).catch(fail));
+  window.addEventListener("message", onFrameMessage);
   startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
 }
 
