@@ -252,7 +252,8 @@ def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus
     there (the copy's residuals describe other joints)."""
     sent_xy = np.asarray(lab.xy, np.float64)
     changed = (np.asarray(lab.visible) != np.asarray(fitted.visible)) \
-        | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1)
+        | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1) \
+        | (decided_of(lab) != decided_of(fitted))
     reference = camera.project(consensus)
     own = np.asarray(lab.visible, bool) & decided_of(lab)
     offset = np.where(own[..., None], sent_xy - reference, np.nan)
