@@ -228,7 +228,7 @@ def _without_camera_faults(
     off shows all its labels the same few pixels away: that is the camera's, taken out before
     anyone is scored (worker.quality.view_faults)."""
     frames = len(labels[0].xy)
-    offsets, lags = camera_offsets(cameras, labels, fit, frames)
+    offsets, lags = camera_offsets(cameras, labels, fit, frames, silent=opts.unreferenced)
     if not (any(o.applied for o in offsets.values()) or any(lags.values())):
         return report, fit, labels, offsets, lags
     sent, first = labels, fit
