@@ -28,13 +28,14 @@ from sqlalchemy import select
 MAX_ROUNDS = 8
 
 
-def _report_outcome(assignment_id: int) -> str | None:
+def _report(assignment_id: int) -> tuple[str | None, list[str]]:
+    """(outcome, reasons) of the assignment's QC report; (None, []) before one."""
     from backend.db import session_scope
     from backend.quality.models import QCReport
 
     with session_scope() as session:
-        return session.scalar(select(QCReport.outcome).where(
-            QCReport.assignment_id == assignment_id))
+        row = session.scalar(select(QCReport).where(QCReport.assignment_id == assignment_id))
+        return (None, []) if row is None else (row.outcome, list(row.reasons or []))
 
 
 def _status(assignment_id: int) -> str:
@@ -46,26 +47,33 @@ def _status(assignment_id: int) -> str:
 
 
 def settle(sequence_id: int, profile_of: dict[int, str],
-           resubmit: Callable[[int], tuple[int, str]]) -> tuple[dict[int, str], dict[str, int]]:
+           resubmit: Callable[[int], tuple[int, str]],
+           careful_flags: list[str] | None = None) -> tuple[dict[int, str], dict[str, int]]:
     """Carry one crowd's hand labels on from its first QC pass (module docstring).
 
     profile_of: {assignment id: profile} of the first workers (extended here with the
     re-opened tasks' workers); resubmit(task id) submits another worker drawn from the crowd,
-    returning (assignment id, profile). Returns each first worker's verdict and the counts
-    (rounds, reopened, admin_decided)."""
+    returning (assignment id, profile); ``careful_flags`` (if given) collects why careful work
+    went to an admin (a few). Returns each first worker's verdict and the counts (rounds,
+    reopened, admin_decided)."""
     import _qc_pipeline as pipe
 
     first = set(profile_of)
     verdict: dict[int, str] = {}
     counts = {"rounds": 0, "reopened": 0, "admin_decided": 0}
+    why = careful_flags if careful_flags is not None else []
     for _ in range(MAX_ROUNDS):
         asked: list[int] = []
         decided = 0
         for task_id, (assignment_id, status) in sorted(pipe._unaccepted(sequence_id).items()):
-            if status == "submitted" and _report_outcome(assignment_id) in ("review", "reject"):
+            outcome, reasons = _report(assignment_id)
+            if status == "submitted" and outcome in ("review", "reject"):
                 right = profile_of.get(assignment_id) == "careful"
                 if assignment_id in first:
                     verdict[assignment_id] = "flagged"
+                if right and len(why) < 6:
+                    why.append(f"{'first' if assignment_id in first else 'later'} careful: "
+                               + "; ".join(reasons[:3]))
                 pipe._admin_decides(assignment_id, right)
                 decided += 1
                 status = "approved" if right else "rejected"

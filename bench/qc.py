@@ -349,6 +349,7 @@ class _HandPath:
         # Their own stream: each crowd's first workers stay those of the first pass.
         self.rng = np.random.default_rng([crowd_seed, 2])
         self.verdicts: list[tuple[str, str]] = []
+        self.careful_flags: list[str] = []
         self.counts: dict[str, int] = {}
         self.draw = self.made = 0
 
@@ -365,7 +366,8 @@ class _HandPath:
         import _hand_path
 
         self.draw = draw
-        verdict, counts = _hand_path.settle(self.sequence_id, dict(first), self._resubmit)
+        verdict, counts = _hand_path.settle(self.sequence_id, dict(first), self._resubmit,
+                                            self.careful_flags)
         self.verdicts += [(first[key], v) for key, v in verdict.items()]
         for name, value in counts.items():
             self.counts[name] = self.counts.get(name, 0) + value
@@ -373,7 +375,8 @@ class _HandPath:
     def summary(self) -> dict:
         import _hand_path
 
-        return {**_hand_path.rates(self.verdicts), **self.counts}
+        return {**_hand_path.rates(self.verdicts), **self.counts,
+                "careful_flags": self.careful_flags}
 
 
 class _SolvedCrowd:

@@ -35,7 +35,14 @@ from backend.jobs.models import Job
 from backend.jobs.service import enqueue_job
 from backend.labels import SCORED_STATUSES
 from backend.quality import gold
-from backend.quality.camera_offsets import camera_notes, landmark_offsets, rescored
+from backend.quality.camera_offsets import (
+    camera_notes,
+    lagged,
+    landmark_lags,
+    landmark_offsets,
+    rescored,
+    view_tracks,
+)
 from backend.quality.inputs import (
     TargetInputs,
     depth_maps,
@@ -218,13 +225,21 @@ def _score_landmarks(session: Session, inputs: TargetInputs, crowd: list,
     depth = depth_maps(session, inputs.camera_rows, {lab.view for lab in crowd})
     anchored = {lab.key: score_anchored(inputs.cameras[lab.view], lab, scene, target,
                                         depth.get(lab.view)) for lab in crowd}
-    # A camera's own offset is taken out of its view before its labels are judged.
-    offsets = landmark_offsets(session, inputs, scene, anchored)
+    # A camera's own lag and offset are taken out of its view before its labels are judged.
+    tracks = view_tracks(session, inputs, scene, anchored)
+    lags = landmark_lags(tracks)
+    offsets = landmark_offsets(inputs, tracks, lags)
     for lab in crowd:
-        offset = offsets.get(lab.view)
+        offset, lag = offsets.get(lab.view), lags.get(lab.view, 0)
+        shown = lagged(scene, lag) if lag else scene
         if offset is not None and offset.applied:
-            anchored[lab.key] = rescored(inputs, lab, offset, scene, target,
+            anchored[lab.key] = rescored(inputs, lab, offset, shown, target,
                                          depth.get(lab.view))
+        elif lag:
+            anchored[lab.key] = score_anchored(inputs.cameras[lab.view], lab, shown, target,
+                                               depth.get(lab.view))
+        if lag:
+            anchored[lab.key].metrics["camera_lag_frames"] = float(lag)
         results[lab.key] = merge_anchored(results[lab.key], anchored[lab.key], run_id)
     timings["anchored_s"] = round(time.perf_counter() - started, 3)
     return results

@@ -228,7 +228,7 @@ def _without_camera_faults(
     off shows all its labels the same few pixels away: that is the camera's, taken out before
     anyone is scored (worker.quality.view_faults)."""
     frames = len(labels[0].xy)
-    offsets, lags = camera_offsets(cameras, labels, fit, frames)
+    offsets, lags = camera_offsets(cameras, labels, fit, frames, silent=opts.unreferenced)
     if not (any(o.applied for o in offsets.values()) or any(lags.values())):
         return report, fit, labels, offsets, lags
     sent, first = labels, fit
@@ -252,7 +252,8 @@ def _as_sent(lab: ViewLabels, fitted: ViewLabels, camera: CameraModel, consensus
     there (the copy's residuals describe other joints)."""
     sent_xy = np.asarray(lab.xy, np.float64)
     changed = (np.asarray(lab.visible) != np.asarray(fitted.visible)) \
-        | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1)
+        | ~np.isclose(sent_xy, fitted.xy, equal_nan=True).all(axis=-1) \
+        | (decided_of(lab) != decided_of(fitted))
     reference = camera.project(consensus)
     own = np.asarray(lab.visible, bool) & decided_of(lab)
     offset = np.where(own[..., None], sent_xy - reference, np.nan)

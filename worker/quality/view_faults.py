@@ -24,7 +24,7 @@ from worker.rig.timing import joint_offsets
 
 def camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: Fit,
                     frames: int, lags: dict[int, int] | None = None,
-                    corrected: Fit | None = None
+                    corrected: Fit | None = None, silent: frozenset[str] = frozenset()
                     ) -> tuple[dict[int, ViewOffset], dict[int, int]]:
     """Per view, its lag (whole frames) and the map fitted to (leave-one-out reference,
     observation) of every label of the view over every point it is judged on (two other
@@ -33,7 +33,9 @@ def camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: Fi
     fit: the labels as sent (``fit.pixels`` their observations). lags: given, they are
     taken as found. corrected: the fit of the labels already corrected (shifted by ``lags``
     and taken back through a first map): the references are then its leave-one-out ones
-    (which the view's own correction does not touch), the observations still those sent."""
+    (which the view's own correction does not touch), the observations still those sent.
+    silent: keys of labels their own evidence discredits: they take no part in finding the
+    lags (a view of only such labels keeps lag 0)."""
     source = fit if corrected is None else corrected
     judged = np.isfinite(source.spread).all(axis=(-1, -2)) & np.isfinite(source.loo).all(axis=-1)
     pairs: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -48,7 +50,9 @@ def camera_offsets(cameras: list[CameraModel], labels: list[ViewLabels], fit: Fi
         pairs.setdefault(lab.view, []).append((ref.reshape(frames, -1, 2),
                                                obs.reshape(frames, -1, 2)))
     if lags is None:
-        lags = view_lags(cameras, labels, frames)
+        lags = dict.fromkeys({lab.view for lab in labels}, 0)
+        lags.update(view_lags(cameras, [lab for lab in labels if lab.key not in silent],
+                              frames))
     # The corrected fit's references are already in the frames the view's images show.
     offsets = {view: fit_view_offset(view, [(r, shift_frames(o, lags.get(view, 0)))
                                             for r, o in found], cameras[view].K[:2, 2])
