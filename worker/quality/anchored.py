@@ -33,10 +33,10 @@ from worker.quality.landmark_points import facing, separation_mm, shown_fraction
 from worker.quality.metrics import (
     AssignmentQC,
     error_issues,
+    jitter_px,
     num,
     per_point_and_frame,
 )
-from worker.quality.motion import track_jitter
 from worker.quality.object_views import (
     SHOWN_SHARE,
     PixelMap,
@@ -246,20 +246,14 @@ def _anchored_tracks(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
 
 
 def _anchored_shake(found: _Tracks, xy: np.ndarray, visible: np.ndarray) -> float | None:
-    """The track's shake (px per frame^2) beyond its anchored points' own, taken out in
-    quadrature as worker.quality.landmarks does with the other views' motion: the known
-    object's motion is what a track that follows the object shakes by."""
-    cols = sorted(found.points)
-    if not cols:
+    """The track's own shake (px per frame^2): that of its offset from its anchored points
+    (worker.quality.metrics.jitter_px), so the known object's motion is taken out exactly and
+    a leap (two landmarks swapped, a slip) is not hidden in it. Only the positions the label
+    shows: an interpolation through frames marked hidden is not a label of anything."""
+    if not found.points:
         return None
-    reference = found.reprojection[:, cols]
-    shown = visible[:, cols] & np.isfinite(xy[:, cols]).all(axis=-1) \
-        & np.isfinite(reference).all(axis=-1)
-    shake = track_jitter(np.where(shown[..., None], xy[:, cols], np.nan))
-    expected = track_jitter(np.where(shown[..., None], reference, np.nan))
-    if shake is None or expected is None:
-        return shake
-    return num(np.sqrt(max(shake ** 2 - expected ** 2, 0.0)))
+    shown = visible & np.isfinite(xy).all(axis=-1)
+    return jitter_px(np.where(shown[..., None], xy, np.nan), found.reprojection)
 
 
 def _anchored_metrics(found: _Tracks, xy: np.ndarray, visible: np.ndarray, decided: np.ndarray,
