@@ -185,13 +185,20 @@ class MTurkProvider:
             return PublishedUnit(key, exc.unit_id, "recovered")
         return PublishedUnit(key, reply["HIT"]["HITId"], "created")
 
-    def unit(self, unit_id: str) -> UnitState | None:
+    def _hit(self, unit_id: str) -> dict[str, Any] | None:
+        """GetHIT's record of the unit; None where the marketplace has no such HIT."""
         try:
-            hit = call(self.client, "get_hit", HITId=unit_id)["HIT"]
+            hit: dict[str, Any] = call(self.client, "get_hit", HITId=unit_id)["HIT"]
         except MarketplaceError as exc:
             if exc.reason == "not_found":
                 return None
             raise
+        return hit
+
+    def unit(self, unit_id: str) -> UnitState | None:
+        hit = self._hit(unit_id)
+        if hit is None:
+            return None
         places = int(hit.get("MaxAssignments") or 0)
         held = int(hit.get("NumberOfAssignmentsPending") or 0)
         available = int(hit.get("NumberOfAssignmentsAvailable") or 0)

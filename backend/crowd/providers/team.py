@@ -59,7 +59,7 @@ from backend.crowd.providers.mturk import (
     hit_params,
     qualification_requirements,
 )
-from backend.crowd.providers.mturk_client import MarketplaceError, call
+from backend.crowd.providers.mturk_client import call
 from backend.db import session_scope
 from backend.instance import public_url
 
@@ -151,12 +151,9 @@ class TeamProvider(MTurkProvider):
     def unit(self, unit_id: str) -> UnitState | None:
         """The task from the HIT's note; open until closed or expired (a unit whose places
         are all taken stays the team's open work)."""
-        try:
-            hit = call(self.client, "get_hit", HITId=unit_id)["HIT"]
-        except MarketplaceError as exc:
-            if exc.reason == "not_found":
-                return None
-            raise
+        hit = self._hit(unit_id)
+        if hit is None:
+            return None
         task = _TASK_IN_NOTE.search(hit.get("RequesterAnnotation") or "")
         return UnitState(
             unit_id=unit_id, task_id=int(task.group(1)) if task else None,
