@@ -263,3 +263,13 @@ class CrowdProvider(Protocol):
         """Message workers; the per-worker failures (empty when all went out)."""
 
     def completion(self, unit_id: str, assignment_id: str) -> Completion: ...
+
+
+def decided_already(crowd: CrowdProvider, exc: ProviderError, assignment_id: str,
+                    done: SubmissionStatus) -> bool:
+    """Whether a provider's refusal of a decision means an earlier run (whose reply or commit
+    was lost) already made it: the submission is in no state for it, and shows ``done``."""
+    if exc.reason != "invalid_state":
+        return False
+    found = crowd.submission(assignment_id)
+    return found is not None and found.status == done

@@ -32,6 +32,7 @@ from backend.crowd.provider import (
     SubmissionStatus,
     UnitSpec,
     UnitState,
+    decided_already,
 )
 from backend.crowd.providers.mturk_client import (
     MarketplaceError,
@@ -234,11 +235,7 @@ class MTurkProvider:
         try:
             call(self.client, operation, **params)
         except MarketplaceError as exc:
-            # Decided by an earlier run whose reply or commit was lost: done already.
-            if exc.reason != "invalid_state":
-                raise
-            found = self.submission(assignment_id)
-            if found is None or found.status != done:
+            if not decided_already(self, exc, assignment_id, done):
                 raise
 
     def approve(self, assignment_id: str, feedback: str | None) -> None:

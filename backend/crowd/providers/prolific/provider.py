@@ -36,8 +36,10 @@ from backend.crowd.provider import (
     ProviderRefused,
     PublishedUnit,
     SubmissionRecord,
+    SubmissionStatus,
     UnitSpec,
     UnitState,
+    decided_already,
 )
 from backend.crowd.providers.prolific import bonuses, groups, studies, submissions
 from backend.crowd.providers.prolific.client import ProlificClient
@@ -134,16 +136,12 @@ class ProlificProvider:
                                          "rejection_category": category}, "rejected")
 
     def _transition(self, assignment_id: str, body: dict[str, str | None],
-                    done: str) -> None:
+                    done: SubmissionStatus) -> None:
         try:
             self.client.post(f"/api/v1/submissions/{assignment_id}/transition/", body)
         except ProviderError as exc:
-            if exc.reason != "invalid_state":
+            if not decided_already(self, exc, assignment_id, done):
                 raise
-            record = self.submission(assignment_id)
-            if record is None or record.status != done:
-                raise
-            # Already so (a repeat whose first reply was lost): not an error.
 
     def bonus_paid(self, order: BonusOrder) -> bool:
         return bonuses.bonus_paid(self.client, order)
