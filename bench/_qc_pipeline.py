@@ -28,8 +28,9 @@ from sqlalchemy import delete, select
 # and admin decisions is reported unsolved (each round is a few QC jobs, no solve).
 MAX_ROUNDS = 12
 # Profiles an admin approves (a frozen track on a still object is right, and so is marking
-# hidden all through an object the view never shows).
-RIGHT = ("careful", "lazy-still", "unseen")
+# hidden all through an object the view never shows, and a swap of two landmarks the view
+# hides all through it).
+RIGHT = ("careful", "lazy-still", "unseen", "swap-unseen")
 
 
 def drain() -> list[str]:

@@ -23,7 +23,10 @@ Scenarios (``--scenario``, comma-separated; default all but the slow pool and ti
                          same first workers. A frozen ("lazy") track on an object that never
                          moves is right, and counted apart (lazy-still), as is a bad profile's
                          label that marks hidden all through an object its view never shows
-                         (unseen: a careful worker's label there is the same)
+                         (unseen: a careful worker's label there is the same),
+                         and a swapper's exchange of two landmarks its view hides (or
+                         shows within 3 px of each other) all through the swap
+                         (swap-unseen: it asserts nothing a careful label does not)
     pool                 every view gets one careful worker and one bad one per round
                          (``--rounds``), all scored together (several workers per view)
     timing               one QC job of one hand target, one careful worker per view, timed
@@ -127,11 +130,32 @@ def _of_kind(tasks: list[dict], kind: str) -> list[dict]:
     return [t for t in tasks if t["kind"] == kind]
 
 
+# A swap of two landmarks whose true positions stay this close (px) changes no position by more
+# than a careful click's noise.
+SWAP_SAME_PX = 3.0
+
+
+def _swap_unseen(xy: np.ndarray, visible: np.ndarray) -> bool:
+    """Whether a swapper's exchange of the two landmarks (worker.synth.annotators) changes
+    nothing its label asserts in this view: inside the swap window both are hidden, or both
+    show within SWAP_SAME_PX of each other, in every frame. xy (F, 2, 2) px, visible (F, 2)
+    the view's truth."""
+    from worker.synth.annotators import swap_window
+
+    lo, hi = swap_window(len(visible))
+    vis, pos = visible[lo:hi + 1], xy[lo:hi + 1]
+    both = vis.all(axis=1)
+    close = np.linalg.norm(pos[:, 0] - pos[:, 1], axis=-1) <= SWAP_SAME_PX
+    return bool(((~vis.any(axis=1)) | (both & close)).all())
+
+
 def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Generator,
-            unseen: set[int] | None = None) -> int:
+            unseen: dict[int, str] | None = None) -> int:
     """One simulated worker's submitted assignment, written as the page's submit writes it.
-    Its id joins ``unseen`` (if given) when the view never shows the task's points and the
-    label marks them all hidden: right work, whatever the profile."""
+    Its id joins ``unseen`` (if given) as "unseen" when the view never shows the task's points
+    and the label marks them all hidden, and as "swap-unseen" when a swapper's exchange of an
+    object's landmarks changes nothing the label asserts there (_swap_unseen): right work,
+    whatever the profile."""
     from backend.annotation.models import Assignment, Track
     from backend.db import session_scope, utcnow
     from worker.synth.annotators import annotate
@@ -150,7 +174,10 @@ def _submit(task: dict, profile: str, worker: str, truth: Any, rng: np.random.Ge
         session.add(assignment)
         session.flush()
         if unseen is not None and hidden:
-            unseen.add(assignment.id)
+            unseen[assignment.id] = "unseen"
+        elif unseen is not None and profile == "swapper" and task["kind"] == "object" \
+                and _swap_unseen(xy, visible):
+            unseen[assignment.id] = "swap-unseen"
         return assignment.id
 
 
@@ -281,12 +308,13 @@ def _fresh_setup(name: str) -> None:
         cached.cache_clear()
 
 
-def _label_profile(task: dict, profile: str, unseen: bool = False) -> str:
+def _label_profile(task: dict, profile: str, apart: str | None = None) -> str:
     """The profile a label is counted under: a frozen track on an object that never moves is
     right (lazy-still), and so is a bad profile's label marking hidden all through an object
-    the view never shows (unseen: a careful worker's label there is the same)."""
-    if task["kind"] == "object" and profile != "careful" and unseen:
-        return "unseen"
+    the view never shows (apart "unseen": a careful worker's label there is the same) and a
+    swap of two landmarks the view hides through the swap (apart "swap-unseen")."""
+    if task["kind"] == "object" and profile != "careful" and apart:
+        return apart
     still = task["kind"] == "object" and profile == "lazy" and not task["moving"]
     return "lazy-still" if still else profile
 
@@ -306,7 +334,7 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
     if kind == "object" and object_poses == "truth":
         _store_true_solve(capture, sequence_id)
     truth = CaptureTruth(capture)
-    tally = _Tally(extra=("lazy-still", "unseen") if kind == "object" else ())
+    tally = _Tally(extra=("lazy-still", "unseen", "swap-unseen") if kind == "object" else ())
     rng = np.random.default_rng(crowd_seed)
     solved = _SolvedCrowd(sequence_id, every, truth, crowd_seed) \
         if kind == "object" and object_poses == "solved" else None
@@ -316,11 +344,11 @@ def mixed(capture: Path, kind: str, draws: int, crowd_seed: int,
         _clear(sequence_id, kind)
         profile_of = {}
         # Per crowd: the database may give a removed assignment's id to the next crowd's.
-        unseen: set[int] = set()
+        unseen: dict[int, str] = {}
         for task, profile in zip(tasks, draw_profiles(len(tasks), "mixed", rng, kind),
                                  strict=True):
             key = _submit(task, profile, f"{profile}-d{draw}-{task['id']}", truth, rng, unseen)
-            profile_of[key] = _label_profile(task, profile, key in unseen)
+            profile_of[key] = _label_profile(task, profile, unseen.get(key))
         if solved is not None:
             solved.run(draw, profile_of)
         else:
@@ -391,7 +419,7 @@ class _SolvedCrowd:
         # first workers are the same as with the true poses.
         self.rng = np.random.default_rng([crowd_seed, 1])
         self.hand: dict[int, str] = {}
-        self.reopened = _Tally(extra=("lazy-still", "unseen"))
+        self.reopened = _Tally(extra=("lazy-still", "unseen", "swap-unseen"))
         self.counts: dict[str, int] = {}
         # {profile: {assignment status: count}} of the first workers once all is done: what
         # the product accepted (approved labels are the ones the solve used).
@@ -413,10 +441,10 @@ class _SolvedCrowd:
         profile = "careful" if task["kind"] == "hand" else \
             draw_profiles(1, "mixed", self.rng, "object")[0]
         self.made += 1
-        unseen: set[int] = set()
+        unseen: dict[int, str] = {}
         key = _submit(task, profile, f"{profile}-d{self.draw}-r{self.made}-{task_id}",
                       self.truth, self.rng, unseen)
-        return key, _label_profile(task, profile, key in unseen)
+        return key, _label_profile(task, profile, unseen.get(key))
 
     def run(self, draw: int, first: dict[int, str]) -> None:
         """One crowd (``first``: {assignment id: profile} of its object labels) from its

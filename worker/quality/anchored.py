@@ -8,7 +8,8 @@ hidden. So each landmark is anchored at the candidate hit (over a few of its vis
 whose projection the track follows best, and judged:
 
 - error: pixels between the track and the anchored point's projection, over the frames where
-  both the track and the solve say it is visible (median, 90th percentile);
+  the track shows it (median, 90th percentile), also where the solve hides it: a careful
+  worker shows a point only where it shows, on it;
 - visibility: the point is hidden where it faces away, where another solved mesh (or its own)
   is nearer along the ray, or where the depth camera reads a surface well in front of it (a
   hand); the share of visible frames marked occluded and of hidden frames marked visible;
@@ -38,11 +39,14 @@ from worker.quality.metrics import (
     per_point_and_frame,
 )
 from worker.quality.object_views import (
+    DEPTH_MARGIN_M,
+    SEEN_SURFACE_M,
     SHOWN_SHARE,
     PixelMap,
     object_shown,
     point_visibility,
     ray_hits,
+    surface_nearest,
 )
 from worker.quality.solved_scene import SolvedObjects
 from worker.quality.view_labels import ViewLabels, decided_of
@@ -83,10 +87,40 @@ def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return camera.T_cam_to_world[:, 3], dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
 
 
+def _reading_m(depth: DepthMaps, camera: CameraModel, frame: int, xy: np.ndarray,
+               image_map: PixelMap | None) -> float:
+    """The depth camera's reading (m) where the view shows model pixel xy (2,) at ``frame``;
+    NaN where it reads nothing."""
+    pix = image_map(xy[None])[0] if image_map is not None else xy
+    row, col = int(np.rint(pix[1])), int(np.rint(pix[0]))
+    if not (0 <= row < camera.height and 0 <= col < camera.width):
+        return float("nan")
+    value = float(depth[(np.array([frame]), np.array([row]), np.array([col]))][0]) / 1000.0
+    return value if value > 0 else float("nan")
+
+
+def _seen_point(camera: CameraModel, xy: np.ndarray, hit: np.ndarray, tri: np.ndarray,
+                reading: float) -> np.ndarray:
+    """The world point (3,) a visible click marks: the mesh hit ``hit`` of its ray, unless the
+    depth camera sees a surface well in front of that hit (more than DEPTH_MARGIN_M) that
+    is the object's own (within SEEN_SURFACE_M of its mesh ``tri``): then the ray went past
+    an edge of the face the worker sees to a face behind (a camera pose a little off, a click
+    a pixel over the edge), and the point marked is the surface point nearest where the
+    reading puts it."""
+    if not np.isfinite(reading) or camera.depth_of(hit) - reading <= DEPTH_MARGIN_M:
+        return hit
+    origin, dirs = _ray(camera, xy[None])
+    seen = origin + dirs[0] * (reading / float(dirs[0] @ camera.T_cam_to_world[:, 2]))
+    nearest, gap = surface_nearest(seen, tri)
+    return nearest if gap <= SEEN_SURFACE_M else hit
+
+
 def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: SolvedObjects,
-                target: int) -> np.ndarray:
+                target: int, depth: DepthMaps | None = None,
+                image_map: PixelMap | None = None) -> np.ndarray:
     """(K, 3) object-frame surface points the landmark's rays hit at a few visible frames
-    (within SNAP_PX of the click)."""
+    (within SNAP_PX of the click); with the view's depth, the point it sees there
+    (_seen_point)."""
     frames = np.flatnonzero(ok)
     if frames.size > ANCHOR_TRIES:
         frames = frames[np.linspace(0, frames.size - 1, ANCHOR_TRIES).astype(int)]
@@ -101,6 +135,10 @@ def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: Solv
         hit = np.flatnonzero(np.isfinite(dist))
         if hit.size:
             world = origin + dist[hit[0]] * dirs[hit[0]]
+            if depth is not None:
+                world = _seen_point(camera, xy[f] + _SNAPS[hit[0]], world, tri,
+                                    _reading_m(depth, camera, int(f), xy[f] + _SNAPS[hit[0]],
+                                               image_map))
             pose = scene.poses[target, f]
             out.append(pose[:, :3].T @ (world - pose[:, 3]))
     return np.array(out).reshape(-1, 3)
@@ -112,11 +150,14 @@ def _track_of(camera: CameraModel, point: np.ndarray, poses: np.ndarray) -> np.n
 
 
 def anchor(camera: CameraModel, xy: np.ndarray, visible: np.ndarray, scene: SolvedObjects,
-           target: int) -> np.ndarray | None:
+           target: int, depth: DepthMaps | None = None,
+           image_map: PixelMap | None = None) -> np.ndarray | None:
     """The object-frame point (3,) of one landmark track (xy (F, 2) px, visible (F,)) whose
-    projection the track follows best (least median error), or None where no ray hits."""
+    projection the track follows best (least median error), or None where no ray hits.
+    depth, image_map: the view's depth maps and where it truly shows a model pixel (see
+    _seen_point)."""
     ok = np.asarray(visible, bool) & np.isfinite(xy).all(axis=1)
-    candidates = _candidates(camera, xy, ok, scene, target)
+    candidates = _candidates(camera, xy, ok, scene, target, depth, image_map)
     if not len(candidates):
         return None
     errors = []
@@ -155,7 +196,7 @@ def score_anchored(camera: CameraModel, label: ViewLabels, scene: SolvedObjects,
 
     Returns:
         AnchoredQC with metrics anchored_median_px, anchored_p90_px (track vs anchored point,
-        frames both call visible), anchored_visible_occluded (share of the point's visible
+        frames the track shows it), anchored_visible_occluded (share of the point's visible
         frames marked occluded), anchored_hidden_visible (share of its hidden frames marked
         visible), anchored_drift_px, anchored_fraction (of the landmarks marked visible
         somewhere, those that could be anchored; None when none is: then
@@ -208,7 +249,7 @@ def _hidden_while_shown(camera: CameraModel, label: ViewLabels, scene: SolvedObj
 @dataclass
 class _Tracks:
     """A label's landmarks anchored on the solved object, (F, P) each unless named: errors px
-    (track against its anchored point where both call it visible, NaN elsewhere),
+    (track against its anchored point where the track shows it, NaN elsewhere),
     reprojection (F, P, 2) px of the anchored points, shown (the point shows in the view),
     edge (at a depth edge: visibility undecided), points {landmark: object point (3,) m},
     faced: each anchored landmark's median cosine of the surface's turn to the camera."""
@@ -229,7 +270,7 @@ def _anchored_tracks(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
     out = _Tracks(np.full((frames, points), np.nan), np.full((frames, points, 2), np.nan),
                   np.zeros((frames, points), bool), np.zeros((frames, points), bool), {}, [])
     for p in range(points):
-        point = anchor(camera, xy[:, p], visible[:, p], scene, target)
+        point = anchor(camera, xy[:, p], visible[:, p], scene, target, depth, image_map)
         if point is None:
             continue
         out.points[p] = point
@@ -239,7 +280,10 @@ def _anchored_tracks(camera: CameraModel, xy: np.ndarray, visible: np.ndarray,
         cosine = facing(camera, point, world, out.shown[:, p], scene, target)
         if cosine is not None:
             out.faced.append(cosine)
-        both = out.shown[:, p] & visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
+        # Every position the worker shows is judged, also where the solve hides the point: a
+        # careful worker shows it only where it shows, on it; a landmark shown where the other
+        # one is (two swapped while one is hidden) is far from its own point.
+        both = visible[:, p] & decided[:, p] & np.isfinite(xy[:, p]).all(axis=1)
         out.reprojection[:, p] = camera.project(world)
         out.errors[both, p] = np.linalg.norm(out.reprojection[both, p] - xy[both, p], axis=1)
     return out

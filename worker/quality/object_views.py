@@ -11,6 +11,7 @@ import numpy as np
 from worker.assist.visibility import DepthMaps
 from worker.geometry.cameras import CameraModel
 from worker.quality.solved_scene import SolvedObjects
+from worker.solver.mesh_query import closest_on_triangles
 
 # A mesh nearer than the point by this much along its ray hides it (metres): the point lies on
 # a face, and the face it lies on must not hide it.
@@ -25,6 +26,10 @@ DEPTH_MARGIN_M = 0.012
 # edge, or on a slope of its own surface, at a neighbouring pixel that is nearer, while a
 # hand over the point covers the whole square.
 DEPTH_WINDOW_PX = 3
+# A depth reading within this distance (m) of a solved object's surface is that object: a hand
+# over an object reads at least 17 mm off every surface (a finger's thickness), a camera turned
+# 0.5 degrees and moved 5 mm reads its objects 6-10 mm off their model.
+SEEN_SURFACE_M = 0.012
 _WINDOW = np.array([(dy, dx) for dy in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)
                     for dx in range(-DEPTH_WINDOW_PX, DEPTH_WINDOW_PX + 1)])
 # A label that marks none of its landmarks visible anywhere has nothing to anchor; it is judged
@@ -96,10 +101,50 @@ def point_visibility(camera: CameraModel, world: np.ndarray, scene: SolvedObject
         at = np.flatnonzero(shown)
         if at.size:
             hidden, near_edge = depth_cover(depth, camera, at, pix[at], z[at])
+            own = at[hidden][_reads_a_mesh(depth, camera, at[hidden], world[at[hidden]],
+                                           pix[at[hidden]], scene)]
             edge[at[near_edge]] = True
+            edge[own] = True
             shown[at[hidden]] = False
+            shown[own] = True
     assert shown.shape == (frames,)
     return shown, edge
+
+
+def _reads_a_mesh(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, world: np.ndarray,
+                  pix: np.ndarray, scene: SolvedObjects) -> np.ndarray:
+    """(N,) whether the depth reading in front of each point (world (N, 3); its pixel (N, 2)
+    where the camera shows it) lies on a solved object's own surface (within SEEN_SURFACE_M):
+    the meshes' own occlusion is the ray test's to judge, and a camera whose pose is a little
+    off reads, near an edge, the object's near face in front of the point its model puts on a
+    face behind; the depth test hides a point only behind what no mesh models (a hand)."""
+    out = np.zeros(len(frames), bool)
+    if not len(frames):
+        return out
+    rows = np.rint(pix[:, 1]).astype(int).clip(0, camera.height - 1)
+    cols = np.rint(pix[:, 0]).astype(int).clip(0, camera.width - 1)
+    reading = depth[(frames, rows, cols)] / 1000.0
+    origin = camera.T_cam_to_world[:, 3]
+    for i, f in enumerate(frames):
+        if reading[i] <= 0:
+            continue
+        ray = world[i] - origin
+        seen = origin + ray * (reading[i] / camera.depth_of(world[i]))
+        for index in range(len(scene.vertices)):
+            tri = scene.triangles(index, int(f))
+            if np.isfinite(tri).all() and surface_nearest(seen, tri)[1] <= SEEN_SURFACE_M:
+                out[i] = True
+                break
+    return out
+
+
+def surface_nearest(point: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, float]:
+    """The nearest point (3,) to point (3,) on triangles (M, 3, 3), and its distance (m)."""
+    bary = closest_on_triangles(np.broadcast_to(point, (len(tri), 3)), tri)
+    nearest = np.einsum("mk,mkd->md", bary, tri)
+    gaps = np.linalg.norm(nearest - point, axis=1)
+    best = int(np.argmin(gaps))
+    return nearest[best], float(gaps[best])
 
 
 def depth_cover(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, pix: np.ndarray,

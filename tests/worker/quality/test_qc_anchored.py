@@ -140,6 +140,25 @@ class TestScoreAnchored:
         qc = score_anchored(camera, label(camera, solved, points, "careful"), both, 0)
         assert qc.metrics["anchored_hidden_visible"] == pytest.approx(1.0)
 
+    def test_a_landmark_shown_where_the_other_is_while_hidden_is_far_off(self, scene):
+        camera, solved, points = scene
+        vertices, faces = box()
+        # The wall of the test above, there for frames 10-20 only (unknown elsewhere).
+        wall = np.full((1, FRAMES, 3, 4), np.nan)
+        wall[0, 10:21, :, :3] = np.eye(3)
+        wall[0, 10:21, :, 3] = [0.03, -0.18, 0.075]
+        both = SolvedObjects([vertices, vertices * 3.0], [faces, faces],
+                             np.concatenate([solved.poses, wall]))
+        careful = label(camera, solved, points, "careful")
+        careful.visible[10:21] = False
+        before = score_anchored(camera, careful, both, 0)
+        # Behind the wall the two are swapped: the first shown where the second is.
+        careful.xy[10:21, 0] = careful.xy[10:21, 1]
+        careful.visible[10:21, 0] = True
+        swapped = score_anchored(camera, careful, both, 0)
+        assert before.metrics["anchored_p90_px"] < 6.0
+        assert swapped.metrics["anchored_p90_px"] > 25.0
+
     def test_frames_without_a_solved_pose_judge_nothing(self, scene):
         camera, solved, points = scene
         unsolved = SolvedObjects(solved.vertices, solved.faces, np.full_like(solved.poses, np.nan))
