@@ -169,7 +169,7 @@ function buildPage(data, api, params) {
   const pointList = new PointList($("point-list"), task, (p) => editor.select(p));
   const timeline = new Timeline($("timeline"), {
     numFrames: task.num_frames, colors: task.point_colors, labels: pointLabels(task),
-    rowHeight: task.kind === "hand" ? 13 : 22,
+    rowHeight: task.kind === "hand" ? 14 : 22,
     onSeek: (frame, point) => {
       if (point !== null) editor.select(point);
       editor.goto(frame);
