@@ -13,6 +13,7 @@ import { $ } from "../common/dom.js";
 import { AnnotateApi, readPageParams } from "./api.js";
 import { startAssist } from "./assist-draw.js";
 import { completionEntries } from "./core/completion.js";
+import { lastFrameKey, readLastFrame, writeLastFrame } from "./core/lastframe.js";
 import { loadBundle } from "./core/loader.js";
 import { AnnotationStore } from "./core/store.js";
 import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./core/sync.js";
@@ -132,32 +133,8 @@ function buildStore(data, storage) {
   return { store, start };
 }
 
-/**
- * Where this tab last was in the clip, per assignment (or per task in a preview), so that a
- * reload reopens that frame: kept in sessionStorage, which a reload keeps and another tab
- * does not share. Silent where the browser refuses storage (some sandboxed frames).
- */
-const lastFrame = {
-  /** @param {any} data */
-  key: (data) => `dexlabel:frame:${data.assignment ? `a${data.assignment.id}` : `t${data.task.id}`}`,
-  /** @param {any} data @returns {number} */
-  read(data) {
-    try {
-      const frame = Number(window.sessionStorage.getItem(lastFrame.key(data)));
-      return Number.isInteger(frame) && frame > 0 && frame < data.task.num_frames ? frame : 0;
-    } catch {
-      return 0;
-    }
-  },
-  /** @param {any} data @param {number} frame */
-  write(data, frame) {
-    try {
-      window.sessionStorage.setItem(lastFrame.key(data), String(frame));
-    } catch {
-      // no storage here: a reload starts at frame 0
-    }
-  },
-};
+/** The tab's sessionStorage (core/lastframe.js: reading it may throw in a sandboxed frame). */
+const tabStorage = () => window.sessionStorage;
 
 /** Everything the page needs once the task is known. */
 function buildPage(data, api, params) {
@@ -165,7 +142,7 @@ function buildPage(data, api, params) {
   const storage = localStorageOrNull();
   const { store, start } = buildStore(data, storage);
   const editor = new Editor({ canvas: $("view"), task, store, onUpdate: (u) => refresh(u) });
-  editor.frame = lastFrame.read(data);
+  editor.frame = readLastFrame(tabStorage, lastFrameKey(data), task.num_frames);
   const pointList = new PointList($("point-list"), task, (p) => editor.select(p));
   const timeline = new Timeline($("timeline"), {
     numFrames: task.num_frames, colors: task.point_colors, labels: pointLabels(task),
@@ -195,7 +172,7 @@ function refreshPanels(page, { frame, active, tracks }) {
   timeline.setFrame(frame);
   if (frame !== page.savedFrame) {
     page.savedFrame = frame;
-    lastFrame.write(page.data, frame);
+    writeLastFrame(tabStorage, lastFrameKey(page.data), frame);
   }
   $("frame-label").textContent = `Frame ${frame} / ${task.num_frames - 1}`;
   $("play").textContent = editor.playing ? "Pause" : "Play";

@@ -113,12 +113,14 @@ let askedFor = "";
 function afterSignIn() {
   const hash = askedFor || "#/hits";
   askedFor = "";
+  $("login-next").hidden = true;
   return hash;
 }
 
 async function route() {
   if (!api.token) {
     askedFor = ["preview", "work"].includes(parseRoute(location.hash).view) ? location.hash : "";
+    $("login-next").hidden = !askedFor;
     show("login-view");
     return;
   }

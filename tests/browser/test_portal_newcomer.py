@@ -75,6 +75,8 @@ def test_a_hit_link_opened_signed_out_lands_on_that_hit_and_keys_work_after_acce
         expect(how).to_be_visible()
         expect(how).to_contain_text("invite link")
         expect(how).to_contain_text("creates your account")
+        expect(page.locator("#login-next")).to_have_text(
+            "Sign in to open the HIT your link is for.")
         for width, height in [(1440, 900), (1024, 700)]:
             page.set_viewport_size({"width": width, "height": height})
             page.screenshot(path=str(output_dir / f"newcomer-login-{width}x{height}.png"))
