@@ -65,6 +65,13 @@ class TaskRead(BaseModel):
     kind: Literal["hand", "object"]
     sequence_id: int
     serial: str
+    # What a worker calls the view and the target: "camera 3 of 8" (view_number 3, num_views 8,
+    # in the sequence's camera order), "right hand". view_serials: every view's serial in that
+    # order, so the page can name any view it mentions (epipolar lines) by its number.
+    view_number: int
+    num_views: int
+    view_serials: list[str]
+    target: str
     target_key: str
     num_points: int
     num_frames: int

@@ -66,7 +66,8 @@ def _hit_read(view: WorkerHit, facts: TaskFacts | None,
               mine: MarketAssignment | None = None, assigned: bool = False) -> HitRead:
     hit_type = view.hit.hit_type
     task = None if facts is None else HitTaskRead(
-        kind=facts.kind, target=facts.target, view=facts.serial, frames=facts.num_frames)
+        kind=facts.kind, target=facts.target, view=facts.serial, view_name=facts.view_name,
+        frames=facts.num_frames)
     return HitRead(hit_id=view.hit.hit_id, title=hit_type.title, description=hit_type.description,
                    keywords=hit_type.keywords, reward=format_amount(hit_type.reward_cents),
                    assignment_duration_s=hit_type.assignment_duration_s,

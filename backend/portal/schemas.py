@@ -44,6 +44,7 @@ class HitTaskRead(BaseModel):
     kind: str  # "hand" | "object"
     target: str  # "right hand", "mustard bottle"
     view: str  # the camera serial
+    view_name: str  # "camera 3 of 8": what the page shows
     frames: int
 
 

@@ -25,6 +25,7 @@ from backend.annotation.schemas import (
 )
 from backend.annotation.tokens import READONLY_SCOPE, TASK_SCOPE, frame_token
 from backend.captures.models import Sequence
+from backend.captures.service import object_label
 from backend.db import SessionDep
 from backend.progress.schemas import SequenceProgress
 from backend.progress.service import sequence_progress, sequences_progress, task_states
@@ -62,9 +63,21 @@ def _task_reads(session: Session, tasks: list[Task]) -> list[TaskRead]:
     return [_task_read(t, states[t.id].state) for t in tasks]
 
 
+def _target(task: Task) -> str:
+    """What the task labels, as a worker calls it: "right hand", "mustard bottle"."""
+    if task.kind != "hand":
+        obj = next((o for o in task.sequence.objects if o.id == task.object_id), None)
+        return object_label(obj.name) if obj is not None else "object"
+    side = next((h.side for h in task.sequence.hands if h.id == task.hand_id), None)
+    return f"{side} hand" if side else "hand"
+
+
 def _task_read(task: Task, status: TaskState) -> TaskRead:
+    serials = [camera.serial for camera in task.sequence.cameras]
     return TaskRead(
         id=task.id, kind=task.kind, sequence_id=task.sequence_id, serial=task.camera.serial,
+        view_number=serials.index(task.camera.serial) + 1, num_views=len(serials),
+        view_serials=serials, target=_target(task),
         target_key=task.target_key, num_points=task.num_points,
         num_frames=task.sequence.num_frames, width=task.camera.width, height=task.camera.height,
         fps=task.sequence.fps, point_names=point_names(task.kind),

@@ -13,6 +13,7 @@ import { $ } from "../common/dom.js";
 import { AnnotateApi, readPageParams } from "./api.js";
 import { startAssist } from "./assist-draw.js";
 import { completionEntries } from "./core/completion.js";
+import { lastFrameKey, readLastFrame, writeLastFrame } from "./core/lastframe.js";
 import { loadBundle } from "./core/loader.js";
 import { AnnotationStore } from "./core/store.js";
 import { AutoSaver, CONFLICT_TEXT, chooseStart, localKey, readLocal } from "./core/sync.js";
@@ -132,16 +133,20 @@ function buildStore(data, storage) {
   return { store, start };
 }
 
+/** The tab's sessionStorage (core/lastframe.js: reading it may throw in a sandboxed frame). */
+const tabStorage = () => window.sessionStorage;
+
 /** Everything the page needs once the task is known. */
 function buildPage(data, api, params) {
   const { task } = data;
   const storage = localStorageOrNull();
   const { store, start } = buildStore(data, storage);
   const editor = new Editor({ canvas: $("view"), task, store, onUpdate: (u) => refresh(u) });
+  editor.frame = readLastFrame(tabStorage, lastFrameKey(data), task.num_frames);
   const pointList = new PointList($("point-list"), task, (p) => editor.select(p));
   const timeline = new Timeline($("timeline"), {
     numFrames: task.num_frames, colors: task.point_colors, labels: pointLabels(task),
-    rowHeight: task.kind === "hand" ? 15 : 22,
+    rowHeight: task.kind === "hand" ? 14 : 22,
     onSeek: (frame, point) => {
       if (point !== null) editor.select(point);
       editor.goto(frame);
@@ -165,6 +170,10 @@ function refreshPanels(page, { frame, active, tracks }) {
   if (tracks) timeline.setTracks(store.tracks());
   timeline.setActive(active);
   timeline.setFrame(frame);
+  if (frame !== page.savedFrame) {
+    page.savedFrame = frame;
+    writeLastFrame(tabStorage, lastFrameKey(page.data), frame);
+  }
   $("frame-label").textContent = `Frame ${frame} / ${task.num_frames - 1}`;
   $("play").textContent = editor.playing ? "Pause" : "Play";
   const editable = !editor.readOnly;
@@ -182,19 +191,24 @@ function startSaver(page) {
     store, api, storage: page.storage, key: localKey(data.assignment.id), clock: page.clock,
     baseEditCount: page.start.editCount, restoredUnsaved: page.start.unsaved,
     onStatus: (status) => {
+      const wasSaving = page.saveState === "saving";
+      page.saveState = status.state;
       showSaveStatus($("save-status"), status);
       if (status.state === "conflict") stopEditing(page, CONFLICT_TEXT);
-      else if (status.state === "saved" && page.restoredNotice) {
-        page.restoredNotice = false;
+      else if (status.state === "saved" && wasSaving && page.startNotice) {
+        // What the page said about the work it started from (restored here, or older than
+        // another tab's save) is over once a later save of this page succeeds.
+        page.startNotice = false;
         showBanner($("banner"), "info", "");
       }
     },
   });
   window.addEventListener("online", () => page.saver.flush());
   if (page.start.restored) {
-    page.restoredNotice = true;
+    page.startNotice = true;
     showBanner($("banner"), "info", "Restored your unsaved work from this browser; saving it now.");
   } else if (page.start.staleLocal) {
+    page.startNotice = true;
     showBanner($("banner"), "warn", "Unsaved work in this browser was older than the saved " +
       "version (saved from another tab); the saved version is shown.");
   }
@@ -318,10 +332,17 @@ function enterMode(page) {
   refreshPanels(page, { frame: editor.frame, active: editor.active, tracks: true });
 }
 
-/** @param {any} task */
+/**
+ * The header's line: "Right hand: 21 joints · camera 3 of 8 · 72 frames". A view is named by
+ * its place among the sequence's cameras; its serial only in the tooltip.
+ * @param {any} task
+ */
 function taskTitle(task) {
-  const what = task.kind === "hand" ? "Hand: 21 joints" : "Object: 2 landmarks";
-  return `${what} · view ${task.serial} · ${task.num_frames} frames`;
+  const target = task.target ? task.target.charAt(0).toUpperCase() + task.target.slice(1)
+    : (task.kind === "hand" ? "Hand" : "Object");
+  const what = task.kind === "hand" ? "21 joints" : "2 landmarks";
+  return `${target}: ${what} · camera ${task.view_number} of ${task.num_views} · ` +
+    `${task.num_frames} frames`;
 }
 
 async function main() {
@@ -338,6 +359,7 @@ async function main() {
   timings.taskLoaded = performance.now();
   const loading = startPreload(data.frames.bundle_url);
   $("task-title").textContent = taskTitle(data.task);
+  $("task-title").title = `camera serial ${data.task.serial}`;
   renderInstructions($("instructions"), data.task);
   renderShortcuts($("shortcut-list"));
   const page = buildPage(data, api, params);
@@ -358,6 +380,8 @@ async function main() {
     return;
   }
   enterMode(page);
+  // The keys (arrows, shortcuts) work at once, without a click on the image first.
+  $("view").focus({ preventScroll: true });
   window.__dexlabel.ready = true;
 }
 

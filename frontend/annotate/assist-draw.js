@@ -6,7 +6,8 @@
  *                       thin cyan lines
  *   suggestion          hollow magenta ring (dashed where the other views say occluded)
  *   epipolar line       thin line across the image, one colour per labelled view, tagged with
- *                       the last 4 characters of the view's serial
+ *                       the view's camera number ("cam 3"); a legend on the image says what
+ *                       they are while any is drawn
  *
  * Positions are image px mapped through the editor's Transform; marker sizes are screen px.
  */
@@ -34,7 +35,8 @@ const OUTLINE = "rgba(0, 0, 0, 0.8)";
  * Draws one frame's assistance. Returns what was drawn (lines with their image-px ends), which
  * the page keeps for tests.
  * @param {CanvasRenderingContext2D} ctx @param {Transform} tf @param {Layer} layer
- * @param {{width: number, height: number}} image  px
+ * @param {{width: number, height: number, view_serials?: string[]}} image  px; the views'
+ *   serials in camera order name each line's view ("cam 3")
  * @param {{width: number, height: number}} canvas  CSS px
  */
 export function drawAssistLayer(ctx, tf, layer, image, canvas) {
@@ -43,8 +45,9 @@ export function drawAssistLayer(ctx, tf, layer, image, canvas) {
     const ends = clipLine(line, image.width, image.height);
     if (!ends) return;
     const color = LINE_COLORS[i % LINE_COLORS.length];
-    drawEpipolar(ctx, tf, ends, canvas, line.serial.slice(-4), color);
-    lines.push({ ...line, ends });
+    const camera = cameraNumber(image.view_serials, line.serial);
+    drawEpipolar(ctx, tf, ends, canvas, camera ? `cam ${camera}` : line.serial.slice(-4), color);
+    lines.push({ ...line, ends, color, camera });
   });
   for (const g of layer.ghosts) for (const run of g.path) drawPath(ctx, tf, run);
   for (const g of layer.ghosts) if (g.xy) drawRing(ctx, tf, g.xy, TRACK_GHOST, false);
@@ -52,6 +55,45 @@ export function drawAssistLayer(ctx, tf, layer, image, canvas) {
     drawRing(ctx, tf, layer.suggestion.xy, SUGGEST_GHOST, !layer.suggestion.visible);
   }
   return { lines, ghosts: layer.ghosts.filter((g) => g.xy), suggestion: layer.suggestion };
+}
+
+/**
+ * A view's camera number (1-based, the sequence's camera order), or null when unknown.
+ * @param {string[]|undefined} serials @param {string} serial
+ */
+function cameraNumber(serials, serial) {
+  const i = serials ? serials.indexOf(serial) : -1;
+  return i >= 0 ? i + 1 : null;
+}
+
+/**
+ * The legend of the epipolar lines, on the image beside them: one swatch per line and what the
+ * lines mean; hidden while none is drawn. Rebuilt only when what it says changes.
+ * @param {HTMLElement} legend
+ * @param {Array<{color: string, camera: number|null, serial: string}>} lines  as drawn
+ * @param {string} pointName  the active point's name
+ */
+export function showLineLegend(legend, lines, pointName) {
+  const names = lines.map((l) => (l.camera ? `camera ${l.camera}` : `view …${l.serial.slice(-4)}`));
+  const key = lines.length ? `${pointName}|${names.join()}|${lines.map((l) => l.color)}` : "";
+  if (legend.dataset.key === key) return;
+  legend.dataset.key = key;
+  legend.hidden = !key;
+  if (!key) {
+    legend.replaceChildren();
+    return;
+  }
+  const swatches = lines.map((l, i) => {
+    const item = document.createElement("span");
+    item.className = "line-swatch";
+    item.style.setProperty("--line-color", l.color);
+    item.textContent = names[i];
+    return item;
+  });
+  const text = document.createElement("span");
+  text.textContent = `: where ${lines.length === 1 ? "that camera sees" : "those cameras see"} ` +
+    `${pointName}. It lies on ${lines.length === 1 ? "the line" : "each line"} here; E hides them.`;
+  legend.replaceChildren("Lines ", ...swatches, text);
 }
 
 /**
@@ -234,6 +276,7 @@ export function startAssist(page) {
     const layer = assist.layer(editor.frame, editor.active);
     assist.drawn = drawAssistLayer(ctx, scene.transform, layer, task,
       { width: scene.cssWidth, height: scene.cssHeight });
+    showLineLegend($("epipolar-legend"), assist.drawn.lines, scene.names[editor.active] || "");
   });
   timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
   updatePanel = wireAssistPanel(assist, editable);

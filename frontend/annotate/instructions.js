@@ -154,7 +154,8 @@ const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions betwee
 /**
  * Fills the instructions panel for a task.
  * @param {HTMLElement} panel
- * @param {{kind: "hand"|"object", point_names: string[], point_colors: string[]}} task
+ * @param {{kind: "hand"|"object", point_names: string[], point_colors: string[],
+ *          target?: string}} task  target: "right hand", "mustard bottle"
  */
 export function renderInstructions(panel, task) {
   const legend = task.point_names.map((name, i) =>
@@ -162,7 +163,8 @@ export function renderInstructions(panel, task) {
     `${i} ${escapeHtml(displayName(name))}</li>`).join("");
   const hand = task.kind === "hand";
   const intro = hand
-    ? "Track the 21 joints of the highlighted hand through the clip. Place every joint on a " +
+    ? `Track the 21 joints of the ${task.target || "hand"} (named at the top of the page) ` +
+      "through the clip. Place every joint on a " +
       "few keyframes (start, end, and wherever it changes direction); positions in between are " +
       "interpolated, so check them and correct any that drift. Joints hidden behind the object " +
       "or other fingers are marked occluded (O)."
@@ -182,6 +184,7 @@ export function renderInstructions(panel, task) {
 export const SHORTCUTS = [
   ["← / →", "previous / next frame"],
   ["Shift + ← / →", "10 frames back / forward"],
+  ["Home / End", "first / last frame"],
   ["[ / ]", "previous / next keyframe of the active point"],
   ["Space", "play / pause (hold and drag to pan)"],
   ["O", "toggle occluded for the active point in this frame"],

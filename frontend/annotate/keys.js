@@ -79,6 +79,8 @@ function handleKey(editor, e) {
   switch (key) {
     case "ArrowLeft": editor.step(e.shiftKey ? -10 : -1); return true;
     case "ArrowRight": editor.step(e.shiftKey ? 10 : 1); return true;
+    case "Home": editor.goto(0); return true;
+    case "End": editor.goto(editor.numFrames - 1); return true;
     case "[": editor.jumpKeyframe(-1); return true;
     case "]": editor.jumpKeyframe(1); return true;
     case "o": editor.toggleOccluded(); return true;

@@ -14,7 +14,8 @@ import { errorText } from "./notice.js";
  * @property {() => void} signedOut   shows the sign-in view
  * @property {() => Promise<void>} loadMe  shows who is signed in
  * @property {() => Promise<void>} route   shows the view of the page's hash
- * @property {string} [home]  the hash a sign-in lands on (else the hash stays)
+ * @property {string | (() => string)} [home]  the hash a sign-in lands on (else the hash
+ *   stays); a function is asked at each sign-in (a deep link asked for before it)
  */
 
 /** Binds the form, the button and hash changes, then shows the page's first view.
@@ -43,7 +44,8 @@ async function signIn(session, event) {
     await session.api.login(String(data.get("email")), String(data.get("password")));
     session.notice.notify("");
     await session.loadMe();
-    if (session.home) location.hash = session.home;
+    const home = typeof session.home === "function" ? session.home() : session.home;
+    if (home) location.hash = home;
     await session.route();
   } catch (err) {
     session.notice.notify(errorText(err), "error");

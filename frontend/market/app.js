@@ -103,8 +103,24 @@ async function showEarnings() {
   show("earnings-view");
 }
 
+/**
+ * The HIT or assignment a signed-out visitor asked for (a link opened in a new tab), where the
+ * sign-in lands instead of the list; "" when none was asked for.
+ */
+let askedFor = "";
+
+/** Where a sign-in lands: the page asked for before it, once; else the list. */
+function afterSignIn() {
+  const hash = askedFor || "#/hits";
+  askedFor = "";
+  $("login-next").hidden = true;
+  return hash;
+}
+
 async function route() {
   if (!api.token) {
+    askedFor = ["preview", "work"].includes(parseRoute(location.hash).view) ? location.hash : "";
+    $("login-next").hidden = !askedFor;
     show("login-view");
     return;
   }
@@ -180,7 +196,7 @@ function start() {
   $("accept").addEventListener("click", onAccept);
   $("return").addEventListener("click", onReturn);
   window.addEventListener("message", onFrameMessage);
-  startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: "#/hits" });
+  startSession({ api, notice, signedOut: () => show("login-view"), loadMe, route, home: afterSignIn });
 }
 
 start();

@@ -4,11 +4,12 @@ import { el } from "../common/dom.js";
 import { dollars, duration } from "../common/format.js";
 
 /**
- * What a HIT's row says about its task: "right hand · view 800007060125 · 72 frames".
- * @param {{target: string, view: string, frames: number} | null} task
+ * What a HIT's row says about its task: "right hand · camera 3 of 8 · 72 frames" (the camera's
+ * serial only in the row's tooltip: it means nothing to a worker).
+ * @param {{target: string, view: string, view_name: string, frames: number} | null} task
  */
 export function taskFacts(task) {
-  return task ? `${task.target} · view ${task.view} · ${task.frames} frames` : "";
+  return task ? `${task.target} · ${task.view_name} · ${task.frames} frames` : "";
 }
 
 /**
@@ -53,14 +54,15 @@ export function renderHits(body, hits) {
       : `#/hits/${encodeURIComponent(hit.hit_id)}`;
     const thumb = hit.thumbnail_url
       ? el("img", { class: "thumb", src: hit.thumbnail_url, width: "96",
-        alt: `first frame of view ${hit.task.view}` })
+        alt: `first frame of ${hit.task.view_name}` })
       : el("div", { class: "thumb thumb-none" });
     const marks = hitMarks(hit).flatMap((mark) => [" ", markElement(mark)]);
     const row = el("tr", { "data-hit": hit.hit_id }, [
       el("td", { class: "thumb-cell" }, [thumb]),
       el("td", {}, [
         el("a", { href: link, class: "hit-title" }, [hit.title]),
-        el("div", { class: "facts" }, [taskFacts(hit.task), ...marks]),
+        el("div", { class: "facts", ...(hit.task ? { title: `camera serial ${hit.task.view}` } : {}) },
+          [taskFacts(hit.task), ...marks]),
         el("div", { class: "muted" }, [hit.description]),
       ]),
       el("td", { class: "num" }, [dollars(hit.reward)]),
@@ -135,5 +137,8 @@ export function taskFrame(src) {
   window.addEventListener("resize", fit);
   requestAnimationFrame(fit);
   frame.addEventListener("load", fit);
+  // The framed page takes the keys at once (arrows, shortcuts), without a click in it first;
+  // it puts them on its image itself once its frames are in.
+  frame.addEventListener("load", () => frame.focus());
   return frame;
 }

@@ -285,10 +285,19 @@ def test_suggestions_from_three_accepted_views_are_shown_used_and_lines_cross_th
             assert not _canvas_has_colour(page, q["x"], q["y"], (0x1B, 0x1F, 0x24), radius=0)
     assert {line["serial"][-4:] for line in lines} <= {
         s[-4:] for s in page.evaluate("window.__dexlabel.assist.epipolar.map((e) => e.serial)")}
+    # The lines are explained where they are drawn: a legend on the image names each line's
+    # camera by its number (as the header does) and says what the lines mean.
+    legend = page.locator("#epipolar-legend")
+    expect(legend).to_be_visible()
+    for line in lines:
+        assert line["camera"] == task["view_serials"].index(line["serial"]) + 1
+        expect(legend).to_contain_text(f"camera {line['camera']}")
+    expect(legend).to_contain_text("E hides them")
     _screens(page, output_dir, "assist-prefill-lines")
 
     page.keyboard.press("e")
     assert page.evaluate("window.__dexlabel.assist.drawn.lines") == []
+    expect(legend).to_be_hidden()
     page.keyboard.press("e")
     assert len(page.evaluate("window.__dexlabel.assist.drawn.lines")) == len(lines)
 

@@ -21,6 +21,7 @@ from tests.browser.helpers import (
     open_task,
     value_at,
     wait_saved,
+    zoom_at,
     zoom_on_points,
 )
 
@@ -206,9 +207,12 @@ def test_hidden_points_are_not_drawn_or_grabbed_and_locked_points_do_not_move(
     page.locator('.point-item[data-point="8"] .point-hide').click()
     expect(page.locator('.point-item[data-point="8"]')).to_have_attribute("data-hidden", "true")
     assert np.abs(np.array(_drawn_rgb(page, *tip)) - green).max() > 30, "hidden: not drawn"
+    # Closer in, so that no other joint lies within grabbing reach (10 screen px) of the tip.
+    zoom_at(page, *tip, -300)
     before = _pose(page, 0)
     drag_image(page, tip, (tip[0] + 10, tip[1] + 10))
     np.testing.assert_array_equal(_pose(page, 0), before)  # nothing grabbed, nothing placed
+    zoom_at(page, *tip, 300)  # back out about the same spot: the whole hand in view again
 
     # H hides and shows the active point.
     page.keyboard.press("5")

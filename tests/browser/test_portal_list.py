@@ -61,7 +61,9 @@ def sequence(live_server: LiveServer) -> Iterator[dict]:
         task = by_id[task_id]
         kind, index = task["target_key"].split(":")
         target = f"{side[int(index)]} hand" if kind == "hand" else names[int(index)]
-        hits[hit_id] = {"kind": kind, "target": target, "serial": task["serial"]}
+        assert task["target"] == target
+        hits[hit_id] = {"kind": kind, "target": target, "serial": task["serial"],
+                        "view_name": f"camera {task['view_number']} of {task['num_views']}"}
     yield {"id": sid, "capture": out, "hits": hits}
     for hit_id in hits:
         httpx.post(f"{server.base}/api/crowd/hits/{hit_id}/expire", timeout=30,
@@ -108,8 +110,9 @@ def _check_rows(page: Page, sequence: dict, output_dir: Path) -> None:
     texts = []
     for hit_id, task in sequence["hits"].items():
         row = page.locator(f'tr[data-hit="{hit_id}"]')
-        facts = f"{task['target']} · view {task['serial']} · {CLIP_FRAMES} frames"
+        facts = f"{task['target']} · {task['view_name']} · {CLIP_FRAMES} frames"
         expect(row.locator(".facts")).to_have_text(facts)
+        expect(row.locator(".facts")).to_have_attribute("title", f"camera serial {task['serial']}")
         expect(row.locator("a.hit-title")).to_have_text(f"Track the {facts}")
         expect(row).to_contain_text("$0.45")
         texts.append(row.inner_text())

@@ -13,8 +13,8 @@ test("a short window still gets a workable frame", () => {
 });
 
 test("a HIT row names its target, view and frame count", () => {
-  assert.equal(taskFacts({ target: "right hand", view: "800007060125", frames: 72 }),
-    "right hand · view 800007060125 · 72 frames");
+  assert.equal(taskFacts({ target: "right hand", view: "800007060125",
+    view_name: "camera 3 of 8", frames: 72 }), "right hand · camera 3 of 8 · 72 frames");
   assert.equal(taskFacts(null), "");
 });
 

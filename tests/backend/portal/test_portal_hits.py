@@ -37,7 +37,8 @@ FRAMES = 6  # small_capture: 3 views x 6 frames, one right hand and two objects
 
 @pytest.fixture
 def published(crowd_url: str, small_capture: Path) -> dict[str, dict[str, Any]]:
-    """Every task of the capture published; per HIT id: task id, kind, target, serial."""
+    """Every task of the capture published; per HIT id: task id, kind, target, serial and the
+    view's name ("camera 2 of 3", in the sequence's camera order)."""
     from backend.accounts.service import create_admin
     from backend.annotation.service import create_tasks
     from backend.captures.flows import import_path
@@ -58,8 +59,11 @@ def published(crowd_url: str, small_capture: Path) -> dict[str, dict[str, Any]]:
                 target = f"{session.get_one(Hand, task.hand_id).side} hand"
             else:
                 target = object_label(session.get_one(SceneObject, task.object_id).name)
+            cameras = task.sequence.cameras
             found[hit_id] = {"task_id": task_id, "kind": task.kind, "target": target,
-                             "serial": task.camera.serial}
+                             "serial": task.camera.serial,
+                             "view_name": f"camera {cameras.index(task.camera) + 1} of "
+                                          f"{len(cameras)}"}
     return found
 
 
@@ -80,19 +84,20 @@ def test_each_hit_title_names_its_target_view_and_frame_count(
     assert sorted({p["serial"] for p in published.values()}) == serials
     assert {p["target"] for p in published.values()} >= {"right hand"}
     for hit_id, task in published.items():
-        assert titles[hit_id] == (f"Track the {task['target']} · view {task['serial']} · "
+        assert titles[hit_id] == (f"Track the {task['target']} · {task['view_name']} · "
                                   f"{FRAMES} frames")
+        assert task["serial"] not in titles[hit_id]
         assert len(titles[hit_id]) <= MAX_TITLE_CHARS
     assert len(set(titles.values())) == len(published) == 9
 
 
 def test_a_long_object_name_is_shortened_to_keep_the_title_within_mturks_limit() -> None:
     facts = TaskFacts(kind="object", target="very long object name " * 10, serial="800007060125",
-                      num_frames=72, sequence_id=1)
+                      num_frames=72, sequence_id=1, view_number=3, num_views=8)
     title = hit_title(facts)
     assert len(title) == MAX_TITLE_CHARS
     assert title.startswith("Track the very long object name")
-    assert title.endswith("… · view 800007060125 · 72 frames")
+    assert title.endswith("… · camera 3 of 8 · 72 frames")
     assert object_label("006_mustard_bottle") == "mustard bottle"
 
 
@@ -105,7 +110,8 @@ def test_the_list_marks_the_hits_a_worker_accepted_or_submitted_for_that_worker_
     for row in first:
         task = published[row["hit_id"]]
         assert row["task"] == {"kind": task["kind"], "target": task["target"],
-                               "view": task["serial"], "frames": FRAMES}
+                               "view": task["serial"], "view_name": task["view_name"],
+                               "frames": FRAMES}
     taken, done = first[4]["hit_id"], first[6]["hit_id"]
     held = portal.ok("POST", f"/hits/{taken}/accept", amy["access_token"])
     finished = portal.ok("POST", f"/hits/{done}/accept", amy["access_token"])
