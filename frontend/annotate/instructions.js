@@ -159,9 +159,9 @@ const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions betwee
  * task's instructions, the training clip's included.
  */
 const CHECKS_TEXT = "Some suggestions are placed wrong on purpose (about 15 px off the " +
-  "point) to check that you look at them. Work that keeps them unchanged is rejected, and the " +
-  "rejection names the point and frames. Look at each suggestion on its frame and drag the " +
-  "wrong ones onto the point before you accept.";
+  "point) to check that you look at them. Work that keeps them unchanged is reviewed or " +
+  "rejected, and the feedback names those points and frames. Look at each suggestion on its " +
+  "frame and drag the wrong ones onto the point before you accept.";
 
 /**
  * Fills the instructions panel for a task.

@@ -5,6 +5,7 @@ tracked on both sides of the toggled frame, O again as well."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -12,12 +13,13 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.conftest import LiveServer
+from tests.browser.conftest import VIEWPORT, LiveServer
 from tests.browser.helpers import (
     check_cells,
     goto_frame,
     grab_and_drop,
     open_task,
+    screens,
     select_point,
     server_keyframes,
     server_settings,
@@ -113,7 +115,7 @@ def _place_once_and_track(page: Page, server: LiveServer, link: dict, truth: lis
 
 
 def test_a_point_placed_once_follows_the_hand_forward_with_t(
-    live_server: LiveServer, follow_capture: dict[str, Any], page: Page
+    live_server: LiveServer, follow_capture: dict[str, Any], page: Page, output_dir: Path
 ) -> None:
     link = live_server.assign(follow_capture["task"], "W-follow")
     truth = follow_capture["truth"]
@@ -138,6 +140,7 @@ def test_a_point_placed_once_follows_the_hand_forward_with_t(
       return [0, 1, 2].every((i) => Math.abs(d[i] - rgb[i]) <= 40);
     }""", [cell["x"], cell["y"], list(STOP_RGB)])
     assert orange
+    screens(page, output_dir, "follow-stop", [(1024, 700), (1440, 900)], VIEWPORT)
     step_through(page, 0, LAST)
     page.keyboard.press("Enter")
     expect(page.locator("#assist-status")).to_contain_text("Accepted:")
@@ -152,10 +155,14 @@ def test_a_point_placed_once_follows_the_hand_forward_with_t(
 
 
 def test_enter_after_a_track_accepts_only_the_frames_stepped_through(
-    live_server: LiveServer, follow_capture: dict[str, Any], page: Page
+    live_server: LiveServer, follow_capture: dict[str, Any], page: Page, output_dir: Path
 ) -> None:
     link = live_server.assign(follow_capture["task"], "W-viewed")
     open_task(page, live_server.page_url(link["token"]))
+    # The instructions say plainly that some suggestions are wrong on purpose.
+    expect(page.locator("#instructions")).to_contain_text(
+        "Some suggestions are placed wrong on purpose")
+    page.screenshot(path=str(output_dir / "follow-instructions-1440x900.png"))
     joint, stop = _place_once_and_track(page, live_server, link, follow_capture["truth"])
     held = page.evaluate("window.__dexlabel.assist.timelineMarks()")[0]["frames"]
     assert len(held) >= 4, held
@@ -165,6 +172,7 @@ def test_enter_after_a_track_accepts_only_the_frames_stepped_through(
     skipped = len(held) - 2
     expect(page.locator("#assist-status")).to_contain_text(
         f"Accepted 2 tracked frames you have viewed; {skipped} not yet viewed")
+    screens(page, output_dir, "follow-partial", [(1024, 700), (1440, 900)], VIEWPORT)
     wait_saved(page)
     stored = server_keyframes(live_server.worker_get_task(link["token"])["assignment"])[joint]
     assert {r[0]: r[4] for r in stored if len(r) == 5} == {held[0]: "tracked",

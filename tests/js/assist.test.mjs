@@ -439,7 +439,7 @@ test("T past a single keyframe follows it forward; Enter takes only the frames v
   assert.equal(await assist.track(false), true);
   assert.deepEqual(api.calls[0], { tracks: [{ point: 0, keyframes: [[2, 20, 50, 1]] }],
     first_frame: 2, last_frame: 11, follow: [{ point: 0, direction: "forward" }] });
-  assert.match(assist.status.text, /^Tracked to frame 8; stopped: lost the point\. 6 of 9/);
+  assert.match(assist.status.text, /^Tracked to frame 8; stopped: lost the point\. 6 of 6 frames/);
   assert.deepEqual(assist.stopMarks(), [{ point: 0, frame: 8, direction: "forward",
     stopped: "lost" }]);
   // The worker steps to frames 3-5 only, then presses Enter.

@@ -148,7 +148,8 @@ export function proposalEntries(keyframes, proposal, keep = () => true) {
 }
 
 /**
- * How many inner span frames a set of proposals holds at.
+ * How many inner span frames a set of proposals holds at. An open span counts only the frames
+ * its point was followed to (past them nothing was asked of the tracker).
  * @param {PointProposal[]} proposals @returns {{tracked: number, total: number}}
  */
 export function countTracked(proposals) {
@@ -156,9 +157,11 @@ export function countTracked(proposals) {
   let total = 0;
   for (const p of proposals) {
     for (const [k0, k1] of p.spans) {
+      const open = k0 < p.first || k1 > p.last;
       for (let f = k0 + 1; f < k1; f++) {
-        total += 1;
-        if (p.ok[f - p.first] && p.xy[f - p.first]) tracked += 1;
+        const held = Boolean(p.ok[f - p.first] && p.xy[f - p.first]);
+        total += open && !held ? 0 : 1;
+        if (held) tracked += 1;
       }
     }
   }
