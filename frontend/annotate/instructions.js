@@ -182,12 +182,12 @@ export function renderInstructions(panel, task) {
       "the time (corners, printed marks, sharp edges), far apart. Step 2: track them through " +
       "the clip; mark a point occluded (O) while it is hidden.";
   panel.innerHTML = `<h2>Instructions</h2><p>${escapeHtml(intro)}</p>` +
+    `<p class="checks-warning"><strong>${escapeHtml(CHECKS_TEXT)}</strong></p>` +
     (hand ? `<div class="diagram">${handDiagramSvg(task.point_colors)}<ol class="legend" ` +
       `start="0">${legend}</ol></div>` : "") +
     `<h3>Examples</h3><div class="examples">` +
     `${examplesHtml(hand ? handExamples() : objectExamples())}</div>` +
     `<h3>Suggestions</h3><p>${escapeHtml(SUGGESTIONS_TEXT)}</p>` +
-    `<p class="checks-warning"><strong>${escapeHtml(CHECKS_TEXT)}</strong></p>` +
     "<p class=\"hint\">Press <kbd>?</kbd> for keyboard shortcuts.</p>";
 }
 
