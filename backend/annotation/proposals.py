@@ -1,6 +1,7 @@
 """Tracking proposals for the annotation page: positions between a worker's keyframes, found in
 the view's own frames (worker.assist.lk: Lucas-Kanade from both keyframes, stopped by a
-forward-backward check).
+forward-backward check), and positions after a point's last keyframe or before its first,
+followed from that one keyframe until the same checks stop it (``follow``).
 
 The page sends the keyframes it holds (the form it saves) and, if it wants, a frame range; the
 answer has, per point and per frame of the range, a proposed position (image px), whether it
@@ -13,7 +14,7 @@ saved as a keyframe.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -30,7 +31,8 @@ from backend.errors import DexlabelError, StorageError
 from backend.storage import Storage
 from backend.validation import MAX_INT32
 from worker.assist.checks import check_key, plant
-from worker.assist.lk import FB_THRESHOLD_PX, propose, tracked_spans
+from worker.assist.lk import FB_THRESHOLD_PX, Followed, follow, propose, tracked_spans
+from worker.tracks.keyframes import as_keyframes
 
 # Frames decoded for one request at most: 300 grey 640x480 frames are 92 MB in memory and
 # about half a second of decoding; a longer stretch is asked for in parts.
@@ -42,16 +44,40 @@ class InvalidProposalRequest(DexlabelError, status_code=422, code="invalid_propo
     pass
 
 
+class FollowIn(BaseModel):
+    """Follow a point from one keyframe: forward from its last keyframe (to ``last_frame``) or
+    backward from its first (to ``first_frame``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    point: int = Field(ge=0, lt=MAX_POINTS)
+    direction: Literal["forward", "backward"]
+
+
 class ProposalsRequest(BaseModel):
-    """Keyframes to propose between (as saved: per point ``[frame, x, y, visible01]`` rows)
-    and the clip frames to propose for (``first_frame``..``last_frame``, inclusive; default
-    the whole clip)."""
+    """Keyframes to propose between (as saved: per point ``[frame, x, y, visible01]`` rows),
+    the clip frames to propose for (``first_frame``..``last_frame``, inclusive; default the
+    whole clip) and the points to follow beyond their outermost keyframe."""
 
     model_config = ConfigDict(extra="forbid")
 
     tracks: list[TrackIn] = Field(max_length=MAX_POINTS)
     first_frame: int | None = Field(default=None, ge=0, le=MAX_INT32)
     last_frame: int | None = Field(default=None, ge=0, le=MAX_INT32)
+    follow: list[FollowIn] = Field(default_factory=list, max_length=2 * MAX_POINTS)
+
+
+class FollowStop(BaseModel):
+    """Where a followed point stopped: the keyframe it started from (``from_frame``), the last
+    frame it holds at (``reached``; ``from_frame`` when none) and why: ``lost`` (the tracker
+    lost the point or its look changed), ``left_image`` or ``end`` (it held to the end of the
+    range)."""
+
+    point: int
+    direction: Literal["forward", "backward"]
+    from_frame: int
+    reached: int
+    stopped: str
 
 
 class PointProposals(BaseModel):
@@ -70,6 +96,7 @@ class ProposalsRead(BaseModel):
     last_frame: int
     fb_threshold_px: float
     points: list[PointProposals]
+    stops: list[FollowStop] = Field(default_factory=list)
 
 
 def _frame_range(body: ProposalsRequest, num_frames: int) -> tuple[int, int]:
@@ -85,12 +112,14 @@ def _frame_range(body: ProposalsRequest, num_frames: int) -> tuple[int, int]:
     return first, last
 
 
-def _window(rows: list[list[list[Any]]], first: int, last: int, num_frames: int
-            ) -> tuple[int, int] | None:
+def _window(rows: list[list[list[Any]]], first: int, last: int, num_frames: int,
+            starts: list[tuple[int, int, float, float, bool]]) -> tuple[int, int] | None:
     """The frames to read: from the first keyframe to the last of every span with inner
-    frames in first..last; None when there is none."""
+    frames in first..last, and each followed point's range; None when there is none."""
     spans = [(k0, k1) for _, k0, k1, _, _ in tracked_spans(rows, 0, num_frames)
              if k0 < last and k1 > first]
+    spans += [(frame, last) if forward else (first, frame)
+              for _, frame, _, _, forward in starts]
     if not spans:
         return None
     start, end = min(s[0] for s in spans), max(s[1] for s in spans)
@@ -123,6 +152,46 @@ def grey_frames(session: Session, storage: Storage, camera_id: int, start: int, 
         return np.stack(list(pool.map(decode, keys)))
 
 
+def _follow_starts(body: ProposalsRequest, rows: list[list[list[Any]]], first: int, last: int
+                   ) -> list[tuple[int, int, float, float, bool]]:
+    """(point, frame, x, y, forward) of each follow asked for: the point's last keyframe
+    (forward) or first (backward), which must be visible with a position inside the range."""
+    starts, problems = [], []
+    for f in body.follow:
+        forward = f.direction == "forward"
+        kfs = as_keyframes(rows[f.point]) if f.point < len(rows) else []
+        if not kfs:
+            problems.append(f"point {f.point} has no keyframe to follow from")
+            continue
+        k = kfs[-1] if forward else kfs[0]
+        if not (k.visible and k.has_position):
+            problems.append(f"point {f.point}: its {'last' if forward else 'first'} keyframe "
+                            f"(frame {k.frame}) is occluded; a followed point starts visible")
+        elif not first <= k.frame <= last:
+            problems.append(f"point {f.point}: its keyframe at frame {k.frame} is outside "
+                            f"frames {first}-{last}")
+        else:
+            starts.append((f.point, k.frame, float(k.x or 0.0), float(k.y or 0.0), forward))
+    if problems:
+        raise InvalidProposalRequest("; ".join(problems))
+    return starts
+
+
+def _followed(frames: np.ndarray, start: int, first: int, last: int,
+              starts: list[tuple[int, int, float, float, bool]], forward: bool
+              ) -> tuple[list[tuple[int, int, float, float, bool]], Followed, int] | None:
+    """One direction's follows over frames (clip frames start..): the starts, what
+    worker.assist.lk.follow found and the clip frame of its first row; None when none."""
+    mine = [s for s in starts if s[4] == forward]
+    if not mine:
+        return None
+    lo = min(s[1] for s in mine) if forward else first
+    hi = last if forward else max(s[1] for s in mine)
+    found = follow(frames[lo - start:hi - start + 1],
+                   [(frame, x, y, fwd) for _, frame, x, y, fwd in mine], first_frame=lo)
+    return mine, found, lo
+
+
 def _rounded(value: float) -> float | None:
     return None if value != value else round(value, 3)
 
@@ -144,7 +213,9 @@ def proposals(session: Session, storage: Storage, assignment: Assignment,
     xy = np.full((count, len(rows), 2), np.nan)
     ok = np.zeros((count, len(rows)), dtype=bool)
     fb = np.full((count, len(rows)), np.nan)
-    window = _window(rows, first, last, num_frames)
+    starts = _follow_starts(body, rows, first, last)
+    stops: list[FollowStop] = []
+    window = _window(rows, first, last, num_frames, starts)
     if window is not None:
         start, end = window
         frames = grey_frames(session, storage, task.camera_id, start, end, size)
@@ -153,6 +224,10 @@ def proposals(session: Session, storage: Storage, assignment: Assignment,
         xy[lo - first:hi - first + 1] = found.xy[lo - start:hi - start + 1]
         ok[lo - first:hi - first + 1] = found.ok[lo - start:hi - start + 1]
         fb[lo - first:hi - first + 1] = found.fb_error[lo - start:hi - start + 1]
+        for forward in (True, False):
+            part = _followed(frames, start, first, last, starts, forward)
+            if part is not None:
+                stops += _write_followed(*part, first, xy, ok, fb)
     # The assignment's check cells, as in every suggestion the page shows.
     xy = np.swapaxes(plant(check_key(get_settings().signing_key), assignment.id,
                            np.swapaxes(xy, 0, 1), ok.T, first, num_frames, task.num_points,
@@ -165,4 +240,20 @@ def proposals(session: Session, storage: Storage, assignment: Assignment,
         fb_error=[_rounded(float(e)) for e in fb[:, p]],
     ) for p in wanted]
     return ProposalsRead(first_frame=first, last_frame=last, fb_threshold_px=FB_THRESHOLD_PX,
-                         points=points)
+                         points=points, stops=stops)
+
+
+def _write_followed(mine: list[tuple[int, int, float, float, bool]], found: Followed, lo: int,
+                    first: int, xy: np.ndarray, ok: np.ndarray, fb: np.ndarray
+                    ) -> list[FollowStop]:
+    """Writes the held frames of each follow into the range's (R, P) outputs; their stops."""
+    stops = []
+    for i, (point, frame, _, _, forward) in enumerate(mine):
+        rows = np.flatnonzero(found.ok[:, i])
+        xy[rows + lo - first, point] = found.xy[rows, i]
+        ok[rows + lo - first, point] = True
+        fb[rows + lo - first, point] = found.fb_error[rows, i]
+        stops.append(FollowStop(point=point, direction="forward" if forward else "backward",
+                                from_frame=frame, reached=int(found.reached[i]),
+                                stopped=found.stopped[i]))
+    return stops

@@ -25,7 +25,7 @@ from backend.labels import SCORED_STATUSES, labelled_work, sequence_tasks
 from backend.solve.models import SolveRun
 from backend.solve.results import decode_result, object_trust
 from backend.storage import get_storage
-from worker.assist.checks import accepted_checks, check_key
+from worker.assist.checks import accepted_checks, check_key, kept_checks
 from worker.assist.stretches import StretchCheck, check_stretches
 from worker.geometry import CameraModel
 from worker.tracks.interpolate import dense_points
@@ -42,12 +42,14 @@ DECODE_THREADS = 4
 @dataclass
 class ScoredAssignment:
     """Who and what one label set is, beside its arrays; checks: (accepted, corrected) check
-    suggestions of the assignment (worker.assist.checks.accepted_checks)."""
+    suggestions of the assignment (worker.assist.checks.accepted_checks); kept: the (point,
+    frame) check cells accepted unchanged."""
 
     assignment_id: int
     task_id: int
     worker_id: str
     checks: tuple[int, int] = (0, 0)
+    kept: tuple[tuple[int, int], ...] = ()
 
 
 @dataclass
@@ -124,9 +126,11 @@ def target_inputs(session: Session, sequence_id: int, target_key: str) -> Target
         view = view_of[task.camera_id]
         out.labels.append(view_labels(assignment, view, out.num_frames, task.num_points))
         out.keyframes[str(assignment.id)] = stored_rows(assignment, task.num_points)
+        rows = out.keyframes[str(assignment.id)]
         out.who[str(assignment.id)] = ScoredAssignment(
             assignment.id, task.id, assignment.worker_id,
-            check_counts(key, assignment, out.num_frames, task.num_points))
+            check_counts(key, assignment, out.num_frames, task.num_points),
+            tuple(kept_checks(key, assignment.id, rows, task.num_points, out.num_frames)))
     return out
 
 

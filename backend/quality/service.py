@@ -275,6 +275,7 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     results, methods, provisional, replays = _score(session, inputs, timings)
     for key, qc in results.items():  # check suggestions kept or corrected (decide.py)
         qc.metrics["checks_accepted"], qc.metrics["checks_corrected"] = inputs.who[key].checks
+        qc.kept_checks = [list(cell) for cell in inputs.who[key].kept]
     fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
     thresholds = learn_thresholds(_population(session, inputs.kind, fresh), thresholds_bounds())
     names = point_names(inputs.kind)

@@ -8,6 +8,8 @@
  *   epipolar line       thin line across the image, one colour per labelled view, tagged with
  *                       the view's camera number ("cam 3"); a legend on the image says what
  *                       they are while any is drawn
+ *   where a followed point stopped   an orange bar across its timeline row, on the side of
+ *                       the last frame it held at that it did not reach
  *
  * Positions are image px mapped through the editor's Transform; marker sizes are screen px.
  */
@@ -19,6 +21,7 @@ import { addSceneLayer, traceImagePath } from "./render.js";
 
 export const TRACK_GHOST = "#35d0ff";
 export const SUGGEST_GHOST = "#ff5fd2";
+export const STOP_MARK = "#ff922b";
 const LINE_COLORS = ["#ffe066", "#8ce99a", "#ffa94d", "#b197fc", "#74c0fc"];
 /** Ghost ring radius, screen px: outside the point's marker (5 px) and halo (10 px). */
 const GHOST_RADIUS_PX = 13;
@@ -180,13 +183,15 @@ function drawRing(ctx, tf, [x, y], color, dashed) {
 }
 
 /**
- * Proposed frames on the timeline: a cyan bar along the top of each frame's cell.
+ * Proposed frames on the timeline: a cyan bar along the top of each frame's cell; where a
+ * followed point stopped, an orange bar across its row at the edge of the last frame held.
  * @param {CanvasRenderingContext2D} ctx
  * @param {{cellCentre: (point: number, frame: number) => {x: number, y: number},
  *          cellWidth: number, rowHeight: number}} timeline
  * @param {Array<{point: number, frames: number[]}>} marks
+ * @param {Array<{point: number, frame: number, direction: string}>} [stops]
  */
-export function drawTimelineMarks(ctx, timeline, marks) {
+export function drawTimelineMarks(ctx, timeline, marks, stops = []) {
   ctx.fillStyle = TRACK_GHOST;
   const w = Math.max(1, timeline.cellWidth - 1);
   const h = Math.max(2, Math.floor(timeline.rowHeight / 3));
@@ -196,11 +201,20 @@ export function drawTimelineMarks(ctx, timeline, marks) {
       ctx.fillRect(c.x - w / 2, c.y - timeline.rowHeight / 2 + 1, w, h);
     }
   }
+  ctx.fillStyle = STOP_MARK;
+  const bar = Math.max(2, Math.min(4, Math.floor(timeline.cellWidth / 2)));
+  for (const s of stops) {
+    const c = timeline.cellCentre(s.point, s.frame);
+    const x = s.direction === "forward" ? c.x + timeline.cellWidth / 2 - bar : c.x - w / 2;
+    ctx.fillRect(x, c.y - timeline.rowHeight / 2, bar, timeline.rowHeight);
+  }
 }
 
 /**
  * The assistance key of a keydown, run; false when the key is not one of ours.
- *   T / Shift+T  track the active point here / every point     Enter  accept   (Esc: discard)
+ *   T / Shift+T  track the active point here / every point     Enter  accept the frames
+ *                (past the last keyframe: forward from it;        viewed  (Esc: discard)
+ *                before the first: backward from it)
  *   U / Shift+U  use suggestions for the active point / all     E      epipolar lines
  * @param {import("./core/assist.js").Assist} assist @param {KeyboardEvent} e
  */
@@ -278,8 +292,13 @@ export function startAssist(page) {
       { width: scene.cssWidth, height: scene.cssHeight });
     showLineLegend($("epipolar-legend"), assist.drawn.lines, scene.names[editor.active] || "");
   });
-  timeline.onRedraw = (ctx) => drawTimelineMarks(ctx, timeline, assist.timelineMarks());
+  timeline.onRedraw = (ctx) =>
+    drawTimelineMarks(ctx, timeline, assist.timelineMarks(), assist.stopMarks());
   updatePanel = wireAssistPanel(assist, editable);
+  // Every frame shown (a step, a jump, each frame of playback) is viewed for the points drawn.
+  const drawnPoints = () => [...Array(editor.numPoints).keys()].filter((p) => !editor.hidden.has(p));
+  assist.noteViewed(editor.frame, drawnPoints());
+  page.refreshHooks.push(() => assist.noteViewed(editor.frame, drawnPoints()));
   page.refreshHooks.push(updatePanel);
   window.addEventListener("keydown", (e) => {
     const t = e.target;

@@ -144,12 +144,24 @@ function examplesHtml(rows) {
  * epipolar lines; all of them are only ever suggestions the worker checks.
  */
 const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions between your " +
-  "keyframes around this frame, shown as cyan rings (Shift+T: every point through the clip); " +
-  "Enter accepts them, Esc discards them. Where other views are labelled already, a magenta " +
-  "ring suggests the point's position (U uses the suggestions) and coloured lines show where " +
-  "each labelled view says the point lies (E hides them). Suggestions are often right but not " +
-  "always: step through the frames and drag any that is off; correcting a tracked frame " +
-  "tracks the frames around it again.";
+  "keyframes around this frame, shown as cyan rings (Shift+T: every point through the clip). " +
+  "A point you placed on one frame only is followed from there: T after it tracks forward, " +
+  "T before it tracks backward, until the tracker loses the point; an orange mark on the " +
+  "timeline and the status line say where it stopped. Step through the proposed frames: Enter " +
+  "accepts the frames you have looked at (stepped to or played through) and leaves the others " +
+  "as proposals; Esc discards them. Where other views are labelled already, a magenta ring " +
+  "suggests the point's position (U uses the suggestions) and coloured lines show where each " +
+  "labelled view says the point lies (E hides them). Suggestions are often right but not " +
+  "always: drag any that is off; correcting a tracked frame tracks the frames around it again.";
+
+/**
+ * The fair warning about check suggestions (worker.assist.checks): said plainly, in every
+ * task's instructions, the training clip's included.
+ */
+const CHECKS_TEXT = "Some suggestions are placed wrong on purpose (about 15 px off the " +
+  "point) to check that you look at them. Work that keeps them unchanged is reviewed or " +
+  "rejected, and the feedback names those points and frames. Look at each suggestion on its " +
+  "frame and drag the wrong ones onto the point before you accept.";
 
 /**
  * Fills the instructions panel for a task.
@@ -172,6 +184,7 @@ export function renderInstructions(panel, task) {
       "the time (corners, printed marks, sharp edges), far apart. Step 2: track them through " +
       "the clip; mark a point occluded (O) while it is hidden.";
   panel.innerHTML = `<h2>Instructions</h2><p>${escapeHtml(intro)}</p>` +
+    `<p class="checks-warning"><strong>${escapeHtml(CHECKS_TEXT)}</strong></p>` +
     (hand ? `<div class="diagram">${handDiagramSvg(task.point_colors)}<ol class="legend" ` +
       `start="0">${legend}</ol></div>` : "") +
     `<h3>Examples</h3><div class="examples">` +
@@ -197,8 +210,9 @@ export const SHORTCUTS = [
   ["Alt + drag or Ctrl + drag", "move one finger: the joint and the joints after it to the tip"],
   ["G", "go to a frame (type its number, Enter)"],
   ["H", "hide / show the active point (view only; not saved)"],
-  ["T / Shift + T", "track the active point between its keyframes / every point"],
-  ["Enter / Esc", "accept / discard the tracking proposals shown"],
+  ["T / Shift + T", "track the active point between its keyframes, or onward from its last " +
+    "(back from its first) / every point"],
+  ["Enter / Esc", "accept the proposals on the frames you have viewed / discard them"],
   ["U / Shift + U", "use the suggestions from other views: active point / every point"],
   ["E", "show / hide the epipolar lines from the labelled views"],
   ["Delete", "remove the active point's keyframe in this frame"],

@@ -119,6 +119,16 @@ def goto_frame(page: Target, frame: int) -> None:
     assert page.evaluate("window.__dexlabel.editor.frame") == frame
 
 
+def step_through(page: Target, first: int, last: int) -> None:
+    """Goes to ``first``, then steps one frame at a time (arrow keys) to ``last``: every frame
+    between is shown, as a worker checking proposals would see them."""
+    goto_frame(page, first)
+    key = "ArrowRight" if last >= first else "ArrowLeft"
+    for _ in range(abs(last - first)):
+        _page_of(page).keyboard.press(key)
+    assert page.evaluate("window.__dexlabel.editor.frame") == last
+
+
 def select_point(page: Page, point: int) -> None:
     page.locator(f'.point-row[data-point="{point}"]').click()
 

@@ -25,6 +25,7 @@ from tests.browser.helpers import (
     select_point,
     server_keyframes,
     server_settings,
+    step_through,
     to_client,
     value_at,
     wait_saved,
@@ -132,6 +133,7 @@ def test_track_accept_correct_and_reload_keep_sources(
     grab_and_drop(page, tuple(truth[0][joint]), tuple(truth[LAST][joint]))
 
     look = _track_and_look(page, joint, truth, checks, output_dir)
+    step_through(page, 0, LAST)
     page.keyboard.press("Enter")
     expect(page.locator("#assist-status")).to_contain_text("Accepted:")
     wait_saved(page)

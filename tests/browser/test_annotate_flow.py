@@ -28,6 +28,7 @@ from tests.browser.helpers import (
     select_point,
     server_keyframes,
     server_settings,
+    step_through,
     to_client,
     value_at,
     wait_saved,
@@ -95,6 +96,7 @@ def _track_and_accept(page: Page, joint: int, truth: list[np.ndarray], checks: s
     if (joint, look) not in checks:
         assert np.hypot(*(np.array(ghost["xy"]) - truth[look][joint])) < TRACK_TOL_PX, ghost
     screens(page, output_dir, "flow-track", SIZES, VIEWPORT)
+    step_through(page, 0, LAST)
     page.keyboard.press("Enter")
     expect(page.locator("#assist-status")).to_contain_text("Accepted:")
     keyframes = page.evaluate(f"window.__dexlabel.store.keyframes({joint})")
@@ -157,7 +159,8 @@ def _drag_chain(page: Page, chain: list[int], truth_last: np.ndarray) -> np.ndar
 
 
 def _track_all(page: Page, output_dir: Path) -> None:
-    """Shift+T proposes for every joint between its keyframes; Enter accepts them all, and one
+    """Shift+T proposes for every joint between its keyframes; Enter after stepping through
+    the clip accepts them all, and one
     undo (and one redo) takes every joint's tracked keyframes back (and again)."""
     goto_frame(page, 5)
     before = page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)")
@@ -166,6 +169,7 @@ def _track_all(page: Page, output_dir: Path) -> None:
     shown = page.evaluate("window.__dexlabel.assist.proposals.points.map((p) => p.point)")
     assert len(shown) == 21, shown
     screens(page, output_dir, "flow-track-all", SIZES, VIEWPORT)
+    step_through(page, 0, LAST)
     page.keyboard.press("Enter")
     expect(page.locator("#assist-status")).to_contain_text("Accepted:")
     after = page.evaluate("JSON.stringify(window.__dexlabel.store.toJSON().tracks)")

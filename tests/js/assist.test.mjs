@@ -6,10 +6,12 @@ import { test } from "node:test";
 import { Assist } from "../../frontend/annotate/core/assist.js";
 import { clipLine, epipolarLines } from "../../frontend/annotate/core/epipolar.js";
 import {
-  allSpans, anchorRows, countTracked, prefillEntries, proposalEntries, retrackSpans, spanAround,
+  acceptViewed, allSpans, anchorRows, countTracked, heldFrames, openSpanAround, openSpans,
+  prefillEntries, proposalEntries, proposalRequest, retrackSpans, spanAround, stopText,
   trackedText,
 } from "../../frontend/annotate/core/proposals.js";
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
+import { ViewedFrames } from "../../frontend/annotate/core/viewed.js";
 
 const kf = (frame, x, y, source = "placed", visible = true) => ({ frame, x, y, visible, source });
 
@@ -56,10 +58,14 @@ test("proposalEntries: ok proposals become tracked, lost frames drop old tracked
 test("retrackSpans: the sides of a correction that hold tracked keyframes", () => {
   const keyframes = [kf(0, 0, 0), kf(1, 1, 0, "tracked"), kf(2, 2, 0, "tracked"),
     kf(3, 3, 0, "edited"), kf(4, 4, 0, "tracked"), kf(6, 6, 0), kf(8, 8, 0)];
-  assert.deepEqual(retrackSpans(keyframes, 3), [[0, 3], [3, 6]]);
-  assert.deepEqual(retrackSpans(keyframes, 6), [[3, 6]]);
-  assert.deepEqual(retrackSpans(keyframes, 8), [], "no tracked keyframe beside it");
-  assert.deepEqual(retrackSpans(keyframes, 2), [], "a tracked keyframe is no correction");
+  assert.deepEqual(retrackSpans(keyframes, 3, 12), [[0, 3], [3, 6]]);
+  assert.deepEqual(retrackSpans(keyframes, 6, 12), [[3, 6]]);
+  assert.deepEqual(retrackSpans(keyframes, 8, 12), [], "no tracked keyframe beside it");
+  assert.deepEqual(retrackSpans(keyframes, 2, 12), [], "a tracked keyframe is no correction");
+  const followed = [kf(2, 0, 0), kf(3, 1, 0, "tracked"), kf(5, 3, 0, "edited"),
+    kf(6, 4, 0, "tracked"), kf(7, 5, 0, "tracked")];
+  assert.deepEqual(retrackSpans(followed, 5, 12), [[2, 5], [5, 12]],
+    "past the last anchor: the open span after it");
 });
 
 test("prefillEntries: every suggested frame except those keyed by hand", () => {
@@ -88,6 +94,76 @@ test("epipolarLines: l = F [x, y, 1], normalised, and clipped to the image", () 
   const diagonal = { a: Math.SQRT1_2, b: -Math.SQRT1_2, c: 0 };  // y = x
   assert.deepEqual(clipLine(diagonal, 100, 50), [[0, 0], [50, 50]]);
   assert.equal(clipLine({ a: 0, b: 1, c: -600 }, 640, 480), null, "y = 600 misses");
+});
+
+test("openSpanAround and openSpans: beyond the outermost visible anchor, inside the clip", () => {
+  const one = [kf(5, 10, 10)];
+  assert.deepEqual(openSpanAround(one, 5, 12), [[5, 12]], "on the keyframe: forward");
+  assert.deepEqual(openSpanAround(one, 9, 12), [[5, 12]]);
+  assert.deepEqual(openSpanAround(one, 2, 12), [[-1, 5]], "before it: backward");
+  assert.deepEqual(openSpans(one, 12), [[-1, 5], [5, 12]]);
+  assert.deepEqual(openSpanAround([kf(11, 1, 1)], 11, 12), [], "nothing after the last frame");
+  assert.deepEqual(openSpans([kf(0, 1, 1), kf(11, 1, 1)], 12), []);
+  const hidden = [kf(3, 1, 1), kf(4, 2, 2, "tracked"), kf(6, 2, 2, "placed", false)];
+  assert.deepEqual(openSpanAround(hidden, 8, 12), [], "an occluded last anchor: nothing");
+  assert.deepEqual(openSpanAround(hidden, 1, 12), [[-1, 3]]);
+  assert.deepEqual(openSpanAround([kf(0, 1, 1), kf(6, 1, 1)], 3, 12), [], "between two");
+});
+
+test("proposalRequest asks to follow the open spans and keeps the range in the clip", () => {
+  const keyframes = new Map([[0, [kf(4, 1, 2)]], [1, [kf(6, 3, 4), kf(9, 3, 4)]]]);
+  const body = proposalRequest(new Map([[0, [[-1, 4], [4, 12]]], [1, [[6, 9]]]]),
+    (p) => keyframes.get(p), 12);
+  assert.deepEqual(body, {
+    tracks: [{ point: 0, keyframes: [[4, 1, 2, 1]] },
+      { point: 1, keyframes: [[6, 3, 4, 1], [9, 3, 4, 1]] }],
+    first_frame: 0, last_frame: 11,
+    follow: [{ point: 0, direction: "backward" }, { point: 0, direction: "forward" }],
+  });
+});
+
+test("acceptViewed takes the viewed held frames; the rest stays a proposal", () => {
+  const proposal = { point: 0, first: 0, last: 7, spans: [[2, 8]],
+    xy: [null, null, null, [3, 3], [4, 4], null, [6, 6], [7, 7]],
+    ok: [false, false, false, true, true, false, true, true] };
+  const keyframes = [kf(2, 2, 2), kf(5, 5, 5, "tracked")];
+  const viewed = new Set([3, 7]);
+  const first = acceptViewed(keyframes, proposal, (f) => viewed.has(f));
+  assert.deepEqual(first.entries, [
+    { frame: 3, x: 3, y: 3, visible: true, source: "tracked" },
+    { frame: 5, remove: true },
+    { frame: 7, x: 7, y: 7, visible: true, source: "tracked" },
+  ]);
+  assert.deepEqual([first.taken, first.skipped], [2, 2]);
+  assert.deepEqual(heldFrames(first.rest), [4, 6]);
+  viewed.add(4).add(6);
+  const after = [kf(2, 2, 2), kf(3, 3, 3, "tracked"), kf(7, 7, 7, "tracked")];
+  const second = acceptViewed(after, first.rest, (f) => viewed.has(f));
+  assert.deepEqual(second.entries.map((e) => e.frame), [4, 6],
+    "the frames already taken are neither written again nor removed");
+  assert.deepEqual([second.taken, second.skipped, second.rest], [2, 0, null]);
+});
+
+test("ViewedFrames: per point and frame, cleared for new proposals", () => {
+  const viewed = new ViewedFrames();
+  viewed.mark(3, [0, 2]);
+  viewed.mark(4, [0]);
+  assert.deepEqual([viewed.has(0, 3), viewed.has(2, 3), viewed.has(2, 4), viewed.has(1, 3)],
+    [true, true, false, false]);
+  assert.equal(viewed.count(0), 2);
+  viewed.clear();
+  assert.equal(viewed.has(0, 3), false);
+});
+
+test("stopText says where a followed point stopped and why", () => {
+  const stop = { point: 0, direction: "forward", from_frame: 2, reached: 31, stopped: "lost" };
+  assert.equal(stopText(stop, 72), "tracked to frame 31; stopped: lost the point");
+  assert.equal(stopText({ ...stop, reached: 71, stopped: "end" }, 72),
+    "tracked to frame 71; stopped: reached the end of the clip");
+  assert.equal(stopText({ ...stop, direction: "backward", reached: 0, stopped: "end" }, 72),
+    "tracked back to frame 0; stopped: reached the start of the clip");
+  assert.equal(stopText({ ...stop, stopped: "left_image" }, 72),
+    "tracked to frame 31; stopped: the point left the image");
 });
 
 /** A page's assistance on a real store; the proposals route answers from `track`. */
@@ -119,6 +195,11 @@ function newAssist(track, { suggestions = null } = {}) {
   return { store, assist, calls, where };
 }
 
+/** The worker steps through every frame of the clip with these points drawn. */
+const stepThrough = (assist, points = [0, 1]) => {
+  for (let f = 0; f < assist.store.numFrames; f++) assist.noteViewed(f, points);
+};
+
 const settle = async (assist) => {
   for (let i = 0; i < 100 && assist.pending; i++) await new Promise((r) => setTimeout(r, 5));
   assert.equal(assist.pending, false);
@@ -132,11 +213,12 @@ test("Track then Accept writes tracked keyframes in one undo step; lost frames s
   assert.equal(await assist.track(false), true);
   assert.deepEqual(calls[0], { tracks: [{ point: 0, keyframes: [[0, 0, 50, 1], [11, 110, 50, 1]] }],
     first_frame: 0, last_frame: 11 });
-  assert.equal(assist.status.text,
-    "9 of 10 frames tracked; 1 left to interpolation (cyan rings). Enter accepts, Esc discards.");
+  assert.equal(assist.status.text, "9 of 10 frames tracked; 1 left to interpolation (cyan " +
+    "rings). Step through them: Enter accepts the frames you have viewed, Esc discards.");
   assert.deepEqual(assist.layer(5, 0).ghosts[0].xy, [50, 50]);
   assert.deepEqual(assist.timelineMarks()[0].frames, [1, 2, 3, 4, 5, 6, 8, 9, 10]);
   assert.equal(store.keyframes(0).length, 2, "nothing written before Accept");
+  stepThrough(assist);
   assert.equal(assist.accept(), true);
   const keyframes = store.keyframes(0);
   assert.deepEqual(keyframes.map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11]);
@@ -171,8 +253,9 @@ test("proposals of a point whose keyframes change are dropped, not written", asy
   assert.deepEqual(assist.proposals.points.map((p) => p.point), [0]);
   assert.match(assist.status.text, /press T to track it again/);
   store.undo();
+  stepThrough(assist);
   assist.accept();
-  assert.equal(store.keyframes(0).length, 11);
+  assert.equal(store.keyframes(0).length, 12, "frames 1-9, and 11 followed past frame 10");
   assert.equal(store.keyframes(1).length, 2);
 });
 
@@ -189,6 +272,7 @@ test("a correction inside a tracked run re-tracks both sides from it, once", asy
   store.placePoint(0, 0, 0, 100);
   store.placePoint(0, 10, 100, 100);
   await assist.track(false);
+  stepThrough(assist);
   assist.accept();
   assert.equal(store.keyframeAt(0, 5).x, 50);
   // The worker drags frame 5 up by 20 px: it becomes "edited", then frames 1-4 and 6-9 follow.
@@ -244,6 +328,7 @@ test("Track all: Accept writes every point in one undo step and one change", asy
   assert.deepEqual(calls[0].tracks.map((t) => t.point), [0, 1]);
   const seen = [];
   store.subscribe((change) => seen.push(change));
+  stepThrough(assist);
   assert.equal(assist.accept(), true);
   assert.equal(seen.length, 1);
   assert.deepEqual([seen[0].label, seen[0].point, seen[0].points],
@@ -303,6 +388,7 @@ test("points corrected together are re-tracked in one request and one undo step"
     store.placePoint(p, 10, 100, 100 + p);
   }
   await assist.track(true);
+  stepThrough(assist);
   assist.accept();
   // A skeleton drag at frame 5: both points' tracked keyframes there move up 20 px, in steps.
   for (let step = 1; step <= 4; step++) {
@@ -325,4 +411,68 @@ test("points corrected together are re-tracked in one request and one undo step"
     "and leaves the drag itself");
   await settle(assist);
   assert.equal(calls.length, 2);
+});
+
+/** A tracker that follows x = 10 f from frame `from` up to frame `stop`, and says so. */
+function followingApi(stop) {
+  const calls = [];
+  return { calls, async proposals(body) {
+    calls.push(body);
+    const first = body.first_frame;
+    const frames = Array.from({ length: body.last_frame - first + 1 }, (_, i) => first + i);
+    const from = body.tracks[0].keyframes.at(-1)[0];
+    const xy = frames.map((f) => (f > from && f <= stop ? [10 * f, 50] : null));
+    return { first_frame: first, last_frame: body.last_frame,
+      points: [{ point: 0, xy, ok: xy.map(Boolean), fb_error: xy.map(() => 0.1) }],
+      stops: [{ point: 0, direction: "forward", from_frame: from, reached: stop,
+        stopped: "lost" }] };
+  }, async suggestions() { return { available: false, views: [] }; } };
+}
+
+test("T past a single keyframe follows it forward; Enter takes only the frames viewed", async () => {
+  const store = new AnnotationStore({ numPoints: 1, numFrames: 12, width: 640, height: 480 });
+  const api = followingApi(8);
+  const where = { frame: 2, active: 0 };
+  const assist = new Assist({ store, api, editable: () => true, where: () => where,
+    onChange: () => {} });
+  store.placePoint(0, 2, 20, 50);
+  assert.equal(await assist.track(false), true);
+  assert.deepEqual(api.calls[0], { tracks: [{ point: 0, keyframes: [[2, 20, 50, 1]] }],
+    first_frame: 2, last_frame: 11, follow: [{ point: 0, direction: "forward" }] });
+  assert.match(assist.status.text, /^Tracked to frame 8; stopped: lost the point\. 6 of 6 frames/);
+  assert.deepEqual(assist.stopMarks(), [{ point: 0, frame: 8, direction: "forward",
+    stopped: "lost" }]);
+  // The worker steps to frames 3-5 only, then presses Enter.
+  for (const f of [3, 4, 5]) assist.noteViewed(f, [0]);
+  assert.equal(assist.accept(), true);
+  assert.deepEqual(store.keyframes(0).map((k) => [k.frame, k.source]),
+    [[2, "placed"], [3, "tracked"], [4, "tracked"], [5, "tracked"]]);
+  assert.match(assist.status.text, /^Accepted 3 tracked frames you have viewed; 3 not yet viewed/);
+  assert.deepEqual(assist.timelineMarks()[0].frames, [6, 7, 8], "the rest still shown");
+  for (const f of [6, 7, 8]) assist.noteViewed(f, [0]);
+  assert.equal(assist.accept(), true);
+  assert.deepEqual(store.keyframes(0).map((k) => k.frame), [2, 3, 4, 5, 6, 7, 8]);
+  assert.equal(assist.proposals, null);
+  assert.equal(store.keyframeAt(0, 6).x, 60);
+});
+
+test("O on a tracked frame keeps every tracked keyframe on both sides; O again too", async () => {
+  const { store, assist, calls } = newAssist((p, f) => [10 * f, 50]);
+  store.placePoint(0, 0, 0, 50);
+  store.placePoint(0, 10, 100, 50);
+  await assist.track(false);
+  stepThrough(assist);
+  assist.accept();
+  const tracked = () => store.keyframes(0).filter((k) => k.source === "tracked").length;
+  assert.equal(tracked(), 9);
+  assert.equal(store.toggleVisibility(0, 5), true);
+  await settle(assist);
+  assert.equal(calls.length, 1, "a toggle re-tracks nothing");
+  assert.deepEqual([store.keyframeAt(0, 5).visible, tracked()], [false, 8]);
+  assert.equal(store.valueAt(0, 6).visible, true, "visible again after the toggled frame");
+  store.toggleVisibility(0, 5);
+  await settle(assist);
+  assert.deepEqual([store.keyframeAt(0, 5).visible, store.keyframeAt(0, 5).x, tracked()],
+    [true, 50, 8]);
+  assert.equal(calls.length, 1);
 });

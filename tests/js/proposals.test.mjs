@@ -13,7 +13,8 @@ test("proposalRequest sends each point's anchors and the frames covering every s
     [0, [kf(2, 10, 10), kf(4, 12, 10, "tracked"), kf(8, 16, 10)]],
     [3, [kf(5, 1, 1), kf(12, 8, 1, "prefilled")]],
   ]);
-  const body = proposalRequest(new Map([[0, [[2, 8]]], [3, [[5, 12]]]]), (p) => keyframes.get(p));
+  const body = proposalRequest(new Map([[0, [[2, 8]]], [3, [[5, 12]]]]), (p) => keyframes.get(p),
+    20);
   assert.deepEqual(body, {
     tracks: [
       { point: 0, keyframes: [[2, 10, 10, 1], [8, 16, 10, 1]] },

@@ -109,6 +109,25 @@ def plant(key: bytes, assignment_id: int, xy: np.ndarray, shown: np.ndarray, fir
     return out
 
 
+def _cell_outcomes(key: bytes, assignment_id: int, tracks: list[list[list[Any]]],
+                   num_points: int, num_frames: int) -> list[tuple[int, int, str]]:
+    """(point, frame, "accepted" | "corrected") of each check cell that is either."""
+    out = []
+    for point, frame in check_cells(key, assignment_id, num_points, num_frames):
+        if point >= len(tracks):
+            continue
+        for row in tracks[point]:
+            if row[0] != frame:
+                continue
+            source = row[4] if len(row) > 4 else "placed"
+            if source in ACCEPTED_SOURCES and row[3]:
+                out.append((point, frame, "accepted"))
+            elif source == "edited":
+                out.append((point, frame, "corrected"))
+            break
+    return out
+
+
 def accepted_checks(key: bytes, assignment_id: int, tracks: list[list[list[Any]]], num_points: int,
                     num_frames: int) -> tuple[int, int]:
     """(accepted, corrected) check cells of a saved assignment.
@@ -120,17 +139,14 @@ def accepted_checks(key: bytes, assignment_id: int, tracks: list[list[list[Any]]
     "edited" was corrected; cells without such a keyframe (keyed by hand, interpolated, never
     suggested) count as neither.
     """
-    accepted = corrected = 0
-    for point, frame in check_cells(key, assignment_id, num_points, num_frames):
-        if point >= len(tracks):
-            continue
-        for row in tracks[point]:
-            if row[0] != frame:
-                continue
-            source = row[4] if len(row) > 4 else "placed"
-            if source in ACCEPTED_SOURCES and row[3]:
-                accepted += 1
-            elif source == "edited":
-                corrected += 1
-            break
-    return accepted, corrected
+    outcomes = [o for _, _, o in _cell_outcomes(key, assignment_id, tracks, num_points,
+                                                num_frames)]
+    return outcomes.count("accepted"), outcomes.count("corrected")
+
+
+def kept_checks(key: bytes, assignment_id: int, tracks: list[list[list[Any]]], num_points: int,
+                num_frames: int) -> list[tuple[int, int]]:
+    """The (point, frame) check cells of a saved assignment accepted unchanged (as
+    :func:`accepted_checks` counts them), sorted: what a rejection names."""
+    return [(p, f) for p, f, o in _cell_outcomes(key, assignment_id, tracks, num_points,
+                                                 num_frames) if o == "accepted"]

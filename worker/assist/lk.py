@@ -282,3 +282,86 @@ def _blend(spans: _Spans, fwd: tuple[np.ndarray, np.ndarray, np.ndarray],
         xy[rows, point] = np.where(held[rows, s, None], blended[rows, s], np.nan)
         ok[rows, point] = held[rows, s]
         fb[rows, point] = np.where(held[rows, s], used_err[rows, s], stopped_err[rows, s])
+
+
+# Why a one-sided chain stopped (Followed.stopped).
+STOP_LOST = "lost"          # LK lost the point, its look changed or it did not come back
+STOP_LEFT_IMAGE = "left_image"
+STOP_END = "end"            # it held to the last frame given
+
+
+@dataclass(frozen=True)
+class Followed:
+    """S points followed from one keyframe each, in one direction, over the F frames given.
+
+    xy: (F, S, 2) float64 image px; NaN where the chain does not hold (and at the start).
+    ok: (F, S) bool; True on the frames after (forward) or before (backward) the start up to
+        the last one the chain holds at.
+    fb_error: (F, S) float64 px; as Proposals.fb_error.
+    reached: (S,) int; the clip frame the chain last holds at (the start when none).
+    stopped: S reasons, STOP_*.
+    """
+
+    xy: np.ndarray
+    ok: np.ndarray
+    fb_error: np.ndarray
+    reached: np.ndarray
+    stopped: list[str]
+
+
+def follow(frames: np.ndarray, starts: Sequence[tuple[int, float, float, bool]], *,
+           first_frame: int = 0, fb_threshold_px: float = FB_THRESHOLD_PX) -> Followed:
+    """Each start keyframe followed frame by frame, forward or backward, until a step fails
+    the checks of :func:`propose` (LK status, residual, forward-backward error, the image's
+    edge) or the frames end.
+
+    Args:
+        frames: (F, H, W) uint8 grey images; frames[i] is clip frame first_frame + i.
+        starts: S (clip frame, x px, y px, forward) keyframes to follow; each frame among
+            those given.
+        first_frame: the clip frame of frames[0].
+        fb_threshold_px: largest forward-backward error (px) of a step that is kept.
+    """
+    frames = _check_frames(frames)
+    count, total = frames.shape[0], len(starts)
+    xy = np.full((count, total, 2), np.nan)
+    ok = np.zeros((count, total), dtype=bool)
+    fb = np.full((count, total), np.nan)
+    reached = np.array([int(s[0]) for s in starts], dtype=np.int64)
+    stopped = [STOP_END] * total
+    for s in starts:
+        if not 0 <= int(s[0]) - first_frame < count:
+            raise ValueError(f"start frame {s[0]} is outside frames {first_frame}-"
+                             f"{first_frame + count - 1}")
+    size = (frames.shape[2], frames.shape[1])
+    for forward in (True, False):
+        idx = [i for i, s in enumerate(starts) if bool(s[3]) == forward]
+        if not idx:
+            continue
+        at = np.array([int(starts[i][0]) - first_frame for i in idx], dtype=np.int64)
+        pos = np.array([starts[i][1:3] for i in idx], dtype=np.float32).reshape(-1, 2)
+        # An open span: the far end one frame past the frames given, so every frame after
+        # (before) the start is an inner frame of it.
+        far = np.full_like(at, count if forward else -1)
+        spans = _Spans(point=np.arange(len(idx)), k0=at if forward else far,
+                       k1=far if forward else at, start=pos, end=pos)
+        chain, status = _chain(frames, spans, forward)
+        tracked = np.isfinite(chain[..., 0])
+        err = _fb_errors(frames, _origin_fill(chain, spans, forward), tracked, forward)
+        held = _held(chain, status, err, size, fb_threshold_px, forward)
+        width, height = size
+        inside = ((chain[..., 0] >= 0) & (chain[..., 0] <= width - 1)
+                  & (chain[..., 1] >= 0) & (chain[..., 1] <= height - 1))
+        for j, i in enumerate(idx):
+            rows = np.flatnonzero(held[:, j])
+            xy[rows, i] = chain[rows, j]
+            ok[rows, i] = True
+            fb[rows, i] = err[rows, j]
+            if rows.size:
+                reached[i] = first_frame + int(rows.max() if forward else rows.min())
+            failed = np.flatnonzero(tracked[:, j] & ~held[:, j])
+            if failed.size:
+                first_failed = int(failed.min() if forward else failed.max())
+                fb[first_failed, i] = err[first_failed, j]
+                stopped[i] = STOP_LOST if inside[first_failed, j] else STOP_LEFT_IMAGE
+    return Followed(xy=xy, ok=ok, fb_error=fb, reached=reached, stopped=stopped)

@@ -77,7 +77,8 @@ class AnchoredQC(AssignmentQC):
 
     def to_dict(self) -> dict:
         return AssignmentQC(self.key, self.view, self.metrics, self.per_joint, self.per_frame,
-                            self.swaps, self.issues, self.provisional).to_dict()
+                            self.swaps, self.issues, self.provisional,
+                            self.kept_checks).to_dict()
 
 
 def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -353,9 +354,12 @@ def merge_anchored(before: AssignmentQC, anchored: AssignmentQC,
                                 if i.get("about") not in ("jump", "silhouette")] \
         if anchored.metrics.get("anchored_median_px") is not None \
         else anchored.issues + before.issues
-    return AnchoredQC(key=before.key, view=before.view, metrics=metrics,
-                      per_joint=anchored.per_joint, per_frame=anchored.per_frame,
-                      swaps=before.swaps, issues=issues,
-                      provisional=before.provisional and anchored.provisional,
-                      **({"reprojection": anchored.reprojection, "shown": anchored.shown,
-                          "errors": anchored.errors} if isinstance(anchored, AnchoredQC) else {}))
+    out = AnchoredQC(key=before.key, view=before.view, metrics=metrics,
+                     per_joint=anchored.per_joint, per_frame=anchored.per_frame,
+                     swaps=before.swaps, issues=issues,
+                     provisional=before.provisional and anchored.provisional,
+                     kept_checks=before.kept_checks)
+    if isinstance(anchored, AnchoredQC):
+        out.reprojection, out.shown, out.errors = (anchored.reprojection, anchored.shown,
+                                                   anchored.errors)
+    return out

@@ -144,6 +144,25 @@ def checks_reason(metrics: dict[str, float | None], level: str) -> str:
             f"{CHECK_OFFSET_PX:.0f} px off the point): {verdict}")
 
 
+def kept_checks_sentence(cells: list[list[int]], names: list[str]) -> str:
+    """The planted cells a worker kept, by point and frame: "The suggestions placed wrong on
+    purpose that you kept: index pip at frame 4; thumb tip at frames 7 and 9." """
+    by_point: dict[int, list[int]] = {}
+    for point, frame in cells:
+        by_point.setdefault(point, []).append(frame)
+    parts = []
+    for point, frames in sorted(by_point.items()):
+        name = _readable(names[point]) if point < len(names) else f"point {point}"
+        shown = sorted(frames)
+        listed = (f"frame {shown[0]}" if len(shown) == 1
+                  else "frames " + ", ".join(map(str, shown[:-1])) + f" and {shown[-1]}")
+        parts.append(f"{name} at {listed}")
+    if not parts:
+        return ""
+    return ("The suggestions placed wrong on purpose that you kept: " + "; ".join(parts)
+            + ".")
+
+
 def decided_nothing(metrics: dict[str, float | None]) -> bool:
     """Every shown position is a pre-filled suggestion left unchanged: nothing of the worker's
     own to judge. Reviewed, not rejected: the suggestions may well be right (a worker who
@@ -160,6 +179,8 @@ def feedback(qc: AssignmentQC, swaps: list[dict], worst: dict[str, tuple],
     if outcome != "approve":
         issues = [i for i in qc.issues if not explained_by_swap(i, swaps, names)]
         sentences.append(issue_sentence(issues, names))
+    if "checks_accepted" in worst:
+        sentences.append(kept_checks_sentence(qc.kept_checks, names))
     for _, name, value, limit, worse in worst.values():
         if name in ADVICE:
             # Advise the review threshold: that is what a good label stays within.

@@ -47,7 +47,8 @@ class AssignmentQC:
     per_joint: (P,) median error per point, px. per_frame: (F,) median error per frame, px.
     swaps: detected label permutations (worker.quality.swaps). issues: spans where one point is
     far off: {"point", "frames": [first, last], "error_px", "views"}. provisional: too few
-    other views to judge (never auto-rejected).
+    other views to judge (never auto-rejected). kept_checks: [point, frame] check cells whose
+    suggestion, placed wrong on purpose, was kept unchanged (worker.assist.checks).
     """
 
     key: str
@@ -58,6 +59,7 @@ class AssignmentQC:
     swaps: list[dict] = field(default_factory=list)
     issues: list[dict] = field(default_factory=list)
     provisional: bool = False
+    kept_checks: list[list[int]] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)

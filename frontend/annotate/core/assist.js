@@ -8,12 +8,18 @@
  *
  *   Track   asks POST /api/annotate/proposals for the span between the keyframes the worker set
  *           around the current frame (or every point over the clip) and holds the answer as
- *           ghosts; Accept writes each proposal that holds as a "tracked" keyframe, Discard
- *           drops them. Frames where the tracker lost the point stay interpolated.
+ *           ghosts. Past the last keyframe (or before the first) it follows the point from
+ *           that one keyframe until the tracker's checks stop it, and says where and why.
+ *           Accept writes each proposal that holds on a frame the worker has viewed since
+ *           (stepped to or played through) as a "tracked" keyframe; the frames not viewed
+ *           stay proposals. Discard drops them. Frames where the tracker lost the point stay
+ *           interpolated.
  *   Re-track  a point placed or dragged inside a run of tracked keyframes splits it: the
  *           tracked keyframes between the nearest keyframes the worker set on each side are
  *           proposed again from the new keyframe and replaced (or removed where none holds).
  *           Points corrected together (a skeleton or finger drag) are re-tracked together.
+ *           Toggling occlusion moves nothing, so it re-tracks nothing: what was tracked on
+ *           either side of the toggled frame stays.
  *   Use suggestions  writes GET /api/annotate/suggestions' positions as "prefilled"
  *           keyframes, never over a keyframe the worker set by hand.
  *
@@ -23,9 +29,14 @@
 
 import { epipolarLines } from "./epipolar.js";
 import {
-  HAND_SOURCES, allSpans, countTracked, heldFrames, heldRuns, prefillEntries, proposalEntries,
-  proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, trackedText,
+  HAND_SOURCES, acceptViewed, allSpans, countTracked, heldFrames, heldRuns, openSpanAround,
+  openSpans, prefillEntries, proposalEntries, proposalRequest, proposalsFrom, retrackSpans,
+  sourceOf, spanAround, stopText, trackedText,
 } from "./proposals.js";
+import { ViewedFrames } from "./viewed.js";
+
+/** The store label of an occlusion toggle (AnnotationStore.toggleVisibility). */
+const TOGGLE_LABEL = "toggle occluded";
 
 /** Quiet time (ms) after the last edit of a drag before a re-track is asked for. */
 const RETRACK_DELAY_MS = 300;
@@ -64,6 +75,10 @@ export class Assist {
     this.retrackDelayMs = retrackDelayMs;
     /** @type {null|{points: PointProposal[], counts: {tracked: number, total: number}}} */
     this.proposals = null;
+    /** The cells viewed since the proposals were shown (Enter accepts only those). */
+    this.viewed = new ViewedFrames();
+    /** @type {import("./proposals.js").FollowStop[]} where followed points stopped */
+    this.stops = [];
     /** @type {Map<number, {xy: Array<number[]|null>, visible: Array<boolean|null>}>} */
     this.suggestions = new Map();
     /** Labelled views' fundamental matrices and points (GET /api/annotate/suggestions). */
@@ -100,27 +115,35 @@ export class Assist {
     const { frame, active } = this.where();
     const points = allPoints ? [...Array(this.store.numPoints).keys()] : [active];
     const spans = new Map();
+    const numFrames = this.store.numFrames;
     for (const p of points) {
       const keyframes = this.store.keyframes(p);
-      const found = allPoints ? allSpans(keyframes) : spanAround(keyframes, frame);
-      if (found.length) spans.set(p, found);
+      const found = allPoints
+        ? [...allSpans(keyframes), ...openSpans(keyframes, numFrames)]
+        : spanAround(keyframes, frame);
+      if (!found.length && !allPoints) found.push(...openSpanAround(keyframes, frame, numFrames));
+      if (found.length) spans.set(p, found.sort((a, b) => a[0] - b[0]));
     }
     if (!spans.size) {
       this._say("warn", allPoints
-        ? "Nothing to track: set a visible keyframe on each side of a stretch first."
-        : "Tracking needs a visible keyframe set by you on each side of this frame, " +
-          "at least 2 frames apart.");
+        ? "Nothing to track: place a point visible on a frame first."
+        : "Tracking starts from a visible keyframe you set: place this point on a frame " +
+          "(it is followed from there), or on both sides of this frame.");
       return false;
     }
     this._tracking = true;
     this._say("busy", "Tracking…");
     try {
       const answer = await this.api.proposals(
-        proposalRequest(spans, (p) => this.store.keyframes(p)));
+        proposalRequest(spans, (p) => this.store.keyframes(p), numFrames));
       const shown = proposalsFrom(answer, spans);
       const counts = countTracked(shown);
       this.proposals = { points: shown, counts };
-      this._say("info", `${trackedText(counts)} (cyan rings). Enter accepts, Esc discards.`);
+      this.stops = (answer.stops || []).filter((s) => spans.has(s.point));
+      this.viewed.clear();
+      this.noteViewed(this.where().frame, points);
+      this._say("info", `${this._stopsText()}${trackedText(counts)} (cyan rings). Step ` +
+        "through them: Enter accepts the frames you have viewed, Esc discards.");
       return true;
     } catch (err) {
       this._say("error", `Tracking failed: ${reason(err)}`);
@@ -130,14 +153,41 @@ export class Assist {
     }
   }
 
-  /** Writes the shown proposals as "tracked" keyframes. @returns {boolean} */
+  /**
+   * Records that `frame` is shown with these points drawn (the page calls it on every frame
+   * it shows while proposals are up, playback included).
+   * @param {number} frame @param {Iterable<number>} points
+   */
+  noteViewed(frame, points) {
+    if (this.proposals) this.viewed.mark(frame, points);
+  }
+
+  /**
+   * Writes the shown proposals as "tracked" keyframes on the frames the worker has viewed;
+   * the others stay shown. @returns {boolean}
+   */
   accept() {
     if (!this.proposals || !this.editable()) return false;
     const { points, counts } = this.proposals;
-    this.proposals = null;
-    this._write(points.map((p) => [p.point, proposalEntries(this.store.keyframes(p.point), p)]),
-      "accept tracking");
-    this._say("ok", `Accepted: ${trackedText(counts)}.`);
+    const writes = [];
+    const rest = [];
+    let taken = 0;
+    let skipped = 0;
+    for (const p of points) {
+      const part = acceptViewed(this.store.keyframes(p.point), p,
+        (f) => this.viewed.has(p.point, f));
+      writes.push([p.point, part.entries]);
+      taken += part.taken;
+      skipped += part.skipped;
+      if (part.rest) rest.push(part.rest);
+    }
+    this.proposals = rest.length ? { points: rest, counts } : null;
+    this._write(writes, "accept tracking");
+    const frames = taken === 1 ? "frame" : "frames";
+    this._say(skipped ? "warn" : "ok", skipped
+      ? `Accepted ${taken} tracked ${frames} you have viewed; ${skipped} not yet viewed ` +
+        "stay suggestions (cyan): step through them, then press Enter again."
+      : `Accepted: ${taken} tracked ${frames} (${trackedText(counts)}).`);
     return true;
   }
 
@@ -145,8 +195,20 @@ export class Assist {
   discard() {
     if (!this.proposals) return false;
     this.proposals = null;
+    this.stops = [];
     this._say("none", "");
     return true;
+  }
+
+  /** "Point 3 tracked to frame 31; stopped: lost the point. " (or the earliest of several). */
+  _stopsText() {
+    if (!this.stops.length) return "";
+    const n = this.store.numFrames;
+    const first = this.stops.reduce((a, b) =>
+      (Math.abs(b.reached - b.from_frame) < Math.abs(a.reached - a.from_frame) ? b : a));
+    const text = stopText(first, n);
+    if (this.stops.length === 1) return `${text[0].toUpperCase()}${text.slice(1)}. `;
+    return `${this.stops.length} points followed from one keyframe; the shortest ${text}. `;
   }
 
   // ---- corrections ------------------------------------------------------------------------
@@ -156,13 +218,15 @@ export class Assist {
     if (this._writing || change.cause === "saved") return;
     const points = change.points || (change.point === null ? [] : [change.point]);
     this._dropStaleProposals(points);
-    if (change.cause !== "edit") return;
+    if (change.cause !== "edit" || change.label === TOGGLE_LABEL) return;
     const corrected = new Map();
     for (const point of points) {
       for (const frame of [...change.created, ...change.updated]) {
         const k = this.store.keyframeAt(point, frame);
         if (!k || !HAND_SOURCES.includes(sourceOf(k))) continue;
-        if (retrackSpans(this.store.keyframes(point), frame).length) corrected.set(point, frame);
+        if (retrackSpans(this.store.keyframes(point), frame, this.store.numFrames).length) {
+          corrected.set(point, frame);
+        }
       }
     }
     if (corrected.size) this._scheduleRetrack(corrected);
@@ -205,12 +269,13 @@ export class Assist {
     const asked = new Map();
     for (const [point, frame] of corrected) {
       const keyframes = this.store.keyframes(point);
-      const spans = retrackSpans(keyframes, frame);
+      const spans = retrackSpans(keyframes, frame, this.store.numFrames);
       if (spans.length) asked.set(point, { keyframes, spans });
     }
     if (!asked.size) return;
     const spans = new Map([...asked].map(([point, a]) => [point, a.spans]));
-    const body = proposalRequest(spans, (point) => asked.get(point).keyframes);
+    const body = proposalRequest(spans, (point) => asked.get(point).keyframes,
+      this.store.numFrames);
     const editCount = this.store.editCount;
     this._inFlight += 1;
     let answer;
@@ -321,6 +386,12 @@ export class Assist {
   timelineMarks() {
     return (this.proposals ? this.proposals.points : [])
       .map((p) => ({ point: p.point, frames: heldFrames(p) }));
+  }
+
+  /** Where each followed point stopped (for the timeline), until the next track or discard. */
+  stopMarks() {
+    return this.stops.map((s) => ({ point: s.point, frame: s.reached, direction: s.direction,
+      stopped: s.stopped }));
   }
 
   // ---- internals --------------------------------------------------------------------------

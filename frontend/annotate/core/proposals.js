@@ -5,8 +5,11 @@
  *
  * Keyframe sources: "placed" (set by hand; a keyframe without source), "edited" (a
  * suggestion the worker changed), "tracked" and "prefilled" (suggestions taken unchanged).
- * Anchors are the keyframes that are not "tracked": tracking runs between them. Positions are
- * image pixels of this view, frames are clip frame indices. No DOM.
+ * Anchors are the keyframes that are not "tracked": tracking runs between them, and beyond
+ * the last anchor (forward) or before the first (backward) it follows the point from that one
+ * anchor. Such an open span's far end lies outside the clip: [k, numFrames] forward,
+ * [-1, k] backward, so that its inner frames are those it may hold at. Positions are image
+ * pixels of this view, frames are clip frame indices. No DOM.
  */
 
 /** Sources of keyframes the worker set by hand, which suggestions never replace. */
@@ -21,8 +24,11 @@ export const HAND_SOURCES = ["placed", "edited"];
  *            xy: Array<number[]|null>, ok: boolean[]}} PointProposal
  *   first..last: the frames xy/ok cover (xy[i] is frame first + i); spans: [k0, k1] anchor
  *   pairs whose inner frames the proposal decides
+ * @typedef {{point: number, direction: "forward"|"backward", from_frame: number,
+ *            reached: number, stopped: string}} FollowStop
+ *   where a point followed from one anchor stopped, and why ("lost", "left_image", "end")
  * @typedef {{first_frame: number, last_frame: number, points: Array<{point: number,
- *            xy: Array<number[]|null>, ok: boolean[]}>}} ProposalsAnswer
+ *            xy: Array<number[]|null>, ok: boolean[]}>, stops?: FollowStop[]}} ProposalsAnswer
  *   POST /api/annotate/proposals
  */
 
@@ -63,6 +69,37 @@ export function spanAround(keyframes, frame) {
 }
 
 /**
+ * The open span tracking follows from one anchor when `frame` is not between two: forward
+ * from the last anchor when the frame is at or after it, backward from the first when the
+ * frame is before it. [] when that anchor is occluded or at the clip's end it would leave.
+ * @param {SourcedKeyframe[]} keyframes @param {number} frame @param {number} numFrames
+ * @returns {number[][]}
+ */
+export function openSpanAround(keyframes, frame, numFrames) {
+  const anchors = keyframes.filter(isAnchor);
+  if (!anchors.length) return [];
+  const first = anchors[0];
+  const last = anchors[anchors.length - 1];
+  if (frame >= last.frame) {
+    return trackable(last) && last.frame < numFrames - 1 ? [[last.frame, numFrames]] : [];
+  }
+  if (frame < first.frame) return trackable(first) && first.frame > 0 ? [[-1, first.frame]] : [];
+  return [];
+}
+
+/**
+ * Both open spans of a track (after its last anchor, before its first), where there is room.
+ * @param {SourcedKeyframe[]} keyframes @param {number} numFrames @returns {number[][]}
+ */
+export function openSpans(keyframes, numFrames) {
+  const anchors = keyframes.filter(isAnchor);
+  if (!anchors.length) return [];
+  const before = openSpanAround(keyframes, anchors[0].frame - 1, numFrames);
+  const after = openSpanAround(keyframes, anchors[anchors.length - 1].frame, numFrames);
+  return [...before, ...after];
+}
+
+/**
  * Every anchor pair of a track worth tracking (both visible, at least 2 frames apart).
  * @param {SourcedKeyframe[]} keyframes @returns {number[][]}
  */
@@ -87,15 +124,18 @@ export function anchorRows(keyframes) {
 /**
  * The store writes that take a proposal: inside each span, a "tracked" keyframe where the
  * proposal holds, and the removal of an older tracked keyframe where it does not. Frames that
- * hold an anchor now (the worker keyed them meanwhile) are left alone.
+ * hold an anchor now (the worker keyed them meanwhile), and those `keep` refuses, are left
+ * alone.
  * @param {SourcedKeyframe[]} keyframes  the point's keyframes now
- * @param {PointProposal} proposal @returns {Entry[]}
+ * @param {PointProposal} proposal @param {(frame: number) => boolean} [keep]
+ * @returns {Entry[]}
  */
-export function proposalEntries(keyframes, proposal) {
+export function proposalEntries(keyframes, proposal, keep = () => true) {
   const byFrame = new Map(keyframes.map((k) => [k.frame, k]));
   const entries = [];
   for (const [k0, k1] of proposal.spans) {
     for (let f = k0 + 1; f < k1; f++) {
+      if (!keep(f)) continue;
       const existing = byFrame.get(f);
       if (existing && isAnchor(existing)) continue;
       const i = f - proposal.first;
@@ -108,7 +148,8 @@ export function proposalEntries(keyframes, proposal) {
 }
 
 /**
- * How many inner span frames a set of proposals holds at.
+ * How many inner span frames a set of proposals holds at. An open span counts only the frames
+ * its point was followed to (past them nothing was asked of the tracker).
  * @param {PointProposal[]} proposals @returns {{tracked: number, total: number}}
  */
 export function countTracked(proposals) {
@@ -116,9 +157,11 @@ export function countTracked(proposals) {
   let total = 0;
   for (const p of proposals) {
     for (const [k0, k1] of p.spans) {
+      const open = k0 < p.first || k1 > p.last;
       for (let f = k0 + 1; f < k1; f++) {
-        total += 1;
-        if (p.ok[f - p.first] && p.xy[f - p.first]) tracked += 1;
+        const held = Boolean(p.ok[f - p.first] && p.xy[f - p.first]);
+        total += open && !held ? 0 : 1;
+        if (held) tracked += 1;
       }
     }
   }
@@ -134,19 +177,20 @@ export function trackedText({ tracked, total }) {
 
 /**
  * The anchor pairs a hand-set keyframe at `frame` re-tracks: each side (the nearest anchor
- * before it to it, it to the nearest anchor after it) that holds tracked keyframes.
- * @param {SourcedKeyframe[]} keyframes @param {number} frame @returns {number[][]}
+ * before it to it, it to the nearest anchor after it; the open span beyond it where it is the
+ * outermost anchor) that holds tracked keyframes.
+ * @param {SourcedKeyframe[]} keyframes @param {number} frame @param {number} numFrames
+ * @returns {number[][]}
  */
-export function retrackSpans(keyframes, frame) {
+export function retrackSpans(keyframes, frame, numFrames) {
   const here = keyframes.find((k) => k.frame === frame);
   if (!here || !isAnchor(here)) return [];
   const anchors = keyframes.filter(isAnchor);
   const i = anchors.indexOf(here);
-  const sides = [[anchors[i - 1], here], [here, anchors[i + 1]]];
-  return sides
-    .filter(([a, b]) => a && b && keyframes.some(
-      (k) => !isAnchor(k) && k.frame > a.frame && k.frame < b.frame))
-    .map(([a, b]) => [a.frame, b.frame]);
+  const before = anchors[i - 1] ? anchors[i - 1].frame : -1;
+  const after = anchors[i + 1] ? anchors[i + 1].frame : numFrames;
+  return [[before, frame], [frame, after]].filter(([a, b]) => keyframes.some(
+    (k) => !isAnchor(k) && k.frame > a && k.frame < b));
 }
 
 /**
@@ -170,18 +214,66 @@ export function prefillEntries(keyframes, suggestion) {
 }
 
 /**
- * The body of POST /api/annotate/proposals: each point's anchors, and the frames that cover
- * every span asked for.
+ * The body of POST /api/annotate/proposals: each point's anchors, the frames that cover every
+ * span asked for, and the points to follow beyond their outermost anchor (open spans).
  * @param {Map<number, number[][]>} spans  point -> anchor pairs
- * @param {(point: number) => SourcedKeyframe[]} keyframesOf
+ * @param {(point: number) => SourcedKeyframe[]} keyframesOf @param {number} numFrames
  */
-export function proposalRequest(spans, keyframesOf) {
+export function proposalRequest(spans, keyframesOf, numFrames) {
   const all = [...spans.values()].flat();
-  return {
+  const follow = [];
+  for (const [point, pairs] of spans) {
+    for (const [a, b] of pairs) {
+      if (b >= numFrames) follow.push({ point, direction: "forward" });
+      else if (a < 0) follow.push({ point, direction: "backward" });
+    }
+  }
+  const body = {
     tracks: [...spans.keys()].map((point) => ({ point, keyframes: anchorRows(keyframesOf(point)) })),
-    first_frame: Math.min(...all.map((s) => s[0])),
-    last_frame: Math.max(...all.map((s) => s[1])),
+    first_frame: Math.max(0, Math.min(...all.map((s) => s[0]))),
+    last_frame: Math.min(numFrames - 1, Math.max(...all.map((s) => s[1]))),
   };
+  return follow.length ? { ...body, follow } : body;
+}
+
+/**
+ * What Enter takes of one proposal: its held frames the worker has viewed, written as
+ * "tracked" keyframes (and, the first time, the removal of older tracked keyframes where it
+ * does not hold); `rest` keeps the held frames not viewed yet, still a proposal (null when
+ * there are none).
+ * @param {SourcedKeyframe[]} keyframes @param {PointProposal & {partial?: boolean}} proposal
+ * @param {(frame: number) => boolean} viewed  for this proposal's point
+ * @returns {{entries: Entry[], taken: number, skipped: number,
+ *            rest: (PointProposal & {partial: boolean})|null}}
+ */
+export function acceptViewed(keyframes, proposal, viewed) {
+  const held = new Set(heldFrames(proposal));
+  const keep = (f) => (held.has(f) ? viewed(f) : !proposal.partial);
+  const entries = proposalEntries(keyframes, proposal, keep);
+  const unseen = [...held].filter((f) => !viewed(f));
+  const taken = held.size - unseen.length;
+  if (!unseen.length) return { entries, taken, skipped: 0, rest: null };
+  const ok = proposal.ok.map((o, i) => o && !viewed(proposal.first + i));
+  return { entries, taken, skipped: unseen.length, rest: { ...proposal, ok, partial: true } };
+}
+
+const STOP_WORDS = {
+  lost: "lost the point",
+  left_image: "the point left the image",
+  end: "reached the end",
+};
+
+/**
+ * "tracked to frame 31; stopped: lost the point", for one followed point.
+ * @param {FollowStop} stop @param {number} numFrames
+ */
+export function stopText(stop, numFrames) {
+  const edge = stop.direction === "forward" ? numFrames - 1 : 0;
+  const why = stop.stopped === "end" && stop.reached === edge
+    ? `reached the ${stop.direction === "forward" ? "end" : "start"} of the clip`
+    : STOP_WORDS[stop.stopped] || stop.stopped;
+  const way = stop.direction === "forward" ? "" : " back";
+  return `tracked${way} to frame ${stop.reached}; stopped: ${why}`;
 }
 
 /**

@@ -235,12 +235,13 @@ export class AnnotationStore {
     this._checkPoint(point);
     this._checkFrame(frame);
     const current = this.valueAt(point, frame);
+    const label = { label: "toggle occluded" };
     if (current.state === "unplaced") {
-      return this.setKeyframe(point, frame, { x: null, y: null, visible: false });
+      return this.setKeyframes(point, [{ frame, x: null, y: null, visible: false }], label);
     }
     const visible = !current.visible;
     if (visible && (current.x === null || current.y === null)) return false;
-    return this.setKeyframe(point, frame, { x: current.x, y: current.y, visible });
+    return this.setKeyframes(point, [{ frame, x: current.x, y: current.y, visible }], label);
   }
 
   /** @returns {boolean} false when there is nothing to undo */

@@ -165,3 +165,57 @@ def test_a_frame_range_answers_its_frames_only(
     whole = client.post(URL, json=_body(truth, [0, 4, 5]),
                         headers=_bearer(hand["link"]["token"])).json()
     assert [p["xy"][2:4] for p in whole["points"]] == [p["xy"] for p in answer["points"]]
+
+
+def test_a_point_keyed_once_is_followed_to_where_the_checks_stop_it(
+    client: TestClient, admin_headers: dict, fast_capture: Path
+) -> None:
+    """Each joint keyed on one frame only (the truth), followed forward from frame 0 and
+    backward from the last frame: every held frame lies between the keyframe and the stop the
+    answer reports, and the held positions are on the true joints (median under 2 px; the
+    assignment's check cells are 15 px off on purpose)."""
+    seq_id = import_path(fast_capture)[0].sequence_id
+    task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",
+                                       headers=admin_headers).json() if t["kind"] == "hand")
+    token = client.post(f"/api/tasks/{task['id']}/assignments", json={"worker_id": "W1"},
+                        headers=admin_headers).json()["token"]
+    frames = task["num_frames"]
+    truth, visible = _truth(fast_capture, task["serial"], frames)
+    for key, direction in ((0, "forward"), (frames - 1, "backward")):
+        points = [p for p in range(21) if visible[key, p]]
+        body = _body(truth[:, points], [key])
+        for i, p in enumerate(points):
+            body["tracks"][i]["point"] = p
+        body["follow"] = [{"point": p, "direction": direction} for p in points]
+        resp = client.post(URL, json=body, headers=_bearer(token))
+        assert resp.status_code == 200, resp.text
+        answer = resp.json()
+        xy, ok = _grid(answer, "xy"), _grid(answer, "ok").astype(bool)
+        stops = {s["point"]: s for s in answer["stops"]}
+        assert sorted(stops) == points and not ok[key].any()
+        for i, p in enumerate(points):
+            stop = stops[p]
+            assert stop["from_frame"] == key and stop["direction"] == direction
+            assert stop["stopped"] in ("lost", "left_image", "end")
+            lo, hi = sorted((key, stop["reached"]))
+            held = np.flatnonzero(ok[:, i])
+            expected = [f for f in range(lo, hi + 1) if f != key]
+            assert held.tolist() == expected, (p, stop, held)
+        # This clip moves several px a frame: the median joint holds 4 frames (measured).
+        reached = [abs(s["reached"] - key) for s in answer["stops"]]
+        assert np.median(reached) >= 3, answer["stops"]
+        error = np.linalg.norm(xy - truth[:, points], axis=2)[ok]
+        assert error.size >= 3 * len(points) and np.median(error) < 2.0
+
+
+def test_a_follow_from_an_occluded_or_missing_keyframe_is_refused(
+    client: TestClient, hand: dict
+) -> None:
+    body = {"tracks": [{"point": 0, "keyframes": [[2, None, None, 0]]},
+                       {"point": 1, "keyframes": []}],
+            "follow": [{"point": 0, "direction": "forward"},
+                       {"point": 1, "direction": "backward"}]}
+    resp = client.post(URL, json=body, headers=_bearer(hand["link"]["token"]))
+    assert resp.status_code == 422, resp.text
+    assert "point 0: its last keyframe (frame 2) is occluded" in resp.text
+    assert "point 1 has no keyframe to follow from" in resp.text

@@ -17,8 +17,12 @@ import numpy as np
 from fastapi.testclient import TestClient
 from sqlalchemy import select
 
+from backend.annotation.points import point_names
 from backend.db import session_scope
 from tests.backend.quality.helpers import submit_direct
+from worker.quality.feedback import kept_checks_sentence
+
+HAND_NAMES = point_names("hand")
 
 ADMIN = ("provenance-admin@example.org", "correct horse battery")
 BLIND_REASON = ("accepted 4 of 4 check suggestions unchanged (each shown 15 px off the point): "
@@ -70,6 +74,13 @@ def _submit_assisted(task_id: int, worker: str, xy: np.ndarray, visible: np.ndar
             track.keyframes = _assisted_rows(track.keyframes, xy[:, p], visible[:, p],
                                              cells.get(p, {}), at_cell, elsewhere, rng)
     return assignment_id
+
+
+def _planted(assignment_id: int) -> list[tuple[int, int]]:
+    from backend.config import get_settings
+    from worker.assist.checks import check_cells, check_key
+
+    return check_cells(check_key(get_settings().signing_key), assignment_id, 21, 16)
 
 
 def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: dict[str, str],
@@ -138,6 +149,14 @@ def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: di
     assert blind.outcome == "reject" and blind.reasons[0] == BLIND_REASON
     assert all(r == BLIND_REASON or r.startswith("jitter_px") for r in blind.reasons)
     assert "15 px off the point on purpose" in blind.feedback
+    # The feedback names the planted cells it kept: each joint and its frames.
+    cells = _planted(blind.assignment_id)
+    assert len(cells) == 4
+    assert kept_checks_sentence([list(c) for c in cells], HAND_NAMES) in blind.feedback
+    for point, frame in cells:
+        assert HAND_NAMES[point].replace("_", " ") in blind.feedback and str(frame) in \
+            blind.feedback
+    assert "placed wrong on purpose that you kept" not in careful.feedback
     # Every position a suggestion kept: not judged on position, and its kept checks reject it.
     assert prefilled.metrics["decided_fraction"] == 0.0
     assert prefilled.metrics["median_error_px"] is None

@@ -1,6 +1,7 @@
 """Lucas-Kanade proposals between keyframes on a synthetic translating texture with a known
 motion: proposals land on the true positions, and the forward-backward check stops a point
-that leaves the image or is covered by something else."""
+that leaves the image or is covered by something else; a point followed from one keyframe
+alone holds on the truth until those checks stop it, and says why it stopped."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from worker.assist.lk import propose
+from worker.assist.lk import STOP_END, STOP_LEFT_IMAGE, STOP_LOST, follow, propose
 
 WIDTH, HEIGHT = 320, 240
 MARGIN = 120
@@ -115,3 +116,55 @@ class TestPropose:
     def test_frames_that_are_not_grey_images_are_refused_naming_the_shape(self) -> None:
         with pytest.raises(ValueError, match=r"\(4, 5, 6, 3\)"):
             propose(np.zeros((4, 5, 6, 3), np.uint8), [])
+
+
+class TestFollow:
+    def test_a_point_followed_forward_from_one_keyframe_holds_to_the_last_frame(self) -> None:
+        count = 24
+        shift = _accelerating(count)
+        frames = _frames(shift)
+        truth = np.array([[[100.0, 90.0], [200.0, 150.0]]]) + (shift - shift[0])[:, None]
+        out = follow(frames, [(0, *truth[0, 0], True), (4, *truth[4, 1], True)])
+        assert out.xy.shape == (count, 2, 2) and out.stopped == [STOP_END, STOP_END]
+        assert out.reached.tolist() == [count - 1, count - 1]
+        assert out.ok[1:, 0].all() and not out.ok[0, 0]
+        assert out.ok[5:, 1].all() and not out.ok[:5, 1].any()
+        error = np.linalg.norm(out.xy - truth, axis=2)
+        assert np.nanmax(error[out.ok]) < 0.5
+
+    def test_a_point_followed_backward_holds_on_the_frames_before_its_keyframe(self) -> None:
+        count = 20
+        shift = _accelerating(count)
+        frames = _frames(shift)
+        truth = np.array([[[120.0, 100.0]]]) + (shift - shift[0])[:, None]
+        out = follow(frames[4:], [(15, *truth[15, 0], False)], first_frame=4)
+        assert out.ok[:11, 0].all() and not out.ok[11:, 0].any()
+        assert out.reached.tolist() == [4] and out.stopped == [STOP_END]
+        assert np.linalg.norm(out.xy[:11, 0] - truth[4:15, 0], axis=1).max() < 0.5
+
+    def test_a_covered_point_stops_where_it_is_lost_and_says_so(self) -> None:
+        count = 31
+        shift = np.stack([np.linspace(0.0, 30.0, count), np.zeros(count)], axis=1)
+        frames = _frames(shift)
+        frames[10:21, 80:160, 100:180] = _texture(9, (80, 80))
+        truth = np.array([[[125.0, 120.0]]]) + shift[:, None]
+        out = follow(frames, [(0, *truth[0, 0], True)])
+        assert out.stopped == [STOP_LOST] and out.reached.tolist() == [9]
+        assert out.ok[1:10, 0].all() and not out.ok[10:, 0].any()
+
+    def test_a_point_leaving_the_image_stops_at_the_edge(self) -> None:
+        count = 16
+        shift = np.stack([np.linspace(0.0, 60.0, count), np.zeros(count)], axis=1)
+        frames = _frames(shift)
+        truth = np.array([[[WIDTH - 30.0, 120.0]]]) + shift[:, None]
+        out = follow(frames, [(0, *truth[0, 0], True)])
+        last_inside = int(np.flatnonzero(truth[:, 0, 0] <= WIDTH - 1).max())
+        assert out.stopped == [STOP_LEFT_IMAGE]
+        assert 1 <= out.reached[0] <= last_inside
+        kept = out.ok[:, 0]
+        # Next to the edge LK's window is cut: within the forward-backward threshold.
+        assert np.linalg.norm(out.xy[kept, 0] - truth[kept, 0], axis=1).max() < 1.0
+
+    def test_a_start_outside_the_frames_given_is_refused_naming_the_frame(self) -> None:
+        with pytest.raises(ValueError, match="start frame 9"):
+            follow(_frames(np.zeros((4, 2))), [(9, 10.0, 10.0, True)])
