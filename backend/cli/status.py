@@ -8,7 +8,7 @@ import typer
 
 from backend.annotation.schemas import TASK_STATES
 from backend.cli.console import refusing_bad_input, resolve_sequence
-from backend.progress.schemas import SequenceProgress
+from backend.progress.schemas import SequenceFrameCost, SequenceProgress, TargetFrameCost
 
 
 def _solve_line(p: SequenceProgress) -> str:
@@ -45,6 +45,29 @@ def _grid(p: SequenceProgress) -> list[str]:
         lines.append("  ".join([f"{serial:<{width}}", *(f"{s:<{w}}" for s, w in zip(
             row, cols, strict=True))]).rstrip())
     return lines
+
+
+COST_HEADER = ("target", "3D frames", "actions", "seconds", "money", "actions/frame",
+               "seconds/frame", "money/frame", "currency")
+
+
+def _cost_cells(line: TargetFrameCost) -> list[str]:
+    def shown(value: object) -> str:
+        return "-" if value is None else str(value)
+
+    return [line.target_key, str(line.frames_labelled), str(line.actions), f"{line.seconds:.1f}",
+            line.money, shown(line.actions_per_frame), shown(line.seconds_per_frame),
+            shown(line.money_per_frame), line.currency]
+
+
+def cost_table(costs: SequenceFrameCost) -> list[str]:
+    """The cost per labelled 3D frame, a row per target and the total (whose 3D frames are
+    those labelled for every target), in aligned columns."""
+    rows = [list(COST_HEADER), *(_cost_cells(t) for t in [*costs.targets, costs.total])]
+    widths = [max(len(row[i]) for row in rows) for i in range(len(COST_HEADER))]
+    return ["  ".join(cell.ljust(w) if i == 0 else cell.rjust(w)
+                      for i, (cell, w) in enumerate(zip(row, widths, strict=True))).rstrip()
+            for row in rows]
 
 
 # Sequences read and printed at a time by `dexlabel status` without a sequence.
@@ -89,11 +112,13 @@ def status_command(
         show_default=False)] = None,
     json: Annotated[bool, typer.Option("--json", help="print the progress API's JSON")] = False,
 ) -> None:
-    """Where the work stands: tasks, HITs, assignments, solve.
+    """Where the work stands: tasks, HITs, assignments, solve, cost per labelled 3D frame.
 
     Each view x target task's state (open, published, submitted, in review, accepted), HIT
-    and assignment counts, and the current solve."""
+    and assignment counts, the current solve, and per target the actions, seconds and money
+    spent per frame that solve labelled and did not flag."""
     from backend.db import session_scope
+    from backend.progress.frame_costs import frame_costs
     from backend.progress.service import sequences_progress
 
     if sequence is None:
@@ -101,7 +126,9 @@ def status_command(
             _every_sequence(json)
         return
     with refusing_bad_input(), session_scope() as session:
-        found = sequences_progress(session, [resolve_sequence(session, sequence)])
+        sequence_id = resolve_sequence(session, sequence)
+        found = sequences_progress(session, [sequence_id])
+        costs = frame_costs(session, [sequence_id])[0]
     if json:
         typer.echo(found[0].model_dump_json(indent=2))
         return
@@ -114,3 +141,8 @@ def status_command(
         typer.echo("")
         for line in _grid(p):
             typer.echo(line)
+    typer.echo("")
+    run = f"solve run {costs.solve_run_id}" if costs.solve_run_id else "no solve yet"
+    typer.echo(f"cost per labelled 3D frame ({run}; money spent, from the crowd ledger):")
+    for line in cost_table(costs):
+        typer.echo(line)

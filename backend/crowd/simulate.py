@@ -5,7 +5,13 @@ the HITs, accepts one, opens the annotation page's assignment (``/api/annotate/s
 task token of the work URL), autosaves its tracks twice, submits them, and posts the
 marketplace's completion form to ``{turkSubmitTo}/mturk/externalSubmit``. The labels come from
 the ground truth of a synthetic capture (matched by the task's camera serial), spoiled by the
-worker's profile (worker.synth.annotators).
+worker's profile (worker.synth.annotators), keyed as the labelling ``protocol`` asks:
+``keyframes`` (the product's: a keyframe every few frames and where the path bends) or
+``every-frame`` (DexYCB's: every joint clicked on every frame). The page's effort counters
+are reported as such a worker earns them: an edit action per keyframe (a click, or a key for
+an occluded one: worker.synth.annotators.keyframe_actions) and a modelled working time:
+READING_S to read the task and play the clip, then SECONDS_PER_ACTION per action (no person
+is timed here).
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ import time
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 from urllib.parse import parse_qs, urlsplit
 
 import httpx
@@ -22,7 +28,7 @@ import numpy as np
 
 from backend.captures.truth import CaptureTruth
 from backend.errors import DexlabelError
-from worker.synth.annotators import annotate, draw_profiles
+from worker.synth.annotators import KEY_STEP, annotate, draw_profiles, keyframe_actions
 
 WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
 WORKER_PASSWORD = "simulated worker {index:03d}"
@@ -30,6 +36,21 @@ HTTP_TIMEOUT_S = 30.0
 # Attempts of a request that a server error left without effect, and the pause between them.
 RETRIES = 3
 RETRY_PAUSE_S = 0.2
+# The modelled working time, s: reading the task and playing the clip once, then each edit
+# action (a click or key, with the look before it).
+READING_S = 60.0
+SECONDS_PER_ACTION = 3.0
+Protocol = Literal["keyframes", "every-frame"]
+# protocol -> (key step, follow the motion: None as the profile does)
+PROTOCOLS: dict[str, tuple[int, bool | None]] = {"keyframes": (KEY_STEP, None),
+                                                 "every-frame": (1, False)}
+
+
+def working_seconds(actions: int) -> float:
+    """The modelled active working time of ``actions`` edit actions, s."""
+    return READING_S + SECONDS_PER_ACTION * actions
+
+
 class SimulationError(DexlabelError, status_code=502, code="simulation_failed"):
     """A step of the worker flow answered with an error."""
 
@@ -115,18 +136,25 @@ class WorkerClient:
                                       headers={"Authorization": f"Bearer {token}"}), "read task")
         return params, token, task
 
-    def label(self, token: str, version: int, tracks: list[list[list[float | None]]]) -> int:
-        """Autosave half the points, then all of them, then submit; the final version."""
+    def label(self, token: str, version: int, tracks: list[list[list[float | None]]],
+              actions: int | None = None) -> int:
+        """Autosave half the points, then all of them, then submit; the final version. The
+        page's counters grow as the points are placed: ``actions`` edit actions in all
+        (default: one per keyframe) in READING_S plus SECONDS_PER_ACTION each."""
         auth = {"Authorization": f"Bearer {token}"}
         body = [{"point": p, "keyframes": rows} for p, rows in enumerate(tracks)]
-        for step, part in enumerate((body[: len(body) // 2 or 1], body)):
+        total = sum(len(rows) for rows in tracks) if actions is None else actions
+        half = body[: len(body) // 2 or 1]
+        done_half = sum(len(rows) for rows in tracks[:len(half)]) if actions is None \
+            else actions * len(half) // max(len(body), 1)
+        for part, count in ((half, done_half), (body, total)):
             saved = _checked(self.http.put(f"{self.base}/api/annotate/tracks", headers=auth, json={
-                "version": version, "tracks": part, "edit_count": 10 * (step + 1),
-                "working_time_s": 60.0 * (step + 1)}), "autosave tracks")
+                "version": version, "tracks": part, "edit_count": count,
+                "working_time_s": working_seconds(count)}), "autosave tracks")
             version = saved["version"]
         done = _checked(self.http.post(f"{self.base}/api/annotate/submit", headers=auth, json={
-            "version": version, "tracks": body, "edit_count": 25, "working_time_s": 150.0}),
-            "submit tracks")
+            "version": version, "tracks": body, "edit_count": total,
+            "working_time_s": working_seconds(total)}), "submit tracks")
         return int(done["version"])
 
     def external_submit(self, params: dict[str, str], version: int) -> None:
@@ -143,7 +171,8 @@ def admin_token(http: httpx.Client, base: str, email: str, password: str) -> str
 
 
 def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth: CaptureTruth,
-              rng: np.random.Generator, only: Collection[str] | None = None) -> WorkerOutcome:
+              rng: np.random.Generator, only: Collection[str] | None = None,
+              protocol: Protocol = "keyframes") -> WorkerOutcome:
     email = WORKER_EMAIL.format(index=index)
     token, worker_id = client.sign_in(admin, email, WORKER_PASSWORD.format(index=index))
     outcome = WorkerOutcome(email=email, worker_id=worker_id, profile=profile,
@@ -154,8 +183,11 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
     params, page_token, reply = client.open_page(accepted["work_url"])
     task = reply["task"]
     xy, visible = truth.points(task, rng)
-    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng)
-    version = client.label(page_token, reply["assignment"]["version"], work.tracks)
+    key_step, follow = PROTOCOLS[protocol]
+    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng, key_step, follow)
+    effort = keyframe_actions(work.tracks)
+    version = client.label(page_token, reply["assignment"]["version"], work.tracks,
+                           effort["clicks"] + effort["drags"] + effort["keys"])
     client.external_submit(params, version)
     outcome.status, outcome.task_id = "submitted", task["id"]
     outcome.hit_id, outcome.assignment_id = params.get("hitId"), params["assignmentId"]
@@ -163,7 +195,8 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
 
 
 def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: str,
-             admin_password: str, seed: int = 0, first_index: int = 1) -> list[WorkerOutcome]:
+             admin_password: str, seed: int = 0, first_index: int = 1,
+             protocol: Protocol = "keyframes") -> list[WorkerOutcome]:
     """Run ``workers`` simulated workers one after another against the app at ``base``.
 
     Worker i (from ``first_index``) is ``sim-worker-<i>`` with a deterministic password, so a
@@ -180,7 +213,7 @@ def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: 
         with httpx.Client(timeout=HTTP_TIMEOUT_S) as http:
             admin = admin_token(http, base, admin_email, admin_password)
             client = WorkerClient(http, base)
-            return [_work_one(client, admin, first_index + i, name, truth, rng)
-                    for i, name in enumerate(profiles)]
+            return [_work_one(client, admin, first_index + i, name, truth, rng,
+                              protocol=protocol) for i, name in enumerate(profiles)]
     except httpx.HTTPError as exc:
         raise SimulationError(f"could not reach the app at {base}: {exc}") from exc

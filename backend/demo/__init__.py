@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     import uvicorn
     from huey.consumer import Consumer
 
+    from backend.crowd.simulate import Protocol
+
 DEMO_ADMIN_EMAIL = "demo@dexlabel.local"
 DEMO_WORKER_EMAIL = "demo-worker@dexlabel.local"
 LOGINS_FILE = "demo-logins.json"
@@ -194,8 +196,9 @@ def demo_publish(sequence_id: int, assignments: int) -> None:
 
 
 def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | None,
-               can_wait: bool) -> None:
-    """Rounds of simulated workers (mixed profiles), one per open assignment, until every
+               can_wait: bool, profile: str = "mixed", protocol: Protocol = "keyframes") -> None:
+    """Rounds of simulated workers (``profile``: mixed by default; labelling as ``protocol``
+    asks, backend.crowd.simulate), one per open assignment, until every
     task has accepted work or MAX_ROUNDS passed. After each round the submissions are synced
     and the quality checks waited for: they approve, or reject and re-open the HIT with one
     more assignment; a task whose work was left for an admin's review gets one more too."""
@@ -210,9 +213,9 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
         typer.echo(f"round {round_}: {count} simulated workers for {missing} tasks without "
                    "accepted work ...")
         started = time.perf_counter()
-        outcomes = simulate(get_settings().public_url, capture, count, "mixed", admin.email,
+        outcomes = simulate(get_settings().public_url, capture, count, profile, admin.email,
                             admin.password, seed=7 + round_,
-                            first_index=_simulated_accounts() + 1)
+                            first_index=_simulated_accounts() + 1, protocol=protocol)
         submitted = sum(o.status == "submitted" for o in outcomes)
         _sync()
         typer.echo(f"round {round_}: {submitted} submitted in "

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from backend.exports.content import SequenceContent, ViewContent
+from worker.formats.provenance import deciding_views, frame_actions, views_decided
 
 
 def object_fields(content: SequenceContent, index: int, frame: int) -> dict[str, Any]:
@@ -39,6 +40,22 @@ def hand_fields(content: SequenceContent, frame: int) -> dict[str, Any]:
                    hand_confidence=round(float(solve.hand_confidence[frame]), 3),
                    hand_flag=flag or None)
     return out
+
+
+def target_decisions(content: SequenceContent, target_key: str) -> dict[str, Any]:
+    """One target's provenance over the clip as the JSON export writes it: per frame
+    views_decided (a count), deciding_views (the serials whose own keyframes decided it) and
+    actions (the accepted work's human actions attributable to the frame, shared out by
+    worker.formats.provenance.frame_actions), with each view's states."""
+    states = content.provenance_states(target_key)
+    serials = [v.serial for v in content.views]
+    accepted = [(w.edit_count, w.keyframes) for w in content.work
+                if w.target_key == target_key and w.status == "approved"]
+    actions = frame_actions(accepted, content.num_frames)
+    return {"views_decided": views_decided(states),
+            "deciding_views": deciding_views(states, serials),
+            "actions": [round(float(a), 2) for a in actions],
+            "views": {str(s): list(v) for s, v in zip(serials, states, strict=True)}}
 
 
 def outside_joints(content: SequenceContent, view: ViewContent, frame: int) -> np.ndarray:

@@ -335,7 +335,11 @@ class JsonExporter(Exporter):
                 "betas": arrays["betas"].tolist(),
                 "frames": [frame_payload(arrays, f) for f in range(content.num_frames)],
                 "consensus": consensus(content),
-                "provenance": _provenance(content),
+                "provenance": {
+                    "hand": (trust.target_decisions(content, f"hand:{content.hands[0].index}")
+                             if content.hands else None),
+                    "objects": [trust.target_decisions(content, f"object:{o.index}")
+                                for o in content.objects]},
             }
         document = jsonfmt.sequence_document(
             {"id": content.sequence_id, "subject": content.subject, "name": content.name,

@@ -27,7 +27,9 @@ from backend.annotation.tokens import READONLY_SCOPE, TASK_SCOPE, frame_token
 from backend.captures.models import Sequence
 from backend.captures.service import object_label
 from backend.db import SessionDep
-from backend.progress.schemas import SequenceProgress
+from backend.errors import NotFound
+from backend.progress.frame_costs import frame_costs
+from backend.progress.schemas import SequenceFrameCost, SequenceProgress
 from backend.progress.service import sequence_progress, sequences_progress, task_states
 from backend.storage import get_storage
 from backend.validation import Id, Offset, QueryId
@@ -50,6 +52,26 @@ def get_progress(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> Seque
     """Every view x target task's state (open, published, submitted, in review, accepted)
     with its HIT and assignment counts, the totals, and the sequence's latest solve run."""
     return sequence_progress(session, sequence_id)
+
+
+@router.get("/frame-costs", response_model=list[SequenceFrameCost])
+def list_frame_costs(session: SessionDep, _: CurrentAdmin, limit: int = Query(50, ge=1, le=200),
+                     offset: Offset = 0) -> list[SequenceFrameCost]:
+    """Per sequence (in id order, ``limit`` from ``offset``) and target: human actions,
+    working seconds and money spent (the crowd ledger's) per frame its current solve labelled
+    and did not flag; totals per sequence."""
+    ids = list(session.scalars(select(Sequence.id).order_by(Sequence.id)
+                               .offset(offset).limit(limit)))
+    return frame_costs(session, ids)
+
+
+@router.get("/sequences/{sequence_id}/frame-costs", response_model=SequenceFrameCost)
+def get_frame_costs(sequence_id: Id, session: SessionDep, _: CurrentAdmin) -> SequenceFrameCost:
+    """One sequence's cost per labelled 3D frame, per target and in total."""
+    found = frame_costs(session, [sequence_id])
+    if not found:
+        raise NotFound(f"sequence {sequence_id} does not exist")
+    return found[0]
 
 
 # ----- tasks, each with its state derived from its work ----------------------------------

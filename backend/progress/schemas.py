@@ -56,3 +56,45 @@ class SequenceProgress(BaseModel):
     tasks: list[TaskProgress]
     # The sequence's latest solve run, if any.
     solve: SolveProgress | None
+
+
+class TargetFrameCost(BaseModel):
+    """What one target (a hand or an object) of a sequence cost in human work and money, and
+    that cost per labelled 3D frame (None while no frame is labelled).
+
+    actions: edit actions (clicks, drags, keys) the annotation page counted in every assignment
+    of the target's tasks; seconds: their active working time; money: the ledger's spend on
+    them (approved rewards and paid bonuses, each with the provider's fee), a decimal string in
+    ``currency`` ("mixed" where providers of different currencies were paid).
+    frames_labelled: frames the current solve labelled for the target and did not flag.
+    """
+
+    target_key: str
+    kind: str
+    views: int
+    assignments: int
+    frames: int
+    frames_labelled: int
+    actions: int
+    seconds: float
+    money: str
+    money_cents: int
+    currency: str
+    actions_per_frame: float | None
+    seconds_per_frame: float | None
+    money_per_frame: str | None
+
+
+class SequenceFrameCost(BaseModel):
+    """A sequence's cost per labelled 3D frame, per target and in total.
+
+    The total's frames_labelled counts the frames labelled for every target at once (a frame
+    whose hand and objects are all trusted); its actions, seconds and money add up the
+    targets'. solve_run_id: the solve result the labelled frames come from (None: none yet).
+    """
+
+    sequence_id: int
+    name: str
+    solve_run_id: int | None
+    targets: list[TargetFrameCost]
+    total: TargetFrameCost

@@ -31,6 +31,8 @@ export class AdminApi extends BearerClient {
   /** @param {number} jobId */
   retryJob(jobId) { return this.request("POST", `/jobs/${jobId}/retry`); }
   costs() { return this.request("GET", "/crowd/costs"); }
+  /** Cost per labelled 3D frame, per sequence and target (the first 200 sequences). */
+  frameCosts() { return this.request("GET", "/frame-costs?limit=200"); }
   /** @param {number} sequenceId */
   solveRuns(sequenceId) { return this.request("GET", `/sequences/${sequenceId}/solve-runs`); }
   /** @param {number} sequenceId */

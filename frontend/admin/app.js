@@ -14,6 +14,7 @@ import { ConfirmBox } from "./confirm.js";
 import { initCrowd, showCrowd } from "./crowd.js";
 import { orderReports, pageOf, parseRoute, pointNames, tallyReports } from "./core/format.js";
 import { rejectQuestion } from "./core/queue-core.js";
+import { renderFrameCosts } from "./frame-costs.js";
 import { initRig, showRigHealth } from "./rig.js";
 import { initSolve, showSolveRuns } from "./solve.js";
 import { initProject, sequencesProgress, showJobRows, showProgress } from "./project.js";
@@ -202,7 +203,8 @@ async function retry(jobId) {
 }
 
 async function showCosts() {
-  const costs = await api.costs();
+  const [costs, frameCosts] = await Promise.all([api.costs(), api.frameCosts()]);
+  renderFrameCosts($("frame-costs"), frameCosts);
   renderCosts({
     summary: $("cost-summary"), sequenceHead: $("cost-head-sequence"),
     sequences: $("cost-sequence-rows"), workerHead: $("cost-head-worker"),

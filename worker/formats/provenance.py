@@ -15,7 +15,8 @@ positions the track model interpolates or holds; see :mod:`worker.tracks`):
 The view's state is the state of most of its positioned points; a tie goes to the state higher
 in the list above. ``views_decided`` counts, per frame, the views whose state is keyframed or
 tracked: views whose own images decided the frame (a prefilled position came from the other
-views, an interpolated one from other frames).
+views, an interpolated one from other frames); ``deciding_views`` names them, and
+``frame_actions`` says how many of the accepted work's human actions each frame took.
 """
 
 from __future__ import annotations
@@ -74,3 +75,41 @@ def frame_provenance(states: Sequence[Sequence[str]], serials: Sequence[str],
              if view[frame] != "none"}
     decided = sum(state in DECIDING_STATES for state in views.values())
     return {"views_decided": int(decided), "views": views}
+
+
+def deciding_views(states: Sequence[Sequence[str]], serials: Sequence[str]) -> list[list[str]]:
+    """Per frame, the serials of the views (V lists of F state words) whose own keyframe
+    (keyframed or tracked) decided it."""
+    if not states:
+        return []
+    return [[str(serial) for serial, view in zip(serials, states, strict=True)
+             if view[f] in DECIDING_STATES] for f in range(len(states[0]))]
+
+
+def frame_actions(work: Iterable[tuple[int, Sequence[Iterable[Any]]]],
+                  num_frames: int) -> np.ndarray:
+    """(F,) float: the human actions attributable to each frame of a target.
+
+    work: per accepted assignment of the target (any view), its edit actions (clicks, drags,
+    keys the annotation page counted) and its points' keyframes. An assignment's actions are
+    shared equally among all its keyframes (every point, every source: a kept suggestion
+    took a keystroke as a placed point took a click); a frame gets the shares of the keyframes
+    at it. An assignment without a keyframe in the clip shares its actions equally among all
+    frames. Summed over the frames, the result is the accepted work's actions.
+    """
+    if num_frames < 0:
+        raise ValueError(f"num_frames must be >= 0, got {num_frames}")
+    out = np.zeros(num_frames, dtype=np.float64)
+    if num_frames == 0:
+        return out
+    for actions, points in work:
+        if actions < 0:
+            raise ValueError(f"an assignment's actions must be >= 0, got {actions}")
+        counts = np.zeros(num_frames, dtype=np.float64)
+        for keyframes in points:
+            for kf in as_keyframes(keyframes):
+                if 0 <= kf.frame < num_frames:
+                    counts[kf.frame] += 1
+        total = counts.sum()
+        out += actions * (counts / total if total else np.full(num_frames, 1.0 / num_frames))
+    return out

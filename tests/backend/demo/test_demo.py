@@ -80,9 +80,13 @@ def test_the_demo_reaches_a_finished_solve_and_prints_links_and_logins(tmp_path:
     assert status.returncode == 0, status.stderr
     head, *rest = status.stdout.splitlines()
     assert "solved: 6 tasks (6 accepted)" in head and f"run {summary[5]} done" in head, head
-    grid = rest[rest.index("") + 1:]
+    start = rest.index("") + 1
+    grid, costs = rest[start:rest.index("", start)], rest[rest.index("", start) + 2:]
     assert grid[0].split() == ["view", "hand:0", "object:0"]
     assert len(grid) == 4 and all(r.split()[1:] == ["accepted", "accepted"] for r in grid[1:])
+    # The cost per labelled 3D frame: the solved frames of each target, paid from the ledger.
+    assert [r.split()[0] for r in costs[1:]] == ["hand:0", "object:0", "total"]
+    assert all(int(r.split()[1]) > 0 and float(r.split()[4]) > 0 for r in costs[1:]), costs
 
     again = run_demo(var_dir)
     # The same emails and passwords (the port differs from run to run).

@@ -402,6 +402,7 @@ def test_flagged_values_stay_beside_their_flags_in_every_format(
             int(scene), 3, ycb_ids[0])]
     assert any(t["obj_id"] == ycb_ids[0] and t["im_id"] != 3 for t in targets)
 
+    actions = _give_edit_counts(approved)
     state = _export(client, admin_headers, {"format": "json", "sequences": [approved]})
     archive = _download(client, admin_headers, state)
     document = json.loads(archive.read(archive.namelist()[0]))
@@ -409,7 +410,38 @@ def test_flagged_values_stay_beside_their_flags_in_every_format(
     frames = document["solve"]["frames"]
     assert [f["hand_flag"] for f in frames].count(HAND_REASON) == 1 and frames[2]["hand_flag"]
     assert frames[3]["objects"][0]["flag"] == OBJECT_REASON and frames[3]["objects"][0]["pose"]
-    assert len(document["solve"]["provenance"]["hand"]["views_decided"]) == len(frames)
+    _check_decisions(document["solve"]["provenance"], len(frames), actions)
+
+
+def _give_edit_counts(sequence_id: int) -> dict[str, int]:
+    """Each approved assignment's edit actions (as the page counts them): 7 per keyframe in the
+    first view, 3 elsewhere; the total per target key."""
+    out: dict[str, int] = {}
+    with session_scope() as s:
+        for a in s.scalars(select(Assignment).join(Task, Task.id == Assignment.task_id)
+                           .where(Task.sequence_id == sequence_id,
+                                  Assignment.status == "approved")):
+            keyframes = sum(len(t.keyframes) for t in a.tracks)
+            a.edit_count = keyframes * (7 if a.task.camera.view_index == 0 else 3)
+            out[a.task.target_key] = out.get(a.task.target_key, 0) + a.edit_count
+    return out
+
+
+def _check_decisions(provenance: dict, frames: int, actions: dict[str, int]) -> None:
+    """Per frame: the views that decided it (those whose state is keyframed or tracked) and the
+    accepted work's actions shared out over its keyframes, adding up to that work's actions."""
+    targets = [("hand:0", provenance["hand"])] + [
+        (f"object:{i}", p) for i, p in enumerate(provenance["objects"])]
+    for key, target in targets:
+        assert len(target["actions"]) == len(target["deciding_views"]) == frames
+        for f in range(frames):
+            decided = sorted(s for s, states in target["views"].items()
+                             if states[f] in ("keyframed", "tracked"))
+            assert sorted(target["deciding_views"][f]) == decided
+            assert len(decided) == target["views_decided"][f]
+        assert sum(target["actions"]) == pytest.approx(actions[key], abs=0.01 * frames)
+        # Every labelled view keyed its first frame: that frame took some of the actions.
+        assert target["actions"][0] > 0
 
 
 def test_hand_trust_reads_results_without_hand_flags_as_trusted() -> None:

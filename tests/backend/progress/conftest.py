@@ -3,7 +3,8 @@ used here by name), simulated workers submitting over HTTP."""
 
 from __future__ import annotations
 
-from tests.backend.crowd.conftest import crowd_url, market_env
+from tests.backend.crowd.conftest import api, crowd_url, market_env, mturk
 from tests.backend.market.conftest import market_database_url, market_url, migrated_sqlite
 
-__all__ = ["crowd_url", "market_database_url", "market_env", "market_url", "migrated_sqlite"]
+__all__ = ["api", "crowd_url", "market_database_url", "market_env", "market_url",
+           "migrated_sqlite", "mturk"]

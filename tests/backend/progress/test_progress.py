@@ -98,7 +98,9 @@ def test_task_states_follow_the_work_in_the_api_and_the_cli(
     assert lines[0].startswith(f"{sequence_id}  ") and "in progress: 12 tasks" in lines[0]
     assert f"{body['counts']['accepted']} accepted" in lines[0] or not body["counts"]["accepted"]
     assert "solve: none yet" in lines[0]
-    grid = lines[lines.index("") + 1:]
+    start = lines.index("") + 1
+    grid = lines[start:lines.index("", start)]  # the cost per labelled 3D frame follows
+    assert lines[lines.index("", start) + 1].startswith("cost per labelled 3D frame (no solve")
     assert grid[0].split() == ["view", "hand:0", "object:0"]
     by_cell = {(t["serial"], t["target_key"]): t["state"] for t in body["tasks"]}
     for row in grid[1:]:

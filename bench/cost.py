@@ -1,0 +1,262 @@
+"""Benchmark: the cost of a labelled 3D frame, DexYCB's labelling protocol against ours, on the
+same capture through the whole product path.
+
+A synthetic capture no test uses (``--seed`` 7717, ``--views`` x ``--frames``, one object) is
+labelled once per protocol, each in a fresh embedded instance of its own (a child process):
+import, tasks, HITs on the built-in marketplace, a simulated crowd (backend.crowd.simulate,
+``--profile`` careful by default) working through the portal and the annotation API, the
+marketplace's confirmation, QC (approve, reject and re-open, or leave for the admin, who
+approves the best as the demo's admin does), the solve of the accepted labels, payment. Then
+the product's own figures: backend.progress.frame_costs (actions, working seconds, money per
+labelled 3D frame, from the ledger), and against the capture's truth the hand's MPJPE (mm,
+frames the solve labelled and trusts) and each object's ADD (mm, mean vertex distance over the
+frames it trusts).
+
+Protocols (backend.crowd.simulate.PROTOCOLS):
+    dexycb  every joint and landmark clicked on every frame in every view ("every-frame");
+    ours    the product's keyframe worker: a keyframe every 4 frames, where the path bends and
+            where visibility changes, interpolated in between ("keyframes").
+
+Effort is what the simulated worker earns on the page's counters: an action per keyframe (a
+click, a key for an occluded one), working time modelled as a minute of reading plus 3 s per
+action (backend.crowd.simulate; no person is timed). Money is real ledger money for rewards
+priced per task at ``--hourly`` dollars an hour of that protocol's expected working time (the
+mean over the tasks of a kind, from the same simulated workers on the truth), plus the
+marketplace's fee; rejected work is done but not paid.
+
+Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
+"profile", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
+"add_mm", "rewards_usd", "seconds"}}, "ratios": {ours over dexycb per labelled hand frame:
+"actions", "seconds", "money"}}.
+
+Usage: python bench/cost.py [--seed 7717] [--views 8] [--frames 72] [--profile careful]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from _server import free_port, isolated_workdir
+
+ROOT = Path(__file__).resolve().parents[1]
+PROTOCOLS = {"dexycb": "every-frame", "ours": "keyframes"}
+
+
+def _truth(capture: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 21, 3) true hand joints and (O, F, 3, 4) object-to-world poses, world metres."""
+    from backend.captures.layout import read_sequence
+    from backend.captures.truth import CaptureTruth
+    from worker.formats import dexycb
+
+    seq_dir = next(capture.glob(dexycb.META_GLOB)).parent
+    plan = read_sequence(seq_dir)
+    master = plan.cameras[0]
+    joints = []
+    for f in range(plan.num_frames):
+        with np.load(seq_dir / master.serial / dexycb.labels_file(f)) as labels:
+            joints.append(labels[dexycb.JOINT_3D][0].astype(np.float64))
+    to_world = np.asarray(master.extrinsics, dtype=np.float64)
+    world = np.stack(joints) @ to_world[:, :3].T + to_world[:, 3]
+    return world, CaptureTruth(capture).object_poses()
+
+
+def _rewards(capture: Path, tasks: list[dict], protocol: str, hourly: float) -> dict[str, int]:
+    """Reward cents per task kind: ``hourly`` dollars an hour of the protocol's mean modelled
+    working time over the kind's tasks (careful workers on the truth)."""
+    from backend.captures.truth import CaptureTruth
+    from backend.crowd.simulate import PROTOCOLS as STEPS
+    from backend.crowd.simulate import working_seconds
+    from worker.synth.annotators import annotate, keyframe_actions
+
+    truth, rng = CaptureTruth(capture), np.random.default_rng(0)
+    key_step, follow = STEPS[protocol]
+    seconds: dict[str, list[float]] = {}
+    for task in tasks:
+        xy, visible = truth.points(task, rng)
+        work = annotate(xy, visible, (task["width"], task["height"]), "careful", rng, key_step,
+                        follow)
+        effort = keyframe_actions(work.tracks)
+        seconds.setdefault(task["kind"], []).append(
+            working_seconds(effort["clicks"] + effort["drags"] + effort["keys"]))
+    return {kind: max(1, round(float(np.mean(s)) / 3600.0 * hourly * 100))
+            for kind, s in seconds.items()}
+
+
+def _setup(capture: Path) -> tuple[int, list[dict]]:
+    """Migrate, import, create the tasks; (sequence id, tasks as the API reads them)."""
+    from backend.annotation.service import create_tasks
+    from backend.captures.flows import import_path
+    from backend.config import get_settings
+    from backend.db import session_scope
+    from backend.migrate import upgrade
+    from backend.storage import get_storage
+
+    upgrade(get_settings().database_url)
+    sequence_id = import_path(capture)[0].sequence_id
+    with session_scope() as session:
+        tasks = [{"id": t.id, "kind": t.kind, "serial": t.camera.serial,
+                  "target_key": t.target_key, "object_id": t.object_id,
+                  "width": t.camera.width, "height": t.camera.height,
+                  "num_frames": t.sequence.num_frames}
+                 for t in create_tasks(session, get_storage(), sequence_id)]
+    return sequence_id, tasks
+
+
+def _publish(sequence_id: int, rewards: dict[str, int]) -> None:
+    from backend.crowd import flows, pricing
+    from backend.crowd.providers import get_provider
+    from backend.crowd.schemas import PublishOptions
+
+    marketplace = get_provider("mturk")
+    for kind in ("hand", "object"):
+        options = PublishOptions(max_assignments=1, provider="mturk", min_approval_rate=None,
+                                 reward=pricing.cents_to_dollars(rewards[kind]))
+        flows.publish_each(marketplace, options, sequence_id, kind)
+
+
+def _accuracy(sequence_id: int, capture: Path) -> tuple[float | None, list[float]]:
+    """Hand MPJPE (mm) over the frames the solve labelled and trusts; object ADD (mm)."""
+    from _qc_pipeline import object_add_mm
+
+    from backend.db import session_scope
+    from backend.progress.frame_costs import labelled_masks
+    from backend.solve.results import decode_result
+    from backend.solve.service import current_run
+    from backend.storage import get_storage
+
+    joints, poses = _truth(capture)
+    with session_scope() as session:
+        run = current_run(session, sequence_id)
+        key = None if run is None else run.result_key
+    if key is None:
+        return None, []
+    arrays = decode_result(get_storage().get_bytes(key))
+    trusted = labelled_masks(arrays, ["hand:0"])["hand:0"]
+    err = np.linalg.norm(arrays["hand_joints"][trusted] - joints[trusted], axis=-1) * 1000.0
+    add, _ = object_add_mm(sequence_id, poses)
+    return (round(float(err.mean()), 3) if err.size else None), add
+
+
+def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]:
+    """One protocol through the product in a fresh instance (this process); its figures."""
+    port = free_port()
+    isolated_workdir(f"cost-{name}", DEXLABEL_PUBLIC_URL=f"http://127.0.0.1:{port}",
+                     DEXLABEL_INPROCESS_WORKER="true")
+    from backend import demo
+    from backend.db import session_scope
+    from backend.progress.frame_costs import frame_costs
+
+    started = time.perf_counter()
+    protocol = PROTOCOLS[name]
+    sequence_id, tasks = _setup(capture)
+    rewards = _rewards(capture, tasks, protocol, hourly)
+    admin = demo.demo_logins()["admin"]
+    server = demo.DemoServer("127.0.0.1", port)
+    server.start()
+    try:
+        _publish(sequence_id, rewards)
+        demo.demo_crowd(sequence_id, capture, admin, None, server.has_consumer, profile,
+                        protocol)
+        demo.wait_for_jobs()
+        demo.wait_for_solve(sequence_id)
+        demo.wait_for_jobs()
+    finally:
+        server.stop()
+    with session_scope() as session:
+        found = frame_costs(session, [sequence_id])[0]
+    mpjpe, add = _accuracy(sequence_id, capture)
+    lines = {t.target_key: t.model_dump() for t in found.targets}
+    return {"hand": lines.get("hand:0"),
+            "objects": [v for k, v in lines.items() if k.startswith("object:")],
+            "total": found.total.model_dump(), "mpjpe_mm": mpjpe, "add_mm": add,
+            "rewards_usd": {k: v / 100 for k, v in rewards.items()},
+            "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
+            "seconds": round(time.perf_counter() - started, 1)}
+
+
+def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]:
+    """``one`` in a process of its own (each protocol gets a fresh instance and settings)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DEXLABEL_")}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
+    done = subprocess.run(
+        [sys.executable, __file__, "--one", name, "--capture", str(capture), "--profile",
+         args.profile, "--hourly", str(args.hourly)],
+        cwd=ROOT, env=env, capture_output=True, text=True)
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+    if done.returncode != 0 or not lines:
+        sys.exit(f"{name}: exit {done.returncode}\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}")
+    result: dict[str, Any] = json.loads(lines[-1])
+    return result
+
+
+def _ratio(ours: float | None, theirs: float | None) -> float | None:
+    return round(ours / theirs, 4) if ours is not None and theirs else None
+
+
+def _money(line: dict[str, Any]) -> float | None:
+    value = line.get("money_per_frame")
+    return None if value is None else float(value)
+
+
+EPILOG = ("Smallest (smoke): --views 4 --frames 12, about 3-4 minutes here (2 shared cores);"
+          " 8 views x 72 frames: the every-frame crowd and two solves, tens of minutes.")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=EPILOG)
+    parser.add_argument("--seed", type=int, default=7717, help="the capture's seed")
+    parser.add_argument("--views", type=int, default=8)
+    parser.add_argument("--frames", type=int, default=72)
+    parser.add_argument("--capture", type=Path, help="a synthetic capture (default: generate)")
+    parser.add_argument("--profile", default="careful",
+                        help="the simulated crowd's profile (careful, mixed, ...)")
+    parser.add_argument("--hourly", type=float, default=12.0,
+                        help="dollars an hour of modelled working time the rewards pay")
+    parser.add_argument("--protocols", default="dexycb,ours",
+                        help="comma-separated, of dexycb and ours (ratios need both)")
+    parser.add_argument("--one", choices=sorted(PROTOCOLS), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    chosen = [p.strip() for p in args.protocols.split(",") if p.strip()]
+    if not chosen or set(chosen) - set(PROTOCOLS):
+        parser.error(f"--protocols {args.protocols!r}: name some of {', '.join(PROTOCOLS)}")
+    if args.one:
+        print(json.dumps(one(args.capture.resolve(), args.one, args.profile, args.hourly)))
+        return
+    capture = args.capture
+    if capture is None:
+        from worker.synth import generate_capture
+
+        capture = isolated_workdir("cost") / f"capture-s{args.seed}"
+        generate_capture(capture, seed=args.seed, frames=args.frames, views=args.views,
+                         objects=1, workers=1)
+    result: dict[str, Any] = {"capture": str(capture), "seed": args.seed, "views": args.views,
+                              "frames": args.frames, "profile": args.profile,
+                              "hourly_usd": args.hourly, "protocols": {}}
+    for name in chosen:
+        result["protocols"][name] = got = _child(capture.resolve(), name, args)
+        hand = got["hand"]
+        print(f"{name}: hand {hand['frames_labelled']} 3D frames, {hand['actions_per_frame']}"
+              f" actions, {hand['seconds_per_frame']} s, ${hand['money_per_frame']} per frame;"
+              f" MPJPE {got['mpjpe_mm']} mm, ADD {got['add_mm']} mm", flush=True)
+    if set(result["protocols"]) != set(PROTOCOLS):
+        print(json.dumps(result))
+        return
+    theirs, ours = result["protocols"]["dexycb"]["hand"], result["protocols"]["ours"]["hand"]
+    result["ratios"] = {
+        "actions": _ratio(ours["actions_per_frame"], theirs["actions_per_frame"]),
+        "seconds": _ratio(ours["seconds_per_frame"], theirs["seconds_per_frame"]),
+        "money": _ratio(_money(ours), _money(theirs))}
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
