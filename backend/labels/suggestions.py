@@ -3,12 +3,14 @@ places each point in this view, and the epipolar lines of those labels.
 
 Once a target (a hand or an object of a sequence) has accepted work (backend.labels)
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
-from them and projected into this view (worker.assist.prefill), with a visibility suggested
-from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
-calibration changes. The assignment's check cells (worker.assist.checks) are planted into the
-suggested positions, as into every suggestion the page shows; the epipolar data is left as it
-is. Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
-"prefilled".
+from them and projected into this view (worker.assist.prefill). A hand with accepted work in
+only one or two other views gets the hand model fitted to those views' labels and depth maps
+instead (worker.solver.suggest), its joints projected into this view. Either way the
+visibility is suggested from this view's depth maps, and the result is kept (CACHE_SIZE
+views) until the accepted work or the calibration changes. The assignment's check cells
+(worker.assist.checks) are planted into the suggested positions, as into every suggestion the
+page shows; the epipolar data is left as it is. Nothing is written: a suggestion the worker
+accepts is saved as a keyframe with source "prefilled".
 
 Positions are image px (x right, y down) of the clip's frames first_frame..last_frame.
 """
@@ -19,7 +21,7 @@ import json
 import threading
 from collections import OrderedDict
 from collections.abc import Hashable
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -30,7 +32,9 @@ from sqlalchemy.orm import Session
 from backend.annotation import service
 from backend.annotation.models import Assignment, Task
 from backend.annotation.tokens import TASK_SCOPE
-from backend.captures.models import Camera, Frame
+from backend.captures.assets import hand_model_for
+from backend.captures.calibration import hand_betas, version_in_use
+from backend.captures.models import Camera, Frame, Hand
 from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
@@ -42,6 +46,7 @@ from worker.assist.prefill import (
     DepthReader,
     Prefill,
     ViewWork,
+    distinct_views,
     epipolar_guide,
     prefill,
     view_work,
@@ -84,15 +89,21 @@ class EpipolarView(BaseModel):
     xy: list[list[list[float] | None]]
 
 
+Method = Literal["triangulated", "fitted"]
+
+
 class SuggestionsRead(BaseModel):
     """Pre-fill suggestions for the assignment's view. ``available`` is false (with the
     ``reason``, and empty lists) until the target has accepted work in ``min_views`` other
-    views; ``views`` are the serials of the views with accepted work."""
+    views; ``views`` are the serials of the views with accepted work. ``method``: how the
+    positions were found: "triangulated" from 3 or more views, or "fitted" (a hand's model
+    fitted to the labels and depth of 1 or 2 views; less sure, a person checks every one)."""
 
     available: bool
     reason: str | None
     views: list[str]
     min_views: int
+    method: Method | None = None
     first_frame: int
     last_frame: int
     points: list[PointSuggestions]
@@ -126,11 +137,19 @@ def _target_name(task: Task) -> str:
     return "hand" if task.kind == "hand" else "object"
 
 
+def min_views(task: Task) -> int:
+    """Other views with accepted work before the task's view is offered suggestions: one for
+    a hand (its model is fitted to it), MIN_ACCEPTED_VIEWS to triangulate an object's."""
+    return 1 if task.kind == "hand" else MIN_ACCEPTED_VIEWS
+
+
 def _unavailable_reason(task: Task, serials: list[str]) -> str:
     have = ("there is none" if not serials else
             f"there is 1 (view {serials[0]})" if len(serials) == 1 else
             f"there are {len(serials)} (views {', '.join(serials)})")
-    return (f"suggestions need accepted work in {MIN_ACCEPTED_VIEWS} other views of this "
+    need = min_views(task)
+    views = "view" if need == 1 else "views"
+    return (f"suggestions need accepted work in {need} other {views} of this "
             f"{_target_name(task)}; {have}")
 
 
@@ -206,14 +225,41 @@ def _computed(session: Session, storage: Storage, task: Task, cameras: list[Came
     view_of = {c.id: i for i, c in enumerate(cameras)}
     work = _dense_work(accepted, others, view_of, task, first, last)
     models, target = [camera_model(c) for c in cameras], view_of[task.camera_id]
-    result = (prefill(models, work, target,
-                      _depth_reader(session, storage, task.camera, first, last)),
-              epipolar_guide(models, work, target))
+    reader = _depth_reader(session, storage, task.camera, first, last)
+    if len(distinct_views(work)) >= MIN_ACCEPTED_VIEWS:
+        found = prefill(models, work, target, reader)
+    else:
+        found = _fitted(session, storage, task, cameras, work, reader, first, last)
+    result = (found, epipolar_guide(models, work, target))
     with _CACHE_LOCK:
         _CACHE[_cache_key(task, first, last, accepted, cameras)] = result
         while len(_CACHE) > CACHE_SIZE:
             _CACHE.popitem(last=False)
     return result
+
+
+def _fitted(session: Session, storage: Storage, task: Task, cameras: list[Camera],
+            work: list[ViewWork], reader: DepthReader | None, first: int, last: int
+            ) -> Prefill:
+    """The hand model fitted to the work of one or two views (their labels and depth maps),
+    projected into the task's view (worker.solver.suggest). PyTorch loads here, on the first
+    such request, not with the API."""
+    from worker.solver.suggest import fit_hand_joints, fitted_prefill
+
+    hand = session.get_one(Hand, task.hand_id)
+    version = version_in_use(session, task.sequence_id)
+    betas = hand_betas(version, hand.index, hand.betas)
+    models = [camera_model(c) for c in cameras]
+    depth = {}
+    for view in distinct_views(work):
+        read = _depth_reader(session, storage, cameras[view], first, last)
+        if read is not None:
+            depth[view] = np.stack([read(f) for f in range(last - first + 1)])
+    joints = fit_hand_joints(models, work, depth, hand.side,
+                             np.zeros(10) if betas is None else np.asarray(betas, float),
+                             hand_model_for(hand.side))
+    return fitted_prefill(models, work, [c.id for c in cameras].index(task.camera_id),
+                          joints, reader)
 
 
 def clear_cache() -> None:
@@ -237,9 +283,9 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     accepted = list(session.scalars(work_query(others, with_tracks=False)))
     views = sorted({view_of[others[a.task_id].camera_id] for a in accepted})
     serials = [camera_rows[v].serial for v in views]
-    if len(views) < MIN_ACCEPTED_VIEWS:
+    if len(views) < min_views(task):
         return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
-                               views=serials, min_views=MIN_ACCEPTED_VIEWS, first_frame=first,
+                               views=serials, min_views=min_views(task), first_frame=first,
                                last_frame=last, points=[], epipolar=[])
     found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
                              last)
@@ -256,7 +302,8 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     epipolar = [EpipolarView(
         serial=camera_rows[g.view].serial, F=g.fundamental.tolist(),
         xy=[_xy_lists(g.xy[:, p]) for p in range(num_points)]) for g in guide]
+    method: Method = "triangulated" if len(views) >= MIN_ACCEPTED_VIEWS else "fitted"
     return SuggestionsRead(available=True, reason=None, views=serials,
-                           min_views=MIN_ACCEPTED_VIEWS,
+                           min_views=min_views(task), method=method,
                            first_frame=first, last_frame=last, points=points,
                            epipolar=epipolar)

@@ -1,0 +1,128 @@
+"""Suggestion error by number of accepted views, for bench/prefill.py.
+
+Each view of a synthetic capture is labelled by one simulated careful worker through the
+crowd's keyframe path (bench/_crowd_labels.py, image-checked), and that is the view's accepted
+work. For every target view and each count k of accepted views (1, 2, and 3 or more: all
+other views, at least 3), the k views after the target (in serial order, wrapping) suggest
+the target's points: 1-2 views by the hand model fitted to their labels and depth
+(worker.solver.suggest), 3 or more by triangulation (worker.assist.prefill), as the product
+does. Error: px from a suggested position to the true joint where the joint is truly visible
+and the suggestion says visible (or cannot tell); occlusion: share of the truly occluded joints
+(inside the image) proposed occluded.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from _crowd_labels import crowd_hand, write_grey
+
+COUNTS = ("1", "2", "3+")
+
+
+def _capture(capture: Path) -> dict[str, Any]:
+    from backend.captures.layout import read_sequence
+    from backend.captures.truth import CaptureTruth
+    from worker.formats import dexycb
+    from worker.geometry.cameras import CameraModel, intrinsics_matrix
+    from worker.synth.annotators import hand_visibility
+
+    seq_dir = next(capture.glob(dexycb.META_GLOB)).parent
+    plan = read_sequence(seq_dir)
+    frames, truth = plan.num_frames, CaptureTruth(capture)
+    cameras, depth, joints, visible = [], [], [], []
+    for cam in plan.cameras:
+        cameras.append(CameraModel(intrinsics_matrix(cam.fx, cam.fy, cam.ppx, cam.ppy),
+                                   np.asarray(cam.distortion), np.asarray(cam.extrinsics),
+                                   cam.width, cam.height))
+        depth.append(np.stack([cv2.imread(str(seq_dir / cam.serial / dexycb.depth_file(f)),
+                                          cv2.IMREAD_UNCHANGED) for f in range(frames)]))
+        joint_2d, seg = truth.view(cam.serial, frames)
+        joints.append(joint_2d)
+        visible.append(hand_visibility(joint_2d, seg))
+    hand = plan.hands[0]
+    return {"cameras": cameras, "depth": depth, "joints": np.stack(joints),
+            "visible": np.stack(visible), "side": hand.side,
+            "betas": np.asarray(hand.betas or np.zeros(10), float),
+            "serials": [c.serial for c in plan.cameras], "frames": frames}
+
+
+def _crowd_work(capture: Path, scene: dict[str, Any], cache: Path, seed: int) -> list[Any]:
+    """One careful crowd worker's image-checked labels per view, as ViewWork."""
+    from worker.assist.prefill import ViewWork
+
+    write_grey(capture, cache, scene["serials"])
+    grey = np.load(cache / "grey.npy")
+    cam = scene["cameras"][0]
+    xy, seen, _ = crowd_hand(scene["joints"], scene["visible"], grey, "crowd",
+                             (cam.width, cam.height), np.random.default_rng(seed))
+    return [ViewWork(view=v, xy=xy[v], visible=seen[v], decided=np.isfinite(xy[v]).all(-1))
+            for v in range(len(xy))]
+
+
+def _suggest(scene: dict[str, Any], work: list[Any], target: int, accepted: list[int]
+             ) -> tuple[Any, float]:
+    """The target's suggestions from the accepted views' work, and the seconds they took."""
+    from worker.assist.prefill import prefill
+    from worker.solver.suggest import MAX_FIT_VIEWS, fit_hand_joints, fitted_prefill
+
+    mine = [work[v] for v in accepted]
+    tick = time.perf_counter()
+    if len(accepted) > MAX_FIT_VIEWS:
+        found = prefill(scene["cameras"], mine, target, scene["depth"][target])
+    else:
+        joints = fit_hand_joints(scene["cameras"], mine,
+                                 {v: scene["depth"][v] for v in accepted},
+                                 scene["side"], scene["betas"])
+        found = fitted_prefill(scene["cameras"], mine, target, joints, scene["depth"][target])
+    return found, time.perf_counter() - tick
+
+
+def _errors(scene: dict[str, Any], found: Any, target: int) -> tuple[np.ndarray, np.ndarray]:
+    """(px errors of shown suggestions at visible joints, caught flags of occluded joints)."""
+    truth, visible = scene["joints"][target], scene["visible"][target]
+    cam = scene["cameras"][target]
+    inside = ((truth[..., 0] >= 0) & (truth[..., 0] < cam.width) & (truth[..., 1] >= 0)
+              & (truth[..., 1] < cam.height))
+    has = np.isfinite(found.xy).all(axis=-1)
+    shown = has & ~(found.known & ~found.visible)
+    err = np.linalg.norm(found.xy - truth, axis=-1)[shown & visible]
+    caught = (found.known & ~found.visible)[~visible & inside]
+    return err, caught
+
+
+def _stat(values: np.ndarray) -> dict[str, float | int | None]:
+    if not values.size:
+        return {"n": 0, "median_px": None, "p90_px": None}
+    return {"n": int(values.size), "median_px": round(float(np.median(values)), 2),
+            "p90_px": round(float(np.percentile(values, 90)), 2)}
+
+
+def by_accepted_views(capture: Path, cache: Path, seed: int, targets: int | None = None
+                      ) -> dict[str, Any]:
+    """Hand suggestion error per count of accepted views (1, 2, 3+); ``targets``: how many
+    target views to evaluate (default all)."""
+    scene = _capture(capture)
+    work = _crowd_work(capture, scene, cache, seed)
+    views = len(scene["cameras"])
+    out: dict[str, Any] = {}
+    for name in COUNTS:
+        count = views - 1 if name == "3+" else int(name)
+        errors, caught, seconds = [], [], []
+        for target in range(views if targets is None else min(targets, views)):
+            accepted = [(target + 1 + i) % views for i in range(count)]
+            found, took = _suggest(scene, work, target, accepted)
+            err, hit = _errors(scene, found, target)
+            errors.append(err)
+            caught.append(hit)
+            seconds.append(took)
+        cat_caught = np.concatenate(caught)
+        out[name] = {**_stat(np.concatenate(errors)),
+                     "occluded_caught": round(float(cat_caught.mean()), 3)
+                     if cat_caught.size else None, "occluded": int(cat_caught.size),
+                     "seconds_per_view": round(float(np.median(seconds)), 2)}
+    return {"hand": out, "frames": scene["frames"], "views": views}
