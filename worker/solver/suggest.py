@@ -111,8 +111,14 @@ def fit_hand_joints(cameras: list[CameraModel], work: list[ViewWork],
     """(F, 21, 3) world metres: the hand model fitted to the work's views alone (their decided
     visible labels and their depth maps, view -> (F, H, W) uint16 mm); NaN in frames with
     fewer than settings.min_joints labelled joints or no start."""
-    views = distinct_views(work)
     frames = np.shape(work[0].xy)[0]
+    # Only views with decided labels: one with only pre-filled echoes adds neither its labels
+    # nor its depth.
+    work = [w for w in work if w.decided.any()]
+    out = np.full((frames, NUM_JOINTS, 3), np.nan)
+    if not work:
+        return out
+    views = distinct_views(work)
     local = {v: i for i, v in enumerate(views)}
     keypoints = np.full((len(views), frames, NUM_JOINTS, 2), np.nan)
     visible = np.zeros((len(views), frames, NUM_JOINTS), bool)
@@ -130,7 +136,6 @@ def fit_hand_joints(cameras: list[CameraModel], work: list[ViewWork],
     lifted, ok = lift_labels(cameras, work, depth)
     started = ok[state.hand_frames].sum(axis=1) >= 3
     state.hand_frames = state.hand_frames[started]
-    out = np.full((frames, NUM_JOINTS, 3), np.nan)
     if not len(state.hand_frames):
         return out
     state.hand_pose[state.hand_frames] = hand_from_joints(
