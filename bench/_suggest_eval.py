@@ -6,8 +6,12 @@ work. For every target view and each count k of accepted views (1, 2, and 3 or m
 other views, at least 3), the k views after the target (in serial order, wrapping) suggest
 the target's points: 1-2 views by the hand model fitted to their labels and depth
 (worker.solver.suggest), 3 or more by triangulation (worker.assist.prefill), as the product
-does. Error: px from a suggested position to the true joint where the joint is truly visible
-and the suggestion says visible (or cannot tell); occlusion: share of the truly occluded joints
+does. Objects (1 and 2 views): each view's careful worker picks its own 2 landmarks; the
+first accepted view's are carried into the target by the object's poses fitted to the
+accepted views' landmarks and depth.
+
+Hand error: px from a suggested position to the true joint where the joint is truly visible and
+the suggestion says visible (or cannot tell); occlusion: share of the truly occluded joints
 (inside the image) proposed occluded.
 """
 
@@ -102,6 +106,68 @@ def _stat(values: np.ndarray) -> dict[str, float | int | None]:
             "p90_px": round(float(np.percentile(values, 90)), 2)}
 
 
+def _object_work(capture: Path, scene: dict[str, Any], index: int, seed: int) -> list[Any]:
+    """One careful worker's 2 landmarks of object ``index`` per view (each view its own), as
+    ViewWork."""
+    from backend.captures.truth import CaptureTruth
+    from worker.assist.prefill import view_work
+    from worker.synth.annotators import annotate
+
+    truth, rng, frames = CaptureTruth(capture), np.random.default_rng(seed), scene["frames"]
+    out = []
+    for v, serial in enumerate(scene["serials"]):
+        xy, visible = truth.object_points(serial, index, frames, rng)
+        cam = scene["cameras"][v]
+        tracks = annotate(xy, visible, (cam.width, cam.height), "careful", rng).tracks
+        out.append(view_work(v, enumerate(tracks), frames, 2))
+    return out
+
+
+def _object_errors(capture: Path, scene: dict[str, Any], seed: int, targets: int
+                   ) -> dict[str, Any]:
+    """Object landmark suggestions from 1 and 2 accepted views: px from each suggested
+    position to where the same surface point (the first accepted worker's landmark as the
+    solver maps it) lies under the object's true pose, where it is suggested visible."""
+    from backend.captures.layout import read_sequence
+    from backend.captures.truth import CaptureTruth
+    from worker.formats import dexycb
+    from worker.geometry.mesh_io import read_mesh
+    from worker.solver.suggest import fit_object_points, fitted_prefill
+
+    plan = read_sequence(next(capture.glob(dexycb.META_GLOB)).parent)
+    true_poses = CaptureTruth(capture).object_poses()  # (O, F, 3, 4)
+    views, out = len(scene["cameras"]), {}
+    parts: dict[str, tuple[list[np.ndarray], list[float]]] = {"1": ([], []), "2": ([], [])}
+    for index, obj in enumerate(plan.objects):
+        mesh = read_mesh(obj.mesh_path)
+        work = _object_work(capture, scene, index, seed + index)
+        pose = None if obj.initial_pose is None else np.asarray(obj.initial_pose, float)
+        for name, (errors, seconds) in parts.items():
+            for target in range(min(targets, views)):
+                accepted = [(target + 1 + i) % views for i in range(int(name))]
+                mine = [work[v] for v in accepted]
+                tick = time.perf_counter()
+                try:
+                    world, local = fit_object_points(
+                        scene["cameras"], mine, {v: scene["depth"][v] for v in accepted},
+                        np.asarray(mesh.vertices, float), np.asarray(mesh.faces), pose)
+                except ValueError:
+                    continue
+                seconds.append(time.perf_counter() - tick)
+                found = fitted_prefill(scene["cameras"], mine, target, world,
+                                       scene["depth"][target])
+                truth = (np.einsum("fij,pj->fpi", true_poses[index][:, :, :3], local)
+                         + true_poses[index][:, None, :, 3])
+                xy = scene["cameras"][target].project(truth)
+                shown = np.isfinite(found.xy).all(axis=-1) & found.known & found.visible
+                errors.append(np.linalg.norm(found.xy - xy, axis=-1)[shown])
+    for name, (errors, seconds) in parts.items():
+        out[name] = {**_stat(np.concatenate(errors) if errors else np.zeros(0)),
+                     "seconds_per_view": round(float(np.median(seconds)), 2)
+                     if seconds else None}
+    return out
+
+
 def by_accepted_views(capture: Path, cache: Path, seed: int, targets: int | None = None
                       ) -> dict[str, Any]:
     """Hand suggestion error per count of accepted views (1, 2, 3+); ``targets``: how many
@@ -125,4 +191,5 @@ def by_accepted_views(capture: Path, cache: Path, seed: int, targets: int | None
                      "occluded_caught": round(float(cat_caught.mean()), 3)
                      if cat_caught.size else None, "occluded": int(cat_caught.size),
                      "seconds_per_view": round(float(np.median(seconds)), 2)}
-    return {"hand": out, "frames": scene["frames"], "views": views}
+    objects = _object_errors(capture, scene, seed, views if targets is None else targets)
+    return {"hand": out, "objects": objects, "frames": scene["frames"], "views": views}

@@ -5,7 +5,9 @@ Once a target (a hand or an object of a sequence) has accepted work (backend.lab
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
 from them and projected into this view (worker.assist.prefill). A hand with accepted work in
 only one or two other views gets the hand model fitted to those views' labels and depth maps
-instead (worker.solver.suggest), its joints projected into this view. Either way the
+instead (worker.solver.suggest), its joints projected into this view; an object, its mesh's
+poses fitted to their landmarks and depth, the first accepted worker's landmarks carried by
+them into this view. Either way the
 visibility is suggested from this view's depth maps, and the result is kept (CACHE_SIZE
 views) until the accepted work or the calibration changes. The assignment's check cells
 (worker.assist.checks) are planted into the suggested positions, as into every suggestion the
@@ -32,9 +34,9 @@ from sqlalchemy.orm import Session
 from backend.annotation import service
 from backend.annotation.models import Assignment, Task
 from backend.annotation.tokens import TASK_SCOPE
-from backend.captures.assets import hand_model_for
+from backend.captures.assets import hand_model_for, load_mesh
 from backend.captures.calibration import hand_betas, version_in_use
-from backend.captures.models import Camera, Frame, Hand
+from backend.captures.models import Camera, Frame, Hand, SceneObject
 from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
 from backend.errors import DexlabelError, StorageError, Unauthorized
@@ -53,6 +55,9 @@ from worker.assist.prefill import (
 )
 from worker.assist.prefill import EpipolarView as EpipolarGuide
 
+# Other views with accepted work before a view is offered suggestions: one (the hand's model,
+# or the object's mesh, is fitted to its labels and depth).
+MIN_VIEWS = 1
 # Views whose suggestions are kept in memory (about 0.3 MB each for 21 points x 72 frames and 7
 # labelled views): every page load of a task reads them, and decoding the view's depth maps
 # is most of their cost (72 PNG frames at 640x480, 4-6 ms of CPU each).
@@ -96,8 +101,9 @@ class SuggestionsRead(BaseModel):
     """Pre-fill suggestions for the assignment's view. ``available`` is false (with the
     ``reason``, and empty lists) until the target has accepted work in ``min_views`` other
     views; ``views`` are the serials of the views with accepted work. ``method``: how the
-    positions were found: "triangulated" from 3 or more views, or "fitted" (a hand's model
-    fitted to the labels and depth of 1 or 2 views; less sure, a person checks every one)."""
+    positions were found: "triangulated" from 3 or more views, or "fitted" (the hand's model
+    or the object's mesh fitted to the labels and depth of 1 or 2 views; rougher, a person
+    checks every one)."""
 
     available: bool
     reason: str | None
@@ -137,19 +143,11 @@ def _target_name(task: Task) -> str:
     return "hand" if task.kind == "hand" else "object"
 
 
-def min_views(task: Task) -> int:
-    """Other views with accepted work before the task's view is offered suggestions: one for
-    a hand (its model is fitted to it), MIN_ACCEPTED_VIEWS to triangulate an object's."""
-    return 1 if task.kind == "hand" else MIN_ACCEPTED_VIEWS
-
-
 def _unavailable_reason(task: Task, serials: list[str]) -> str:
     have = ("there is none" if not serials else
             f"there is 1 (view {serials[0]})" if len(serials) == 1 else
             f"there are {len(serials)} (views {', '.join(serials)})")
-    need = min_views(task)
-    views = "view" if need == 1 else "views"
-    return (f"suggestions need accepted work in {need} other {views} of this "
+    return (f"suggestions need accepted work in {MIN_VIEWS} other view of this "
             f"{_target_name(task)}; {have}")
 
 
@@ -244,22 +242,31 @@ def _fitted(session: Session, storage: Storage, task: Task, cameras: list[Camera
     """The hand model fitted to the work of one or two views (their labels and depth maps),
     projected into the task's view (worker.solver.suggest). PyTorch loads here, on the first
     such request, not with the API."""
-    from worker.solver.suggest import fit_hand_joints, fitted_prefill
+    from worker.solver.suggest import fit_hand_joints, fit_object_points, fitted_prefill
 
-    hand = session.get_one(Hand, task.hand_id)
-    version = version_in_use(session, task.sequence_id)
-    betas = hand_betas(version, hand.index, hand.betas)
     models = [camera_model(c) for c in cameras]
     depth = {}
     for view in distinct_views(work):
         read = _depth_reader(session, storage, cameras[view], first, last)
         if read is not None:
             depth[view] = np.stack([read(f) for f in range(last - first + 1)])
-    joints = fit_hand_joints(models, work, depth, hand.side,
-                             np.zeros(10) if betas is None else np.asarray(betas, float),
-                             hand_model_for(hand.side))
+    if task.kind == "hand":
+        hand = session.get_one(Hand, task.hand_id)
+        betas = hand_betas(version_in_use(session, task.sequence_id), hand.index, hand.betas)
+        points = fit_hand_joints(models, work, depth, hand.side,
+                                 np.zeros(10) if betas is None else np.asarray(betas, float),
+                                 hand_model_for(hand.side))
+    else:
+        obj = session.get_one(SceneObject, task.object_id)
+        mesh = load_mesh(storage, obj.mesh_key)
+        # The given pose is of frame 0: it starts a range that starts there.
+        pose = None if obj.initial_pose is None or first else np.asarray(obj.initial_pose)
+        try:
+            points, _ = fit_object_points(models, work, depth, mesh.vertices, mesh.faces, pose)
+        except ValueError:  # no pose at the range's first frame could be fitted
+            points = np.full((last - first + 1, task.num_points, 3), np.nan)
     return fitted_prefill(models, work, [c.id for c in cameras].index(task.camera_id),
-                          joints, reader)
+                          points, reader)
 
 
 def clear_cache() -> None:
@@ -283,9 +290,9 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     accepted = list(session.scalars(work_query(others, with_tracks=False)))
     views = sorted({view_of[others[a.task_id].camera_id] for a in accepted})
     serials = [camera_rows[v].serial for v in views]
-    if len(views) < min_views(task):
+    if len(views) < MIN_VIEWS:
         return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
-                               views=serials, min_views=min_views(task), first_frame=first,
+                               views=serials, min_views=MIN_VIEWS, first_frame=first,
                                last_frame=last, points=[], epipolar=[])
     found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
                              last)
@@ -304,6 +311,6 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
         xy=[_xy_lists(g.xy[:, p]) for p in range(num_points)]) for g in guide]
     method: Method = "triangulated" if len(views) >= MIN_ACCEPTED_VIEWS else "fitted"
     return SuggestionsRead(available=True, reason=None, views=serials,
-                           min_views=min_views(task), method=method,
+                           min_views=MIN_VIEWS, method=method,
                            first_frame=first, last_frame=last, points=points,
                            epipolar=epipolar)

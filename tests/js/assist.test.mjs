@@ -233,6 +233,17 @@ test("suggestions: a quiet reason, or prefilled keyframes around the hand-set on
   assert.equal(assist.layer(3, 0).suggestion, null, "a used suggestion is no longer a ghost");
 });
 
+test("suggestions fitted from one view say so", async () => {
+  const xy = Array.from({ length: 4 }, () => [100, 200]);
+  const { assist } = newAssist(() => null, { suggestions: {
+    available: true, reason: null, views: ["cam-a"], min_views: 1, method: "fitted",
+    points: [{ point: 0, xy, visible: [true, true, false, null] }], epipolar: [] } });
+  await assist.loadSuggestions();
+  assert.match(assist.suggestNote,
+    /^Suggestions from 1 other view, the hand model fitted to them: check each \(magenta ring\)/);
+  assert.equal(assist.suggestions.size, 1);
+});
+
 test("Track all: Accept writes every point in one undo step and one change", async () => {
   const { store, assist, calls } = newAssist((p, f) => [10 * f + p, 50 + p]);
   for (const p of [0, 1]) {

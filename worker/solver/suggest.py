@@ -35,7 +35,13 @@ from worker.solver.default import fit_hand
 from worker.solver.init import hand_from_joints
 from worker.solver.problem import Problem
 from worker.solver.state import SolveState
-from worker.solver.types import HandTarget, SolveInputs, SolveSettings
+from worker.solver.types import (
+    HandTarget,
+    Landmark,
+    ObjectTarget,
+    SolveInputs,
+    SolveSettings,
+)
 
 # A joint lies inside the finger, behind the skin the depth camera sees: about a finger's
 # radius (adult fingers are 14-20 mm thick).
@@ -163,3 +169,43 @@ def fitted_prefill(cameras: list[CameraModel], work: list[ViewWork], target: int
     fitted = np.isfinite(joints).all(axis=-1)
     views = np.where(fitted, len(distinct_views(work)), 0)
     return Prefill(xy=xy, visible=visible, known=known, views=views, points=joints)
+
+
+def fit_object_points(cameras: list[CameraModel], work: list[ViewWork],
+                      depth: dict[int, np.ndarray], vertices: np.ndarray, faces: np.ndarray,
+                      initial_pose: np.ndarray | None = None,
+                      settings: SolveSettings = FIT_SETTINGS) -> tuple[np.ndarray, np.ndarray]:
+    """(F, P, 3) world metres and (P, 3) object frame metres: the landmarks of the first
+    assignment with decided labels (P of them, in its point order), each mapped onto the mesh
+    (vertices (N, 3), faces (M, 3), object frame, metres) and carried by the object's poses.
+    The solver fits those poses to the landmarks and depth maps (view -> (F, H, W) uint16 mm)
+    of the work's views alone (worker.solver.entry.solve without a hand: each frame from its
+    own landmarks and depth). initial_pose: (3, 4) object-to-world at frame 0, None: fitted to
+    frame 0. NaN where a landmark could not be mapped; ValueError where the solve refuses (no
+    initial pose fits)."""
+    from worker.solver.entry import solve
+
+    frames, points = np.shape(work[0].xy)[:2]
+    work = [w for w in work if w.decided.any()]
+    out, local_points = np.full((frames, points, 3), np.nan), np.full((points, 3), np.nan)
+    if not work:
+        return out, local_points
+    views = distinct_views(work)
+    local = {v: i for i, v in enumerate(views)}
+    landmarks = [Landmark(view=local[w.view], xy=np.where(w.decided[:, p, None], w.xy[:, p],
+                                                          np.nan),
+                          visible=w.visible[:, p] & w.decided[:, p])
+                 for w in work for p in range(points)]
+    inputs = SolveInputs(
+        cameras=[cameras[v] for v in views], num_frames=frames, hand=None,
+        objects=[ObjectTarget(name="object", vertices=np.asarray(vertices, float),
+                              faces=np.asarray(faces, np.int64), initial_pose=initial_pose,
+                              landmarks=landmarks)],
+        depth=[depth.get(v) for v in views])
+    result = solve(inputs, settings)
+    poses = result.object_poses[0]  # (F, 3, 4)
+    for p, point in enumerate(result.landmark_points[0][:points]):
+        if point is not None:
+            local_points[p] = point
+            out[:, p] = np.einsum("fij,j->fi", poses[:, :, :3], local_points[p]) + poses[:, :, 3]
+    return out, local_points

@@ -254,7 +254,9 @@ export class Assist {
     if (answer.available) {
       for (const s of answer.points || []) this.suggestions.set(s.point, s);
       const n = Array.isArray(answer.views) ? answer.views.length : Number(answer.views) || 0;
-      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"} ` +
+      // Fitted from one or two views (the hand model on their labels and depth): rougher.
+      const how = answer.method === "fitted" ? ", the hand model fitted to them: check each" : "";
+      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"}${how} ` +
         "(magenta ring): U uses them for this point, Shift+U for every point.";
     } else {
       this.suggestNote = answer.reason || "No suggestions for this task yet.";

@@ -114,7 +114,7 @@ def test_hand_suggestions_wait_for_accepted_work_in_one_other_view(
     _accept(tasks[2]["id"], "waiting", _careful(capture4, tasks[2], 2), status="submitted")
     answer = _get(client, token)
     assert answer["available"] is False and answer["views"] == []
-    # An object's landmarks are triangulated: its tasks still wait for three views.
+    # An object task says so.
     from backend.annotation.models import Assignment
     from backend.annotation.service import get_task_or_raise
     from backend.annotation.tokens import assignment_token
@@ -124,8 +124,8 @@ def test_hand_suggestions_wait_for_accepted_work_in_one_other_view(
         object_token = assignment_token(get_task_or_raise(session, hands["object"]["id"]),
                                         session.get_one(Assignment, aid))
     answer = _get(client, object_token)
-    assert answer["min_views"] == 3
-    assert "3 other views of this object; there is none" in answer["reason"]
+    assert answer["min_views"] == 1 and answer["available"] is False
+    assert "1 other view of this object; there is none" in answer["reason"]
 
 
 @pytest.mark.parametrize(("views", "bound_px"), [((1,), 12.0), ((1, 3), 6.0)])
