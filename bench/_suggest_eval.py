@@ -69,13 +69,14 @@ def _crowd_work(capture: Path, scene: dict[str, Any], cache: Path, seed: int) ->
 
 
 def _suggest(scene: dict[str, Any], work: list[Any], target: int, accepted: list[int]
-             ) -> tuple[Any, float]:
-    """The target's suggestions from the accepted views' work, and the seconds they took."""
+             ) -> tuple[Any, tuple[float, float]]:
+    """The target's suggestions from the accepted views' work, and the seconds they took
+    (wall, and CPU of the process: all its threads)."""
     from worker.assist.prefill import prefill
     from worker.solver.suggest import MAX_FIT_VIEWS, fit_hand_joints, fitted_prefill
 
     mine = [work[v] for v in accepted]
-    tick = time.perf_counter()
+    tick, cpu = time.perf_counter(), time.process_time()
     if len(accepted) > MAX_FIT_VIEWS:
         found = prefill(scene["cameras"], mine, target, scene["depth"][target])
     else:
@@ -83,7 +84,7 @@ def _suggest(scene: dict[str, Any], work: list[Any], target: int, accepted: list
                                  {v: scene["depth"][v] for v in accepted},
                                  scene["side"], scene["betas"])
         found = fitted_prefill(scene["cameras"], mine, target, joints, scene["depth"][target])
-    return found, time.perf_counter() - tick
+    return found, (time.perf_counter() - tick, time.process_time() - cpu)
 
 
 def _errors(scene: dict[str, Any], found: Any, target: int) -> tuple[np.ndarray, np.ndarray]:
@@ -137,12 +138,13 @@ def _object_errors(capture: Path, scene: dict[str, Any], seed: int, targets: int
     plan = read_sequence(next(capture.glob(dexycb.META_GLOB)).parent)
     true_poses = CaptureTruth(capture).object_poses()  # (O, F, 3, 4)
     views, out = len(scene["cameras"]), {}
-    parts: dict[str, tuple[list[np.ndarray], list[float]]] = {"1": ([], []), "2": ([], [])}
+    parts: dict[str, tuple[list[np.ndarray], list[np.ndarray], list[float]]] = {
+        "1": ([], [], []), "2": ([], [], [])}
     for index, obj in enumerate(plan.objects):
         mesh = read_mesh(obj.mesh_path)
         work = _object_work(capture, scene, index, seed + index)
         pose = None if obj.initial_pose is None else np.asarray(obj.initial_pose, float)
-        for name, (errors, seconds) in parts.items():
+        for name, (errors, moving, seconds) in parts.items():
             for target in range(min(targets, views)):
                 accepted = [(target + 1 + i) % views for i in range(int(name))]
                 mine = [work[v] for v in accepted]
@@ -160,9 +162,14 @@ def _object_errors(capture: Path, scene: dict[str, Any], seed: int, targets: int
                          + true_poses[index][:, None, :, 3])
                 xy = scene["cameras"][target].project(truth)
                 shown = np.isfinite(found.xy).all(axis=-1) & found.known & found.visible
+                # Moved: more than 5 mm from where frame 0 has it (at rest the given initial
+                # pose, exact on a synthetic capture, answers alone).
+                moved = np.linalg.norm(truth - truth[:1], axis=-1) > 0.005
                 errors.append(np.linalg.norm(found.xy - xy, axis=-1)[shown])
-    for name, (errors, seconds) in parts.items():
+                moving.append(np.linalg.norm(found.xy - xy, axis=-1)[shown & moved])
+    for name, (errors, moving, seconds) in parts.items():
         out[name] = {**_stat(np.concatenate(errors) if errors else np.zeros(0)),
+                     "moving": _stat(np.concatenate(moving) if moving else np.zeros(0)),
                      "seconds_per_view": round(float(np.median(seconds)), 2)
                      if seconds else None}
     return out
@@ -178,18 +185,20 @@ def by_accepted_views(capture: Path, cache: Path, seed: int, targets: int | None
     out: dict[str, Any] = {}
     for name in COUNTS:
         count = views - 1 if name == "3+" else int(name)
-        errors, caught, seconds = [], [], []
+        errors, caught, seconds, cpu = [], [], [], []
         for target in range(views if targets is None else min(targets, views)):
             accepted = [(target + 1 + i) % views for i in range(count)]
             found, took = _suggest(scene, work, target, accepted)
             err, hit = _errors(scene, found, target)
             errors.append(err)
             caught.append(hit)
-            seconds.append(took)
+            seconds.append(took[0])
+            cpu.append(took[1])
         cat_caught = np.concatenate(caught)
         out[name] = {**_stat(np.concatenate(errors)),
                      "occluded_caught": round(float(cat_caught.mean()), 3)
                      if cat_caught.size else None, "occluded": int(cat_caught.size),
-                     "seconds_per_view": round(float(np.median(seconds)), 2)}
+                     "seconds_per_view": round(float(np.median(seconds)), 2),
+                     "cpu_seconds_per_view": round(float(np.median(cpu)), 2)}
     objects = _object_errors(capture, scene, seed, views if targets is None else targets)
     return {"hand": out, "objects": objects, "frames": scene["frames"], "views": views}

@@ -332,7 +332,7 @@ def test_suggestions_from_two_accepted_views_are_fitted_and_the_page_says_so(
     checks = _check_cells(live_server, link["assignment_id"])
     open_task(page, live_server.page_url(link["token"]))
     expect(page.locator("#suggest-note")).to_contain_text(
-        "Suggestions from 2 other views, the hand model fitted to them: check each",
+        "Suggestions from 2 other views, a model fitted to them: check each",
         timeout=120_000)
     assert page.evaluate("window.__dexlabel.assist.suggestions.size") == 21
     truth, _ = CaptureTruth(prefill_capture["capture"]).view(task["serial"], CLIP_FRAMES)

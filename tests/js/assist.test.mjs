@@ -240,7 +240,7 @@ test("suggestions fitted from one view say so", async () => {
     points: [{ point: 0, xy, visible: [true, true, false, null] }], epipolar: [] } });
   await assist.loadSuggestions();
   assert.match(assist.suggestNote,
-    /^Suggestions from 1 other view, the hand model fitted to them: check each \(magenta ring\)/);
+    /^Suggestions from 1 other view, a model fitted to it: check each \(magenta ring\)/);
   assert.equal(assist.suggestions.size, 1);
 });
 

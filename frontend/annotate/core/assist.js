@@ -254,8 +254,10 @@ export class Assist {
     if (answer.available) {
       for (const s of answer.points || []) this.suggestions.set(s.point, s);
       const n = Array.isArray(answer.views) ? answer.views.length : Number(answer.views) || 0;
-      // Fitted from one or two views (the hand model on their labels and depth): rougher.
-      const how = answer.method === "fitted" ? ", the hand model fitted to them: check each" : "";
+      // Fitted from one or two views (the hand model, or the object's mesh, on their labels
+      // and depth): rougher than triangulated.
+      const how = answer.method === "fitted"
+        ? `, a model fitted to ${n === 1 ? "it" : "them"}: check each` : "";
       this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"}${how} ` +
         "(magenta ring): U uses them for this point, Shift+U for every point.";
     } else {
