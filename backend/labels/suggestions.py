@@ -7,9 +7,8 @@ from them and projected into this view (worker.assist.prefill). A hand with acce
 only one or two other views gets the hand model fitted to those views' labels and depth maps
 instead (worker.solver.suggest), its joints projected into this view; an object, its mesh's
 poses fitted to their landmarks and depth, the first accepted worker's landmarks carried by
-them into this view. Either way the
-visibility is suggested from this view's depth maps, and the result is kept (CACHE_SIZE
-views) until the accepted work or the calibration changes. The assignment's check cells
+them into this view. Either way the visibility is suggested from this view's depth maps,
+and the result is kept (CACHE_SIZE views) until the accepted work or the calibration changes. The assignment's check cells
 (worker.assist.checks) are planted into the suggested positions, as into every suggestion the
 page shows; the epipolar data is left as it is. Nothing is written: a suggestion the worker
 accepts is saved as a keyframe with source "prefilled".
@@ -239,9 +238,10 @@ def _computed(session: Session, storage: Storage, task: Task, cameras: list[Came
 def _fitted(session: Session, storage: Storage, task: Task, cameras: list[Camera],
             work: list[ViewWork], reader: DepthReader | None, first: int, last: int
             ) -> Prefill:
-    """The hand model fitted to the work of one or two views (their labels and depth maps),
-    projected into the task's view (worker.solver.suggest). PyTorch loads here, on the first
-    such request, not with the API."""
+    """The hand model (or the object's poses) fitted to the work of one or two views (their
+    labels and depth maps), projected into the task's view (worker.solver.suggest). PyTorch
+    loads here, on the first such request, not with the API. The fit takes CPU seconds (about
+    16 s for 24 frames, BENCHMARKS.md) inside the request; the result is kept."""
     from worker.solver.suggest import fit_hand_joints, fit_object_points, fitted_prefill
 
     models = [camera_model(c) for c in cameras]
