@@ -14,9 +14,6 @@ export const PREVIEW_ASSIGNMENT_ID = "ASSIGNMENT_ID_NOT_AVAILABLE";
 
 /** A save or read that the network never answered gets this long (ms) before it counts as lost. */
 const REQUEST_TIMEOUT_MS = 15000;
-/** Suggestions from one or two views fit a hand model or an object's poses on the server's
- * CPU first (seconds to a minute on a busy machine for a 72-frame clip), then are kept. */
-const SUGGESTIONS_TIMEOUT_MS = 120000;
 
 /**
  * @typedef {Object} PageParams
@@ -60,11 +57,10 @@ export function readPageParams(search, hash = "") {
 /**
  * Runs fetch with a timeout; network failures become ApiError(0).
  * @param {typeof fetch} fetchFn @param {string} url @param {RequestInit} init
- * @param {number} [timeoutMs]
  */
-async function fetchOrNetworkError(fetchFn, url, init, timeoutMs = REQUEST_TIMEOUT_MS) {
+async function fetchOrNetworkError(fetchFn, url, init) {
   const controller = new AbortController();
-  const timer = setTimeout(() => controller.abort(), timeoutMs);
+  const timer = setTimeout(() => controller.abort(), REQUEST_TIMEOUT_MS);
   try {
     return await fetchFn(url, { ...init, signal: controller.signal });
   } catch (err) {
@@ -88,11 +84,10 @@ export class AnnotateApi {
   /**
    * JSON request; resolves to the parsed body, rejects with ApiError.
    * @param {string} method @param {string} path @param {object} [body]
-   * @param {number} [timeoutMs]
    */
-  async request(method, path, body, timeoutMs = REQUEST_TIMEOUT_MS) {
+  async request(method, path, body) {
     const init = requestInit(method, this.token, body);
-    const resp = await fetchOrNetworkError(this._fetch, this.base + path, init, timeoutMs);
+    const resp = await fetchOrNetworkError(this._fetch, this.base + path, init);
     const data = await jsonOrNull(resp);
     if (!resp.ok) throw new ApiError(resp.status, data);
     return data;
@@ -156,7 +151,7 @@ export class AnnotateApi {
    *   points: object[], epipolar: object[]}>}
    */
   suggestions() {
-    return this.request("GET", "/api/annotate/suggestions", undefined, SUGGESTIONS_TIMEOUT_MS);
+    return this.request("GET", "/api/annotate/suggestions");
   }
 
   /**

@@ -29,6 +29,10 @@ import {
 
 /** Quiet time (ms) after the last edit of a drag before a re-track is asked for. */
 const RETRACK_DELAY_MS = 300;
+/** While the server prepares fitted suggestions (a job on its worker queue), the page asks
+ * again this often (ms), for at most SUGGEST_POLL_LIMIT_MS. */
+const SUGGEST_POLL_MS = 4000;
+const SUGGEST_POLL_LIMIT_MS = 180000;
 
 /**
  * @typedef {import("./proposals.js").PointProposal} PointProposal
@@ -54,14 +58,18 @@ export class Assist {
    * @param {() => {frame: number, active: number}} o.where  the editor's frame and point
    * @param {() => void} o.onChange  ghosts, lines or status changed: redraw
    * @param {number} [o.retrackDelayMs]
+   * @param {number} [o.suggestPollMs]  @param {number} [o.suggestPollLimitMs]
    */
-  constructor({ store, api, editable, where, onChange, retrackDelayMs = RETRACK_DELAY_MS }) {
+  constructor({ store, api, editable, where, onChange, retrackDelayMs = RETRACK_DELAY_MS,
+    suggestPollMs = SUGGEST_POLL_MS, suggestPollLimitMs = SUGGEST_POLL_LIMIT_MS }) {
     this.store = store;
     this.api = api;
     this.editable = editable;
     this.where = where;
     this.onChange = onChange;
     this.retrackDelayMs = retrackDelayMs;
+    this.suggestPollMs = suggestPollMs;
+    this.suggestPollLimitMs = suggestPollLimitMs;
     /** @type {null|{points: PointProposal[], counts: {tracked: number, total: number}}} */
     this.proposals = null;
     /** @type {Map<number, {xy: Array<number[]|null>, visible: Array<boolean|null>}>} */
@@ -240,15 +248,32 @@ export class Assist {
 
   // ---- suggestions ------------------------------------------------------------------------
 
-  /** Reads the task's suggestions once (edit mode). */
+  /**
+   * Reads the task's suggestions (edit mode). While the server says they are being prepared
+   * (fitted on its worker queue), shows its reason and asks again every few seconds, for a
+   * few minutes at most.
+   */
   async loadSuggestions() {
     let answer;
-    try {
-      answer = await this.api.suggestions();
-    } catch (err) {
-      this.suggestNote = `No suggestions: ${reason(err)}`;
+    const started = Date.now();
+    for (;;) {
+      try {
+        answer = await this.api.suggestions();
+      } catch (err) {
+        this.suggestNote = `No suggestions: ${reason(err)}`;
+        this.onChange();
+        return;
+      }
+      if (!answer.preparing) break;
+      if (Date.now() - started >= this.suggestPollLimitMs) {
+        this.suggestNote = "No suggestions: they are taking longer than expected to prepare; " +
+          "reload the page later to see them.";
+        this.onChange();
+        return;
+      }
+      this.suggestNote = answer.reason || "Suggestions are being prepared.";
       this.onChange();
-      return;
+      await new Promise((resolve) => setTimeout(resolve, this.suggestPollMs));
     }
     this.epipolar = Array.isArray(answer.epipolar) ? answer.epipolar : [];
     if (answer.available) {

@@ -84,6 +84,37 @@ def _get(client: TestClient, token: str, **params: int) -> dict:
     return resp.json()
 
 
+def _fit_jobs() -> list[tuple[str, str]]:
+    """The fit jobs' (key, status), in id order."""
+    from sqlalchemy import select
+
+    from backend.jobs.models import Job
+    from backend.labels.suggestions import FITTED_KIND
+
+    with session_scope() as session:
+        return [(j.key, j.status) for j in session.scalars(
+            select(Job).where(Job.kind == FITTED_KIND).order_by(Job.id))]
+
+
+def _run_fit_jobs() -> int:
+    """Run the queued fit jobs here (as a queue worker would); how many ran."""
+    from backend.jobs.runner import execute
+
+    queued = [key for key, status in _fit_jobs() if status == "queued"]
+    for key in queued:
+        execute(key)
+    return len(queued)
+
+
+def _fitted(client: TestClient, token: str, **params: int) -> dict:
+    """The answer once the fit job it queued has run."""
+    answer = _get(client, token, **params)
+    if answer["preparing"]:
+        assert _run_fit_jobs() >= 1
+        answer = _get(client, token, **params)
+    return answer
+
+
 def _grid(points: list[dict]) -> np.ndarray:
     """(F, P, 2) of the answer's points, NaN where null."""
     rows = [[[np.nan, np.nan] if v is None else v for v in p["xy"]] for p in points]
@@ -137,7 +168,7 @@ def test_one_or_two_accepted_views_give_fitted_suggestions_near_the_truth(
     tasks, token = hands["tasks"], hands["links"][0]["token"]
     for view in views:
         _accept(tasks[view]["id"], f"A{view}", _careful(capture4, tasks[view], 30 + view))
-    answer = _get(client, token)
+    answer = _fitted(client, token)
     assert answer["available"] is True and answer["method"] == "fitted"
     assert answer["views"] == [tasks[v]["serial"] for v in views]
     truth, visible = _truth(capture4, tasks[0]["serial"], 6)
@@ -146,6 +177,69 @@ def test_one_or_two_accepted_views_give_fitted_suggestions_near_the_truth(
     assert has[visible].mean() > 0.9
     errors = np.linalg.norm(xy - truth, axis=-1)[has & visible]
     assert np.median(errors) < bound_px, np.median(errors)
+
+
+def _api_process_answers(token: str, asks: int) -> tuple[list[dict], bool]:
+    """``asks`` requests for suggestions answered by a fresh API process (the app on this
+    test's database and storage, no queue worker in it); its answers, and whether it loaded
+    PyTorch."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[3]
+    code = ("import json, sys\nfrom fastapi.testclient import TestClient\n"
+            "from backend.app import create_app\nclient = TestClient(create_app())\n"
+            f"answers = [client.get({URL!r}, headers={_bearer(token)!r}).json() "
+            f"for _ in range({asks})]\n"
+            "print(json.dumps([answers, 'torch' in sys.modules]))")
+    env = {**os.environ, "DEXLABEL_INPROCESS_WORKER": "false",
+           "PYTHONPATH": os.pathsep.join([str(root), *filter(None, [os.environ.get(
+               "PYTHONPATH")])])}
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True,
+                         text=True, timeout=300, check=False)
+    assert out.returncode == 0, out.stderr[-3000:]
+    answers, torch = json.loads(out.stdout.strip().splitlines()[-1])
+    return answers, torch
+
+
+def test_fitted_suggestions_are_prepared_by_one_queued_job(
+    client: TestClient, hands: dict, capture4: Path
+) -> None:
+    """The fit runs on the worker queue, never in a request: the API answers at once that
+    the suggestions are being prepared and queues one job however often it is asked; once the
+    job has run, it serves them."""
+    from backend.labels.suggestions import compute_fitted
+
+    tasks, token = hands["tasks"], hands["links"][0]["token"]
+    _accept(tasks[1]["id"], "A1", _careful(capture4, tasks[1], 31))
+    answers, torch = _api_process_answers(token, asks=2)
+    assert torch is False
+    for answer in answers:
+        assert answer["available"] is False and answer["preparing"] is True
+        assert answer["reason"] == ("suggestions from the hand model are being prepared; "
+                                    "they will appear shortly")
+        assert answer["points"] == [] and answer["views"] == [tasks[1]["serial"]]
+    assert _get(client, token)["preparing"] is True
+    (job,) = _fit_jobs()
+    assert job[1] == "queued" and job[0].startswith(f"fitted_suggestions:{tasks[0]['id']}:0:5:")
+    assert _run_fit_jobs() == 1
+    assert _fit_jobs() == [(job[0], "done")]
+    answer = _get(client, token)
+    assert answer["available"] is True and answer["preparing"] is False
+    assert answer["method"] == "fitted"
+    truth, visible = _truth(capture4, tasks[0]["serial"], 6)
+    xy = _grid(answer["points"])
+    has = np.isfinite(xy).all(axis=-1)
+    errors = np.linalg.norm(xy - truth, axis=-1)[has & visible]
+    assert has[visible].mean() > 0.9 and np.median(errors) < 12.0, np.median(errors)
+    # A second run of the same work (two queue messages, a retry) leaves what is stored.
+    assert "stored: True" in compute_fitted(tasks[0]["id"], 0, 5)["message"]
+    # New accepted work is other work: a new job for it, the old result no longer served.
+    _accept(tasks[3]["id"], "A3", _careful(capture4, tasks[3], 33))
+    assert _get(client, token)["preparing"] is True
+    assert [status for _, status in _fit_jobs()] == ["done", "queued"]
 
 
 def test_suggestions_from_three_accepted_views_lie_near_the_truth(
@@ -284,7 +378,7 @@ def test_another_views_assignment_reads_suggestions_for_its_own_view(
     tasks = accepted["tasks"]
     token = client.post(f"/api/tasks/{tasks[1]['id']}/assignments", json={"worker_id": "W9"},
                         headers=admin_headers).json()["token"]
-    answer = _get(client, token)
+    answer = _fitted(client, token)
     assert answer["method"] == "fitted"
     assert answer["views"] == [tasks[2]["serial"], tasks[3]["serial"]]
     _accept(tasks[0]["id"], "A0", _careful(capture4, tasks[0], 10))
@@ -348,7 +442,7 @@ def test_openapi_documents_the_answer(client: TestClient) -> None:
     schema = operation["responses"]["200"]["content"]["application/json"]["schema"]
     assert schema["$ref"].endswith("/SuggestionsRead")
     fields = spec["components"]["schemas"]["SuggestionsRead"]["properties"]
-    assert set(fields) == {"available", "reason", "views", "min_views", "method", "first_frame",
-                           "last_frame", "points", "epipolar"}
+    assert set(fields) == {"available", "reason", "views", "min_views", "method", "preparing",
+                           "first_frame", "last_frame", "points", "epipolar"}
     assert "hypot(a, b)" in spec["components"]["schemas"]["EpipolarView"]["description"]
 
