@@ -7,12 +7,15 @@ from them and projected into this view (worker.assist.prefill). A hand with acce
 only one or two other views gets the hand model fitted to those views' labels and depth maps
 instead (worker.solver.suggest), its joints projected into this view; an object, its mesh's
 poses fitted to their landmarks and depth, the first accepted worker's landmarks carried by
-them into this view. Either way the visibility is suggested from this view's depth maps,
-and the result is kept (CACHE_SIZE views) until the accepted work or the calibration
-changes. The assignment's check cells (worker.assist.checks) are planted into the suggested
-positions, as into every suggestion the page shows; the epipolar data is left as it is.
-Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
-"prefilled".
+them into this view. The fit takes CPU seconds and PyTorch, so it never runs in a request:
+the request queues a FITTED_KIND job (compute_fitted, once per view, frames and accepted
+work) and answers ``preparing`` until the job has stored its result in storage under a
+digest of what it rests on. Either way the visibility is suggested from this view's depth
+maps, and the result is kept in memory (CACHE_SIZE views) until the accepted work or the
+calibration changes. The assignment's check cells (worker.assist.checks) are planted into
+the suggested positions, as into every suggestion the page shows; the epipolar data is left
+as it is. Nothing the worker sees is written: a suggestion the worker accepts is saved as a
+keyframe with source "prefilled".
 
 Positions are image px (x right, y down) of the clip's frames first_frame..last_frame.
 """

@@ -6,6 +6,10 @@ joint; before three other views are accepted, the reason why not."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -320,11 +324,28 @@ def test_suggestions_from_three_accepted_views_are_shown_used_and_lines_cross_th
                 assert np.hypot(r[1] - truth[r[0]][p][0], r[2] - truth[r[0]][p][1]) < 3.0, (p, r)
 
 
+@pytest.fixture
+def fit_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
+    """A queue consumer on the live server's database and queue: it runs the fit jobs."""
+    log = output_dir / "assist-fit-worker.log"
+    with log.open("w") as log_file:
+        proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
+                                env={**os.environ, **live_server.env},
+                                stdout=log_file, stderr=subprocess.STDOUT)
+        try:
+            yield
+        finally:
+            proc.terminate()
+            proc.wait(timeout=20)
+
+
 def test_suggestions_from_two_accepted_views_are_fitted_and_the_page_says_so(
-    live_server: LiveServer, prefill_capture: dict[str, Any], page: Page, output_dir: Path
+    live_server: LiveServer, prefill_capture: dict[str, Any], fit_worker: None, page: Page,
+    output_dir: Path
 ) -> None:
     """View 3's other views are 0 (not labelled), 1 and 2 (accepted): two, too few to
-    triangulate; the hand model fitted to them suggests view 3's joints."""
+    triangulate; the hand model fitted to them (a job on the worker queue: the page says
+    they are being prepared, then asks again) suggests view 3's joints."""
     from backend.captures.truth import CaptureTruth
 
     task = prefill_capture["hands"][3]
@@ -332,8 +353,11 @@ def test_suggestions_from_two_accepted_views_are_fitted_and_the_page_says_so(
     checks = _check_cells(live_server, link["assignment_id"])
     open_task(page, live_server.page_url(link["token"]))
     expect(page.locator("#suggest-note")).to_contain_text(
+        "suggestions from the hand model are being prepared; they will appear shortly")
+    _screens(page, output_dir, "assist-fitted-preparing")
+    expect(page.locator("#suggest-note")).to_contain_text(
         "Suggestions from 2 other views, a model fitted to them: check each",
-        timeout=120_000)
+        timeout=150_000)
     assert page.evaluate("window.__dexlabel.assist.suggestions.size") == 21
     truth, _ = CaptureTruth(prefill_capture["capture"]).view(task["serial"], CLIP_FRAMES)
     frame = 6

@@ -135,11 +135,13 @@ def test_frames_suggestions_proposals_replays_and_overlays_from_the_api_host(
     frames = hand["num_frames"]
     link = d.api.json("POST", f"/api/tasks/{hand['id']}/assignments", {"worker_id": "probe"})
     # Three views: never enough to triangulate another's joints; before any accepted work in
-    # another view the route says why there are none, after it the hand model fitted to it
-    # suggests them.
+    # another view the route says why there are none, after it the hand model fitted to it (a
+    # job on a worker host) suggests them, the route saying they are being prepared till then.
     suggestions = d.api.json("GET", "/api/annotate/suggestions", token=link["token"])
     if suggestions["available"]:
         assert suggestions["method"] == "fitted", suggestions
+    elif suggestions["preparing"]:
+        assert "being prepared" in suggestions["reason"], suggestions
     else:
         assert "1 other view" in suggestions["reason"], suggestions
     body = {"tracks": [{"point": 0, "keyframes": [[0, 320.0, 240.0, 1],
