@@ -383,6 +383,29 @@ def _fit_queued(session: Session, task: Task, first: int, last: int, digest: str
             True)
 
 
+def queue_fits(session: Session, storage: Storage, sequence_id: int, target_key: str) -> int:
+    """Queue the fit job (whole clip) of every view of the target whose suggestions are fitted
+    from its accepted work and not stored yet, so that they are usually ready before a worker
+    of the view asks (QC calls this once it has decided); how many views are being prepared."""
+    preparing = 0
+    for task in sequence_tasks(session, sequence_id, target_key):
+        cameras, others = _view_inputs(session, task)
+        view_of = {c.id: i for i, c in enumerate(cameras)}
+        accepted = list(session.scalars(work_query(others, with_tracks=False)))
+        if not accepted:
+            continue
+        last = task.sequence.num_frames - 1
+        accepted = labelled_work(session, others)
+        work = _dense_work(accepted, others, view_of, task, 0, last)
+        if len(distinct_views(work)) >= MIN_ACCEPTED_VIEWS:
+            continue
+        digest = _key_digest(_cache_key(task, 0, last, accepted, cameras))
+        if storage.exists(fitted_storage_key(task.id, digest)):
+            continue
+        preparing += _fit_queued(session, task, 0, last, digest)[1]
+    return preparing
+
+
 def clear_cache() -> None:
     """Forget every kept result (the next request of each view computes it again)."""
     with _CACHE_LOCK:
