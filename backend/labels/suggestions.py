@@ -384,11 +384,20 @@ def _fit_queued(session: Session, task: Task, first: int, last: int, digest: str
 
 
 def queue_fits(session: Session, storage: Storage, sequence_id: int, target_key: str) -> int:
-    """Queue the fit job (whole clip) of every view of the target whose suggestions are fitted
-    from its accepted work and not stored yet, so that they are usually ready before a worker
-    of the view asks (QC calls this once it has decided); how many views are being prepared."""
+    """Queue the fit job (whole clip) of every view of the target that no worker holds, has
+    submitted or has done and whose suggestions are fitted from the accepted work and not
+    stored yet, so that they are usually ready before its next worker asks (QC calls this once
+    it has decided); how many views are being prepared."""
     preparing = 0
-    for task in sequence_tasks(session, sequence_id, target_key):
+    tasks = sequence_tasks(session, sequence_id, target_key)
+    # Views someone holds, has submitted or has done are not prepared ahead (a worker who opens
+    # one asks, and the request queues the fit): the CPU goes to views still waiting for one.
+    held = set(session.scalars(select(Assignment.task_id).where(
+        Assignment.task_id.in_([t.id for t in tasks]),
+        Assignment.status.in_(("working", "submitted", "approved")))))
+    for task in tasks:
+        if task.id in held:
+            continue
         cameras, others = _view_inputs(session, task)
         view_of = {c.id: i for i, c in enumerate(cameras)}
         accepted = list(session.scalars(work_query(others, with_tracks=False)))

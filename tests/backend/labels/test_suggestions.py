@@ -451,22 +451,25 @@ def test_openapi_documents_the_answer(client: TestClient) -> None:
 def test_accepted_work_has_the_other_views_fits_prepared_ahead(
     client: TestClient, hands: dict, capture4: Path
 ) -> None:
-    """Once QC has accepted work (queue_fits), every other view's fit is queued, so a worker
-    of that view finds the suggestions ready; a view with no accepted work elsewhere gets
-    none, and asking again queues nothing more."""
+    """Once QC has accepted work (queue_fits), the fit of every other view nobody holds yet is
+    queued, so its next worker finds the suggestions ready; a view a worker holds is fitted
+    when that worker asks; asking again queues nothing more."""
     from backend.labels.suggestions import queue_fits
     from backend.storage import get_storage
 
     tasks, token = hands["tasks"], hands["links"][0]["token"]
     _accept(tasks[1]["id"], "A1", _careful(capture4, tasks[1], 31))
     with session_scope() as session:
-        assert queue_fits(session, get_storage(), tasks[0]["sequence_id"], "hand:0") == 3
+        # View 0 is held by the link's worker: not prepared ahead.
+        assert queue_fits(session, get_storage(), tasks[0]["sequence_id"], "hand:0") == 2
+    assert sorted(int(key.split(":")[1]) for key, _ in _fit_jobs()) == sorted(
+        tasks[v]["id"] for v in (2, 3))
+    assert _get(client, token)["preparing"] is True
     jobs = _fit_jobs()
     assert sorted(int(key.split(":")[1]) for key, _ in jobs) == sorted(
         tasks[v]["id"] for v in (0, 2, 3))
-    assert _get(client, token)["preparing"] is True
     with session_scope() as session:
-        assert queue_fits(session, get_storage(), tasks[0]["sequence_id"], "hand:0") == 3
+        assert queue_fits(session, get_storage(), tasks[0]["sequence_id"], "hand:0") == 2
     assert _fit_jobs() == jobs
     assert _run_fit_jobs() == 3
     answer = _get(client, token)
