@@ -21,10 +21,18 @@ answer), and "again", a request whose result the server kept (a reload, another 
 task); and the pure worker.assist.prefill.prefill on arrays with the depth maps already
 decoded. The machine's 1-minute load average is printed beside them.
 
+By accepted views ("by_accepted_views", bench/_suggest_eval.py): with one careful crowd
+worker's image-checked labels per view (bench/_crowd_labels.py) as the accepted work, each
+target view (the first ``--targets``; default all) is suggested from 1, 2 and 3+ (all) other
+views: from 1-2 by the hand model fitted to their labels and depth (worker.solver.suggest),
+from 3 or more by triangulation, as the endpoint does. Per count: median and 90th percentile
+px error of the suggested visible joints against the truth, the share of truly occluded
+joints proposed occluded, and the median seconds one view's suggestions took.
+
 Prints one JSON line: {"capture", "frames", "views", "every", "error", "suggested",
-"visibility", "timing_ms"}.
+"visibility", "timing_ms", "by_accepted_views"}.
 Usage: python bench/prefill.py [--capture DIR] [--capture-seed 7] [--views 8] [--frames 72]
-                               [--every 4] [--runs 5] [--worker-seed 3]
+                               [--every 4] [--runs 5] [--worker-seed 3] [--targets N]
 """
 
 from __future__ import annotations
@@ -37,6 +45,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from _suggest_eval import by_accepted_views
 
 from _server import isolated_workdir, median_ms
 
@@ -200,6 +209,8 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=4, help="the worker keys every K frames")
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--worker-seed", type=int, default=3)
+    parser.add_argument("--targets", type=int, default=None,
+                        help="target views of the by-accepted-views figures (default all; 0: none)")
     args = parser.parse_args()
     work = isolated_workdir("prefill")
     capture = args.capture
@@ -223,6 +234,9 @@ def main() -> None:
                             "endpoint": _timing(client, tasks[0], args.runs),
                             "load_average": round(os.getloadavg()[0], 1),
                             "pure": _pure_ms(capture, setup["sequence_id"], args.runs)}}
+    if args.targets != 0:
+        result["by_accepted_views"] = by_accepted_views(capture, work, args.worker_seed,
+                                                        args.targets)
     print(json.dumps(result))
 
 

@@ -17,6 +17,7 @@ from backend.exports.flows import cleanup_job, export_job
 from backend.exports.stored import CLEANUP_KIND
 from backend.jobs.runner import Handler
 from backend.jobs.runner import register_handlers as register
+from backend.labels.suggestions import FITTED_KIND, compute_fitted
 from backend.rig.flows import run_rig_health
 
 
@@ -53,6 +54,13 @@ def export_labels(args: dict[str, Any]) -> dict[str, Any]:
     return export_job(args)
 
 
+def fitted_suggestions(args: dict[str, Any]) -> dict[str, Any]:
+    """Fit a target's model to the accepted work of one or two views; store the suggestions
+    of one view (backend.labels.suggestions)."""
+    return compute_fitted(int(args["task_id"]), int(args["first_frame"]),
+                          int(args["last_frame"]))
+
+
 def clean_up_exports(args: dict[str, Any]) -> dict[str, Any]:
     """Delete export archives past DEXLABEL_EXPORT_RETENTION_DAYS."""
     return cleanup_job(args)
@@ -69,6 +77,7 @@ HANDLERS: dict[str, Handler] = {
     "rig_health": Handler(rig_health, None),
     "export": Handler(export_labels, None),
     CLEANUP_KIND: Handler(clean_up_exports, None),
+    FITTED_KIND: Handler(fitted_suggestions, None),
 }
 
 

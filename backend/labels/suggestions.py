@@ -3,23 +3,32 @@ places each point in this view, and the epipolar lines of those labels.
 
 Once a target (a hand or an object of a sequence) has accepted work (backend.labels)
 in at least MIN_ACCEPTED_VIEWS views other than this one, each point is triangulated per frame
-from them and projected into this view (worker.assist.prefill), with a visibility suggested
-from this view's depth maps; the result is kept (CACHE_SIZE views) until the accepted work or the
-calibration changes. The assignment's check cells (worker.assist.checks) are planted into the
-suggested positions, as into every suggestion the page shows; the epipolar data is left as it
-is. Nothing is written: a suggestion the worker accepts is saved as a keyframe with source
-"prefilled".
+from them and projected into this view (worker.assist.prefill). A hand with accepted work in
+only one or two other views gets the hand model fitted to those views' labels and depth maps
+instead (worker.solver.suggest), its joints projected into this view; an object, its mesh's
+poses fitted to their landmarks and depth, the first accepted worker's landmarks carried by
+them into this view. The fit takes CPU seconds and PyTorch, so it never runs in a request:
+the request queues a FITTED_KIND job (compute_fitted, once per view, frames and accepted
+work) and answers ``preparing`` until the job has stored its result in storage under a
+digest of what it rests on. Either way the visibility is suggested from this view's depth
+maps, and the result is kept in memory (CACHE_SIZE views) until the accepted work or the
+calibration changes. The assignment's check cells (worker.assist.checks) are planted into
+the suggested positions, as into every suggestion the page shows; the epipolar data is left
+as it is. Nothing the worker sees is written: a suggestion the worker accepts is saved as a
+keyframe with source "prefilled".
 
 Positions are image px (x right, y down) of the clip's frames first_frame..last_frame.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 import threading
 from collections import OrderedDict
-from collections.abc import Hashable
-from typing import Any
+from collections.abc import Callable, Hashable
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -30,24 +39,36 @@ from sqlalchemy.orm import Session
 from backend.annotation import service
 from backend.annotation.models import Assignment, Task
 from backend.annotation.tokens import TASK_SCOPE
-from backend.captures.models import Camera, Frame
+from backend.captures.assets import hand_model_for, load_mesh
+from backend.captures.calibration import hand_betas, version_in_use
+from backend.captures.models import Camera, Frame, Hand, SceneObject
 from backend.captures.service import camera_model, sequence_cameras
 from backend.config import get_settings
+from backend.db import session_scope
 from backend.errors import DexlabelError, StorageError, Unauthorized
+from backend.jobs.models import Job
+from backend.jobs.runner import ACTIVE
+from backend.jobs.service import enqueue_job
 from backend.labels import labelled_work, sequence_tasks, work_query
-from backend.storage import Storage
+from backend.storage import Storage, get_storage
 from worker.assist.checks import check_key, plant
 from worker.assist.prefill import (
     MIN_ACCEPTED_VIEWS,
     DepthReader,
     Prefill,
     ViewWork,
+    distinct_views,
     epipolar_guide,
     prefill,
     view_work,
 )
 from worker.assist.prefill import EpipolarView as EpipolarGuide
 
+# Other views with accepted work before a view is offered suggestions: one (the hand's model,
+# or the object's mesh, is fitted to its labels and depth).
+MIN_VIEWS = 1
+# The job that fits a target's model to the accepted work of one or two views (compute_fitted).
+FITTED_KIND = "fitted_suggestions"
 # Views whose suggestions are kept in memory (about 0.3 MB each for 21 points x 72 frames and 7
 # labelled views): every page load of a task reads them, and decoding the view's depth maps
 # is most of their cost (72 PNG frames at 640x480, 4-6 ms of CPU each).
@@ -84,15 +105,24 @@ class EpipolarView(BaseModel):
     xy: list[list[list[float] | None]]
 
 
+Method = Literal["triangulated", "fitted"]
+
+
 class SuggestionsRead(BaseModel):
     """Pre-fill suggestions for the assignment's view. ``available`` is false (with the
     ``reason``, and empty lists) until the target has accepted work in ``min_views`` other
-    views; ``views`` are the serials of the views with accepted work."""
+    views; ``views`` are the serials of the views with accepted work. ``method``: how the
+    positions were found: "triangulated" from 3 or more views, or "fitted" (the hand's model
+    or the object's mesh fitted to the labels and depth of 1 or 2 views; rougher, a person
+    checks every one). ``preparing``: the fit runs on the worker queue and its result is not
+    stored yet; ask again in a few seconds."""
 
     available: bool
     reason: str | None
     views: list[str]
     min_views: int
+    method: Method | None = None
+    preparing: bool = False
     first_frame: int
     last_frame: int
     points: list[PointSuggestions]
@@ -130,7 +160,7 @@ def _unavailable_reason(task: Task, serials: list[str]) -> str:
     have = ("there is none" if not serials else
             f"there is 1 (view {serials[0]})" if len(serials) == 1 else
             f"there are {len(serials)} (views {', '.join(serials)})")
-    return (f"suggestions need accepted work in {MIN_ACCEPTED_VIEWS} other views of this "
+    return (f"suggestions need accepted work in {MIN_VIEWS} other view of this "
             f"{_target_name(task)}; {have}")
 
 
@@ -191,11 +221,44 @@ def _cache_key(task: Task, first: int, last: int, accepted: list[Assignment],
     return (task.id, task.created_at, first, last, work, calibration)
 
 
+def _key_digest(key: Hashable) -> str:
+    """A stable name for a cache key's content (its repr: ids, versions, times, numbers)."""
+    return hashlib.sha256(repr(key).encode()).hexdigest()[:32]
+
+
+def fitted_storage_key(task_id: int, digest: str) -> str:
+    """Where the fit job stores a view's fitted suggestions for the work named by ``digest``."""
+    return f"suggestions/fitted/{task_id}/{digest}.npz"
+
+
+def fitted_job_key(task_id: int, first: int, last: int, digest: str) -> str:
+    """The fit job's key: one job per view, frames and accepted work."""
+    return f"{FITTED_KIND}:{task_id}:{first}:{last}:{digest}"
+
+
+def _save_prefill(storage: Storage, key: str, found: Prefill) -> None:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, xy=found.xy, visible=found.visible, known=found.known,
+                        views=found.views, points=found.points)
+    storage.put_bytes(key, buffer.getvalue(), "application/octet-stream")
+
+
+def _load_prefill(storage: Storage, key: str) -> Prefill | None:
+    """The stored fitted suggestions, None when there are none (yet)."""
+    if not storage.exists(key):
+        return None
+    with np.load(io.BytesIO(storage.get_bytes(key)), allow_pickle=False) as data:
+        return Prefill(xy=data["xy"], visible=data["visible"], known=data["known"],
+                       views=data["views"], points=data["points"])
+
+
 def _computed(session: Session, storage: Storage, task: Task, cameras: list[Camera],
               others: dict[int, Task], accepted: list[Assignment], first: int, last: int
-              ) -> tuple[Prefill, list[EpipolarGuide]]:
+              ) -> tuple[Prefill, list[EpipolarGuide]] | str:
     """The view's suggestions and epipolar guide from the accepted work, from the cache when
-    nothing they depend on changed."""
+    nothing they depend on changed. Fitted suggestions (fewer than MIN_ACCEPTED_VIEWS views)
+    are read from what the fit job stored; when it has stored none for this work, the
+    digest of the work it has to be run for."""
     key = _cache_key(task, first, last, accepted, cameras)
     with _CACHE_LOCK:
         if key in _CACHE:
@@ -203,17 +266,153 @@ def _computed(session: Session, storage: Storage, task: Task, cameras: list[Came
             return _CACHE[key]
     # The tracks, read only now; the work read with them is what the result is stored under.
     accepted = labelled_work(session, others)
+    key = _cache_key(task, first, last, accepted, cameras)
     view_of = {c.id: i for i, c in enumerate(cameras)}
     work = _dense_work(accepted, others, view_of, task, first, last)
     models, target = [camera_model(c) for c in cameras], view_of[task.camera_id]
-    result = (prefill(models, work, target,
-                      _depth_reader(session, storage, task.camera, first, last)),
-              epipolar_guide(models, work, target))
+    if len(distinct_views(work)) >= MIN_ACCEPTED_VIEWS:
+        found = prefill(models, work, target,
+                        _depth_reader(session, storage, task.camera, first, last))
+    else:
+        digest = _key_digest(key)
+        stored = _load_prefill(storage, fitted_storage_key(task.id, digest))
+        if stored is None:
+            return digest
+        found = stored
+    result = (found, epipolar_guide(models, work, target))
     with _CACHE_LOCK:
-        _CACHE[_cache_key(task, first, last, accepted, cameras)] = result
+        _CACHE[key] = result
         while len(_CACHE) > CACHE_SIZE:
             _CACHE.popitem(last=False)
     return result
+
+
+def _fit(session: Session, storage: Storage, task: Task, cameras: list[Camera],
+         work: list[ViewWork], first: int, last: int) -> Callable[[], Prefill]:
+    """Reads what fitting the hand model (or the object's poses) to the work of one or two
+    views needs (their labels and depth maps) and returns the fit, projected into the task's
+    view (worker.solver.suggest): it takes CPU seconds (about 16 s for 24 frames,
+    BENCHMARKS.md), so the fit job runs it with the session closed."""
+    models = [camera_model(c) for c in cameras]
+    target = [c.id for c in cameras].index(task.camera_id)
+    reader = _depth_reader(session, storage, task.camera, first, last)
+    depth = {}
+    for view in distinct_views(work):
+        read = _depth_reader(session, storage, cameras[view], first, last)
+        if read is not None:
+            depth[view] = np.stack([read(f) for f in range(last - first + 1)])
+    if task.kind == "hand":
+        hand = session.get_one(Hand, task.hand_id)
+        side = hand.side
+        betas = hand_betas(version_in_use(session, task.sequence_id), hand.index, hand.betas)
+        shape = np.zeros(10) if betas is None else np.asarray(betas, float)
+
+        def fit_hand() -> Prefill:
+            # PyTorch loads here, in the job's process, never with the API.
+            from worker.solver.suggest import fit_hand_joints, fitted_prefill
+
+            points = fit_hand_joints(models, work, depth, side, shape, hand_model_for(side))
+            return fitted_prefill(models, work, target, points, reader)
+
+        return fit_hand
+    obj = session.get_one(SceneObject, task.object_id)
+    mesh = load_mesh(storage, obj.mesh_key)
+    # The given pose is of frame 0: it starts a range that starts there.
+    pose = None if obj.initial_pose is None or first else np.asarray(obj.initial_pose)
+    num_points = task.num_points
+
+    def fit_object() -> Prefill:
+        from worker.solver.suggest import fit_object_points, fitted_prefill
+
+        try:
+            points, _ = fit_object_points(models, work, depth, mesh.vertices, mesh.faces, pose)
+        except ValueError:  # no pose at the range's first frame could be fitted
+            points = np.full((last - first + 1, num_points, 3), np.nan)
+        return fitted_prefill(models, work, target, points, reader)
+
+    return fit_object
+
+
+def _view_inputs(session: Session, task: Task) -> tuple[list[Camera], dict[int, Task]]:
+    """The sequence's cameras and the target's tasks of the other views."""
+    cameras = sequence_cameras(session, task.sequence_id)
+    others = {t.id: t for t in sequence_tasks(session, task.sequence_id, task.target_key)
+              if t.camera_id != task.camera_id}
+    return cameras, others
+
+
+def compute_fitted(task_id: int, first: int, last: int, storage: Storage | None = None
+                   ) -> dict[str, Any]:
+    """The fit job (FITTED_KIND): fit the target's model to the accepted work of one or two
+    other views and store the view's suggestions under the digest of that work (idempotent:
+    work already fitted is left as stored, a second run writes the same file)."""
+    storage = storage or get_storage()
+    with session_scope() as session:
+        task = service.get_task_or_raise(session, task_id)
+        cameras, others = _view_inputs(session, task)
+        accepted = labelled_work(session, others)
+        digest = _key_digest(_cache_key(task, first, last, accepted, cameras))
+        key = fitted_storage_key(task_id, digest)
+        view_of = {c.id: i for i, c in enumerate(cameras)}
+        work = _dense_work(accepted, others, view_of, task, first, last)
+        views = len(distinct_views(work))
+        if storage.exists(key) or views >= MIN_ACCEPTED_VIEWS:
+            return {"key": key, "message": f"task {task_id} frames {first}-{last}: nothing "
+                                           f"to fit ({views} views, stored: "
+                                           f"{storage.exists(key)})"}
+        fit = _fit(session, storage, task, cameras, work, first, last)
+    _save_prefill(storage, key, fit())
+    return {"key": key, "message": f"task {task_id} frames {first}-{last}: fitted to "
+                                   f"{views} view{'s' if views > 1 else ''}"}
+
+
+def _fit_queued(session: Session, task: Task, first: int, last: int, digest: str
+                ) -> tuple[str, bool]:
+    """Queue the fit job for this work unless it is queued, running or done already; the
+    reason to show, and whether the suggestions are on their way."""
+    model = "the hand model" if task.kind == "hand" else "the object's mesh"
+    key = fitted_job_key(task.id, first, last, digest)
+    job = session.scalars(select(Job).where(Job.key == key)).one_or_none()
+    if job is not None and job.status == "failed":
+        error = (job.error or "").strip().splitlines()[-1:] or ["unknown error"]
+        return f"suggestions from {model} could not be prepared: {error[0]}", False
+    if job is None or job.status not in ACTIVE:
+        enqueue_job(session, FITTED_KIND, key,
+                    {"task_id": task.id, "first_frame": first, "last_frame": last})
+    return (f"suggestions from {model} are being prepared; they will appear shortly",
+            True)
+
+
+def queue_fits(session: Session, storage: Storage, sequence_id: int, target_key: str) -> int:
+    """Queue the fit job (whole clip) of every view of the target that no worker holds, has
+    submitted or has done and whose suggestions are fitted from the accepted work and not
+    stored yet, so that they are usually ready before its next worker asks (QC calls this once
+    it has decided); how many views are being prepared."""
+    preparing = 0
+    tasks = sequence_tasks(session, sequence_id, target_key)
+    # Views someone holds, has submitted or has done are not prepared ahead (a worker who opens
+    # one asks, and the request queues the fit): the CPU goes to views still waiting for one.
+    held = set(session.scalars(select(Assignment.task_id).where(
+        Assignment.task_id.in_([t.id for t in tasks]),
+        Assignment.status.in_(("working", "submitted", "approved")))))
+    for task in tasks:
+        if task.id in held:
+            continue
+        cameras, others = _view_inputs(session, task)
+        view_of = {c.id: i for i, c in enumerate(cameras)}
+        accepted = list(session.scalars(work_query(others, with_tracks=False)))
+        if not accepted:
+            continue
+        last = task.sequence.num_frames - 1
+        accepted = labelled_work(session, others)
+        work = _dense_work(accepted, others, view_of, task, 0, last)
+        if len(distinct_views(work)) >= MIN_ACCEPTED_VIEWS:
+            continue
+        digest = _key_digest(_cache_key(task, 0, last, accepted, cameras))
+        if storage.exists(fitted_storage_key(task.id, digest)):
+            continue
+        preparing += _fit_queued(session, task, 0, last, digest)[1]
+    return preparing
 
 
 def clear_cache() -> None:
@@ -230,19 +429,23 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     task = service.get_task_or_raise(session, assignment.task_id)
     num_frames, num_points = task.sequence.num_frames, task.num_points
     first, last = frame_range(first_frame, last_frame, num_frames)
-    camera_rows = sequence_cameras(session, task.sequence_id)
+    camera_rows, others = _view_inputs(session, task)
     view_of = {c.id: i for i, c in enumerate(camera_rows)}
-    others = {t.id: t for t in sequence_tasks(session, task.sequence_id, task.target_key)
-              if t.camera_id != task.camera_id}
     accepted = list(session.scalars(work_query(others, with_tracks=False)))
     views = sorted({view_of[others[a.task_id].camera_id] for a in accepted})
     serials = [camera_rows[v].serial for v in views]
-    if len(views) < MIN_ACCEPTED_VIEWS:
-        return SuggestionsRead(available=False, reason=_unavailable_reason(task, serials),
-                               views=serials, min_views=MIN_ACCEPTED_VIEWS, first_frame=first,
+
+    def unavailable(reason: str, preparing: bool = False) -> SuggestionsRead:
+        return SuggestionsRead(available=False, reason=reason, views=serials,
+                               min_views=MIN_VIEWS, preparing=preparing, first_frame=first,
                                last_frame=last, points=[], epipolar=[])
-    found, guide = _computed(session, storage, task, camera_rows, others, accepted, first,
-                             last)
+
+    if len(views) < MIN_VIEWS:
+        return unavailable(_unavailable_reason(task, serials))
+    computed = _computed(session, storage, task, camera_rows, others, accepted, first, last)
+    if isinstance(computed, str):
+        return unavailable(*_fit_queued(session, task, first, last, computed))
+    found, guide = computed
     # Check cells go wherever the page shows a suggestion as visible (unknown included).
     shown = np.isfinite(found.xy).all(axis=-1) & ~(found.known & ~found.visible)
     xy = plant(check_key(get_settings().signing_key), assignment.id,
@@ -256,7 +459,8 @@ def suggestions(session: Session, storage: Storage, assignment: Assignment,
     epipolar = [EpipolarView(
         serial=camera_rows[g.view].serial, F=g.fundamental.tolist(),
         xy=[_xy_lists(g.xy[:, p]) for p in range(num_points)]) for g in guide]
+    method: Method = "triangulated" if len(views) >= MIN_ACCEPTED_VIEWS else "fitted"
     return SuggestionsRead(available=True, reason=None, views=serials,
-                           min_views=MIN_ACCEPTED_VIEWS,
+                           min_views=MIN_VIEWS, method=method,
                            first_frame=first, last_frame=last, points=points,
                            epipolar=epipolar)

@@ -33,12 +33,14 @@ from backend.jobs.models import Job
 from backend.jobs.runner import ACTIVE
 from backend.jobs.service import enqueue_job, mark_waiting
 from backend.labels import accepted_digest
+from backend.labels.suggestions import queue_fits
 from backend.quality import flows as quality_flows
 from backend.quality.models import QCReport
 from backend.quality.service import qc_key, record_decision, request_landmark_qc, request_qc
 from backend.rig.service import adopt
 from backend.solve.models import SolveRun
 from backend.solve.service import request_solve
+from backend.storage import get_storage
 
 CONFIRM = "confirm"
 
@@ -145,6 +147,9 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
     result = quality_flows.run_qc(sequence_id, target_key)
     with session_scope() as session:
         result["solve"] = solve_if_ready(session, sequence_id)
+        # Views whose suggestions are fitted from the work now accepted: prepared ahead.
+        result["suggestions_preparing"] = queue_fits(session, get_storage(), sequence_id,
+                                                     target_key)
     result["message"] = _qc_message(target_key, result)
     return result
 

@@ -317,6 +317,17 @@ test("suggestions: a quiet reason, or prefilled keyframes around the hand-set on
   assert.equal(assist.layer(3, 0).suggestion, null, "a used suggestion is no longer a ghost");
 });
 
+test("suggestions fitted from one view say so", async () => {
+  const xy = Array.from({ length: 4 }, () => [100, 200]);
+  const { assist } = newAssist(() => null, { suggestions: {
+    available: true, reason: null, views: ["cam-a"], min_views: 1, method: "fitted",
+    points: [{ point: 0, xy, visible: [true, true, false, null] }], epipolar: [] } });
+  await assist.loadSuggestions();
+  assert.match(assist.suggestNote,
+    /^Suggestions from 1 other view, a model fitted to it: check each \(magenta ring\)/);
+  assert.equal(assist.suggestions.size, 1);
+});
+
 test("Track all: Accept writes every point in one undo step and one change", async () => {
   const { store, assist, calls } = newAssist((p, f) => [10 * f + p, 50 + p]);
   for (const p of [0, 1]) {
@@ -475,4 +486,38 @@ test("O on a tracked frame keeps every tracked keyframe on both sides; O again t
   assert.deepEqual([store.keyframeAt(0, 5).visible, store.keyframeAt(0, 5).x, tracked()],
     [true, 50, 8]);
   assert.equal(calls.length, 1);
+});
+
+test("suggestions being prepared: the reason shows, then the page asks again", async () => {
+  const xy = Array.from({ length: 4 }, () => [100, 200]);
+  const answers = [
+    { available: false, preparing: true, views: ["cam-a"], points: [], epipolar: [],
+      reason: "suggestions from the hand model are being prepared; they will appear shortly" },
+    { available: false, preparing: true, views: ["cam-a"], points: [], epipolar: [],
+      reason: "suggestions from the hand model are being prepared; they will appear shortly" },
+    { available: true, reason: null, views: ["cam-a"], min_views: 1, method: "fitted",
+      points: [{ point: 0, xy, visible: [true, true, true, true] }], epipolar: [] },
+  ];
+  const notes = [];
+  let asked = 0;
+  const api = { async suggestions() { return answers[Math.min(asked++, answers.length - 1)]; } };
+  const store = new AnnotationStore({ numPoints: 2, numFrames: 4, width: 640, height: 480 });
+  const assist = new Assist({ store, api, editable: () => true,
+    where: () => ({ frame: 0, active: 0 }), onChange: () => notes.push(assist.suggestNote),
+    suggestPollMs: 1 });
+  await assist.loadSuggestions();
+  assert.equal(asked, 3);
+  assert.equal(notes[0], answers[0].reason);
+  assert.match(assist.suggestNote, /^Suggestions from 1 other view, a model fitted to it/);
+  assert.equal(assist.suggestions.size, 1);
+
+  // A job that never finishes: the page stops asking after its limit and says so.
+  let polls = 0;
+  const stuck = new Assist({ store, api: { async suggestions() { polls++; return answers[0]; } },
+    editable: () => true, where: () => ({ frame: 0, active: 0 }), onChange: () => {},
+    suggestPollMs: 1, suggestPollLimitMs: 20 });
+  await stuck.loadSuggestions();
+  assert.ok(polls >= 2 && polls < 100, String(polls));
+  assert.match(stuck.suggestNote, /taking longer than expected/);
+  assert.equal(stuck.suggestions.size, 0);
 });

@@ -39,10 +39,11 @@ from worker.tracks.sources import decided_mask
 
 # Fewest other views with decided work on a point before it is suggested: two rays fix it.
 MIN_VIEWS = 2
-# Fewest other views with accepted work before a view is offered suggestions at all. QC judges
-# a point only where three views decide it (each view's labels against the other two), and
-# pre-filled positions are never evidence; so the first three views are labelled without
-# pre-fill, and the work the suggestions come from has been judged.
+# Fewest other views with accepted work before a view's suggestions are triangulated. QC
+# judges a point only where three views decide it (each view's labels against the other two),
+# so from three on the work the suggestions come from has been judged; with one or two the
+# hand model (or the object's mesh) fitted to that work suggests instead
+# (worker.solver.suggest). Pre-filled positions are never evidence either way.
 MIN_ACCEPTED_VIEWS = 3
 # Reprojection error (px) above which a label is an outlier of the triangulation: five times
 # the 2 px per-axis noise of a careful label at 640x480, as QC's consensus (HandOptions).

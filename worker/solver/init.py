@@ -44,9 +44,17 @@ def kabsch(source: np.ndarray, target: np.ndarray, weight: np.ndarray
 
 def initial_hand(problem: Problem, frames: np.ndarray, iterations: int = 10) -> np.ndarray:
     """pose_m (B, 51) for frames (B,), from the triangulated keypoints."""
-    subject = problem.require_subject()
     points, ok = triangulate(problem.cameras, problem.keypoints[:, frames],
                              problem.gamma[:, frames], problem.settings.robust_scale_px)
+    return hand_from_joints(problem, points, ok, iterations)
+
+
+def hand_from_joints(problem: Problem, points: np.ndarray, ok: np.ndarray,
+                     iterations: int = 10) -> np.ndarray:
+    """pose_m (B, 51) fitted to 3D joints: points (B, 21, 3) world metres, ok (B, 21) bool
+    where a joint is known (a frame needs 3 of them, the palm's or any)."""
+    subject = problem.require_subject()
+    count = len(points)
     zero = torch.zeros(1, 51, dtype=torch.float64, device=problem.device)
     rest = subject.pose(zero)[0][0].cpu().numpy()  # (21, 3) mean hand, identity rotation
     palm = list(PALM_JOINTS)
@@ -55,11 +63,11 @@ def initial_hand(problem: Problem, frames: np.ndarray, iterations: int = 10) -> 
     few = weight.sum(1) < 3
     weight[few] = 0.0
     w_all = np.concatenate([weight, np.where(few[:, None], ok, 0.0)], axis=1)
-    src = np.concatenate([rest[palm], rest])[None].repeat(len(frames), 0)
+    src = np.concatenate([rest[palm], rest])[None].repeat(count, 0)
     tgt = np.nan_to_num(np.concatenate([points[:, palm], points], axis=1))
     rot, trans = kabsch(src, tgt, w_all)
     wrist = subject.rest_joints[0].cpu().numpy()
-    pose = np.zeros((len(frames), 51))
+    pose = np.zeros((count, 51))
     pose[:, :3] = matrix_to_axis_angle(rot)
     pose[:, 48:] = trans + rot @ wrist - wrist
     target = problem.tensor(np.nan_to_num(points))

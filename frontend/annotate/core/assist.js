@@ -40,6 +40,10 @@ const TOGGLE_LABEL = "toggle occluded";
 
 /** Quiet time (ms) after the last edit of a drag before a re-track is asked for. */
 const RETRACK_DELAY_MS = 300;
+/** While the server prepares fitted suggestions (a job on its worker queue), the page asks
+ * again this often (ms), for at most SUGGEST_POLL_LIMIT_MS. */
+const SUGGEST_POLL_MS = 4000;
+const SUGGEST_POLL_LIMIT_MS = 180000;
 
 /**
  * @typedef {import("./proposals.js").PointProposal} PointProposal
@@ -65,14 +69,18 @@ export class Assist {
    * @param {() => {frame: number, active: number}} o.where  the editor's frame and point
    * @param {() => void} o.onChange  ghosts, lines or status changed: redraw
    * @param {number} [o.retrackDelayMs]
+   * @param {number} [o.suggestPollMs]  @param {number} [o.suggestPollLimitMs]
    */
-  constructor({ store, api, editable, where, onChange, retrackDelayMs = RETRACK_DELAY_MS }) {
+  constructor({ store, api, editable, where, onChange, retrackDelayMs = RETRACK_DELAY_MS,
+    suggestPollMs = SUGGEST_POLL_MS, suggestPollLimitMs = SUGGEST_POLL_LIMIT_MS }) {
     this.store = store;
     this.api = api;
     this.editable = editable;
     this.where = where;
     this.onChange = onChange;
     this.retrackDelayMs = retrackDelayMs;
+    this.suggestPollMs = suggestPollMs;
+    this.suggestPollLimitMs = suggestPollLimitMs;
     /** @type {null|{points: PointProposal[], counts: {tracked: number, total: number}}} */
     this.proposals = null;
     /** The cells viewed since the proposals were shown (Enter accepts only those). */
@@ -305,21 +313,42 @@ export class Assist {
 
   // ---- suggestions ------------------------------------------------------------------------
 
-  /** Reads the task's suggestions once (edit mode). */
+  /**
+   * Reads the task's suggestions (edit mode). While the server says they are being prepared
+   * (fitted on its worker queue), shows its reason and asks again every few seconds, for a
+   * few minutes at most.
+   */
   async loadSuggestions() {
     let answer;
-    try {
-      answer = await this.api.suggestions();
-    } catch (err) {
-      this.suggestNote = `No suggestions: ${reason(err)}`;
+    const started = Date.now();
+    for (;;) {
+      try {
+        answer = await this.api.suggestions();
+      } catch (err) {
+        this.suggestNote = `No suggestions: ${reason(err)}`;
+        this.onChange();
+        return;
+      }
+      if (!answer.preparing) break;
+      if (Date.now() - started >= this.suggestPollLimitMs) {
+        this.suggestNote = "No suggestions: they are taking longer than expected to prepare; " +
+          "reload the page later to see them.";
+        this.onChange();
+        return;
+      }
+      this.suggestNote = answer.reason || "Suggestions are being prepared.";
       this.onChange();
-      return;
+      await new Promise((resolve) => setTimeout(resolve, this.suggestPollMs));
     }
     this.epipolar = Array.isArray(answer.epipolar) ? answer.epipolar : [];
     if (answer.available) {
       for (const s of answer.points || []) this.suggestions.set(s.point, s);
       const n = Array.isArray(answer.views) ? answer.views.length : Number(answer.views) || 0;
-      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"} ` +
+      // Fitted from one or two views (the hand model, or the object's mesh, on their labels
+      // and depth): rougher than triangulated.
+      const how = answer.method === "fitted"
+        ? `, a model fitted to ${n === 1 ? "it" : "them"}: check each` : "";
+      this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"}${how} ` +
         "(magenta ring): U uses them for this point, Shift+U for every point.";
     } else {
       this.suggestNote = answer.reason || "No suggestions for this task yet.";
