@@ -8,6 +8,9 @@ framed (as the worker portal frames it, like MTurk): positions are then offset b
 from __future__ import annotations
 
 import hashlib
+import os
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -25,6 +28,21 @@ if TYPE_CHECKING:
     from tests.browser.conftest import LiveServer
 
 Target = Page | Frame
+
+@contextmanager
+def queue_worker(server: LiveServer, log: Path) -> Iterator[None]:
+    """A `dexlabel worker` process on the live server's database and queue while the block
+    runs (its output in ``log``)."""
+    with log.open("w") as log_file:
+        proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
+                                env={**os.environ, **server.env},
+                                stdout=log_file, stderr=subprocess.STDOUT)
+        try:
+            yield
+        finally:
+            proc.terminate()
+            proc.wait(timeout=20)
+
 
 READY = "window.__dexlabel && (window.__dexlabel.ready || window.__dexlabel.error)"
 

@@ -12,10 +12,7 @@ database and queue) runs.
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,6 +25,7 @@ from playwright.sync_api import Page, expect
 from backend.captures.truth import CaptureTruth
 from backend.crowd.simulate import WORKER_PASSWORD, simulate
 from tests.browser.conftest import ADMIN_EMAIL, ADMIN_PASSWORD, LiveServer
+from tests.browser.helpers import queue_worker as consumer
 from tests.browser.helpers import wait_overlay_shows
 from worker.synth.annotators import annotate
 
@@ -43,16 +41,8 @@ REWARD, FEE = 0.40, 0.08  # the HITs' reward and MTurk's 20% fee on it (dollars)
 @pytest.fixture(scope="module")
 def queue_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
     """A queue consumer on the live server's database and queue (confirm, QC, solve jobs)."""
-    log = output_dir / "admin-worker.log"
-    with log.open("w") as log_file:
-        proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
-                                env={**os.environ, **live_server.env},
-                                stdout=log_file, stderr=subprocess.STDOUT)
-        try:
-            yield
-        finally:
-            proc.terminate()
-            proc.wait(timeout=20)
+    with consumer(live_server, output_dir / "admin-worker.log"):
+        yield
 
 
 def _submit(server: LiveServer, task: dict, worker: str, profile: str,

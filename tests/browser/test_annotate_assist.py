@@ -6,9 +6,6 @@ joint; before three other views are accepted, the reason why not."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -25,6 +22,7 @@ from tests.browser.helpers import (
     grab_and_drop,
     open_task,
     pan_to_centre,
+    queue_worker,
     screens,
     select_point,
     server_keyframes,
@@ -338,16 +336,8 @@ def test_suggestions_from_three_accepted_views_are_shown_used_and_lines_cross_th
 @pytest.fixture
 def fit_worker(live_server: LiveServer, output_dir: Path) -> Iterator[None]:
     """A queue consumer on the live server's database and queue: it runs the fit jobs."""
-    log = output_dir / "assist-fit-worker.log"
-    with log.open("w") as log_file:
-        proc = subprocess.Popen([sys.executable, "-m", "backend.cli", "worker", "--workers", "1"],
-                                env={**os.environ, **live_server.env},
-                                stdout=log_file, stderr=subprocess.STDOUT)
-        try:
-            yield
-        finally:
-            proc.terminate()
-            proc.wait(timeout=20)
+    with queue_worker(live_server, output_dir / "assist-fit-worker.log"):
+        yield
 
 
 def test_suggestions_from_two_accepted_views_are_fitted_and_the_page_says_so(
