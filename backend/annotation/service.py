@@ -75,9 +75,14 @@ def create_tasks(session: Session, storage: Storage, sequence_id: int) -> list[T
 
 def list_tasks(session: Session, sequence_id: int | None = None, limit: int | None = None,
                offset: int = 0) -> list[Task]:
-    """Tasks in id order (of one sequence), with their cameras and sequences loaded; a page
-    of them when ``limit`` is given."""
-    stmt = (select(Task).options(selectinload(Task.camera), selectinload(Task.sequence))
+    """Tasks in id order (of one sequence), with their cameras and sequences loaded (each
+    sequence's cameras, objects and hands too: the listing names a task's view and target);
+    a page of them when ``limit`` is given."""
+    # A task's camera is one of its sequence's, found among them without a statement of its own.
+    sequence = selectinload(Task.sequence)
+    stmt = (select(Task).options(sequence.selectinload(Sequence.cameras),
+                                 sequence.selectinload(Sequence.objects),
+                                 sequence.selectinload(Sequence.hands))
             .order_by(Task.id).offset(offset).limit(limit))
     if sequence_id is not None:
         stmt = stmt.where(Task.sequence_id == sequence_id)

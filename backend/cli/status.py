@@ -112,7 +112,7 @@ def status_command(
         show_default=False)] = None,
     json: Annotated[bool, typer.Option("--json", help="print the progress API's JSON")] = False,
 ) -> None:
-    """Where the work stands: tasks, HITs, assignments, solve, cost per labelled 3D frame.
+    """Where the work stands, and its cost per labelled 3D frame.
 
     Each view x target task's state (open, published, submitted, in review, accepted), HIT
     and assignment counts, the current solve, and per target the actions, seconds and money
