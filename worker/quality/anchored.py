@@ -43,9 +43,11 @@ from worker.quality.object_views import (
     SEEN_SURFACE_M,
     SHOWN_SHARE,
     PixelMap,
+    at_reading,
     object_shown,
     point_visibility,
     ray_hits,
+    readings_m,
     surface_nearest,
 )
 from worker.quality.solved_scene import SolvedObjects
@@ -88,19 +90,7 @@ def _ray(camera: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return camera.T_cam_to_world[:, 3], dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
 
 
-def _reading_m(depth: DepthMaps, camera: CameraModel, frame: int, xy: np.ndarray,
-               image_map: PixelMap | None) -> float:
-    """The depth camera's reading (m) where the view shows model pixel xy (2,) at ``frame``;
-    NaN where it reads nothing."""
-    pix = image_map(xy[None])[0] if image_map is not None else xy
-    row, col = int(np.rint(pix[1])), int(np.rint(pix[0]))
-    if not (0 <= row < camera.height and 0 <= col < camera.width):
-        return float("nan")
-    value = float(depth[(np.array([frame]), np.array([row]), np.array([col]))][0]) / 1000.0
-    return value if value > 0 else float("nan")
-
-
-def _seen_point(camera: CameraModel, xy: np.ndarray, hit: np.ndarray, tri: np.ndarray,
+def _seen_point(camera: CameraModel, hit: np.ndarray, tri: np.ndarray,
                 reading: float) -> np.ndarray:
     """The world point (3,) a visible click marks: the mesh hit ``hit`` of its ray, unless the
     depth camera sees a surface well in front of that hit (more than DEPTH_MARGIN_M) that
@@ -110,9 +100,7 @@ def _seen_point(camera: CameraModel, xy: np.ndarray, hit: np.ndarray, tri: np.nd
     reading puts it."""
     if not np.isfinite(reading) or camera.depth_of(hit) - reading <= DEPTH_MARGIN_M:
         return hit
-    origin, dirs = _ray(camera, xy[None])
-    seen = origin + dirs[0] * (reading / float(dirs[0] @ camera.T_cam_to_world[:, 2]))
-    nearest, gap = surface_nearest(seen, tri)
+    nearest, gap = surface_nearest(at_reading(camera, hit, reading), tri)
     return nearest if gap <= SEEN_SURFACE_M else hit
 
 
@@ -137,9 +125,10 @@ def _candidates(camera: CameraModel, xy: np.ndarray, ok: np.ndarray, scene: Solv
         if hit.size:
             world = origin + dist[hit[0]] * dirs[hit[0]]
             if depth is not None:
-                world = _seen_point(camera, xy[f] + _SNAPS[hit[0]], world, tri,
-                                    _reading_m(depth, camera, int(f), xy[f] + _SNAPS[hit[0]],
-                                               image_map))
+                click = xy[f] + _SNAPS[hit[0]]
+                seen_at = image_map(click[None]) if image_map is not None else click[None]
+                world = _seen_point(camera, world, tri,
+                                    float(readings_m(depth, camera, np.array([f]), seen_at)[0]))
             pose = scene.poses[target, f]
             out.append(pose[:, :3].T @ (world - pose[:, 3]))
     return np.array(out).reshape(-1, 3)

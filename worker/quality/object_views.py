@@ -121,21 +121,35 @@ def _reads_a_mesh(depth: DepthMaps, camera: CameraModel, frames: np.ndarray, wor
     out = np.zeros(len(frames), bool)
     if not len(frames):
         return out
-    rows = np.rint(pix[:, 1]).astype(int).clip(0, camera.height - 1)
-    cols = np.rint(pix[:, 0]).astype(int).clip(0, camera.width - 1)
-    reading = depth[(frames, rows, cols)] / 1000.0
-    origin = camera.T_cam_to_world[:, 3]
+    reading = readings_m(depth, camera, frames, pix)
     for i, f in enumerate(frames):
-        if reading[i] <= 0:
+        if not np.isfinite(reading[i]):
             continue
-        ray = world[i] - origin
-        seen = origin + ray * (reading[i] / camera.depth_of(world[i]))
+        seen = at_reading(camera, world[i], float(reading[i]))
         for index in range(len(scene.vertices)):
             tri = scene.triangles(index, int(f))
             if np.isfinite(tri).all() and surface_nearest(seen, tri)[1] <= SEEN_SURFACE_M:
                 out[i] = True
                 break
     return out
+
+
+def readings_m(depth: DepthMaps, camera: CameraModel, frames: np.ndarray,
+               pix: np.ndarray) -> np.ndarray:
+    """(N,) the depth camera's reading (m) at each pixel (N, 2) of frames (N,) int; NaN where
+    it reads nothing or the pixel is outside the image."""
+    rows, cols = np.rint(pix[:, 1]).astype(int), np.rint(pix[:, 0]).astype(int)
+    inside = (rows >= 0) & (rows < camera.height) & (cols >= 0) & (cols < camera.width)
+    reading = depth[(frames, rows.clip(0, camera.height - 1),
+                     cols.clip(0, camera.width - 1))] / 1000.0
+    return np.where(inside & (reading > 0), reading, np.nan)
+
+
+def at_reading(camera: CameraModel, world: np.ndarray, reading: float) -> np.ndarray:
+    """The point (3,) on the camera's ray through world point (3,) at depth ``reading`` (m):
+    where the depth camera puts what it sees there."""
+    origin = camera.T_cam_to_world[:, 3]
+    return origin + (world - origin) * (reading / camera.depth_of(world))
 
 
 def surface_nearest(point: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, float]:
