@@ -41,6 +41,20 @@ def _truth(capture: Path, serial: str, frames: int) -> tuple[np.ndarray, np.ndar
     return joint_2d, hand_visibility(joint_2d, seg)
 
 
+def _fast_hand(client: TestClient, admin_headers: dict, fast_capture: Path
+               ) -> tuple[str, int, np.ndarray, np.ndarray]:
+    """The fast capture imported, a hand task's assignment token for worker W1, its frame count
+    and its view's true joints (F, 21, 2) px and visibility (F, 21)."""
+    seq_id = import_path(fast_capture)[0].sequence_id
+    task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",
+                                       headers=admin_headers).json() if t["kind"] == "hand")
+    token = client.post(f"/api/tasks/{task['id']}/assignments", json={"worker_id": "W1"},
+                        headers=admin_headers).json()["token"]
+    frames = task["num_frames"]
+    truth, visible = _truth(fast_capture, task["serial"], frames)
+    return token, frames, truth, visible
+
+
 def _body(truth: np.ndarray, keys: list[int], size: tuple[int, int] = (640, 480),
           **extra: int) -> dict:
     """Keyframes on the true joints at ``keys``; a joint outside the image is sent occluded
@@ -84,13 +98,7 @@ def test_accepted_proposals_are_closer_to_the_true_joints_than_interpolation(
     from worker.synth.annotators import annotate
     from worker.tracks.interpolate import dense_track
 
-    seq_id = import_path(fast_capture)[0].sequence_id
-    task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",
-                                       headers=admin_headers).json() if t["kind"] == "hand")
-    token = client.post(f"/api/tasks/{task['id']}/assignments", json={"worker_id": "W1"},
-                        headers=admin_headers).json()["token"]
-    frames = task["num_frames"]
-    truth, visible = _truth(fast_capture, task["serial"], frames)
+    token, frames, truth, visible = _fast_hand(client, admin_headers, fast_capture)
     work = annotate(truth, visible, (640, 480), "careful", np.random.default_rng(3),
                     follow_motion=False)
     body = {"tracks": [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]}
@@ -174,13 +182,7 @@ def test_a_point_keyed_once_is_followed_to_where_the_checks_stop_it(
     backward from the last frame: every held frame lies between the keyframe and the stop the
     answer reports, and the held positions are on the true joints (median under 2 px; the
     assignment's check cells are 15 px off on purpose)."""
-    seq_id = import_path(fast_capture)[0].sequence_id
-    task = next(t for t in client.post(f"/api/sequences/{seq_id}/tasks",
-                                       headers=admin_headers).json() if t["kind"] == "hand")
-    token = client.post(f"/api/tasks/{task['id']}/assignments", json={"worker_id": "W1"},
-                        headers=admin_headers).json()["token"]
-    frames = task["num_frames"]
-    truth, visible = _truth(fast_capture, task["serial"], frames)
+    token, frames, truth, visible = _fast_hand(client, admin_headers, fast_capture)
     for key, direction in ((0, "forward"), (frames - 1, "backward")):
         points = [p for p in range(21) if visible[key, p]]
         body = _body(truth[:, points], [key])
