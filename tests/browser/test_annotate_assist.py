@@ -357,7 +357,7 @@ def test_suggestions_from_two_accepted_views_are_fitted_and_the_page_says_so(
         "suggestions from the hand model are being prepared; they will appear shortly")
     _screens(page, output_dir, "assist-fitted-preparing")
     expect(page.locator("#suggest-note")).to_contain_text(
-        "Suggestions from 2 other views, a model fitted to them: check each",
+        "Suggestions from 2 other views, fitted: check each",
         timeout=150_000)
     assert page.evaluate("window.__dexlabel.assist.suggestions.size") == 21
     truth, _ = CaptureTruth(prefill_capture["capture"]).view(task["serial"], CLIP_FRAMES)

@@ -304,7 +304,7 @@ test("suggestions: a quiet reason, or prefilled keyframes around the hand-set on
     available: true, reason: null, views: ["cam-a", "cam-b", "cam-c"], min_views: 2,
     points: [{ point: 0, xy, visible }], epipolar: [] } });
   await assist.loadSuggestions();
-  assert.match(assist.suggestNote, /^Suggestions from 3 other views \(magenta ring\): U uses/);
+  assert.match(assist.suggestNote, /^Suggestions from 3 other views \(magenta rings\)\. U: this point/);
   store.placePoint(0, 0, 90, 190);
   assert.deepEqual(assist.layer(3, 0).suggestion, { point: 0, xy: [103, 200], visible: true });
   where.active = 0;
@@ -324,7 +324,7 @@ test("suggestions fitted from one view say so", async () => {
     points: [{ point: 0, xy, visible: [true, true, false, null] }], epipolar: [] } });
   await assist.loadSuggestions();
   assert.match(assist.suggestNote,
-    /^Suggestions from 1 other view, a model fitted to it: check each \(magenta ring\)/);
+    /^Suggestions from 1 other view, fitted: check each \(magenta rings\)/);
   assert.equal(assist.suggestions.size, 1);
 });
 
@@ -508,7 +508,7 @@ test("suggestions being prepared: the reason shows, then the page asks again", a
   await assist.loadSuggestions();
   assert.equal(asked, 3);
   assert.equal(notes[0], answers[0].reason);
-  assert.match(assist.suggestNote, /^Suggestions from 1 other view, a model fitted to it/);
+  assert.match(assist.suggestNote, /^Suggestions from 1 other view, fitted: check each/);
   assert.equal(assist.suggestions.size, 1);
 
   // A job that never finishes: the page stops asking after its limit and says so.

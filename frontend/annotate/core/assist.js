@@ -346,10 +346,9 @@ export class Assist {
       const n = Array.isArray(answer.views) ? answer.views.length : Number(answer.views) || 0;
       // Fitted from one or two views (the hand model, or the object's mesh, on their labels
       // and depth): rougher than triangulated.
-      const how = answer.method === "fitted"
-        ? `, a model fitted to ${n === 1 ? "it" : "them"}: check each` : "";
+      const how = answer.method === "fitted" ? ", fitted: check each" : "";
       this.suggestNote = `Suggestions from ${n} other ${n === 1 ? "view" : "views"}${how} ` +
-        "(magenta ring): U uses them for this point, Shift+U for every point.";
+        "(magenta rings). U: this point; Shift+U: every point.";
     } else {
       this.suggestNote = answer.reason || "No suggestions for this task yet.";
     }
