@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from json import dumps
 from typing import Annotated
 
 import typer
@@ -110,7 +111,8 @@ def status_command(
     sequence: Annotated[str | None, typer.Argument(
         help="sequence id or SUBJECT/NAME (default: one line per sequence)",
         show_default=False)] = None,
-    json: Annotated[bool, typer.Option("--json", help="print the progress API's JSON")] = False,
+    json: Annotated[bool, typer.Option(
+        "--json", help="print the progress API's JSON (with a sequence: and its frame_costs)")] = False,
 ) -> None:
     """Where the work stands, and its cost per labelled 3D frame.
 
@@ -130,7 +132,9 @@ def status_command(
         found = sequences_progress(session, [sequence_id])
         costs = frame_costs(session, [sequence_id])[0]
     if json:
-        typer.echo(found[0].model_dump_json(indent=2))
+        # The progress API's JSON, with the cost per labelled 3D frame the table shows.
+        body = found[0].model_dump(mode="json") | {"frame_costs": costs.model_dump(mode="json")}
+        typer.echo(dumps(body, indent=2))
         return
     p = found[0]
     typer.echo(summary_line(p))

@@ -55,11 +55,11 @@ def _per_frame_money(cents: int, frames: int) -> str | None:
     return f"{cents / frames / 100:.4f}" if frames else None
 
 
-def _line(key: str, work: _Work, frames: int, labelled: int) -> TargetFrameCost:
+def _line(key: str, work: _Work, frames: int, labelled: int, label: str) -> TargetFrameCost:
     cents = sum(work.cents.values())
     currencies = sorted(work.cents) or ["USD"]
     return TargetFrameCost(
-        target_key=key, kind=work.kind, views=work.views, assignments=work.assignments,
+        target_key=key, label=label, kind=work.kind, views=work.views, assignments=work.assignments,
         frames=frames, frames_labelled=labelled, actions=work.actions,
         seconds=round(work.seconds, 1), money=_money(cents), money_cents=cents,
         currency=currencies[0] if len(currencies) == 1 else "mixed",
@@ -135,7 +135,10 @@ def sequence_frame_cost(session: Session, sequence: Sequence) -> SequenceFrameCo
         arrays = decode_result(get_storage().get_bytes(run.result_key))
         frames = len(arrays["labelled"])
         masks = labelled_masks(arrays, keys)
-    lines = [_line(k, work[k], frames, int(masks[k].sum())) for k in keys]
+    labels = {f"hand:{h.index}": f"{h.side} hand" for h in sequence.hands}
+    labels.update({f"object:{o.index}": f"object {o.index} ({o.name})" for o in sequence.objects})
+    lines = [_line(k, work[k], frames, int(masks[k].sum()),
+                   labels.get(k) or k.replace(":", " ")) for k in keys]
     every = np.logical_and.reduce([masks[k] for k in keys]) if keys \
         else np.zeros(frames, dtype=bool)
     whole = _Work(kind="total", views=sum(w.views for w in work.values()),
@@ -148,13 +151,14 @@ def sequence_frame_cost(session: Session, sequence: Sequence) -> SequenceFrameCo
     return SequenceFrameCost(
         sequence_id=sequence.id, name=f"{sequence.subject.name}/{sequence.name}",
         solve_run_id=None if run is None else run.id, targets=lines,
-        total=_line("total", whole, frames, int(every.sum())))
+        total=_line("total", whole, frames, int(every.sum()), "all targets"))
 
 
 def frame_costs(session: Session, sequence_ids: list[int]) -> list[SequenceFrameCost]:
     """:func:`sequence_frame_cost` of each existing sequence of ``sequence_ids``, in order."""
     found = {s.id: s for s in session.scalars(
         select(Sequence).where(Sequence.id.in_(sequence_ids))
-        .options(selectinload(Sequence.subject)))}
+        .options(selectinload(Sequence.subject), selectinload(Sequence.hands),
+                 selectinload(Sequence.objects)))}
     return [sequence_frame_cost(session, found[i]) for i in sequence_ids if i in found]
 

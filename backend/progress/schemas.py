@@ -67,9 +67,11 @@ class TargetFrameCost(BaseModel):
     them (approved rewards and paid bonuses, each with the provider's fee), a decimal string in
     ``currency`` ("mixed" where providers of different currencies were paid).
     frames_labelled: frames the current solve labelled for the target and did not flag.
+    label: the target as people name it ("right hand", "object 1 (003_cracker_box)").
     """
 
     target_key: str
+    label: str
     kind: str
     views: int
     assignments: int

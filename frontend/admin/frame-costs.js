@@ -30,7 +30,7 @@ export function renderFrameCosts(at, sequences) {
         ? ` · 3D frames from solve run ${s.solve_run_id}` : " · not solved yet: no 3D frame"])]),
     el("thead", {}, [el("tr", {}, FRAME_COST_COLUMNS.map(([, title], i) => el("th",
       i ? { class: "num", scope: "col" } : { scope: "col" }, [title])))]),
-    el("tbody", {}, s.targets.map((/** @type {any} */ t) => row(t, targetName(t.target_key),
+    el("tbody", {}, s.targets.map((/** @type {any} */ t) => row(t, t.label || targetName(t.target_key),
       false))),
     el("tfoot", {}, [row(s.total, "All targets", true)]),
   ])])));

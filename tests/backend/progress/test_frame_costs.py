@@ -4,6 +4,8 @@ to the ledger's rows and to the cost report, in the API and in `dexlabel status`
 
 from __future__ import annotations
 
+import json
+
 from typing import Any
 
 import numpy as np
@@ -149,3 +151,9 @@ def test_frame_costs_api_and_status_command_show_the_same_figures(paid: int, api
     # target, 3D frames, actions, seconds, money, then per frame: actions, seconds, money
     assert rows["hand:0"][1:] == ["4", "65", "190.5", "1.80", "16.25", "47.62", "0.4500", "USD"]
     assert rows["total"][1:5] == ["3", "65", "190.5", "1.80"]
+    # --json: the progress API's figures and the same cost lines, each target named.
+    out = CliRunner().invoke(app, ["status", str(paid), "--json"])
+    assert out.exit_code == 0, out.output
+    printed = json.loads(out.output)
+    assert printed["frame_costs"] == body
+    assert [t["label"] for t in body["targets"]] == ["hand 0", "object 0 (003_cracker_box)"]
