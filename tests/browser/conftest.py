@@ -33,6 +33,9 @@ ADMIN_PASSWORD = "browser-tests-password"
 CLIP_FRAMES = 12
 CLIP_VIEWS = 2
 VIEWPORT = {"width": 1440, "height": 900}
+# What a page shows after a server round trip (an overlay rendered, a job's result) can take
+# several seconds on a loaded machine: assertions on it wait this long, as actions do.
+EXPECT_TIMEOUT_MS = 15_000
 
 
 def _free_port() -> int:
@@ -162,7 +165,7 @@ def live_server(tmp_path_factory: pytest.TempPathFactory, output_dir: Path) -> I
 
 @pytest.fixture(scope="session")
 def browser() -> Iterator:
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
 
     from tests.conftest import REQUIRE_SERVICES
 
@@ -171,6 +174,7 @@ def browser() -> Iterator:
         if REQUIRE_SERVICES:
             pytest.fail(message)
         pytest.skip(message)
+    expect.set_options(timeout=EXPECT_TIMEOUT_MS)
     with sync_playwright() as pw:
         chromium = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         yield chromium
