@@ -153,9 +153,8 @@ def initial_choice(session: Session, sequence_id: int, target: str, count: int
         return {task.id: f"{INITIAL_REASON} (all {len(tasks)} views)" for task in tasks}
     models = calibrated_models(session, [task.camera for task in tasks])
     chosen = sorted(initial_views(models, _anchor(session, tasks, models), count))
-    picked = [tasks[i] for i in chosen]
-    reason = f"{INITIAL_REASON} (views {_views(picked)} of {len(tasks)})"
-    return {task.id: reason for task in picked}
+    reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
+    return {tasks[i].id: reason for i in chosen}
 
 
 def select_due(session: Session, task_ids: list[int], policy: Policy) -> dict[int, str | None]:

@@ -56,7 +56,7 @@ export function progressSummary(p) {
 }
 
 // A task the adaptive publishing policy holds back (backend/crowd/adaptive.py).
-const HELD = "held back: published if a solve is unsure without this view";
+const HELD = "published only if a solve is unsure without this view";
 
 /**
  * The view x target grid of a sequence's tasks: one cell per task with its state, HITs and
