@@ -1,5 +1,6 @@
 """The one place that moves work between stages: submitted -> confirmed -> QC -> solve, and
-solve -> landmark QC (object landmarks checked against the solved objects).
+solve -> landmark QC (object landmarks checked against the solved objects), and, for a
+sequence published under the adaptive policy, solve -> more views (backend.crowd.adaptive).
 
 Each domain does its own step and knows nothing of the next one (annotation saves and
 submits, crowd talks to the marketplace, quality scores and acts, solve fits poses); this
