@@ -265,6 +265,15 @@ class Settings(BaseSettings):
     qc_auto_actions: bool = True
     qc_block_after_failures: int = Field(default=3, ge=0)
     qc_thresholds: dict[str, Any] = Field(default_factory=dict)
+    # Publishing views (backend.crowd.adaptive): "every-view" publishes every (target, view)
+    # task at once (DexYCB's protocol); "adaptive" publishes, per target, the
+    # PUBLISH_INITIAL_VIEWS views of widest baseline first and one more view after each solve
+    # while fewer than PUBLISH_CONFIDENT_SHARE of the target's frames have a solve confidence
+    # of at least PUBLISH_CONFIDENCE without a flag. A publish request may set its own.
+    publish_policy: Literal["every-view", "adaptive"] = "every-view"
+    publish_initial_views: int = Field(default=3, ge=2, le=64)
+    publish_confidence: float = Field(default=0.5, gt=0, le=1)
+    publish_confident_share: float = Field(default=0.9, gt=0, le=1)
 
     @field_validator("capture_roots", mode="before")
     @classmethod

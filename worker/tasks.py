@@ -44,6 +44,12 @@ def solve_run(args: dict[str, Any]) -> dict[str, Any]:
     return {**result, "message": f"solve run {result['run_id']} {outcome}"}
 
 
+def publish_views(args: dict[str, Any]) -> dict[str, Any]:
+    """After a solve of an adaptively published sequence: publish the views its weak frames
+    need, with the reason (backend.crowd.adaptive)."""
+    return pipeline.publish_views(int(args["run_id"]))
+
+
 def rig_health(args: dict[str, Any]) -> dict[str, Any]:
     """Estimate a sequence's rig from its accepted labels; store a new calibration version."""
     return run_rig_health(int(args["sequence_id"]))
@@ -74,6 +80,7 @@ HANDLERS: dict[str, Handler] = {
     "qc": Handler(quality_check, None),
     pipeline.CONFIRM: Handler(confirm_submission, None),
     "solve": Handler(solve_run, None),
+    pipeline.PUBLISH_VIEWS: Handler(publish_views, None),
     "rig_health": Handler(rig_health, None),
     "export": Handler(export_labels, None),
     CLEANUP_KIND: Handler(clean_up_exports, None),

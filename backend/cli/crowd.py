@@ -36,7 +36,7 @@ def tasks_create(sequence: SequenceArg) -> None:
 def _publish_options(  # type: ignore[no-untyped-def]
     reward: str, assignments: int, allow_large_hits: bool, round_: int,
     min_approval_rate: int | None, require_training: bool, provider: str | None = None,
-    assignee: str | None = None,
+    assignee: str | None = None, views: dict[str, Any] | None = None,
 ):
     from pydantic import ValidationError
 
@@ -47,7 +47,7 @@ def _publish_options(  # type: ignore[no-untyped-def]
                               allow_large_hits=allow_large_hits, round=round_,
                               min_approval_rate=min_approval_rate,
                               require_training=require_training, provider=provider,
-                              assignee=assignee)
+                              assignee=assignee, **(views or {}))
     except ValidationError as exc:
         fail("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()))
 
@@ -69,16 +69,32 @@ def publish_command(
         help="mturk, prolific or team (default: DEXLABEL_CROWD_PROVIDER)")] = None,
     assignee: Annotated[str | None, typer.Option(
         help="team only: the portal worker id the tasks are assigned to")] = None,
+    policy: Annotated[str | None, typer.Option(
+        help="every-view (all views at once) or adaptive (the widest-baseline views first, "
+             "more after each solve while it is unsure; default: DEXLABEL_PUBLISH_POLICY)")
+    ] = None,
+    initial_views: Annotated[int | None, typer.Option(
+        help="adaptive: views published first per target (default: "
+             "DEXLABEL_PUBLISH_INITIAL_VIEWS)")] = None,
+    confidence: Annotated[float | None, typer.Option(
+        help="adaptive: the solve confidence (0-1] a frame must reach (default: "
+             "DEXLABEL_PUBLISH_CONFIDENCE)")] = None,
+    confident_share: Annotated[float | None, typer.Option(
+        help="adaptive: the share (0-1] of a target's frames that must reach it (default: "
+             "DEXLABEL_PUBLISH_CONFIDENT_SHARE)")] = None,
 ) -> None:
     """Publish a HIT per task not yet published (safe to re-run).
 
-    One HIT (unit of work of the provider) per task not yet published in this round;
+    One HIT (unit of work of the provider) per task not yet published in this round (under
+    --policy adaptive: per target, the initial views only; the solve publishes more);
     --dry-run prints the cost only, in the provider's fees and currency."""
     from backend.crowd import flows
     from backend.db import session_scope
 
+    views = {"policy": policy, "initial_views": initial_views, "confidence": confidence,
+             "confident_share": confident_share}
     options = _publish_options(reward, assignments, allow_large_hits, round_, min_approval_rate,
-                               require_training, provider, assignee)
+                               require_training, provider, assignee, views)
     with refusing_bad_input():
         with session_scope() as session:
             sequence_id = resolve_sequence(session, sequence) if sequence else None

@@ -9,7 +9,12 @@ import typer
 
 from backend.annotation.schemas import TASK_STATES
 from backend.cli.console import refusing_bad_input, resolve_sequence
-from backend.progress.schemas import SequenceFrameCost, SequenceProgress, TargetFrameCost
+from backend.progress.schemas import (
+    SequenceFrameCost,
+    SequenceProgress,
+    TargetFrameCost,
+    TaskProgress,
+)
 
 
 def _solve_line(p: SequenceProgress) -> str:
@@ -30,19 +35,26 @@ def _solve_line(p: SequenceProgress) -> str:
 def summary_line(p: SequenceProgress) -> str:
     """One line: the sequence, its state, its tasks per state and its solve."""
     total = sum(p.counts.values())
-    states = ", ".join(f"{p.counts[state]} {state}" for state in TASK_STATES if p.counts[state])
+    # Views the adaptive publishing policy holds back are open tasks, named apart.
+    counts = {**p.counts, "open": p.counts["open"] - p.held}
+    states = ", ".join([f"{counts[state]} {state}" for state in TASK_STATES if counts[state]]
+                       + ([f"{p.held} held back"] if p.held else []))
     return (f"{p.sequence_id}  {p.subject}/{p.name}  {p.state}: {total} tasks"
             f"{' (' + states + ')' if states else ''}; {_solve_line(p)}")
+
+
+def _cell(task: TaskProgress) -> str:
+    return "held back" if task.held else task.state
 
 
 def _grid(p: SequenceProgress) -> list[str]:
     cells = {(t.serial, t.target_key): t for t in p.tasks}
     width = max([len("view"), *map(len, p.views)])
-    cols = [max(len(target), *(len(t.state) for t in p.tasks)) for target in p.targets]
+    cols = [max(len(target), *(len(_cell(t)) for t in p.tasks)) for target in p.targets]
     lines = ["  ".join([f"{'view':<{width}}", *(f"{t:<{w}}" for t, w in zip(p.targets, cols,
                                                                              strict=True))])]
     for serial in p.views:
-        row = [cells[(serial, t)].state if (serial, t) in cells else "-" for t in p.targets]
+        row = [_cell(cells[(serial, t)]) if (serial, t) in cells else "-" for t in p.targets]
         lines.append("  ".join([f"{serial:<{width}}", *(f"{s:<{w}}" for s, w in zip(
             row, cols, strict=True))]).rstrip())
     return lines

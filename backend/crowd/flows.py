@@ -15,13 +15,14 @@ from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
 from backend.config import get_settings
-from backend.crowd import actions, decisions, pricing
+from backend.crowd import actions, adaptive, decisions, pricing
 from backend.crowd.models import CrowdHit
 from backend.crowd.provider import CrowdProvider, Requirements
 from backend.crowd.providers import fees_of, get_provider, provider_of
 from backend.crowd.publish import check_assignments, publish_tasks, requirements, unit_spec
 from backend.crowd.schemas import CostRead, PaymentRead, PublishOptions, PublishResult
 from backend.db import session_scope
+from backend.errors import DexlabelError
 
 _COUNTERS = {"created": "created", "recovered": "recovered", "existing": "already_published"}
 
@@ -62,12 +63,32 @@ def cost_read(hits: int, options: PublishOptions, provider: str = "mturk") -> Co
                     fees=money(fees_total), total=money(rewards + fees_total))
 
 
+def chosen_tasks(session: Session, options: PublishOptions, sequence_id: int | None,
+                 kind: str | None = None) -> dict[int, str | None]:
+    """The due tasks a publish with ``options`` sends under its policy (backend.crowd.adaptive),
+    by id, each with why it is published (None: every view at once)."""
+    due = due_task_ids(session, options.round, sequence_id, kind)
+    return adaptive.select_due(session, due, adaptive.policy_of(options))
+
+
+def record_plans(session: Session, options: PublishOptions, sequence_id: int | None,
+                 task_ids: list[int]) -> None:
+    """Keep the policy of the sequences a publish touches: every sequence published under
+    the adaptive policy, and those that had one and are now published with every view."""
+    policy = adaptive.policy_of(options)
+    sequences = {sequence_id} if sequence_id is not None else set(session.scalars(
+        select(Task.sequence_id).where(Task.id.in_(task_ids))))
+    for seq in sorted(sequences):
+        if policy.name == adaptive.ADAPTIVE or adaptive.plan_of(session, seq) is not None:
+            adaptive.record_plan(session, seq, policy, options)
+
+
 def plan(session: Session, options: PublishOptions, sequence_id: int | None,
          kind: str | None = None, provider: str | None = None) -> PublishResult:
     """What a publish would do: the unit count and cost, nothing sent."""
     name = provider or options.provider or get_settings().crowd_provider
     check_assignments(options.max_assignments, options.allow_large_hits, fees_of(name))
-    due = due_task_ids(session, options.round, sequence_id, kind)
+    due = chosen_tasks(session, options, sequence_id, kind)
     check_due(session, _due(options.round, sequence_id, kind), options, name)
     return PublishResult(cost=cost_read(len(due), options, name))
 
@@ -100,12 +121,14 @@ def publish(
     provider = _provider(crowd, options)
     result = plan(session, options, sequence_id, provider=provider.name)
     with session.no_autoflush:
-        task_ids = due_task_ids(session, options.round, sequence_id)
-        if task_ids:
+        reasons = chosen_tasks(session, options, sequence_id)
+        if reasons:
             reqs = requirements(session, provider, options)
-            tasks = [session.get_one(Task, task_id) for task_id in task_ids]
-            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs):
+            tasks = [session.get_one(Task, task_id) for task_id in reasons]
+            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs,
+                                                  reasons):
                 _count(result, unit_id, outcome)
+        record_plans(session, options, sequence_id, list(reasons))
     session.flush()
     return result
 
@@ -121,16 +144,44 @@ def publish_each(
     with session_scope() as session:
         result = plan(session, options, sequence_id, kind, provider.name)
         with session.no_autoflush:
-            task_ids = due_task_ids(session, options.round, sequence_id, kind)
-            reqs = requirements(session, provider, options) if task_ids else None
+            reasons = chosen_tasks(session, options, sequence_id, kind)
+            reqs = requirements(session, provider, options) if reasons else None
+        record_plans(session, options, sequence_id, list(reasons))
+    _publish_in_chunks(provider, options, reqs, reasons, result)
+    return result
+
+
+def publish_needed(crowd: CrowdProvider | None, sequence_id: int,
+                   reasons: dict[int, str]) -> PublishResult:
+    """Publish the views a solve found needed (backend.crowd.adaptive.needed_views) with the
+    options of the sequence's plan and their reasons, one unit of work per provider call as
+    :func:`publish_each`."""
+    with session_scope() as session:
+        options = adaptive.plan_options(session, sequence_id)
+        if options is None:
+            raise DexlabelError(f"sequence {sequence_id} is not published adaptively")
+        provider = _provider(crowd, options)
+        with session.no_autoflush:
+            reqs = requirements(session, provider, options) if reasons else None
+    result = PublishResult(cost=cost_read(len(reasons), options, provider.name))
+    _publish_in_chunks(provider, options, reqs, dict(reasons), result)
+    return result
+
+
+def _publish_in_chunks(provider: CrowdProvider, options: PublishOptions,
+                       reqs: Requirements | None, reasons: dict[int, str | None],
+                       result: PublishResult) -> None:
+    """One unit of work (and commit) per provider call: per task where the provider makes a
+    call per unit (``publish_chunk``), else all in one."""
+    task_ids = list(reasons)
     chunk = int(getattr(provider, "publish_chunk", 0)) or max(len(task_ids), 1)
     for start in range(0, len(task_ids), chunk):
         with session_scope() as session, session.no_autoflush:
             tasks = [session.get_one(Task, task_id)
                      for task_id in task_ids[start:start + chunk]]
-            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs):
+            for unit_id, outcome in publish_tasks(session, provider, tasks, options, reqs,
+                                                  reasons):
                 _count(result, unit_id, outcome)
-    return result
 
 
 def pay_bonus(crowd: CrowdProvider | None, assignment_id: int, amount_cents: int, reason: str,

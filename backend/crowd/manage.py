@@ -64,6 +64,9 @@ class UnitRead(BaseModel):
     state: str  # "open" or "expired"
     expired_at: datetime | None
     published_at: datetime
+    # Why it was published under the adaptive policy (backend.crowd.adaptive); None under
+    # every view.
+    reason: str | None = None
 
 
 class UnitAssignmentRead(BaseModel):
@@ -123,7 +126,8 @@ def list_units(session: Session, sequence_id: int | None, task_id: int | None,
         decided=hit.decided, holders=counts[hit.hit_id].get("working", 0),
         submitted=counts[hit.hit_id].get("submitted", 0),
         state="open" if hit.expired_at is None else "expired", expired_at=hit.expired_at,
-        published_at=hit.created_at) for hit, sequence, target, serial in rows]
+        published_at=hit.created_at, reason=hit.reason)
+        for hit, sequence, target, serial in rows]
 
 
 def _emails(session: Session, worker_ids: set[str]) -> dict[str, str]:

@@ -10,10 +10,13 @@ marketplace tokens expire after 24 hours, these rows do not.
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 from sqlalchemy import (
+    JSON,
     BigInteger,
     CheckConstraint,
+    Float,
     Index,
     Integer,
     String,
@@ -54,6 +57,31 @@ class CrowdHit(TimestampMixin, Base):
     # (backend.crowd.totals): a live HIT's open slots are max_assignments - decided.
     decided: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     provider: Mapped[str] = mapped_column(String(16), default="mturk", server_default="mturk")
+    # Why the unit was published under the adaptive policy (backend.crowd.adaptive), e.g.
+    # "initial: widest baselines" or "frames 12-30 below confidence 0.5 after views 0, 3, 5";
+    # null for a unit published with every view at once.
+    reason: Mapped[str | None] = mapped_column(String(300))
+
+
+class PublishPlan(TimestampMixin, Base):
+    """How a sequence's views are published (backend.crowd.adaptive): the policy and its
+    numbers as the last publish gave them, and that publish's options, which the publishes
+    after each solve use again."""
+
+    __tablename__ = "crowd_publish_plans"
+    __table_args__ = (
+        one_of("policy", ("every-view", "adaptive")),
+        CheckConstraint("initial_views >= 2", name="initial_views_at_least_two"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    sequence_id: Mapped[int] = parent_key("sequences.id", unique=True)
+    policy: Mapped[str] = mapped_column(String(16))
+    initial_views: Mapped[int] = mapped_column(Integer)
+    confidence: Mapped[float] = mapped_column(Float)
+    confident_share: Mapped[float] = mapped_column(Float)
+    # backend.crowd.schemas.PublishOptions as JSON (the reward, places, provider, ...).
+    options: Mapped[dict[str, Any]] = mapped_column(JSON)
 
 
 class CrowdSubmission(TimestampMixin, Base):

@@ -10,7 +10,7 @@ provider's memory of the key (MTurk's: 24 hours).
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC
 
 from sqlalchemy import select
@@ -132,10 +132,11 @@ def _is_training_clip(session: Session, task_id: int) -> bool:
 
 
 def publish_tasks(session: Session, crowd: CrowdProvider, tasks: Sequence[Task],
-                  options: PublishOptions, reqs: Requirements | None
-                  ) -> list[tuple[str, str]]:
+                  options: PublishOptions, reqs: Requirements | None,
+                  reasons: Mapping[int, str | None] | None = None) -> list[tuple[str, str]]:
     """Publish the tasks in ``options.round`` in one provider batch; per task (unit id,
-    "created" | "recovered" | "existing").
+    "created" | "recovered" | "existing"). ``reasons``: per task id, why it is published
+    (backend.crowd.adaptive), kept on its new unit's row.
 
     The provider is called before anything is written here: a transaction held open across
     the call would lock the embedded SQLite database the built-in marketplace writes to.
@@ -162,7 +163,8 @@ def publish_tasks(session: Session, crowd: CrowdProvider, tasks: Sequence[Task],
         if row is None:
             row = CrowdHit(task_id=task.id, round=options.round, request_token=spec.key,
                            max_assignments=options.max_assignments,
-                           reward_cents=spec.reward_cents, provider=provider.name)
+                           reward_cents=spec.reward_cents, provider=provider.name,
+                           reason=(reasons or {}).get(task.id))
             session.add(row)
         row.hit_id = unit.unit_id
         out.append((unit.unit_id, unit.outcome))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime
 from decimal import Decimal
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field
 
@@ -19,6 +19,7 @@ Seconds = Annotated[int, Field(ge=30, le=31_536_000)]
 # its minimum hourly rate), naming the field reward.
 Reward = Annotated[Decimal, Field(ge=Decimal(0), le=1000, decimal_places=2)]
 Feedback = Annotated[str, Field(min_length=1, max_length=1024)]
+PublishPolicy = Literal["every-view", "adaptive"]
 
 
 class PublishOptions(BaseModel):
@@ -41,6 +42,13 @@ class PublishOptions(BaseModel):
     provider: ProviderName | None = None
     # team only: the portal worker id of the one annotator the tasks are assigned to.
     assignee: str | None = Field(default=None, min_length=1, max_length=64)
+    # Which views are published (backend.crowd.adaptive; unset: the DEXLABEL_PUBLISH_*
+    # settings): every view at once, or adaptive (the initial views of widest baseline, then
+    # one more after each solve while too few frames reach the confidence).
+    policy: PublishPolicy | None = None
+    initial_views: int | None = Field(default=None, ge=2, le=64)
+    confidence: float | None = Field(default=None, gt=0, le=1)
+    confident_share: float | None = Field(default=None, gt=0, le=1)
 
 
 class PublishRequest(PublishOptions):

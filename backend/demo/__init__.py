@@ -316,12 +316,16 @@ def _hits(sequence_id: int, kind: str) -> int:
 
 
 def unaccepted(sequence_id: int) -> tuple[int, int]:
-    """(tasks without approved work, tasks) of the sequence."""
+    """(tasks without approved work, tasks) of the sequence, leaving out the views the
+    adaptive publishing policy holds back."""
     from backend.annotation.models import Assignment, Task
+    from backend.crowd.adaptive import held_task_ids
     from backend.labels import ACCEPTED
 
     with session_scope() as session:
         tasks = set(session.scalars(select(Task.id).where(Task.sequence_id == sequence_id)))
+        # Views the adaptive policy holds back wait for a solve that needs them.
+        tasks -= held_task_ids(session, [sequence_id])
         accepted = set(session.scalars(select(Assignment.task_id).where(
             Assignment.task_id.in_(tasks), Assignment.status == ACCEPTED)))
     return len(tasks - accepted), len(tasks)

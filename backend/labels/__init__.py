@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session, selectinload
 
 from backend.annotation.models import Assignment, Task
 from backend.annotation.proposals import grey_frames
+from backend.crowd.adaptive import held
 from backend.crowd.models import CrowdSubmission
 from backend.storage import get_storage
 from worker.assist.stretches import (
@@ -106,7 +107,8 @@ def accepted_ids_by_task(session: Session, task_ids: Iterable[int]) -> list[tupl
 
 def accepted_digest(session: Session, sequence_id: int) -> tuple[str | None, int]:
     """(digest of the accepted assignments, tasks still without one); the digest is None
-    while any task of the sequence lacks accepted work."""
+    while any task of the sequence lacks accepted work. Tasks the adaptive publishing policy
+    holds back (backend.crowd.adaptive) are not waited for."""
     return accepted_digests(session, [sequence_id])[sequence_id]
 
 
@@ -114,7 +116,8 @@ def accepted_digests(session: Session, sequence_ids: list[int]
                      ) -> dict[int, tuple[str | None, int]]:
     """:func:`accepted_digest` of each sequence, in two statements whatever their number."""
     task_sequence = dict(session.execute(
-        select(Task.id, Task.sequence_id).where(Task.sequence_id.in_(sequence_ids))).all())
+        select(Task.id, Task.sequence_id).where(Task.sequence_id.in_(sequence_ids), ~held()))
+        .all())
     tasks: dict[int, set[int]] = {i: set() for i in sequence_ids}
     for task_id, seq_id in task_sequence.items():
         tasks[seq_id].add(task_id)

@@ -1,5 +1,6 @@
 """The one place that moves work between stages: submitted -> confirmed -> QC -> solve, and
-solve -> landmark QC (object landmarks checked against the solved objects).
+solve -> landmark QC (object landmarks checked against the solved objects), and, for a
+sequence published under the adaptive policy, solve -> more views (backend.crowd.adaptive).
 
 Each domain does its own step and knows nothing of the next one (annotation saves and
 submits, crowd talks to the marketplace, quality scores and acts, solve fits poses); this
@@ -24,7 +25,9 @@ from backend.annotation.models import Assignment, Task
 from backend.annotation.schemas import TracksSave
 from backend.crowd import confirm as crowd_confirm
 from backend.crowd import decisions
+from backend.crowd import flows as crowd_flows
 from backend.crowd import sync as crowd_sync
+from backend.crowd.adaptive import needed_views, plan_options
 from backend.crowd.provider import CrowdProvider
 from backend.crowd.schemas import PaymentRead, SyncResult
 from backend.db import session_scope
@@ -39,10 +42,13 @@ from backend.quality.models import QCReport
 from backend.quality.service import qc_key, record_decision, request_landmark_qc, request_qc
 from backend.rig.service import adopt
 from backend.solve.models import SolveRun
+from backend.solve.results import decode_result
 from backend.solve.service import request_solve
+from backend.solve.trust import target_trust
 from backend.storage import get_storage
 
 CONFIRM = "confirm"
+PUBLISH_VIEWS = "publish_views"
 
 
 def confirm_key(assignment_id: int) -> str:
@@ -205,8 +211,38 @@ def run_solve(run_id: int) -> dict[str, Any]:
         with session_scope() as session:
             sequence_id = session.get_one(SolveRun, run_id).sequence_id
             jobs = request_landmark_qc(session, sequence_id)
+            if plan_options(session, sequence_id) is not None:
+                enqueue_job(session, PUBLISH_VIEWS, f"{PUBLISH_VIEWS}:{run_id}",
+                            {"run_id": run_id})
+                result["publish_views"] = "queued"
         result["landmark_qc"] = len(jobs)
     return result
+
+
+# --- solve -> more views (the adaptive publishing policy) ------------------------------
+
+
+def publish_views(run_id: int) -> dict[str, Any]:
+    """The job after a done solve of an adaptively published sequence: publish, per target
+    whose frames the solve could not trust enough, one more view, saying why
+    (backend.crowd.adaptive). A run whose labels are no longer the accepted ones publishes
+    nothing: the newer run's job decides."""
+    with session_scope() as session:
+        run = session.get_one(SolveRun, run_id)
+        sequence_id, finished_at, key = run.sequence_id, run.finished_at, run.result_key
+        digest, _ = accepted_digest(session, sequence_id)
+        stale = run.status != "done" or (run.labels_digest not in (None, digest))
+    if stale or key is None:
+        return {"published": 0, "message": f"solve run {run_id}: not the latest labels' run"}
+    arrays = decode_result(get_storage().get_bytes(key))
+    with session_scope() as session:
+        reasons = needed_views(session, sequence_id,
+                               target_trust(session, sequence_id, arrays), finished_at)
+    if not reasons:
+        return {"published": 0, "message": f"solve run {run_id}: no more views needed"}
+    result = crowd_flows.publish_needed(None, sequence_id, reasons)
+    return {"published": result.created + result.recovered, "reasons": reasons,
+            "message": f"solve run {run_id}: {len(reasons)} more views published"}
 
 
 # --- calibration -> solve ----------------------------------------------------------------

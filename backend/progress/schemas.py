@@ -29,6 +29,11 @@ class TaskProgress(BaseModel):
     hits: int
     hits_live: int
     assignments: AssignmentCounts
+    # Why the task's first unit was published under the adaptive policy (backend.crowd.
+    # adaptive), e.g. "initial: widest baselines (views 0, 3, 5 of 8)"; None under every view.
+    publish_reason: str | None = None
+    # Held back by the adaptive policy: published only if a solve needs the view.
+    held: bool = False
 
 
 class SolveProgress(BaseModel):
@@ -54,6 +59,10 @@ class SequenceProgress(BaseModel):
     hits_live: int
     assignments: AssignmentCounts
     tasks: list[TaskProgress]
+    # How its views are published: "every-view" (all at once) or "adaptive" (held tasks wait
+    # for a solve that needs them; the state counts the others).
+    publish_policy: str = "every-view"
+    held: int = 0
     # The sequence's latest solve run, if any.
     solve: SolveProgress | None
 

@@ -22,7 +22,8 @@ from sqlalchemy.orm import Session, selectinload
 from backend.annotation.models import Assignment, Task
 from backend.annotation.schemas import TASK_STATES, TaskState
 from backend.captures.models import Camera, Sequence
-from backend.crowd.models import CrowdHit
+from backend.crowd.adaptive import EVERY_VIEW, held
+from backend.crowd.models import CrowdHit, PublishPlan
 from backend.errors import NotFound
 from backend.labels import ACCEPTED, accepted_digests
 from backend.progress.schemas import (
@@ -68,23 +69,29 @@ def task_states(session: Session, task_ids: Iterable[int]) -> dict[int, TaskProg
     hits: Counter[int] = Counter()
     live: Counter[int] = Counter()
     slots: Counter[int] = Counter()
-    for task_id, expired_at, max_assignments in session.execute(
-            select(CrowdHit.task_id, CrowdHit.expired_at, CrowdHit.max_assignments)
-            .where(CrowdHit.task_id.in_(ids), CrowdHit.hit_id.is_not(None))):
+    reasons: dict[int, str] = {}
+    for task_id, expired_at, max_assignments, reason in session.execute(
+            select(CrowdHit.task_id, CrowdHit.expired_at, CrowdHit.max_assignments,
+                   CrowdHit.reason)
+            .where(CrowdHit.task_id.in_(ids), CrowdHit.hit_id.is_not(None))
+            .order_by(CrowdHit.round)):
         hits[task_id] += 1
         live[task_id] += expired_at is None
         slots[task_id] += max_assignments
+        if reason and task_id not in reasons:
+            reasons[task_id] = reason
     _count_confirmable_work(session, ids, counts, slots)
     rows = session.execute(
-        select(Task.id, Task.kind, Task.target_key, Camera.serial)
+        select(Task.id, Task.kind, Task.target_key, Camera.serial, held())
         .join(Camera, Camera.id == Task.camera_id).where(Task.id.in_(ids))).all()
     return {
         task_id: TaskProgress(
             task_id=task_id, serial=serial, target_key=target_key, kind=kind,
             state=_state(counts[task_id], reviewed[task_id], live[task_id]),
             hits=hits[task_id], hits_live=live[task_id],
-            assignments=AssignmentCounts(**counts[task_id]))
-        for task_id, kind, target_key, serial in rows}
+            assignments=AssignmentCounts(**counts[task_id]),
+            publish_reason=reasons.get(task_id), held=bool(is_held))
+        for task_id, kind, target_key, serial, is_held in rows}
 
 
 def _count_confirmable_work(session: Session, ids: list[int],
@@ -132,9 +139,15 @@ def sequence_progress(session: Session, sequence_id: int) -> SequenceProgress:
 def sequences_progress(session: Session, sequence_ids: list[int]) -> list[SequenceProgress]:
     """The progress of each existing sequence of ``sequence_ids``, in that order, in the same
     few grouped statements whatever their number."""
-    seqs = {s.id: s for s in session.scalars(
-        select(Sequence).where(Sequence.id.in_(sequence_ids))
-        .options(selectinload(Sequence.subject), selectinload(Sequence.cameras)))}
+    seqs: dict[int, Sequence] = {}
+    policies: dict[int, str] = {}
+    for seq, policy in session.execute(
+            select(Sequence, PublishPlan.policy)
+            .outerjoin(PublishPlan, PublishPlan.sequence_id == Sequence.id)
+            .where(Sequence.id.in_(sequence_ids))
+            .options(selectinload(Sequence.subject), selectinload(Sequence.cameras))):
+        seqs[seq.id] = seq
+        policies[seq.id] = policy or EVERY_VIEW
     ids = [i for i in sequence_ids if i in seqs]
     by_sequence: dict[int, list[int]] = defaultdict(list)
     for task_id, seq_id in session.execute(
@@ -142,7 +155,8 @@ def sequences_progress(session: Session, sequence_ids: list[int]) -> list[Sequen
         by_sequence[seq_id].append(task_id)
     states = task_states(session, [t for tasks in by_sequence.values() for t in tasks])
     solves = _solves(session, ids)
-    return [_progress(seqs[i], [states[t] for t in by_sequence[i]], solves.get(i)) for i in ids]
+    return [_progress(seqs[i], [states[t] for t in by_sequence[i]], solves.get(i),
+                      policies[i]) for i in ids]
 
 
 def _solves(session: Session, sequence_ids: list[int]) -> dict[int, SolveProgress]:
@@ -154,18 +168,19 @@ def _solves(session: Session, sequence_ids: list[int]) -> dict[int, SolveProgres
             for run in runs}
 
 
-def _progress(seq: Sequence, tasks: list[TaskProgress], solve: SolveProgress | None
-              ) -> SequenceProgress:
+def _progress(seq: Sequence, tasks: list[TaskProgress], solve: SolveProgress | None,
+              policy: str = EVERY_VIEW) -> SequenceProgress:
     cells = sorted(tasks, key=lambda t: (t.serial, _target_order(t.target_key)))
     counts = dict.fromkeys(TASK_STATES, 0)
     totals: Counter[str] = Counter()
     for cell in cells:
         counts[cell.state] += 1
         totals.update(cell.assignments.model_dump())
+    held = sum(cell.held for cell in cells)
     state: SequenceState
     if not cells:
         state = "no tasks"
-    elif counts["accepted"] == len(cells):
+    elif counts["accepted"] == len(cells) - held and counts["accepted"]:
         state = "solved" if solve and solve.status == "done" and solve.labels == "current" \
             else "accepted"
     elif counts["open"] == len(cells):
@@ -178,4 +193,4 @@ def _progress(seq: Sequence, tasks: list[TaskProgress], solve: SolveProgress | N
         targets=sorted({c.target_key for c in cells}, key=_target_order),
         counts=counts, hits=sum(c.hits for c in cells),
         hits_live=sum(c.hits_live for c in cells), assignments=AssignmentCounts(**totals),
-        tasks=cells, solve=solve)
+        tasks=cells, publish_policy=policy, held=held, solve=solve)

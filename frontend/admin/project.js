@@ -126,11 +126,13 @@ function publishOptions() {
   const team = provider === "team";
   const approval = team ? "" : input("publish-approval").value.trim();
   const assignee = team ? input("publish-assignee").value.trim() : "";
+  const policy = /** @type {HTMLSelectElement} */ ($("publish-policy")).value;
   return {
     sequence_id: state.sequence, provider, reward: input("publish-reward").value.trim(),
     max_assignments: Number(input("publish-assignments").value),
     min_approval_rate: approval === "" ? null : Number(approval),
     ...(assignee ? { assignee } : {}),
+    ...(policy ? { policy } : {}),
   };
 }
 

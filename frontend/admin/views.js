@@ -55,6 +55,9 @@ export function progressSummary(p) {
   ]);
 }
 
+// A task the adaptive publishing policy holds back (backend/crowd/adaptive.py).
+const HELD = "published only if a solve is unsure without this view";
+
 /**
  * The view x target grid of a sequence's tasks: one cell per task with its state, HITs and
  * assignments; views down, targets across.
@@ -71,13 +74,16 @@ export function renderProgressGrid(table, p) {
       const t = cells.get(`${serial} ${target}`);
       if (!t) return el("td", { class: "cell none" }, ["–"]);
       const a = t.assignments;
+      const why = t.held ? HELD : t.publish_reason;
       return el("td", {
-        class: `cell state-${t.state.replace(" ", "-")}`, "data-task": String(t.task_id),
-        "data-target": target, "data-state": t.state,
+        class: `cell state-${t.state.replace(" ", "-")}${t.held ? " held" : ""}`,
+        "data-task": String(t.task_id), "data-target": target, "data-state": t.state,
         title: `task ${t.task_id}: ${t.hits} HITs (${t.hits_live} open); ${a.working} working, `
-          + `${a.submitted} submitted, ${a.approved} approved, ${a.rejected} rejected`,
-      }, [el("span", { class: "cell-state" }, [t.state]),
-        el("span", { class: "cell-counts" }, [taskCounts(t)])]);
+          + `${a.submitted} submitted, ${a.approved} approved, ${a.rejected} rejected`
+          + (why ? `\n${why}` : ""),
+      }, [el("span", { class: "cell-state" }, [t.held ? "held back" : t.state]),
+        el("span", { class: "cell-counts" }, [taskCounts(t)]),
+        why ? el("span", { class: "cell-reason" }, [why]) : ""]);
     }),
   ]));
   table.replaceChildren(head, el("tbody", {}, rows));

@@ -15,6 +15,11 @@ test("progressLine counts accepted tasks of all, then the rest from the furthest
     "3 of 7 accepted · 1 in review · 2 published · 1 open");
   assert.equal(progressLine({ state: "no tasks", counts: {} }), "no tasks yet");
   assert.equal(progressLine({ state: "accepted", counts: { accepted: 4 } }), "4 of 4 accepted");
+  // Views the adaptive policy holds back are open tasks, named apart from the published ones.
+  assert.equal(progressLine({ state: "accepted", counts: { accepted: 6, open: 2 }, held: 2 }),
+    "6 of 6 accepted · 2 held back");
+  assert.equal(progressLine({ state: "in progress", counts: { published: 5, open: 3 }, held: 2 }),
+    "0 of 6 accepted · 5 published · 1 open · 2 held back");
 });
 
 test("solveLine says whether the current labels are solved", () => {

@@ -7,20 +7,25 @@ import { dollars, isNumber } from "../../common/format.js";
 export const TASK_STATES = ["open", "published", "submitted", "in review", "accepted"];
 
 /**
- * @typedef {{state: string, counts: Record<string, number>,
+ * @typedef {{state: string, counts: Record<string, number>, held?: number,
  *            solve?: {run_id: number, status: string, labels: string}|null}} ProgressLike
  */
 
 /**
- * A sequence's progress in one line: "3 of 4 accepted · 1 in review", "no tasks yet".
+ * A sequence's progress in one line: "3 of 4 accepted · 1 in review", "no tasks yet"; tasks
+ * the adaptive publishing policy holds back (open tasks, counted in ``held``) are named
+ * apart: "6 of 6 accepted · 2 held back".
  * @param {ProgressLike} progress   GET /api/sequences/{id}/progress
  */
 export function progressLine(progress) {
-  const counts = progress.counts || {};
+  const held = progress.held || 0;
+  const counts = { ...(progress.counts || {}) };
+  counts.open = (counts.open || 0) - held;
   const total = TASK_STATES.reduce((sum, state) => sum + (counts[state] || 0), 0);
-  if (!total) return "no tasks yet";
-  const rest = TASK_STATES.filter((s) => s !== "accepted" && counts[s])
+  if (!total && !held) return "no tasks yet";
+  const rest = TASK_STATES.filter((s) => s !== "accepted" && counts[s] > 0)
     .reverse().map((s) => `${counts[s]} ${s}`);
+  if (held) rest.push(`${held} held back`);
   return [`${counts.accepted || 0} of ${total} accepted`, ...rest].join(" · ");
 }
 

@@ -1,0 +1,252 @@
+"""Publishing views where the 3D needs them: the adaptive policy, beside DexYCB's every view.
+
+Under ``every-view`` a publish sends every due (target, view) task at once. Under ``adaptive``
+a publish sends, per target (a hand or an object of a sequence) none of whose views is
+published yet, the ``initial_views`` views that pin its 3D best (worker.geometry.view_choice:
+the widest baselines among the views that see it, seen from where the target is: an object's
+initial pose, a hand at its grasped object, else the point the rig looks at). The other views
+are *held*: they wait, and the sequence's solve waits for the published ones only. After each
+solve, :func:`needed_views` names, per target whose frames are confident (solve confidence at
+least ``confidence``, no flag) on fewer than ``confident_share`` of its frames, the one held
+view that best covers the weak frames; it is published with the reason, and the next solve
+judges again, until the target is confident or every view is published.
+
+Occlusion is judged by whether the target lies in front of a camera and inside its image (the
+object's initial pose, the hand's grasped object); depth is not read to publish.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+from sqlalchemy import ColumnElement, and_, select
+from sqlalchemy.orm import Session
+
+from backend.annotation.models import Task
+from backend.captures.calibration import calibrated_models
+from backend.captures.models import Camera, SceneObject
+from backend.config import get_settings
+from backend.crowd.models import CrowdHit, PublishPlan
+from backend.crowd.schemas import PublishOptions
+from worker.geometry.cameras import CameraModel
+from worker.geometry.view_choice import initial_views, next_view, rig_centre, seen
+
+EVERY_VIEW, ADAPTIVE = "every-view", "adaptive"
+INITIAL_REASON = "initial: widest baselines"
+# Frame ranges named in a reason before the rest is summed up (the column holds 300 chars).
+REASON_RANGES = 6
+REASON_CHARS = 300
+
+
+@dataclass(frozen=True)
+class Policy:
+    """A publish's policy and its numbers (see the module)."""
+
+    name: str
+    initial_views: int
+    confidence: float
+    confident_share: float
+
+
+@dataclass(frozen=True)
+class TargetTrust:
+    """What a solve says of one target: confidence (F,) in [0, 1], flags (F,) str ("" =
+    trusted) and points (F, N, 3) world metres (NaN where unknown) where the target was
+    solved."""
+
+    confidence: np.ndarray
+    flags: np.ndarray
+    points: np.ndarray
+
+
+def policy_of(options: PublishOptions) -> Policy:
+    """The options' policy, each number the setting's where the options leave it unset."""
+    s = get_settings()
+    return Policy(options.policy or s.publish_policy,
+                  options.initial_views or s.publish_initial_views,
+                  options.confidence or s.publish_confidence,
+                  options.confident_share or s.publish_confident_share)
+
+
+def plan_of(session: Session, sequence_id: int) -> PublishPlan | None:
+    return session.scalar(select(PublishPlan).where(PublishPlan.sequence_id == sequence_id))
+
+
+def record_plan(session: Session, sequence_id: int, policy: Policy,
+                options: PublishOptions) -> PublishPlan:
+    """Keep the sequence's policy and the options of its publish (the publishes after each
+    solve use them again); the last publish's win."""
+    plan = plan_of(session, sequence_id)
+    if plan is None:
+        plan = PublishPlan(sequence_id=sequence_id)
+        session.add(plan)
+    plan.policy, plan.initial_views = policy.name, policy.initial_views
+    plan.confidence, plan.confident_share = policy.confidence, policy.confident_share
+    plan.options = options.model_dump(mode="json")
+    return plan
+
+
+def plan_policy(plan: PublishPlan) -> Policy:
+    return Policy(plan.policy, plan.initial_views, plan.confidence, plan.confident_share)
+
+
+def held() -> ColumnElement[bool]:
+    """Whether a task (a row of ``tasks`` in the statement) is held back by the adaptive
+    policy: of a sequence published under it, with no unit in any round. A clause, so that the
+    readers that list tasks learn it in the statement they make anyway."""
+    adaptive = select(PublishPlan.sequence_id).where(PublishPlan.policy == ADAPTIVE)
+    unit = select(CrowdHit.id).where(CrowdHit.task_id == Task.id)
+    return and_(Task.sequence_id.in_(adaptive), ~unit.exists())
+
+
+def held_task_ids(session: Session, sequence_ids: list[int]) -> set[int]:
+    """Tasks of ``sequence_ids`` that the adaptive policy holds back (see :func:`held`)."""
+    return set(session.scalars(select(Task.id).where(
+        Task.sequence_id.in_(sequence_ids), held())))
+
+
+def _published_ids(session: Session, task_ids: list[int]) -> set[int]:
+    return set(session.scalars(select(CrowdHit.task_id).where(CrowdHit.task_id.in_(task_ids))))
+
+
+def _target_tasks(session: Session, sequence_id: int) -> dict[str, list[Task]]:
+    """The sequence's tasks per target key, each list in view order."""
+    rows = session.execute(select(Task, Camera.view_index).join(Camera, Camera.id == Task.camera_id)
+                           .where(Task.sequence_id == sequence_id)
+                           .order_by(Task.target_key, Camera.view_index)).all()
+    out: dict[str, list[Task]] = defaultdict(list)
+    for task, _ in rows:
+        out[task.target_key].append(task)
+    return dict(out)
+
+
+def _anchor(session: Session, tasks: list[Task], models: list[CameraModel]) -> np.ndarray:
+    """(3,) world metres: where the target is before anything is solved (see the module)."""
+    task = tasks[0]
+    if task.object_id is not None:
+        obj = session.get_one(SceneObject, task.object_id)
+        objects = [obj]
+    else:
+        objects = list(session.scalars(select(SceneObject).where(
+            SceneObject.sequence_id == task.sequence_id, SceneObject.grasped.is_(True))
+            .order_by(SceneObject.index)))
+    for obj in objects:
+        if obj.initial_pose is not None:
+            return np.asarray(obj.initial_pose, np.float64)[:3, 3]
+    return rig_centre(models)
+
+
+def _views(tasks: list[Task]) -> str:
+    """The tasks' views by camera serial, as the admin page names them."""
+    return ", ".join(task.camera.serial for task in tasks)
+
+
+def initial_choice(session: Session, sequence_id: int, target: str, count: int
+                   ) -> dict[int, str]:
+    """The target's initial tasks (widest baselines) and their reason."""
+    tasks = _target_tasks(session, sequence_id).get(target, [])
+    if len(tasks) <= count:
+        return {task.id: f"{INITIAL_REASON} (all {len(tasks)} views)" for task in tasks}
+    models = calibrated_models(session, [task.camera for task in tasks])
+    chosen = sorted(initial_views(models, _anchor(session, tasks, models), count))
+    reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
+    return {tasks[i].id: reason for i in chosen}
+
+
+def select_due(session: Session, task_ids: list[int], policy: Policy) -> dict[int, str | None]:
+    """Which of the due ``task_ids`` a publish under ``policy`` sends, with each one's reason
+    (None: every view at once, or a task already published in an earlier round)."""
+    if policy.name == EVERY_VIEW or not task_ids:
+        return dict.fromkeys(task_ids)
+    tasks = [session.get_one(Task, task_id) for task_id in task_ids]
+    published = _published_ids(session, [
+        t.id for s in {t.sequence_id for t in tasks}
+        for group in _target_tasks(session, s).values() for t in group])
+    out: dict[int, str | None] = {}
+    targets = sorted({(t.sequence_id, t.target_key) for t in tasks})
+    for sequence_id, target in targets:
+        # The initial views (again, where a publish stopped half way), and, in later rounds,
+        # the views published before; the views the solves add are published after them.
+        chosen = initial_choice(session, sequence_id, target, policy.initial_views)
+        for t in tasks:
+            if (t.sequence_id, t.target_key) != (sequence_id, target):
+                continue
+            if t.id in chosen and t.id not in published:
+                out[t.id] = chosen[t.id]
+            elif t.id in published:
+                out[t.id] = None
+    return {task_id: out[task_id] for task_id in task_ids if task_id in out}
+
+
+def frame_ranges(frames: np.ndarray) -> str:
+    """"12-30, 40" of sorted frame indices (the first REASON_RANGES ranges, then a count)."""
+    ranges: list[tuple[int, int]] = []
+    for f in (int(x) for x in frames):
+        if ranges and f == ranges[-1][1] + 1:
+            ranges[-1] = (ranges[-1][0], f)
+        else:
+            ranges.append((f, f))
+    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in ranges[:REASON_RANGES])
+    if len(ranges) > REASON_RANGES:
+        text += f" and {len(ranges) - REASON_RANGES} more stretches"
+    return text
+
+
+def weak_frames(trust: TargetTrust, policy: Policy) -> np.ndarray:
+    """(F,) bool: frames below the confidence or flagged."""
+    return np.asarray((np.asarray(trust.confidence) < policy.confidence)
+                      | (np.asarray(trust.flags) != ""))
+
+
+def needed_views(session: Session, sequence_id: int, trust: dict[str, TargetTrust],
+                 solved_at: datetime | None = None) -> dict[int, str]:
+    """After a solve: per target of an adaptive sequence whose confident frames fall short of
+    the plan's share and that has held views, the held task that best covers its weak frames,
+    with the reason. Empty under every view, or when every target is confident or complete.
+    A target given a view since ``solved_at`` (the solve's end: a publish run again) waits
+    for the next solve."""
+    plan = plan_of(session, sequence_id)
+    if plan is None or plan.policy != ADAPTIVE:
+        return {}
+    policy = plan_policy(plan)
+    out: dict[int, str] = {}
+    for target, tasks in sorted(_target_tasks(session, sequence_id).items()):
+        if target not in trust or _added_since(session, tasks, solved_at):
+            continue
+        published = _published_ids(session, [t.id for t in tasks])
+        held = [i for i, t in enumerate(tasks) if t.id not in published]
+        done = [i for i, t in enumerate(tasks) if t.id in published]
+        weak = weak_frames(trust[target], policy)
+        if not held or not weak.size or 1.0 - weak.mean() >= policy.confident_share:
+            continue
+        models = calibrated_models(session, [task.camera for task in tasks])
+        points = np.asarray(trust[target].points, np.float64)[weak]
+        if not np.isfinite(points).all(axis=-1).any() or not seen(models, points).any():
+            points = _anchor(session, tasks, models).reshape(1, 1, 3)
+        view, _score = next_view(models, done, held, points)
+        out[tasks[view].id] = (
+            f"frames {frame_ranges(np.flatnonzero(weak))} below confidence "
+            f"{policy.confidence:g} or flagged after views "
+            f"{_views([tasks[i] for i in done])}")[:REASON_CHARS]
+    return out
+
+
+def _added_since(session: Session, tasks: list[Task], since: datetime | None) -> bool:
+    if since is None:
+        return False
+    return session.scalar(select(CrowdHit.id).where(
+        CrowdHit.task_id.in_([t.id for t in tasks]), CrowdHit.created_at > since).limit(1)) \
+        is not None
+
+
+def plan_options(session: Session, sequence_id: int) -> PublishOptions | None:
+    """The publish options the sequence's adaptive plan keeps (None: no adaptive plan)."""
+    plan = plan_of(session, sequence_id)
+    if plan is None or plan.policy != ADAPTIVE:
+        return None
+    options: dict[str, Any] = dict(plan.options)
+    return PublishOptions.model_validate(options)

@@ -1,0 +1,247 @@
+"""Publishing views where the 3D needs them: against the built-in marketplace through boto3,
+on a real database, with solve results stored as the solve stores them."""
+
+from __future__ import annotations
+
+import io
+import uuid
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+import pytest
+from sqlalchemy import select
+from typer.testing import CliRunner
+
+from backend.config import InvalidSettings, get_settings
+from backend.crowd import flows
+from backend.crowd.client import make_client
+from backend.crowd.models import CrowdHit, PublishPlan
+from backend.crowd.schemas import PublishOptions
+from backend.db import session_scope
+from tests.worker.geometry.test_view_choice import TestInitialViews, ring
+
+# Views 0, 2 and 3 pin a target at the origin best (tests/worker/geometry/test_view_choice).
+AZIMUTHS = TestInitialViews.AZIMUTHS
+INITIAL = ["cam0", "cam2", "cam3"]
+FRAMES = 6
+ADAPTIVE = PublishOptions(min_approval_rate=None, policy="adaptive")
+
+
+def make_rig_sequence() -> int:
+    """A sequence of 4 cameras on a ring around the origin, a right hand and a grasped object
+    at the origin, one task per view and target; the sequence id."""
+    from backend.annotation.models import Task
+    from backend.captures.models import Camera, Hand, SceneObject, Sequence, Subject
+
+    with session_scope() as session:
+        sequence = Sequence(subject=Subject(name=f"subject-{uuid.uuid4().hex[:6]}"),
+                            name="grasp", storage_uid=uuid.uuid4().hex, num_frames=FRAMES,
+                            source_kind="images", fingerprint="0" * 64)
+        session.add(sequence)
+        session.flush()
+        hand = Hand(sequence_id=sequence.id, index=0, side="right")
+        obj = SceneObject(sequence_id=sequence.id, index=0, ycb_id=6, name="006_mustard_bottle",
+                          mesh_key="meshes/mustard.obj", num_vertices=8, num_faces=12,
+                          grasped=True, initial_pose=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]])
+        session.add_all([hand, obj])
+        session.flush()
+        for view, model in enumerate(ring(AZIMUTHS)):
+            camera = Camera(sequence_id=sequence.id, serial=f"cam{view}", view_index=view,
+                            width=640, height=480, fx=600.0, fy=600.0, ppx=320.0, ppy=240.0,
+                            distortion=[0.0] * 5, extrinsics=model.T_cam_to_world.tolist())
+            session.add(camera)
+            session.flush()
+            session.add_all([
+                Task(sequence_id=sequence.id, camera_id=camera.id, kind="hand",
+                     target_key="hand:0", hand_id=hand.id, num_points=21),
+                Task(sequence_id=sequence.id, camera_id=camera.id, kind="object",
+                     target_key="object:0", object_id=obj.id, num_points=2)])
+        return sequence.id
+
+
+def published(sequence_id: int) -> dict[str, dict[str, str | None]]:
+    """Per target, the published views (camera serials) and each one's reason."""
+    from backend.annotation.models import Task
+    from backend.captures.models import Camera
+
+    out: dict[str, dict[str, str | None]] = {}
+    with session_scope() as session:
+        for target, serial, reason in session.execute(
+                select(Task.target_key, Camera.serial, CrowdHit.reason)
+                .join(Task, Task.id == CrowdHit.task_id).join(Camera, Camera.id == Task.camera_id)
+                .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))):
+            out.setdefault(target, {})[serial] = reason
+    return out
+
+
+def store_solve(sequence_id: int, hand_confidence: np.ndarray,
+                hand_flags: list[str] | None = None) -> int:
+    """A done solve run of the sequence with its outputs stored as backend.solve.results
+    stores them: the hand's per-frame confidence as given, the object fully trusted."""
+    from backend.solve.models import SolveRun
+    from backend.solve.results import result_key
+    from backend.storage import get_storage
+
+    joints = np.zeros((FRAMES, 21, 3))
+    joints += np.linspace(-0.02, 0.02, 21)[None, :, None]
+    arrays = {
+        "labelled": np.ones(FRAMES, bool),
+        "hand_joints": joints, "hand_confidence": np.asarray(hand_confidence, float),
+        "hand_flags": np.asarray(hand_flags or [""] * FRAMES, str),
+        "object_poses": np.tile(np.eye(4)[:3], (1, FRAMES, 1, 1)),
+        "object_names": np.asarray(["006_mustard_bottle"]),
+        "object_confidence": np.ones((1, FRAMES)),
+        "object_flags": np.full((1, FRAMES), "", str),
+    }
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
+    with session_scope() as session:
+        run = SolveRun(sequence_id=sequence_id, optimiser="default", params={}, status="done",
+                       timings={}, num_frames=FRAMES, num_views=len(AZIMUTHS),
+                       finished_at=datetime.now(UTC))
+        session.add(run)
+        session.flush()
+        sequence_uid = uuid.uuid4().hex
+        run.result_key = result_key(sequence_uid, run.id)
+        get_storage().put_bytes(run.result_key, buf.getvalue())
+        return run.id
+
+
+def test_adaptive_publishes_first_the_widest_baseline_views_of_each_target(
+    crowd_url: str,
+) -> None:
+    from backend.labels import accepted_digest
+    from backend.progress.service import sequence_progress
+
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        result = flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    assert result.created == 6 and result.cost.hits == 6
+    units = published(sequence_id)
+    assert {target: sorted(views) for target, views in units.items()} == {
+        "hand:0": INITIAL, "object:0": INITIAL}
+    assert set(units["hand:0"].values()) == {
+        "initial: widest baselines (3 of 4 views)"}
+    with session_scope() as session:
+        # The solve waits for the published views only.
+        assert accepted_digest(session, sequence_id) == (None, 6)
+        progress = sequence_progress(session, sequence_id)
+        again = flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    assert again.created == 0  # the held views wait for a solve that needs them
+    assert progress.publish_policy == "adaptive" and progress.held == 2
+    held = {(t.serial, t.target_key) for t in progress.tasks if t.held}
+    assert held == {("cam1", "hand:0"), ("cam1", "object:0")}
+    assert all(t.publish_reason and t.publish_reason.startswith("initial: widest baselines")
+               for t in progress.tasks if not t.held)
+
+
+def test_every_view_publishes_every_view_at_once_as_before(crowd_url: str) -> None:
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        result = flows.publish(session, make_client(get_settings()),
+                               PublishOptions(min_approval_rate=None), sequence_id)
+        plans = session.scalars(select(PublishPlan)).all()
+    assert result.created == 8 and plans == []
+    units = published(sequence_id)
+    assert {t: sorted(v) for t, v in units.items()} == {
+        "hand:0": ["cam0", "cam1", "cam2", "cam3"], "object:0": ["cam0", "cam1", "cam2", "cam3"]}
+    assert {r for views in units.values() for r in views.values()} == {None}
+
+
+def test_no_view_is_added_while_the_solve_is_confident(crowd_url: str) -> None:
+    from backend import pipeline
+
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    run_id = store_solve(sequence_id, np.full(FRAMES, 0.9))
+    done = pipeline.publish_views(run_id)
+    assert done["published"] == 0 and "no more views needed" in done["message"]
+    assert sum(len(v) for v in published(sequence_id).values()) == 6
+
+
+def test_a_view_is_added_with_its_reason_where_frames_are_below_the_target(
+    crowd_url: str,
+) -> None:
+    from backend import pipeline
+
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    # Frames 2-4 below 0.5, frame 5 flagged: 2 of 6 confident, under the share of 0.9.
+    flags = ["", "", "", "", "", "fewer than 2 views decided this frame"]
+    run_id = store_solve(sequence_id, np.array([0.9, 0.8, 0.2, 0.3, 0.1, 0.9]), flags)
+    done = pipeline.publish_views(run_id)
+    assert done["published"] == 1
+    units = published(sequence_id)
+    assert sorted(units["object:0"]) == INITIAL  # the object is confident: nothing added
+    assert units["hand:0"]["cam1"] == (
+        "frames 2-5 below confidence 0.5 or flagged after views cam0, cam2, cam3")
+    assert pipeline.publish_views(run_id)["published"] == 0  # a re-run adds nothing more
+    # Every view of the hand published: a later unsure solve has nothing left to add.
+    later = store_solve(sequence_id, np.zeros(FRAMES))
+    assert pipeline.publish_views(later)["published"] == 0
+
+
+def test_publishing_again_with_every_view_publishes_the_held_views(crowd_url: str) -> None:
+    from backend.labels import accepted_digest
+
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    with session_scope() as session:
+        result = flows.publish(session, make_client(get_settings()),
+                               PublishOptions(min_approval_rate=None, policy="every-view"),
+                               sequence_id)
+    assert result.created == 2
+    with session_scope() as session:
+        assert accepted_digest(session, sequence_id) == (None, 8)
+    assert all(len(views) == 4 for views in published(sequence_id).values())
+
+
+@pytest.mark.parametrize(("body", "field"), [
+    ({"policy": "sometimes"}, "policy"), ({"confidence": 0}, "confidence"),
+    ({"confident_share": 1.5}, "confident_share"), ({"initial_views": 1}, "initial_views"),
+])
+def test_bad_policy_values_are_refused_naming_the_field(
+    api: Any, body: dict[str, Any], field: str,
+) -> None:
+    resp = api.post("/api/crowd/publish", json={"min_approval_rate": None, **body})
+    assert resp.status_code == 422, resp.text
+    assert [f["field"] for f in resp.json()["fields"]] == [field]
+    assert resp.json()["detail"].startswith(f"{field}: ")
+
+
+def test_the_cli_refuses_a_bad_policy_and_publishes_adaptively(crowd_url: str) -> None:
+    from backend.cli import app
+
+    sequence_id = make_rig_sequence()
+    runner = CliRunner()
+    bad = runner.invoke(app, ["publish", "--sequence", str(sequence_id), "--policy", "some"])
+    assert bad.exit_code == 2 and "policy: Input should be 'every-view' or 'adaptive'" \
+        in bad.output, bad.output
+    bad = runner.invoke(app, ["publish", "--sequence", str(sequence_id), "--policy",
+                              "adaptive", "--confidence", "1.5"])
+    assert bad.exit_code == 2 and "confidence: Input should be less than or equal to 1" \
+        in bad.output, bad.output
+    out = runner.invoke(app, ["publish", "--sequence", str(sequence_id), "--policy", "adaptive",
+                              "--min-approval-rate", "0", "--dry-run"])
+    assert out.exit_code == 0 and "6 HITs x 1 assignment(s)" in out.output, out.output
+
+
+def test_a_bad_policy_setting_is_named_when_the_settings_load(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("DEXLABEL_PUBLISH_POLICY", "sometimes")
+    monkeypatch.setenv("DEXLABEL_PUBLISH_CONFIDENT_SHARE", "0")
+    get_settings.cache_clear()
+    try:
+        with pytest.raises(InvalidSettings) as caught:
+            get_settings()
+    finally:
+        monkeypatch.undo()
+        get_settings.cache_clear()
+    lines = caught.value.detail.splitlines()
+    assert "DEXLABEL_PUBLISH_POLICY: Input should be 'every-view' or 'adaptive'" in lines
+    assert "DEXLABEL_PUBLISH_CONFIDENT_SHARE: Input should be greater than 0" in lines
