@@ -40,6 +40,7 @@ from worker.geometry.transforms import (
     transform_points,
     transform_pose_m,
 )
+from worker.synth.forearm import forearm_meshes
 from worker.synth.grasp import build_shaped_hand, plan_grasp
 from worker.synth.layout import (
     LabelSet,
@@ -126,7 +127,7 @@ def _render_all(jobs: list[ViewJob], workers: int) -> None:
 
 def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int = 8,
                      objects: int = 3, width: int = 640, height: int = 480,
-                     workers: int | None = None) -> SynthSummary:
+                     workers: int | None = None, forearm: bool = False) -> SynthSummary:
     """Write a synthetic capture of a right hand grasping and lifting one of ``objects`` objects.
 
     Args:
@@ -137,6 +138,8 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
         width, height: image size, pixels (intrinsics scale with the width).
         workers: processes rendering views in parallel (default: the CPUs available); more
             than one starts a spawn pool, so a calling script needs ``if __name__ == "__main__"``.
+        forearm: also draw a forearm and sleeve from the wrist (worker.synth.forearm), closer to
+            real footage; the truth is unchanged and the default renders stay as they were.
 
     Returns:
         A :class:`SynthSummary` of what was written.
@@ -144,7 +147,8 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
     _check_args(seed, frames, views, objects, width, height)
     out = Path(out).resolve()
     with written_whole(out) as partial:
-        return _generate(partial, out, seed, frames, views, objects, width, height, workers)
+        return _generate(partial, out, seed, frames, views, objects, width, height, workers,
+                         forearm)
 
 
 @contextmanager
@@ -167,7 +171,7 @@ def written_whole(out: Path) -> Iterator[Path]:
 
 
 def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects: int,
-              width: int, height: int, workers: int | None) -> SynthSummary:
+              width: int, height: int, workers: int | None, forearm: bool) -> SynthSummary:
     rng = np.random.default_rng(seed)
     serials = make_serials(seed, views)
     cams = make_cameras(rng, serials, width, height)
@@ -199,12 +203,13 @@ def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects:
     table, object_meshes, textures, skin = build_meshes(rng, [p.spec for p in placed])
     write_models(tmp, [p.spec for p in placed], textures[1:])
     seq_dir = write_sequence_files(tmp, names, serials, ycb_ids, grasp_ind, world, frames)
+    arm = tuple(forearm_meshes(joints, skin)) if forearm else ()
     jobs = []
     for v, cam in enumerate(cams):
         (seq_dir / cam.serial).mkdir()
         jobs.append(ViewJob(
             seed, v, seq_dir / cam.serial, cam, width, height, table, object_meshes,
             traj.object_poses, hand_vertices, np.asarray(rig.model.faces), skin,
-            camera_labels(world, extrinsics[v], cam, rig.root), textures))
+            camera_labels(world, extrinsics[v], cam, rig.root), textures, arm))
     _render_all(jobs, _worker_count(views, workers))
     return SynthSummary(out, names["subject"], names["sequence"], serials, frames, ycb_ids)
