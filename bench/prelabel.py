@@ -1,10 +1,12 @@
 """Benchmark: the optional hand prelabeler (MediaPipe's hand landmarker, extra ``prelabel``)
 on synthetic captures, scored against their truth.
 
-For one seed, two captures are rendered from the same scene: the default renders (a hand with
-no arm) and ``--forearm`` renders (worker.synth.forearm: bare forearm and sleeve). On each,
-every view's colour frames go to the prelabeler (images only; the truth is read afterwards)
-and per view and over all views it reports:
+For one seed, up to four captures are rendered from the same scene (``--renders``): "plain",
+the default renders (a hand with no arm, the fixed light); "forearm" (``synth --forearm``:
+bare forearm and sleeve, worker.synth.forearm); "light" (``synth --varied-light``: a room's
+light drawn from the seed, worker.synth.render.varied_lighting); "forearm_light", both. On
+each, every view's colour frames go to the prelabeler (images only; the truth is read
+afterwards) and per view and over all views it reports:
 
     detection_rate  frames where the hand is visible (at least 500 px of its segmentation) and
                     a hand of the capture's side was proposed, over the visible frames;
@@ -18,9 +20,10 @@ and per view and over all views it reports:
 Without MediaPipe (the extra is not installed) it renders nothing and prints
 ``{"available": false, ...}``, exit status 0, so CI's smoke run needs no extra.
 
-Prints one JSON line: {"available", "model", "video", "seed", "frames", "views", "plain",
-"forearm", "seconds"} where plain and forearm are {"overall", "views": [...]}.
+Prints one JSON line: {"available", "model", "video", "seed", "frames", "views", "renders":
+{name: {"overall", "views": [...]}}, "seconds"}.
 Usage: python bench/prelabel.py [--seed 901] [--frames 24] [--views 4] [--still]
+                                [--renders plain,forearm,light,forearm_light]
        (pip install 'dexlabel[prelabel]' first)
 """
 
@@ -35,6 +38,8 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+RENDERS = {"plain": {}, "forearm": {"forearm": True}, "light": {"varied_light": True},
+           "forearm_light": {"forearm": True, "varied_light": True}}
 
 
 def _run(capture: Path, still: bool) -> dict[str, Any]:
@@ -52,7 +57,13 @@ def main() -> None:
     parser.add_argument("--views", type=int, default=4)
     parser.add_argument("--still", action="store_true",
                         help="each frame on its own, not followed as a clip")
+    parser.add_argument("--renders", default=",".join(RENDERS),
+                        help=f"comma-separated, of {', '.join(RENDERS)}")
     args = parser.parse_args()
+    renders = [r.strip() for r in args.renders.split(",") if r.strip()]
+    unknown = sorted(set(renders) - set(RENDERS))
+    if unknown or not renders:
+        parser.error(f"unknown renders {unknown}; choose from {', '.join(RENDERS)}")
     sys.path.insert(0, str(ROOT))
     from worker.assist.prelabel import MEDIAPIPE_REQUIREMENT, mediapipe_available
 
@@ -68,12 +79,13 @@ def main() -> None:
 
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="dexlabel-bench-prelabel-") as work:
-        for name, forearm in (("plain", False), ("forearm", True)):
+        result["renders"] = {}
+        for name in renders:
             capture = Path(work) / name
             generate_capture(capture, seed=args.seed, frames=args.frames, views=args.views,
-                             objects=1, forearm=forearm)
-            result[name] = _run(capture, args.still)
-            o = result[name]["overall"]
+                             objects=1, **RENDERS[name])
+            result["renders"][name] = _run(capture, args.still)
+            o = result["renders"][name]["overall"]
             print(f"{name}: found {o['found']} of {o['visible']} visible, {o['found_clear']} of "
                   f"{o['clear']} clear, median {o['median_px']} px", flush=True)
     result["seconds"] = round(time.perf_counter() - started, 1)

@@ -102,6 +102,9 @@ def synth(
     forearm: Annotated[bool, typer.Option(
         "--forearm", help="draw a forearm and sleeve from the wrist (closer to real footage, "
                           "for hand detectors); the truth is unchanged")] = False,
+    varied_light: Annotated[bool, typer.Option(
+        "--varied-light", help="a room's light drawn from the seed (more ambient light, the "
+                               "lamp anywhere above) instead of the fixed one")] = False,
 ) -> None:
     """Write a synthetic capture and its ground-truth labels.
 
@@ -117,7 +120,8 @@ def synth(
         clean = out.with_name(out.name + ".clean") if faults else out
         with progress(f"synthesising {views} views x {frames} frames") as step:
             summary = generate_capture(clean, seed=seed, frames=frames, views=views,
-                                       objects=objects, forearm=forearm)
+                                       objects=objects, forearm=forearm,
+                                       varied_light=varied_light)
             step(f"{summary.subject}/{summary.sequence}")
         if faults:
             _with_faults(clean, out, faults, fault_seed)

@@ -13,6 +13,8 @@ import numpy as np
 from worker.formats import dexycb
 from worker.formats.files import encode_image, npz_bytes
 from worker.synth.render import (
+    DEFAULT_LIGHTING,
+    Lighting,
     ModelMesh,
     SceneMesh,
     TextureAtlas,
@@ -38,6 +40,7 @@ class ViewJob:
         textures: texture images indexed by the meshes' ``texture`` fields.
         arm: extra meshes drawn with the hand and labelled background (worker.synth.forearm):
             (vertices (F, V, 3) table frame, faces, BGR colour) each; none by default.
+        lighting: how the scene is lit (worker.synth.render.Lighting).
     """
 
     seed: int
@@ -55,6 +58,7 @@ class ViewJob:
     labels: dict[str, np.ndarray]
     textures: list[np.ndarray]
     arm: tuple[tuple[np.ndarray, np.ndarray, tuple[float, float, float]], ...] = ()
+    lighting: Lighting = DEFAULT_LIGHTING
 
 
 def _hand_mesh(job: ViewJob, frame: int, label: int) -> SceneMesh:
@@ -77,7 +81,7 @@ def run_view_job(job: ViewJob, hand_label: int) -> list[str]:
         meshes += [SceneMesh(v[frame], faces, smooth_normals(v[frame], faces), None, -1, color,
                              dexycb.BACKGROUND_SEG_VALUE) for v, faces, color in job.arm]
         rng = np.random.default_rng([job.seed, job.view, frame])
-        color, depth, seg = render_view(combine(meshes), view, atlas, rng)
+        color, depth, seg = render_view(combine(meshes), view, atlas, rng, job.lighting)
         labels = {name: values[frame] for name, values in job.labels.items()}
         labels[dexycb.SEG] = seg
         files = {
