@@ -4,6 +4,7 @@ without the optional extra or a capture."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -88,3 +89,14 @@ def test_prelabel_of_a_missing_folder_is_refused(tmp_path: Path):
     done = CliRunner().invoke(app, ["prelabel", str(tmp_path / "nothing")])
     assert done.exit_code == 2
     assert done.output.splitlines()[-1] == f"error: {tmp_path / 'nothing'} is not a folder"
+
+
+@pytest.mark.skipif(not mediapipe_available(),
+                    reason="needs the optional extra: pip install 'dexlabel[prelabel]'")
+def test_prelabel_reports_one_view_as_json(capture: SynthSummary):
+    serial = capture.serials[1]
+    done = CliRunner().invoke(app, ["prelabel", str(capture.root), "--view", serial, "--json"])
+    assert done.exit_code == 0, done.output
+    report = json.loads(done.output.splitlines()[-1])
+    assert [v["serial"] for v in report["views"]] == [serial]
+    assert report["overall"]["frames"] == FRAMES and report["video"] is True
