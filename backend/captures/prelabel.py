@@ -21,6 +21,7 @@ from backend.captures.truth import CaptureTruth
 from backend.errors import DexlabelError
 from worker.assist.prelabel import HAND_SIDES, HandSide, Prelabeler, PrelabelScore, score_proposals
 from worker.formats import dexycb
+from worker.hand.joints import JOINT_NAMES
 from worker.synth.annotators import hand_visibility
 
 
@@ -106,4 +107,9 @@ def overall(views: Sequence[ViewPrelabel]) -> dict[str, Any]:
             "detection_rate": _rate(found, visible),
             "clear_detection_rate": _rate(found_clear, clear),
             "median_px": round(float(np.median(errors)), 2) if errors.size else None,
+            # Per joint in DexYCB order: a model's joint conventions (where on the hand it puts
+            # the wrist or a knuckle) show as joints off by more than the others.
+            "median_px_by_joint": dict(zip(JOINT_NAMES, np.round(np.median(
+                errors.reshape(-1, len(JOINT_NAMES)), axis=0), 2).tolist(), strict=True))
+            if errors.size else None,
             "p90_px": round(float(np.percentile(errors, 90)), 2) if errors.size else None}

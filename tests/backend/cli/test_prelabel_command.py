@@ -71,6 +71,9 @@ def test_proposals_are_scored_against_each_views_own_truth(capture: SynthSummary
     total = overall(views)
     assert total["frames"] == 2 * FRAMES
     assert total["found"] == sum(v.score.found for v in views)
+    errors = np.concatenate([v.score.errors_px for v in views]).reshape(-1, 21)
+    assert total["median_px_by_joint"]["wrist"] == pytest.approx(np.median(errors[:, 0]),
+                                                                  abs=0.01)
 
 
 def test_an_unknown_view_is_refused_with_the_capture_views(capture: SynthSummary):
