@@ -65,14 +65,25 @@ def main() -> None:
     if unknown or not renders:
         parser.error(f"unknown renders {unknown}; choose from {', '.join(RENDERS)}")
     sys.path.insert(0, str(ROOT))
-    from worker.assist.prelabel import MEDIAPIPE_REQUIREMENT, mediapipe_available
+    from worker.assist.prelabel import (
+        MEDIAPIPE_REQUIREMENT,
+        MediaPipeHands,
+        PrelabelUnavailable,
+        mediapipe_available,
+    )
 
     result: dict[str, Any] = {"available": mediapipe_available(), "model": "mediapipe-hands-full",
                               "video": not args.still, "seed": args.seed,
                               "frames": args.frames, "views": args.views}
+    reason = (f"mediapipe is not installed (pip install 'dexlabel[prelabel]', "
+              f"{MEDIAPIPE_REQUIREMENT})")
+    if result["available"]:
+        try:
+            MediaPipeHands()  # installed but not importable (a broken install) is unavailable
+        except PrelabelUnavailable as exc:
+            result["available"], reason = False, str(exc)
     if not result["available"]:
-        result["reason"] = (f"mediapipe is not installed (pip install 'dexlabel[prelabel]', "
-                            f"{MEDIAPIPE_REQUIREMENT})")
+        result["reason"] = reason
         print(json.dumps(result))
         return
     from worker.synth import generate_capture
