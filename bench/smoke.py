@@ -94,6 +94,9 @@ QUICK: dict[str, Run] = {
                     "timing_ms.endpoint.again", "timing_ms.pure",
                     "by_accepted_views.hand.1.median_px", "by_accepted_views.hand.2.median_px",
                     "by_accepted_views.hand.3+.median_px")),
+    # Without the optional extra (MediaPipe) it only says so: {"available": false}.
+    "prelabel": Run("prelabel", ("--frames", "6", "--views", "2"),
+                    ("available", "seed", "frames", "views")),
     "qc": Run("qc", ("--capture", "{capture}", "--scenario", "hands-4,objects-4", "--draws", "1",
                      "--object-poses", "truth"),
               ("scenarios.hands-4.bad_flagged_rate", "scenarios.hands-4.good_flagged_rate",

@@ -1,9 +1,10 @@
 """The `dexlabel` command line.
 
-Every command but ``migrate``, ``synth`` and ``demo`` works on an instance: before it runs, a
-migrated database must be where the settings point (``DEXLABEL_VAR_DIR``), or the command
-stops with one line saying so, creating nothing. Bad input is refused the same way everywhere
-(backend.cli.console: ``error: ...``, exit 2), and sequences are named by id or SUBJECT/NAME.
+Every command but ``migrate``, ``synth``, ``demo`` and ``prelabel`` works on an instance:
+before it runs, a migrated database must be where the settings point (``DEXLABEL_VAR_DIR``),
+or the command stops with one line saying so, creating nothing. Bad input is refused the same
+way everywhere (backend.cli.console: ``error: ...``, exit 2), and sequences are named by id or
+SUBJECT/NAME.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from backend.instance import (
 )
 
 # Commands that make their own instance (or none) instead of needing one.
-NO_INSTANCE = frozenset({"migrate", "synth", "demo"})
+NO_INSTANCE = frozenset({"migrate", "synth", "demo", "prelabel"})
 # Commands that run for long and find the server's address each time they need it.
 LONG_RUNNING = frozenset({"serve", "worker"})
 _ARGS = "dexlabel.args"
@@ -98,6 +99,12 @@ def synth(
              "extrinsics:DEG,MM, late:N, depth-scale:S, depth-shift:LO-HI, betas[:SIGMA]; "
              "see worker/synth/faults.py")] = None,
     fault_seed: Annotated[int, typer.Option(min=0, help="seed of the faults' choices")] = 0,
+    forearm: Annotated[bool, typer.Option(
+        "--forearm", help="draw a forearm and sleeve from the wrist (closer to real footage, "
+                          "for hand detectors); the truth is unchanged")] = False,
+    varied_light: Annotated[bool, typer.Option(
+        "--varied-light", help="a room's light drawn from the seed (more ambient light, the "
+                               "lamp anywhere above) instead of the fixed one")] = False,
 ) -> None:
     """Write a synthetic capture and its ground-truth labels.
 
@@ -113,7 +120,8 @@ def synth(
         clean = out.with_name(out.name + ".clean") if faults else out
         with progress(f"synthesising {views} views x {frames} frames") as step:
             summary = generate_capture(clean, seed=seed, frames=frames, views=views,
-                                       objects=objects)
+                                       objects=objects, forearm=forearm,
+                                       varied_light=varied_light)
             step(f"{summary.subject}/{summary.sequence}")
         if faults:
             _with_faults(clean, out, faults, fault_seed)
@@ -359,6 +367,7 @@ def _register_domain_commands() -> None:
     from backend.cli.captures import sequences_app
     from backend.cli.exports import export_command
     from backend.cli.jobs import jobs_app
+    from backend.cli.prelabel import prelabel_command
     from backend.cli.quality import qc_app, training_app
     from backend.cli.rig import rig_app
     from backend.cli.solve import calibrate_hand_command, solve_command
@@ -368,6 +377,7 @@ def _register_domain_commands() -> None:
     app.command("solve")(solve_command)
     app.command("calibrate-hand")(calibrate_hand_command)
     app.command("export")(export_command)
+    app.command("prelabel")(prelabel_command)
     app.add_typer(qc_app, name="qc")
     app.add_typer(jobs_app, name="jobs")
     app.add_typer(training_app, name="training")

@@ -5,6 +5,8 @@
   view's images with the same tracker;
 - :mod:`worker.assist.prefill`: pre-fill suggestions for one view from the accepted work of the
   others (triangulated, projected, visibility from depth);
+- :mod:`worker.assist.prelabel`: hand proposals from a keypoint model (MediaPipe, the optional
+  extra ``prelabel``) for a view nobody has labelled yet, and their score against the truth;
 - :mod:`worker.assist.checks`: check suggestions, the few cells per assignment shown off the
   point so that QC can tell a worker who looks from one who accepts everything.
 

@@ -40,6 +40,7 @@ from worker.geometry.transforms import (
     transform_points,
     transform_pose_m,
 )
+from worker.synth.forearm import forearm_meshes
 from worker.synth.grasp import build_shaped_hand, plan_grasp
 from worker.synth.layout import (
     LabelSet,
@@ -49,11 +50,13 @@ from worker.synth.layout import (
     write_sequence_files,
 )
 from worker.synth.motion import build_trajectory, make_keyframes
+from worker.synth.render import DEFAULT_LIGHTING, varied_lighting
 from worker.synth.scene import build_meshes, make_cameras, make_serials, place_objects
 from worker.synth.shapes import CATALOGUE
 from worker.synth.views import ViewJob, run_view_job
 
 SUBJECT = "synth-subject-01"
+_LIGHT_STREAM = 1  # the varied light's generator: default_rng([seed, _LIGHT_STREAM])
 
 
 @dataclass(frozen=True)
@@ -126,7 +129,8 @@ def _render_all(jobs: list[ViewJob], workers: int) -> None:
 
 def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int = 8,
                      objects: int = 3, width: int = 640, height: int = 480,
-                     workers: int | None = None) -> SynthSummary:
+                     workers: int | None = None, forearm: bool = False,
+                     varied_light: bool = False) -> SynthSummary:
     """Write a synthetic capture of a right hand grasping and lifting one of ``objects`` objects.
 
     Args:
@@ -137,6 +141,11 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
         width, height: image size, pixels (intrinsics scale with the width).
         workers: processes rendering views in parallel (default: the CPUs available); more
             than one starts a spawn pool, so a calling script needs ``if __name__ == "__main__"``.
+        forearm: also draw a forearm and sleeve from the wrist (worker.synth.forearm), closer to
+            real footage; the truth is unchanged and the default renders stay as they were.
+        varied_light: light the scene with a room's light drawn from the seed
+            (worker.synth.render.varied_lighting: more ambient, the lamp anywhere above)
+            instead of the fixed default; drawn apart from the scene, which stays the same.
 
     Returns:
         A :class:`SynthSummary` of what was written.
@@ -144,7 +153,8 @@ def generate_capture(out: Path, *, seed: int = 0, frames: int = 72, views: int =
     _check_args(seed, frames, views, objects, width, height)
     out = Path(out).resolve()
     with written_whole(out) as partial:
-        return _generate(partial, out, seed, frames, views, objects, width, height, workers)
+        return _generate(partial, out, seed, frames, views, objects, width, height, workers,
+                         forearm, varied_light)
 
 
 @contextmanager
@@ -167,7 +177,8 @@ def written_whole(out: Path) -> Iterator[Path]:
 
 
 def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects: int,
-              width: int, height: int, workers: int | None) -> SynthSummary:
+              width: int, height: int, workers: int | None, forearm: bool,
+              varied_light: bool) -> SynthSummary:
     rng = np.random.default_rng(seed)
     serials = make_serials(seed, views)
     cams = make_cameras(rng, serials, width, height)
@@ -199,12 +210,16 @@ def _generate(tmp: Path, out: Path, seed: int, frames: int, views: int, objects:
     table, object_meshes, textures, skin = build_meshes(rng, [p.spec for p in placed])
     write_models(tmp, [p.spec for p in placed], textures[1:])
     seq_dir = write_sequence_files(tmp, names, serials, ycb_ids, grasp_ind, world, frames)
+    arm = tuple(forearm_meshes(joints, skin)) if forearm else ()
+    # A generator of its own, so that the scene drawn from ``rng`` is the same either way.
+    lighting = (varied_lighting(np.random.default_rng([seed, _LIGHT_STREAM])) if varied_light
+                else DEFAULT_LIGHTING)
     jobs = []
     for v, cam in enumerate(cams):
         (seq_dir / cam.serial).mkdir()
         jobs.append(ViewJob(
             seed, v, seq_dir / cam.serial, cam, width, height, table, object_meshes,
             traj.object_poses, hand_vertices, np.asarray(rig.model.faces), skin,
-            camera_labels(world, extrinsics[v], cam, rig.root), textures))
+            camera_labels(world, extrinsics[v], cam, rig.root), textures, arm, lighting))
     _render_all(jobs, _worker_count(views, workers))
     return SynthSummary(out, names["subject"], names["sequence"], serials, frames, ycb_ids)

@@ -27,6 +27,40 @@ _BACKGROUND_BOTTOM = np.array([58.0, 60.0, 62.0])
 
 
 @dataclass(frozen=True)
+class Lighting:
+    """Ambient light plus one distant light, in the scene frame.
+
+    Attributes:
+        ambient, diffuse: shading = ambient + diffuse * max(0, normal . direction).
+        direction: (3,) unit vector towards the light, scene frame.
+    """
+
+    ambient: float = AMBIENT
+    diffuse: float = DIFFUSE
+    direction: tuple[float, float, float] = (float(LIGHT_DIR_SCENE[0]),
+                                             float(LIGHT_DIR_SCENE[1]),
+                                             float(LIGHT_DIR_SCENE[2]))
+
+
+DEFAULT_LIGHTING = Lighting()
+
+
+def varied_lighting(rng: np.random.Generator) -> Lighting:
+    """A room's light drawn at random (``dexlabel synth --varied-light``): indoor footage is
+    lit as much by light bounced off walls and ceiling as by its lamps, so the ambient share
+    is drawn higher than the default's (which leaves the side of a hand away from the light
+    dark), and the lamp anywhere above the table."""
+    ambient = rng.uniform(0.45, 0.65)
+    diffuse = rng.uniform(0.4, 0.65)
+    elevation = np.deg2rad(rng.uniform(35.0, 80.0))
+    azimuth = rng.uniform(0.0, 2.0 * np.pi)
+    direction = (np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
+                 np.sin(elevation))
+    return Lighting(float(ambient), float(diffuse),
+                    (float(direction[0]), float(direction[1]), float(direction[2])))
+
+
+@dataclass(frozen=True)
 class SceneMesh:
     """One mesh instance at one frame, in the scene frame.
 
@@ -212,8 +246,8 @@ def _albedo(frame: SceneFrame, tri: np.ndarray, bary: np.ndarray, atlas: Texture
     return albedo
 
 
-def _shade(frame: SceneFrame, view: ViewCamera, frags: Fragments, atlas: TextureAtlas
-           ) -> np.ndarray:
+def _shade(frame: SceneFrame, view: ViewCamera, frags: Fragments, atlas: TextureAtlas,
+           lighting: Lighting) -> np.ndarray:
     """Lambertian + ambient colour (H', W', 3) float32 of the padded render image."""
     rw, rh = view.render_size
     img = np.repeat(view.background, rw, axis=0)  # (rh * rw, 3), row-major pixels
@@ -229,14 +263,16 @@ def _shade(frame: SceneFrame, view: ViewCamera, frags: Fragments, atlas: Texture
     flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
     flat *= -np.sign(np.einsum("pc,pc->p", flat, rays[away]))[:, None]
     normals[away] = flat
-    lit = AMBIENT + DIFFUSE * np.clip(normals @ LIGHT_DIR_SCENE.astype(np.float32), 0.0, None)
+    light = np.asarray(lighting.direction, np.float64).astype(np.float32)
+    lit = lighting.ambient + lighting.diffuse * np.clip(normals @ light, 0.0, None)
     img[frags.pixels] = _albedo(frame, tri, bary, atlas) * lit[:, None]
     return img.reshape(rh, rw, 3)
 
 
 def render_view(frame: SceneFrame, view: ViewCamera, atlas: TextureAtlas,
-                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Render one view of a frame.
+                rng: np.random.Generator, lighting: Lighting = DEFAULT_LIGHTING
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Render one view of a frame (lit by ``lighting``).
 
     Returns:
         color (H, W, 3) uint8 BGR, depth (H, W) uint16 millimetres along camera z (0 = none),
@@ -246,7 +282,7 @@ def render_view(frame: SceneFrame, view: ViewCamera, atlas: TextureAtlas,
     points_cam = (frame.vertices - trans) @ rot
     rw, rh = view.render_size
     frags = rasterize(points_cam, frame.faces, view.render_K, rw, rh)
-    shaded = _shade(frame, view, frags, atlas)
+    shaded = _shade(frame, view, frags, atlas, lighting)
     seg_full = np.where(frags.tri >= 0, frame.label[np.maximum(frags.tri, 0)], 0).astype(np.uint8)
     depth_full = frags.depth
     if view.map_xy is not None and view.sample is not None:

@@ -13,6 +13,8 @@ import numpy as np
 from worker.formats import dexycb
 from worker.formats.files import encode_image, npz_bytes
 from worker.synth.render import (
+    DEFAULT_LIGHTING,
+    Lighting,
     ModelMesh,
     SceneMesh,
     TextureAtlas,
@@ -36,6 +38,9 @@ class ViewJob:
         hand_vertices: (F, V, 3) table frame, metres; hand_faces: (Fh, 3); hand_color: BGR.
         labels: per-frame label arrays in this camera's frame, keyed by label name, leading F.
         textures: texture images indexed by the meshes' ``texture`` fields.
+        arm: extra meshes drawn with the hand and labelled background (worker.synth.forearm):
+            (vertices (F, V, 3) table frame, faces, BGR colour) each; none by default.
+        lighting: how the scene is lit (worker.synth.render.Lighting).
     """
 
     seed: int
@@ -52,6 +57,8 @@ class ViewJob:
     hand_color: tuple[float, float, float]
     labels: dict[str, np.ndarray]
     textures: list[np.ndarray]
+    arm: tuple[tuple[np.ndarray, np.ndarray, tuple[float, float, float]], ...] = ()
+    lighting: Lighting = DEFAULT_LIGHTING
 
 
 def _hand_mesh(job: ViewJob, frame: int, label: int) -> SceneMesh:
@@ -71,8 +78,10 @@ def run_view_job(job: ViewJob, hand_label: int) -> list[str]:
         meshes = [job.table.posed(identity)]
         meshes += [m.posed(job.object_poses[frame, k]) for k, m in enumerate(job.objects)]
         meshes.append(_hand_mesh(job, frame, hand_label))
+        meshes += [SceneMesh(v[frame], faces, smooth_normals(v[frame], faces), None, -1, color,
+                             dexycb.BACKGROUND_SEG_VALUE) for v, faces, color in job.arm]
         rng = np.random.default_rng([job.seed, job.view, frame])
-        color, depth, seg = render_view(combine(meshes), view, atlas, rng)
+        color, depth, seg = render_view(combine(meshes), view, atlas, rng, job.lighting)
         labels = {name: values[frame] for name, values in job.labels.items()}
         labels[dexycb.SEG] = seg
         files = {
