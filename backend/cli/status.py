@@ -124,7 +124,8 @@ def status_command(
         help="sequence id or SUBJECT/NAME (default: one line per sequence)",
         show_default=False)] = None,
     json: Annotated[bool, typer.Option(
-        "--json", help="print the progress API's JSON (with a sequence: and its frame_costs)")] = False,
+        "--json", help="print the progress API's JSON (one sequence's with its frame_costs)",
+    )] = False,
 ) -> None:
     """Where the work stands, and its cost per labelled 3D frame.
 

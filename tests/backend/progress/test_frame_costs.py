@@ -5,7 +5,6 @@ to the ledger's rows and to the cost report, in the API and in `dexlabel status`
 from __future__ import annotations
 
 import json
-
 from typing import Any
 
 import numpy as np
