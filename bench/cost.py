@@ -28,16 +28,17 @@ click, a key for an occluded one), with assistance what the page's edit counter 
 (clicks, drags, occlusion keys, accepts, the page's own re-tracks after a correction), working
 time modelled as a minute of reading plus 3 s per action (backend.crowd.simulate; no person is
 timed). "first_view_actions": per target, the edit actions of its first accepted view (the
-accepted assignment submitted first), the view worked with the least help. Money is real
+accepted assignment submitted first), the view worked with the least help; "view_actions": per
+target, each submitted assignment's actions, kept suggestions and status. Money is real
 ledger money for rewards priced per task at ``--hourly`` dollars an hour of that protocol's
 expected working time (the mean over the tasks of a kind, from the same simulated workers on
 the truth), plus the marketplace's fee; rejected work is done but not paid.
 
 Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
 "profile", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
-"add_mm", "rewards_usd", "first_view_actions", "seconds"}}, "ratios": {ours over dexycb per
-labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios": {assisted over dexycb,
-the same}} (each ratio block only when both its protocols ran).
+"add_mm", "rewards_usd", "first_view_actions", "view_actions", "seconds"}}, "ratios": {ours
+over dexycb per labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios":
+{assisted over dexycb, the same}} (each ratio block only when both its protocols ran).
 
 Usage: python bench/cost.py [--seed 7717] [--views 8] [--frames 72] [--profile careful]
            [--protocols dexycb,ours,assisted]
@@ -124,25 +125,39 @@ def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarr
     return int(assisted_annotate(xy, visible, setting, "careful", rng).actions["edits"])
 
 
-def _first_views(sequence_id: int) -> dict[str, int]:
-    """Per target, the edit actions of its first accepted view (the accepted assignment
-    submitted first)."""
+def _views(sequence_id: int) -> dict[str, list[dict[str, Any]]]:
+    """Per target, each submitted assignment in submission order: its edit actions, how many
+    of its keyframes are suggestions kept unchanged (source "prefilled") and its status."""
     from sqlalchemy import select
+    from sqlalchemy.orm import selectinload
 
     from backend.annotation.models import Assignment, Task
     from backend.db import session_scope
-    from backend.labels import ACCEPTED
 
-    out: dict[str, int] = {}
+    out: dict[str, list[dict[str, Any]]] = {}
     with session_scope() as session:
         rows = session.execute(
-            select(Task.target_key, Assignment.edit_count)
+            select(Task.target_key, Assignment)
             .join(Task, Task.id == Assignment.task_id)
-            .where(Task.sequence_id == sequence_id, Assignment.status == ACCEPTED)
+            .where(Task.sequence_id == sequence_id, Assignment.submitted_at.is_not(None))
+            .options(selectinload(Assignment.tracks))
             .order_by(Assignment.submitted_at, Assignment.id)).all()
-    for target, edits in rows:
-        out.setdefault(target, int(edits))
+        for target, work in rows:
+            suggested = sum(len(r) > 4 and r[4] == "prefilled"
+                            for t in work.tracks for r in t.keyframes)
+            out.setdefault(target, []).append({"actions": int(work.edit_count),
+                                               "suggested": suggested,
+                                               "status": work.status})
     return out
+
+
+def _first_views(views: dict[str, list[dict[str, Any]]]) -> dict[str, int]:
+    """Per target, the edit actions of its first accepted view (the accepted assignment
+    submitted first)."""
+    from backend.labels import ACCEPTED
+
+    return {target: next(v["actions"] for v in rows if v["status"] == ACCEPTED)
+            for target, rows in views.items() if any(v["status"] == ACCEPTED for v in rows)}
 
 
 def _setup(capture: Path) -> tuple[int, list[dict]]:
@@ -228,12 +243,13 @@ def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]
     with session_scope() as session:
         found = frame_costs(session, [sequence_id])[0]
     mpjpe, add = _accuracy(sequence_id, capture)
+    views = _views(sequence_id)
     lines = {t.target_key: t.model_dump() for t in found.targets}
     return {"hand": lines.get("hand:0"),
             "objects": [v for k, v in lines.items() if k.startswith("object:")],
             "total": found.total.model_dump(), "mpjpe_mm": mpjpe, "add_mm": add,
             "rewards_usd": {k: v / 100 for k, v in rewards.items()},
-            "first_view_actions": _first_views(sequence_id),
+            "first_view_actions": _first_views(views), "view_actions": views,
             "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
             "seconds": round(time.perf_counter() - started, 1)}
 
