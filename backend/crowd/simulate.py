@@ -179,7 +179,7 @@ class WorkerClient:
 
 
 class PageAssistance:
-    """What the annotation page shows one assignment, asked of its routes (an
+    """What the annotation page shows one assignment, asked of its routes (a
     worker.synth.assisted.Assistance): POST /api/annotate/proposals (between anchors, and
     ``follow`` forward from a point's last keyframe, as the page's Track all asks) and GET
     /api/annotate/suggestions (polled while ``preparing``, as the page does). The check cells
@@ -195,8 +195,6 @@ class PageAssistance:
         self.frames = int(task["num_frames"])
         self.size = (int(task["width"]), int(task["height"]))
         self.poll_s, self.poll_limit_s = poll_s, poll_limit_s
-        self.requests = 0
-        self.suggested_views = 0
 
     def proposals(self, anchors: list[list[list[Any]]], forward: list[int]
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -212,7 +210,6 @@ class PageAssistance:
             "last_frame": self.frames - 1 if forward else max(frames)}
         if forward:
             body["follow"] = [{"point": p, "direction": "forward"} for p in forward]
-        self.requests += 1
         reply = _checked(self.client.http.post(f"{self.client.base}/api/annotate/proposals",
                                                headers=self.auth, json=body), "proposals")
         first = int(reply["first_frame"])
@@ -244,7 +241,6 @@ class PageAssistance:
                 # The page takes a suggestion of unknown visibility as visible.
                 visible[first + i, point["point"]] = vis is not False
                 known[first + i, point["point"]] = vis is not None
-        self.suggested_views = len(reply.get("views") or [])
         return Prefill(xy=xy, visible=visible, known=known)
 
 

@@ -53,8 +53,8 @@ Workers:
     blind     keys by hand what the careful worker keys (the first and last frame and the
               visibility changes, with the same care; the last frame even where points are
               followed), accepts every proposal and the whole pre-fill, corrects nothing: the
-              check cells keep their offsets. Its labels are
-              as good as the suggestions, so only the check cells tell it apart.
+              check cells keep their offsets. Its labels are as good as the suggestions, so
+              where those hold only the check cells tell it apart.
 
 Pure numpy (and OpenCV through worker.assist.lk); every random choice comes from ``rng``.
 """
