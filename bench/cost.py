@@ -12,24 +12,36 @@ labelled 3D frame, from the ledger), and against the capture's truth the hand's 
 frames the solve labelled and trusts) and each object's ADD (mm, mean vertex distance over the
 frames it trusts).
 
-Protocols (backend.crowd.simulate.PROTOCOLS):
-    dexycb  every joint and landmark clicked on every frame in every view ("every-frame");
-    ours    the product's keyframe worker: a keyframe every 4 frames, where the path bends and
-            where visibility changes, interpolated in between ("keyframes").
+Protocols (backend.crowd.simulate.PROTOCOLS and ASSISTED):
+    dexycb    every joint and landmark clicked on every frame in every view ("every-frame");
+    ours      the product's keyframe worker: a keyframe every 4 frames, where the path bends and
+              where visibility changes, interpolated in between ("keyframes");
+    assisted  ours with the page's assistance ("assisted", worker.synth.assisted through the
+              routes the page asks): a keyframe on the first frame and at visibility changes,
+              each point followed forward and tracked between keyframes (POST
+              /api/annotate/proposals), suggestions from the views already accepted (GET
+              /api/annotate/suggestions) where there are any, every shown position further than
+              worker.synth.assisted.TOLERANCE_PX from the point corrected, then accepted.
 
 Effort is what the simulated worker earns on the page's counters: an action per keyframe (a
-click, a key for an occluded one), working time modelled as a minute of reading plus 3 s per
-action (backend.crowd.simulate; no person is timed). Money is real ledger money for rewards
-priced per task at ``--hourly`` dollars an hour of that protocol's expected working time (the
-mean over the tasks of a kind, from the same simulated workers on the truth), plus the
-marketplace's fee; rejected work is done but not paid.
+click, a key for an occluded one), with assistance what the page's edit counter records
+(clicks, drags, occlusion keys, accepts, the page's own re-tracks after a correction), working
+time modelled as a minute of reading plus 3 s per action (backend.crowd.simulate; no person is
+timed). "first_view_actions": per target, the edit actions of its first accepted view (the
+accepted assignment submitted first), the view worked with the least help; "view_actions": per
+target, each submitted assignment's actions, kept suggestions and status. Money is real
+ledger money for rewards priced per task at ``--hourly`` dollars an hour of that protocol's
+expected working time (the mean over the tasks of a kind, from the same simulated workers on
+the truth), plus the marketplace's fee; rejected work is done but not paid.
 
 Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
 "profile", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
-"add_mm", "rewards_usd", "seconds"}}, "ratios": {ours over dexycb per labelled hand frame:
-"actions", "seconds", "money"}}.
+"add_mm", "rewards_usd", "first_view_actions", "view_actions", "seconds"}}, "ratios": {ours
+over dexycb per labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios":
+{assisted over dexycb, the same}} (each ratio block only when both its protocols ran).
 
 Usage: python bench/cost.py [--seed 7717] [--views 8] [--frames 72] [--profile careful]
+           [--protocols dexycb,ours,assisted]
 """
 
 from __future__ import annotations
@@ -48,7 +60,7 @@ import numpy as np
 from _server import free_port, isolated_workdir
 
 ROOT = Path(__file__).resolve().parents[1]
-PROTOCOLS = {"dexycb": "every-frame", "ours": "keyframes"}
+PROTOCOLS = {"dexycb": "every-frame", "ours": "keyframes", "assisted": "assisted"}
 
 
 def _truth(capture: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -71,24 +83,81 @@ def _truth(capture: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _rewards(capture: Path, tasks: list[dict], protocol: str, hourly: float) -> dict[str, int]:
     """Reward cents per task kind: ``hourly`` dollars an hour of the protocol's mean modelled
-    working time over the kind's tasks (careful workers on the truth)."""
+    working time over the kind's tasks (careful workers on the truth; with assistance, on the
+    view's frames in process, without suggestions)."""
     from backend.captures.truth import CaptureTruth
+    from backend.crowd.simulate import ASSISTED, working_seconds
     from backend.crowd.simulate import PROTOCOLS as STEPS
-    from backend.crowd.simulate import working_seconds
     from worker.synth.annotators import annotate, keyframe_actions
 
     truth, rng = CaptureTruth(capture), np.random.default_rng(0)
-    key_step, follow = STEPS[protocol]
     seconds: dict[str, list[float]] = {}
     for task in tasks:
         xy, visible = truth.points(task, rng)
-        work = annotate(xy, visible, (task["width"], task["height"]), "careful", rng, key_step,
-                        follow)
-        effort = keyframe_actions(work.tracks)
-        seconds.setdefault(task["kind"], []).append(
-            working_seconds(effort["clicks"] + effort["drags"] + effort["keys"]))
+        if protocol == ASSISTED:
+            actions = _assisted_edits(capture, task, xy, visible, rng)
+        else:
+            key_step, follow = STEPS[protocol]
+            work = annotate(xy, visible, (task["width"], task["height"]), "careful", rng,
+                            key_step, follow)
+            effort = keyframe_actions(work.tracks)
+            actions = effort["clicks"] + effort["drags"] + effort["keys"]
+        seconds.setdefault(task["kind"], []).append(working_seconds(actions))
     return {kind: max(1, round(float(np.mean(s)) / 3600.0 * hourly * 100))
             for kind, s in seconds.items()}
+
+
+def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarray,
+                    rng: np.random.Generator) -> int:
+    """The page's edit count of a careful assisted worker on the task's view, the proposals
+    computed in process (as the route computes them), no suggestions."""
+    import cv2
+
+    from worker.assist.checks import check_key
+    from worker.formats import dexycb
+    from worker.synth.assisted import AssistSetting, assisted_annotate
+
+    view = next(capture.glob(dexycb.META_GLOB)).parent / task["serial"]
+    grey = np.stack([cv2.imread(str(view / dexycb.color_file(f)), cv2.IMREAD_GRAYSCALE)
+                     for f in range(task["num_frames"])])
+    setting = AssistSetting(grey, check_key("rewards"), task["id"], follows=True,
+                            retracks=True)
+    return int(assisted_annotate(xy, visible, setting, "careful", rng).actions["edits"])
+
+
+def _views(sequence_id: int) -> dict[str, list[dict[str, Any]]]:
+    """Per target, each submitted assignment in submission order: its edit actions, how many
+    of its keyframes are suggestions kept unchanged (source "prefilled") and its status."""
+    from sqlalchemy import select
+    from sqlalchemy.orm import selectinload
+
+    from backend.annotation.models import Assignment, Task
+    from backend.db import session_scope
+
+    out: dict[str, list[dict[str, Any]]] = {}
+    with session_scope() as session:
+        rows = session.execute(
+            select(Task.target_key, Assignment)
+            .join(Task, Task.id == Assignment.task_id)
+            .where(Task.sequence_id == sequence_id, Assignment.submitted_at.is_not(None))
+            .options(selectinload(Assignment.tracks))
+            .order_by(Assignment.submitted_at, Assignment.id)).all()
+        for target, work in rows:
+            suggested = sum(len(r) > 4 and r[4] == "prefilled"
+                            for t in work.tracks for r in t.keyframes)
+            out.setdefault(target, []).append({"actions": int(work.edit_count),
+                                               "suggested": suggested,
+                                               "status": work.status})
+    return out
+
+
+def _first_views(views: dict[str, list[dict[str, Any]]]) -> dict[str, int]:
+    """Per target, the edit actions of its first accepted view (the accepted assignment
+    submitted first)."""
+    from backend.labels import ACCEPTED
+
+    return {target: next(v["actions"] for v in rows if v["status"] == ACCEPTED)
+            for target, rows in views.items() if any(v["status"] == ACCEPTED for v in rows)}
 
 
 def _setup(capture: Path) -> tuple[int, list[dict]]:
@@ -174,11 +243,13 @@ def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]
     with session_scope() as session:
         found = frame_costs(session, [sequence_id])[0]
     mpjpe, add = _accuracy(sequence_id, capture)
+    views = _views(sequence_id)
     lines = {t.target_key: t.model_dump() for t in found.targets}
     return {"hand": lines.get("hand:0"),
             "objects": [v for k, v in lines.items() if k.startswith("object:")],
             "total": found.total.model_dump(), "mpjpe_mm": mpjpe, "add_mm": add,
             "rewards_usd": {k: v / 100 for k, v in rewards.items()},
+            "first_view_actions": _first_views(views), "view_actions": views,
             "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
             "seconds": round(time.perf_counter() - started, 1)}
 
@@ -202,6 +273,13 @@ def _ratio(ours: float | None, theirs: float | None) -> float | None:
     return round(ours / theirs, 4) if ours is not None and theirs else None
 
 
+def _ratios(ours: dict[str, Any], theirs: dict[str, Any]) -> dict[str, float | None]:
+    """Per labelled hand frame, ``ours`` over ``theirs``: actions, seconds, money."""
+    return {"actions": _ratio(ours["actions_per_frame"], theirs["actions_per_frame"]),
+            "seconds": _ratio(ours["seconds_per_frame"], theirs["seconds_per_frame"]),
+            "money": _ratio(_money(ours), _money(theirs))}
+
+
 def _money(line: dict[str, Any]) -> float | None:
     value = line.get("money_per_frame")
     return None if value is None else float(value)
@@ -222,7 +300,8 @@ def main() -> None:
     parser.add_argument("--hourly", type=float, default=12.0,
                         help="dollars an hour of modelled working time the rewards pay")
     parser.add_argument("--protocols", default="dexycb,ours",
-                        help="comma-separated, of dexycb and ours (ratios need both)")
+                        help="comma-separated, of dexycb, ours and assisted (ratios need"
+                             " dexycb)")
     parser.add_argument("--one", choices=sorted(PROTOCOLS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     chosen = [p.strip() for p in args.protocols.split(",") if p.strip()]
@@ -244,17 +323,15 @@ def main() -> None:
     for name in chosen:
         result["protocols"][name] = got = _child(capture.resolve(), name, args)
         hand = got["hand"]
+        first = got["first_view_actions"].get("hand:0")
         print(f"{name}: hand {hand['frames_labelled']} 3D frames, {hand['actions_per_frame']}"
               f" actions, {hand['seconds_per_frame']} s, ${hand['money_per_frame']} per frame;"
-              f" MPJPE {got['mpjpe_mm']} mm, ADD {got['add_mm']} mm", flush=True)
-    if set(result["protocols"]) != set(PROTOCOLS):
-        print(json.dumps(result))
-        return
-    theirs, ours = result["protocols"]["dexycb"]["hand"], result["protocols"]["ours"]["hand"]
-    result["ratios"] = {
-        "actions": _ratio(ours["actions_per_frame"], theirs["actions_per_frame"]),
-        "seconds": _ratio(ours["seconds_per_frame"], theirs["seconds_per_frame"]),
-        "money": _ratio(_money(ours), _money(theirs))}
+              f" first view {first} actions; MPJPE {got['mpjpe_mm']} mm, ADD"
+              f" {got['add_mm']} mm", flush=True)
+    ran = result["protocols"]
+    for field, name in (("ratios", "ours"), ("assisted_ratios", "assisted")):
+        if "dexycb" in ran and name in ran:
+            result[field] = _ratios(ran[name]["hand"], ran["dexycb"]["hand"])
     print(json.dumps(result))
 
 

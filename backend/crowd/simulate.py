@@ -6,12 +6,15 @@ task token of the work URL), autosaves its tracks twice, submits them, and posts
 marketplace's completion form to ``{turkSubmitTo}/mturk/externalSubmit``. The labels come from
 the ground truth of a synthetic capture (matched by the task's camera serial), spoiled by the
 worker's profile (worker.synth.annotators), keyed as the labelling ``protocol`` asks:
-``keyframes`` (the product's: a keyframe every few frames and where the path bends) or
-``every-frame`` (DexYCB's: every joint clicked on every frame). The page's effort counters
-are reported as such a worker earns them: an edit action per keyframe (a click, or a key for
-an occluded one: worker.synth.annotators.keyframe_actions) and a modelled working time:
-READING_S to read the task and play the clip, then SECONDS_PER_ACTION per action (no person
-is timed here).
+``keyframes`` (the product's: a keyframe every few frames and where the path bends),
+``every-frame`` (DexYCB's: every joint clicked on every frame) or ``assisted`` (the product's
+with the page's assistance: worker.synth.assisted's worker, careful or blind, asking the same
+routes the page asks, see ``PageAssistance``). The page's effort counters are reported as such
+a worker earns them: an edit action per keyframe (a click, or a key for an occluded one:
+worker.synth.annotators.keyframe_actions), or with assistance what the page's edit counter
+records (worker.synth.assisted.Actions.edits: clicks, drags, occlusion keys, accepts, the
+page's re-tracks), and a modelled working time: READING_S to read the task and play the clip,
+then SECONDS_PER_ACTION per action (no person is timed here).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import numpy as np
 from backend.captures.truth import CaptureTruth
 from backend.errors import DexlabelError
 from worker.synth.annotators import KEY_STEP, annotate, draw_profiles, keyframe_actions
+from worker.synth.assisted import Prefill, assisted_annotate
 
 WORKER_EMAIL = "sim-worker-{index:03d}@simulated.dexlabel.org"
 WORKER_PASSWORD = "simulated worker {index:03d}"
@@ -40,10 +44,20 @@ RETRY_PAUSE_S = 0.2
 # action (a click or key, with the look before it).
 READING_S = 60.0
 SECONDS_PER_ACTION = 3.0
-Protocol = Literal["keyframes", "every-frame"]
-# protocol -> (key step, follow the motion: None as the profile does)
+Protocol = Literal["keyframes", "every-frame", "assisted"]
+# protocol -> (key step, follow the motion: None as the profile does), for the protocols
+# keyed without assistance
 PROTOCOLS: dict[str, tuple[int, bool | None]] = {"keyframes": (KEY_STEP, None),
                                                  "every-frame": (1, False)}
+ASSISTED = "assisted"
+# The profiles of an assisted crowd (worker.synth.assisted): "mixed" draws a blind acceptor
+# with this probability, a careful worker otherwise.
+ASSISTED_PROFILES = ("careful", "blind")
+ASSISTED_BLIND_SHARE = 0.2
+# While the suggestions route answers ``preparing`` (a fit on the worker queue), the page asks
+# again this often for at most this long, s (frontend/annotate/core/assist.js).
+SUGGEST_POLL_S = 4.0
+SUGGEST_POLL_LIMIT_S = 180.0
 
 
 def working_seconds(actions: int) -> float:
@@ -164,6 +178,72 @@ class WorkerClient:
         _checked(self.http.post(url, data=form), "post externalSubmit")
 
 
+class PageAssistance:
+    """What the annotation page shows one assignment, asked of its routes (a
+    worker.synth.assisted.Assistance): POST /api/annotate/proposals (between anchors, and
+    ``follow`` forward from a point's last keyframe, as the page's Track all asks) and GET
+    /api/annotate/suggestions (polled while ``preparing``, as the page does). The check cells
+    are planted by the routes. The page re-tracks around a correction by itself."""
+
+    follows = True
+    retracks = True
+
+    def __init__(self, client: WorkerClient, token: str, task: dict,
+                 poll_s: float = SUGGEST_POLL_S, poll_limit_s: float = SUGGEST_POLL_LIMIT_S
+                 ) -> None:
+        self.client, self.auth = client, {"Authorization": f"Bearer {token}"}
+        self.frames = int(task["num_frames"])
+        self.size = (int(task["width"]), int(task["height"]))
+        self.poll_s, self.poll_limit_s = poll_s, poll_limit_s
+
+    def proposals(self, anchors: list[list[list[Any]]], forward: list[int]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        asked = [p for p, rows in enumerate(anchors) if rows]
+        xy = np.full((self.frames, len(anchors), 2), np.nan)
+        ok = np.zeros((self.frames, len(anchors)), dtype=bool)
+        if not asked:
+            return xy, ok
+        frames = [int(r[0]) for p in asked for r in anchors[p]]
+        body: dict[str, Any] = {
+            "tracks": [{"point": p, "keyframes": anchors[p]} for p in asked],
+            "first_frame": min(frames),
+            "last_frame": self.frames - 1 if forward else max(frames)}
+        if forward:
+            body["follow"] = [{"point": p, "direction": "forward"} for p in forward]
+        reply = _checked(self.client.http.post(f"{self.client.base}/api/annotate/proposals",
+                                               headers=self.auth, json=body), "proposals")
+        first = int(reply["first_frame"])
+        for point in reply["points"]:
+            for i, (at, held) in enumerate(zip(point["xy"], point["ok"], strict=True)):
+                if held and at is not None:
+                    xy[first + i, point["point"]], ok[first + i, point["point"]] = at, True
+        return xy, ok
+
+    def suggestions(self) -> Prefill | None:
+        started = time.monotonic()
+        while True:
+            reply = _checked(self.client.http.get(f"{self.client.base}/api/annotate/suggestions",
+                                                  headers=self.auth), "suggestions")
+            if not reply.get("preparing") or time.monotonic() - started >= self.poll_limit_s:
+                break
+            time.sleep(self.poll_s)
+        if not reply.get("available") or not reply.get("points"):
+            return None
+        points = max(int(p["point"]) for p in reply["points"]) + 1
+        xy = np.full((self.frames, points, 2), np.nan)
+        visible = np.ones((self.frames, points), dtype=bool)
+        known = np.zeros((self.frames, points), dtype=bool)
+        first = int(reply["first_frame"])
+        for point in reply["points"]:
+            for i, (at, vis) in enumerate(zip(point["xy"], point["visible"], strict=True)):
+                if at is not None:
+                    xy[first + i, point["point"]] = at
+                # The page takes a suggestion of unknown visibility as visible.
+                visible[first + i, point["point"]] = vis is not False
+                known[first + i, point["point"]] = vis is not None
+        return Prefill(xy=xy, visible=visible, known=known)
+
+
 def admin_token(http: httpx.Client, base: str, email: str, password: str) -> str:
     reply = _checked(http.post(f"{base.rstrip('/')}/api/auth/token",
                                json={"email": email, "password": password}), "admin log in")
@@ -183,15 +263,32 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
     params, page_token, reply = client.open_page(accepted["work_url"])
     task = reply["task"]
     xy, visible = truth.points(task, rng)
-    key_step, follow = PROTOCOLS[protocol]
-    work = annotate(xy, visible, (task["width"], task["height"]), profile, rng, key_step, follow)
-    effort = keyframe_actions(work.tracks)
-    version = client.label(page_token, reply["assignment"]["version"], work.tracks,
-                           effort["clicks"] + effort["drags"] + effort["keys"])
+    if protocol == ASSISTED:
+        page = PageAssistance(client, page_token, task)
+        done = assisted_annotate(xy, visible, page, profile, rng)
+        tracks, edits = done.tracks, done.actions["edits"]
+    else:
+        key_step, follow = PROTOCOLS[protocol]
+        work = annotate(xy, visible, (task["width"], task["height"]), profile, rng, key_step,
+                        follow)
+        effort = keyframe_actions(work.tracks)
+        tracks, edits = work.tracks, effort["clicks"] + effort["drags"] + effort["keys"]
+    version = client.label(page_token, reply["assignment"]["version"], tracks, edits)
     client.external_submit(params, version)
     outcome.status, outcome.task_id = "submitted", task["id"]
     outcome.hit_id, outcome.assignment_id = params.get("hitId"), params["assignmentId"]
     return outcome
+
+
+def draw_assisted(count: int, profile: str, rng: np.random.Generator) -> list[str]:
+    """``count`` assisted profiles: all ``profile`` (careful or blind), or for ``mixed`` a
+    blind acceptor with ASSISTED_BLIND_SHARE, careful otherwise."""
+    if profile == "mixed":
+        return ["blind" if b else "careful" for b in rng.random(count) < ASSISTED_BLIND_SHARE]
+    if profile not in ASSISTED_PROFILES:
+        raise ValueError(f"unknown profile {profile!r} for assisted work; one of "
+                         f"{', '.join(ASSISTED_PROFILES)} or mixed")
+    return [profile] * count
 
 
 def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: str,
@@ -207,7 +304,8 @@ def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: 
     workers who have not done them yet.
     """
     rng = np.random.default_rng(seed)
-    profiles = draw_profiles(workers, profile, rng)
+    profiles = (draw_assisted(workers, profile, rng) if protocol == ASSISTED
+                else draw_profiles(workers, profile, rng))
     truth = CaptureTruth(capture)
     try:
         with httpx.Client(timeout=HTTP_TIMEOUT_S) as http:

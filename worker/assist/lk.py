@@ -135,6 +135,10 @@ def _lk(a: np.ndarray, b: np.ndarray, pts: np.ndarray
     high = np.ceil(start.max(axis=0)).astype(int) + CROP_MARGIN_PX + 1
     x0, y0 = max(int(low[0]), 0), max(int(low[1]), 0)
     x1, y1 = min(int(high[0]), width), min(int(high[1]), height)
+    if x1 <= x0 or y1 <= y0:
+        # Every point has left the image (a followed chain can step out): nothing to track.
+        count = len(start)
+        return start, np.zeros(count, dtype=bool), np.full(count, np.inf, dtype=np.float32)
     offset = np.array([x0, y0], dtype=np.float32)
     local = (start - offset).reshape(-1, 1, 2)
     moved, status, residual = cv2.calcOpticalFlowPyrLK(

@@ -21,6 +21,22 @@ Action counting (the same rule for annotators.keyframe_actions, today's keyframe
     navigation (changing frame or point, looking) is free.
 keyframes_placed counts the keyframes made by hand (clicks and occluded keyframes).
 
+The annotation page's own edit counter (what it saves as ``edit_count``, and what
+backend.progress.frame_costs sums) counts the changes made to the labels instead: every click,
+drag, occlusion key, Enter that takes proposals and U that takes suggestions, plus each re-track
+the page writes by itself after a correction inside tracked keyframes; asking for proposals
+(T) changes nothing and is not counted. ``Actions.edits`` is that count: keys less the
+requests (``requests``), plus the page's own re-track writes (``writes``). A drag counts once
+(the page counts the steps of a drag as it moves: a drag of one step).
+
+Assistance (the ``Assistance`` the worker is given): ``AssistSetting`` computes what the routes
+show in process (worker.assist.lk, the check cells planted here); backend.crowd.simulate asks
+the routes themselves over HTTP. With ``follows`` the worker keys no clip's last frame: it
+follows each point forward from its last keyframe (the proposals route's ``follow``) and
+corrects where the follow stopped or strayed. With ``retracks`` the page re-tracks around each
+correction by itself (one write, no T and no Enter), as the annotation page does; without it
+the worker asks again (T) and accepts (Enter) once a round for every point.
+
 Workers:
     careful   clicks and drags to the truth plus its own Gaussian noise (CAREFUL_SIGMA_PX, one
               draw per frame and point) and judges a shown marker against where it sees the
@@ -35,9 +51,10 @@ Workers:
               frame is within tolerance or keyed. With a pre-fill it first accepts it, drags
               what is beyond tolerance, fixes wrong visibility, and tracks only the gaps.
     blind     keys by hand what the careful worker keys (the first and last frame and the
-              visibility changes, with the same care), accepts every proposal and the whole
-              pre-fill, corrects nothing: the check cells keep their offsets. Its labels are
-              as good as the suggestions, so only the check cells tell it apart.
+              visibility changes, with the same care; the last frame even where points are
+              followed), accepts every proposal and the whole pre-fill, corrects nothing: the
+              check cells keep their offsets. Its labels are as good as the suggestions, so
+              where those hold only the check cells tell it apart.
 
 Pure numpy (and OpenCV through worker.assist.lk); every random choice comes from ``rng``.
 """
@@ -47,12 +64,12 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from worker.assist import checks
-from worker.assist.lk import propose
+from worker.assist.lk import follow, propose
 from worker.synth.annotators import CAREFUL_SIGMA_PX
 from worker.tracks.interpolate import dense_track
 
@@ -93,21 +110,93 @@ class Prefill:
         return has_xy & np.asarray(self.visible, bool)
 
 
+class Assistance(Protocol):
+    """What the annotation page shows one assignment's worker, as its routes answer."""
+
+    @property
+    def frames(self) -> int: ...
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) px of the view."""
+        ...
+
+    @property
+    def follows(self) -> bool:
+        """Whether a point is followed forward from its last keyframe (the worker then keys
+        no clip's last frame)."""
+        ...
+
+    @property
+    def retracks(self) -> bool:
+        """Whether the page re-tracks around a correction by itself (the annotation page)."""
+        ...
+
+    def proposals(self, anchors: list[list[list[Any]]], forward: list[int]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Proposals between each point's anchors (P lists of [frame, x, y, visible01] rows,
+        empty for a point not asked about) and, for the points in ``forward``, after its last
+        anchor: (F, P, 2) px as shown (check cells moved off) and (F, P) where they hold."""
+        ...
+
+    def suggestions(self) -> Prefill | None:
+        """The view's suggestions as shown (check cells moved off), None when there are none."""
+        ...
+
+
 @dataclass(frozen=True)
 class AssistSetting:
-    """What the page gives one assignment: the view's frames and the check cells' draw.
+    """What the page gives one assignment, computed in process: the view's frames and the
+    check cells' draw (an Assistance).
 
     grey: (F, H, W) uint8 grey frames of the view (what the proposals route tracks on).
     key: the check-cell key (worker.assist.checks.check_key of the instance's signing key).
     assignment_id: the database id of the assignment (the check cells depend on it).
     prefill: the view's pre-fill suggestions, None before worker.assist.prefill's
         MIN_ACCEPTED_VIEWS other views are done.
+    follows, retracks: as Assistance (off: the worker of bench/assist.py).
     """
 
     grey: np.ndarray
     key: bytes
     assignment_id: int
     prefill: Prefill | None = None
+    follows: bool = False
+    retracks: bool = False
+
+    @property
+    def frames(self) -> int:
+        return int(self.grey.shape[0]) if self.grey.ndim == 3 else -1
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.grey.shape[2]), int(self.grey.shape[1])
+
+    def proposals(self, anchors: list[list[list[Any]]], forward: list[int]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        found = propose(self.grey, anchors)
+        xy, ok = found.xy.copy(), found.ok.copy()
+        starts = [(int(anchors[p][-1][0]), float(anchors[p][-1][1]),
+                   float(anchors[p][-1][2]), True) for p in forward]
+        if starts:
+            followed = follow(self.grey, starts)
+            for i, p in enumerate(forward):
+                after = np.arange(self.frames) > starts[i][0]
+                held = followed.ok[:, i] & after
+                xy[held, p], ok[after, p] = followed.xy[held, i], held[after]
+        frames, points = ok.shape
+        shown = checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), ok.T, 0,
+                             frames, points, self.size[0], self.size[1])
+        return shown.transpose(1, 0, 2), ok
+
+    def suggestions(self) -> Prefill | None:
+        if self.prefill is None:
+            return None
+        frames, points = self.prefill.visible.shape
+        shown = checks.plant(self.key, self.assignment_id, self.prefill.xy.transpose(1, 0, 2),
+                             self.prefill.shown().T, 0, frames, points, self.size[0],
+                             self.size[1]).transpose(1, 0, 2)
+        return Prefill(xy=shown, visible=self.prefill.visible, known=self.prefill.known)
 
 
 @dataclass
@@ -118,14 +207,22 @@ class Actions:
     drags: int = 0
     keys: int = 0
     keyframes_placed: int = 0
+    requests: int = 0
+    writes: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {"clicks": self.clicks, "drags": self.drags, "keys": self.keys,
-                "keyframes_placed": self.keyframes_placed}
+                "keyframes_placed": self.keyframes_placed, "requests": self.requests,
+                "writes": self.writes, "edits": self.edits}
 
     @property
     def total(self) -> int:
         return self.clicks + self.drags + self.keys
+
+    @property
+    def edits(self) -> int:
+        """What the annotation page's edit counter records (the module docstring)."""
+        return self.clicks + self.drags + self.keys - self.requests + self.writes
 
 
 @dataclass(frozen=True)
@@ -133,7 +230,7 @@ class AssistedWork:
     """One simulated assisted worker's annotation of one view.
 
     tracks: P lists of keyframe rows, sorted by frame; a 5th element only when not "placed".
-    actions: {clicks, drags, keys, keyframes_placed}.
+    actions: {clicks, drags, keys, keyframes_placed, requests, writes, edits} (Actions).
     seen: (F, P, 2) px, where the worker clicks or drags each point to (truth plus its noise).
     judged: (F, P, 2) px, where it sees each point when it judges a shown marker.
     rounds: proposal requests made.
@@ -192,52 +289,51 @@ def _place(state: _State, point: int, frame: int, seen: np.ndarray, visible: np.
     state.actions.keyframes_placed += 1
 
 
-def _must_frames(visible: np.ndarray, free: np.ndarray) -> list[int]:
+def _must_frames(visible: np.ndarray, free: np.ndarray, last: bool = True) -> list[int]:
     """Frames one point needs keyed by hand among the ``free`` ones (no keyframe yet): the
-    first and last, and each visibility change: the first frame of the new state, and the
-    last visible frame before an occlusion (it bounds a span that can be tracked).
+    first, the last (unless ``last`` is False: the point is followed there from its last
+    keyframe), and each visibility change: the first frame of the new state, and the last
+    visible frame before an occlusion (it bounds a span that can be tracked).
     visible, free: (F,) bool."""
     frames = len(visible)
-    need = {0, frames - 1}
+    need = {0, frames - 1} if last else {0}
     for f in np.flatnonzero(visible[1:] != visible[:-1]) + 1:
         need |= {int(f)} | ({int(f) - 1} if visible[f - 1] else set())
     return sorted(f for f in need if free[f])
 
 
-def _open_spans(state: _State, point: int) -> list[tuple[int, int]]:
+def _open_spans(state: _State, point: int, frames: int | None = None) -> list[tuple[int, int]]:
     """(k0, k1) between consecutive anchors of a point, both visible with a position, with
-    at least one inner frame."""
-    frames = state.anchors(point)
+    at least one inner frame; with ``frames`` (the point is followed forward) also (k, frames)
+    after its last anchor k when that is visible with a position before the clip's last frame
+    (the inner frames k+1..frames-1)."""
+    anchors = state.anchors(point)
     rows = state.rows[point]
-    return [(a, b) for a, b in itertools.pairwise(frames)
-            if b - a >= 2 and rows[a][3] and rows[b][3] and rows[a][1] is not None
-            and rows[b][1] is not None]
 
+    def held(f: int) -> bool:
+        return bool(rows[f][3]) and rows[f][1] is not None
 
-def _shown_proposals(state: _State, setting: AssistSetting, spans: dict[int, list[tuple[int,
-                     int]]], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Proposals for the given points' spans as the route shows them: (F, P, 2) px with the
-    check cells moved off, and (F, P) ok."""
-    frames, points = setting.grey.shape[0], len(state.rows)
-    keyframes = [[state.rows[p][f][:4] for f in state.anchors(p)] if spans.get(p) else []
-                 for p in range(points)]
-    found = propose(setting.grey, keyframes)
-    shown = checks.plant(setting.key, setting.assignment_id, found.xy.transpose(1, 0, 2),
-                         found.ok.T, 0, frames, points, size[0], size[1])
-    return shown.transpose(1, 0, 2), found.ok
+    out = [(a, b) for a, b in itertools.pairwise(anchors) if b - a >= 2 and held(a) and held(b)]
+    if frames is not None and anchors and anchors[-1] < frames - 1 and held(anchors[-1]):
+        out.append((anchors[-1], frames))
+    return out
 
 
 def _accept(state: _State, point: int, span: tuple[int, int], xy: np.ndarray,
-            ok: np.ndarray) -> bool:
-    """Replace the span's accepted proposals with the new ones; whether any was taken."""
+            ok: np.ndarray) -> tuple[bool, bool]:
+    """Replace the span's accepted proposals with the new ones; (whether any was taken,
+    whether the point's keyframes changed: taken, or older ones removed)."""
     k0, k1 = span
     rows = state.rows[point]
+    removed = False
     for f in range(k0 + 1, k1):
         if f in rows and rows[f][4] == "tracked":
             del rows[f]
+            removed = True
         if ok[f, point]:
             rows[f] = [f, *_position(xy[f, point]), 1, "tracked"]
-    return bool(ok[k0 + 1:k1, point].any())
+    taken = bool(ok[k0 + 1:k1, point].any())
+    return taken, taken or removed
 
 
 def _worst(state: _State, point: int, span: tuple[int, int], judged: np.ndarray,
@@ -267,47 +363,65 @@ def _correct(state: _State, point: int, frame: int, seen: np.ndarray) -> None:
         state.actions.keyframes_placed += 1
 
 
-def _track(state: _State, setting: AssistSetting, seen: np.ndarray, judged: np.ndarray,
-           size: tuple[int, int], tolerance: float | None) -> None:
+Spans = list[tuple[int, list[tuple[int, int]]]]
+
+
+def _track(state: _State, setting: Assistance, seen: np.ndarray, judged: np.ndarray,
+           tolerance: float | None) -> None:
     """Ask for proposals over every open span, accept them, and (tolerance given: the careful
-    worker) correct each span's worst frame and ask again for the halves, until all hold.
-    tolerance None: the blind acceptor, one request, nothing corrected."""
-    spans = {p: _open_spans(state, p) for p in range(len(state.rows))}
-    while any(spans.values()) and state.rounds < MAX_ROUNDS:
-        xy, ok = _shown_proposals(state, setting, spans, size)
+    worker) correct each span's worst frame and track the halves again, until all hold.
+    tolerance None: the blind acceptor, one request, nothing corrected.
+
+    Each round asks once for every span waiting. The first round is the worker's (T, then
+    Enter when something holds); later rounds are the re-tracks around the corrections: the
+    page's own writes, one per correction that took something (``retracks``), or the worker's
+    T and Enter again."""
+    points, frames = len(state.rows), setting.frames
+    ends = frames if setting.follows else None
+    groups: Spans = [(p, s) for p in range(points) if (s := _open_spans(state, p, ends))]
+    by_hand = True
+    while groups and state.rounds < MAX_ROUNDS:
+        asked: dict[int, list[tuple[int, int]]] = {}
+        for point, spans in groups:
+            asked.setdefault(point, []).extend(spans)
+        anchors = [[state.rows[p][f][:4] for f in state.anchors(p)] if p in asked else []
+                   for p in range(points)]
+        forward = sorted(p for p, spans in asked.items() if any(b >= frames for _, b in spans))
+        xy, ok = setting.proposals(anchors, forward)
         state.rounds += 1
-        state.actions.keys += 1
-        following: dict[int, list[tuple[int, int]]] = {}
-        taken = False
-        for point, open_spans in spans.items():
-            for span in open_spans:
-                taken |= _accept(state, point, span, xy, ok)
-        state.actions.keys += int(taken)
-        for point, open_spans in spans.items():
-            if tolerance is None:
-                continue
-            for span in open_spans:
+        state.actions.keys += int(by_hand)
+        state.actions.requests += int(by_hand)
+        taken_any = False
+        for point, spans in groups:
+            changed = False
+            for span in spans:
+                took, wrote = _accept(state, point, span, xy, ok)
+                taken_any, changed = taken_any or took, changed or wrote
+            state.actions.writes += int(changed and not by_hand)
+        state.actions.keys += int(taken_any and by_hand)
+        by_hand = not setting.retracks
+        if tolerance is None:
+            break
+        groups = []
+        for point, spans in asked.items():
+            for span in spans:
                 frame = _worst(state, point, span, judged, tolerance)
                 if frame is None:
                     continue
                 _correct(state, point, frame, seen)
-                following.setdefault(point, []).extend(
-                    s for s in ((span[0], frame), (frame, span[1])) if s[1] - s[0] >= 2)
-        spans = following
+                halves = [s for s in ((span[0], frame), (frame, span[1])) if s[1] - s[0] >= 2]
+                if halves:
+                    groups.append((point, halves))
 
 
-def _take_prefill(state: _State, setting: AssistSetting, prefill: Prefill, seen: np.ndarray,
-                  judged: np.ndarray, visible: np.ndarray, size: tuple[int, int],
-                  tolerance: float | None) -> None:
-    """Accept the pre-fill (one key) as the route shows it; the careful worker then fixes
-    wrong visibility (a key each) and drags what is beyond tolerance where it sees the point."""
-    frames, points = visible.shape
-    suggested = np.isfinite(prefill.xy).all(axis=2)
-    shown = checks.plant(setting.key, setting.assignment_id, prefill.xy.transpose(1, 0, 2),
-                         prefill.shown().T, 0, frames, points, size[0],
-                         size[1]).transpose(1, 0, 2)
+def _take_prefill(state: _State, shown: Prefill, seen: np.ndarray, judged: np.ndarray,
+                  visible: np.ndarray, tolerance: float | None) -> None:
+    """Accept the suggestions as shown (one key, U for every point); the careful worker then
+    fixes wrong visibility (a key each) and drags what is beyond tolerance where it sees the
+    point."""
+    suggested = np.isfinite(shown.xy).all(axis=2)
     for f, p in zip(*np.nonzero(suggested), strict=True):
-        state.rows[p][f] = [int(f), *_position(shown[f, p]), int(prefill.visible[f, p]),
+        state.rows[p][f] = [int(f), *_position(shown.xy[f, p]), int(shown.visible[f, p]),
                             "prefilled"]
     state.actions.keys += int(suggested.any())
     if tolerance is None:
@@ -324,37 +438,41 @@ def _take_prefill(state: _State, setting: AssistSetting, prefill: Prefill, seen:
             state.actions.drags += 1
 
 
-def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: AssistSetting,
+def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistance,
                       profile: str, rng: np.random.Generator,
                       tolerance: float = TOLERANCE_PX,
                       judge_sigma: float = JUDGE_SIGMA_PX) -> AssistedWork:
     """One simulated assisted worker's tracks for one view.
 
     truth: (F, P, 2) true positions, image px (NaN where unknown); visible: (F, P) bool, the
-    true visibility; setting: the view's frames, check-cell draw and pre-fill; profile:
-    "careful" or "blind"; tolerance, judge_sigma: px, the careful worker's (TOLERANCE_PX,
-    JUDGE_SIGMA_PX).
+    true visibility; setting: what the page shows (an Assistance: AssistSetting in process);
+    profile: "careful" or "blind"; tolerance, judge_sigma: px, the careful worker's
+    (TOLERANCE_PX, JUDGE_SIGMA_PX).
     """
     truth, visible = np.asarray(truth, np.float64), np.asarray(visible, bool)
-    frames = setting.grey.shape[0] if setting.grey.ndim == 3 else -1
+    frames = setting.frames
     if truth.ndim != 3 or truth.shape[2] != 2 or visible.shape != truth.shape[:2] \
             or truth.shape[0] != frames:
-        raise ValueError(f"expected truth (F, P, 2), visible (F, P) and grey (F, H, W), got "
-                         f"{truth.shape}, {visible.shape} and {setting.grey.shape}")
+        raise ValueError(f"expected truth (F, P, 2) and visible (F, P) over the view's "
+                         f"{frames} frames, got {truth.shape} and {visible.shape}")
     if profile not in ("careful", "blind"):
         raise ValueError(f"unknown assisted profile {profile!r}; one of careful, blind")
-    size = (setting.grey.shape[2], setting.grey.shape[1])
+    size = setting.size
     seen = _seen(truth, size, rng, CAREFUL_SIGMA_PX)
     judged = _seen(truth, size, rng, judge_sigma)
     state = _State(rows=[{} for _ in range(truth.shape[1])])
     limit = tolerance if profile == "careful" else None
-    if setting.prefill is not None:
-        _take_prefill(state, setting, setting.prefill, seen, judged, visible, size, limit)
+    shown = setting.suggestions()
+    if shown is not None:
+        _take_prefill(state, shown, seen, judged, visible, limit)
     for p in range(truth.shape[1]):
         free = np.array([f not in state.rows[p] for f in range(frames)])
-        for f in _must_frames(visible[:, p], free):
+        # The blind acceptor keys the clip's last frame too: tracking between two keyframes
+        # fills a whole stretch, a follow from one stops where it loses the point.
+        for f in _must_frames(visible[:, p], free,
+                              last=not setting.follows or profile == "blind"):
             _place(state, p, f, seen, visible)
-    _track(state, setting, seen, judged, size, limit)
+    _track(state, setting, seen, judged, limit)
     return AssistedWork(profile=profile, tracks=stored_tracks(state.rows),
                         actions=state.actions.as_dict(), seen=seen, judged=judged,
                         rounds=state.rounds)

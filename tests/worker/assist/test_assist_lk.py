@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from worker.assist.lk import STOP_END, STOP_LEFT_IMAGE, STOP_LOST, follow, propose
+from worker.assist.lk import STOP_END, STOP_LEFT_IMAGE, STOP_LOST, _lk, follow, propose
 
 WIDTH, HEIGHT = 320, 240
 MARGIN = 120
@@ -164,6 +164,15 @@ class TestFollow:
         kept = out.ok[:, 0]
         # Next to the edge LK's window is cut: within the forward-backward threshold.
         assert np.linalg.norm(out.xy[kept, 0] - truth[kept, 0], axis=1).max() < 1.0
+
+    def test_a_step_of_points_that_are_all_outside_the_image_finds_nothing(self) -> None:
+        """A followed chain can step out of the image; the check of that step (forward-backward,
+        every point of the frame out) has no pixels to look at and holds nothing."""
+        frames = _frames(np.zeros((2, 2)))
+        outside = np.array([[100.0, HEIGHT + 200.0], [140.0, HEIGHT + 210.0]], np.float32)
+        moved, found, residual = _lk(frames[0], frames[1], outside)
+        assert not found.any() and np.isinf(residual).all()
+        np.testing.assert_array_equal(moved, outside)
 
     def test_a_start_outside_the_frames_given_is_refused_naming_the_frame(self) -> None:
         with pytest.raises(ValueError, match="start frame 9"):

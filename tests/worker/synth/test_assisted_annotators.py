@@ -135,6 +135,49 @@ class TestCarefulAssisted:
         assert work.actions["drags"] == sum(row_source(r) == "edited" for r in rows)
 
 
+class TestFollowedOnThePage:
+    """The worker of the annotation page: points followed from one keyframe, and the page's
+    own re-tracks after a correction (AssistSetting follows and retracks)."""
+
+    @staticmethod
+    def _page_work(clip, profile: str) -> AssistedWork:
+        grey, truth, visible = clip
+        setting = AssistSetting(grey, KEY, ASSIGNMENT, None, follows=True, retracks=True)
+        return assisted_annotate(truth, visible, setting, profile, np.random.default_rng(0))
+
+    def test_keys_no_last_frame_and_ends_within_tolerance(self, clip) -> None:
+        _, _, visible = clip
+        work = self._page_work(clip, "careful")
+        last = [_row_at(t, FRAMES - 1) for t in work.tracks]
+        assert sum(row is not None and row_source(row) == "placed" for row in last) < POINTS
+        for p, track in enumerate(work.tracks):
+            dense = dense_track(plain_rows(track), FRAMES).xy
+            seen = visible[:, p]
+            err = np.linalg.norm(dense[seen] - work.judged[seen, p], axis=1)
+            sources = {row[0]: row_source(row) for row in track}
+            by_hand = np.array([sources.get(f) in ("placed", "edited")
+                                for f in np.flatnonzero(seen)])
+            assert (err[~by_hand] <= TOLERANCE_PX).all()
+        for point, frame in _inner_cells():
+            row = _row_at(work.tracks[point], frame)
+            assert row is None or row_source(row) != "tracked"
+
+    def test_the_page_counts_edits_not_requests_and_its_own_re_tracks(self, clip) -> None:
+        work = self._page_work(clip, "careful")
+        acts = work.actions
+        assert acts["requests"] == 1  # one T; the re-tracks after corrections are the page's
+        assert acts["writes"] > 0
+        assert acts["edits"] == (acts["clicks"] + acts["drags"] + acts["keys"]
+                                 - acts["requests"] + acts["writes"])
+
+    def test_the_blind_acceptor_keys_the_last_frame_and_keeps_what_it_is_shown(self,
+                                                                              clip) -> None:
+        work = self._page_work(clip, "blind")
+        assert all(row_source(t[-1]) == "placed" and t[-1][0] == FRAMES - 1
+                   for t in work.tracks)
+        assert work.actions["drags"] == 0 and work.actions["requests"] == 1
+
+
 class TestBlindAcceptor:
     def test_keeps_the_check_cells_offsets(self, clip) -> None:
         _, truth, _ = clip
