@@ -12,9 +12,9 @@ with the page's assistance: worker.synth.assisted's worker, careful or blind, as
 routes the page asks, see ``PageAssistance``). The page's effort counters are reported as such
 a worker earns them: an edit action per keyframe (a click, or a key for an occluded one:
 worker.synth.annotators.keyframe_actions), or with assistance what the page's edit counter
-records (worker.synth.assisted.Actions.edits: clicks, drags, occlusion keys, accepts, the
-page's re-tracks), and a modelled working time: READING_S to read the task and play the clip,
-then SECONDS_PER_ACTION per action (no person is timed here).
+records (worker.synth.assisted.Actions.edits: clicks, drags, occlusion keys, accepts; not
+the re-tracks the page writes by itself), and a modelled working time: READING_S to read the
+task and play the clip, then SECONDS_PER_ACTION per action (no person is timed here).
 """
 
 from __future__ import annotations

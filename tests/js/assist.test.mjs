@@ -285,7 +285,11 @@ test("a correction inside a tracked run re-tracks both sides from it, once", asy
   assert.equal(store.keyframeAt(0, 3).y, 88);
   assert.equal(store.keyframeAt(0, 7).y, 88);
   assert.equal(store.keyframeAt(0, 3).source, "tracked");
+  // The worker's actions: 2 placements, Enter, the drag; the page's own re-track is none.
+  assert.equal(store.actionCount, 4);
+  assert.equal(store.editCount, 5);
   store.undo();
+  assert.equal(store.actionCount, 5, "an undo is the worker's");
   assert.equal(store.keyframeAt(0, 3).y, 100, "the re-track is its own undo step");
   assert.equal(store.keyframeAt(0, 5).y, 80);
   await settle(assist);

@@ -504,3 +504,22 @@ test("setTracks writes 21 points x 2000 frames quickly, and undoes them as fast"
   const took = `write ${write.toFixed(1)} ms, undo + redo ${rest.toFixed(1)} ms`;
   assert.ok(write < 1000 && rest < 1000, took);
 });
+
+test("actionCount: a drag's steps are one action, undo and redo one each, no-ops none", () => {
+  const store = newStore();
+  store.placePoint(0, 0, 10, 10);
+  for (let i = 1; i <= 5; i++) store.placePoint(0, 0, 10 + i, 10, { gesture: "drag-1" });
+  assert.equal(store.actionCount, 2);
+  store.placePoint(0, 0, 15, 10, { gesture: "drag-2" });
+  assert.equal(store.actionCount, 2, "a step that changes nothing is no action");
+  store.placePoint(0, 0, 20, 10, { gesture: "drag-2" });
+  store.placePoint(0, 0, 25, 10, { gesture: "drag-2" });
+  assert.equal(store.actionCount, 3);
+  store.undo();
+  store.redo();
+  assert.equal(store.actionCount, 5);
+  store.setTracks([{ point: 1, entries: [{ frame: 3, x: 1, y: 1, visible: true }] }],
+    { automatic: true });
+  assert.equal(store.actionCount, 5, "what the page writes by itself is no action");
+  assert.ok(store.editCount > store.actionCount);
+});

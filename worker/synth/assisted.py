@@ -21,13 +21,13 @@ Action counting (the same rule for annotators.keyframe_actions, today's keyframe
     navigation (changing frame or point, looking) is free.
 keyframes_placed counts the keyframes made by hand (clicks and occluded keyframes).
 
-The annotation page's own edit counter (what it saves as ``edit_count``, and what
-backend.progress.frame_costs sums) counts the changes made to the labels instead: every click,
-drag, occlusion key, Enter that takes proposals and U that takes suggestions, plus each re-track
-the page writes by itself after a correction inside tracked keyframes; asking for proposals
-(T) changes nothing and is not counted. ``Actions.edits`` is that count: keys less the
-requests (``requests``), plus the page's own re-track writes (``writes``). A drag counts once
-(the page counts the steps of a drag as it moves: a drag of one step).
+The annotation page's own action counter (what it saves as ``edit_count``, and what
+backend.progress.frame_costs sums) counts the worker's changes to the labels instead: every
+click, drag (once, however many steps), occlusion key, Enter that takes proposals and U that
+takes suggestions; asking for proposals (T) changes nothing and is not counted, nor is a
+re-track the page writes by itself after a correction inside tracked keyframes (``writes``,
+kept apart). ``Actions.edits`` is that count: clicks, drags and keys less the requests
+(``requests``).
 
 Assistance (the ``Assistance`` the worker is given): ``AssistSetting`` computes what the routes
 show in process (worker.assist.lk, the check cells planted here); backend.crowd.simulate asks
@@ -222,7 +222,7 @@ class Actions:
     @property
     def edits(self) -> int:
         """What the annotation page's edit counter records (the module docstring)."""
-        return self.clicks + self.drags + self.keys - self.requests + self.writes
+        return self.clicks + self.drags + self.keys - self.requests
 
 
 @dataclass(frozen=True)

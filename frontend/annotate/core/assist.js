@@ -303,8 +303,9 @@ export class Assist {
       return;
     }
     const proposals = proposalsFrom(answer, spans);
+    // Written by the page itself after the worker's correction: not an action of theirs.
     this._write(proposals.map((p) => [p.point, proposalEntries(asked.get(p.point).keyframes, p)]),
-      "re-track");
+      "re-track", true);
     const around = asked.size === 1
       ? "your correction" : `your corrections of ${asked.size} points`;
     this._say("ok", `Re-tracked frames ${body.first_frame}-${body.last_frame} around ${around}: ` +
@@ -429,12 +430,12 @@ export class Assist {
    * not corrections.
    * @param {Array<[number, Entry[]]>} writes  [point, entries] @param {string} label
    */
-  _write(writes, label) {
+  _write(writes, label, automatic = false) {
     this._writing = true;
     try {
       const groups = writes.filter(([, entries]) => entries.length)
         .map(([point, entries]) => ({ point, entries }));
-      this.store.setTracks(groups, { label });
+      this.store.setTracks(groups, { label, automatic });
     } finally {
       this._writing = false;
     }

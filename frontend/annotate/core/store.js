@@ -57,6 +57,14 @@ export class AnnotationStore {
     this.editCount = 0;
     /** editCount at the last acknowledged save. */
     this.savedEditCount = 0;
+    /**
+     * The worker's own actions (what pay and cost count): each edit the worker makes, a drag
+     * once however many steps it takes, each undo and redo; not what the page writes by itself
+     * (a re-track after a correction).
+     */
+    this.actionCount = 0;
+    /** The gesture id of the last counted edit: a drag's later steps are the same action. */
+    this._countedGesture = undefined;
     /** @type {Keyframe[][]} sorted by frame */
     this._tracks = Array.from({ length: numPoints }, () => []);
     this._history = new UndoStack(maxUndo);
@@ -162,7 +170,8 @@ export class AnnotationStore {
    * must be unique. Everything is validated before anything is written. Returns false when no
    * entry changed anything. O(n log n) in the entries and the touched tracks' lengths.
    * @param {Array<{point: number, entries: FrameEntry[]}>} entriesByPoint
-   * @param {{gesture?: any, label?: string}} [options]
+   * @param {{gesture?: any, label?: string, automatic?: boolean}} [options] automatic: the page
+   *   writes it by itself (not a worker's action)
    */
   setTracks(entriesByPoint, options = {}) {
     if (!Array.isArray(entriesByPoint)) throw new TypeError("entriesByPoint must be an array");
@@ -178,7 +187,8 @@ export class AnnotationStore {
       return { point, frame: null, entries };
     });
     const changes = changesFor(this._tracks, groups, this);
-    return this._execute(options.label ?? "set tracks", changes, options.gesture);
+    return this._execute(options.label ?? "set tracks", changes, options.gesture,
+      options.automatic === true);
   }
 
   /**
@@ -246,12 +256,12 @@ export class AnnotationStore {
 
   /** @returns {boolean} false when there is nothing to undo */
   undo() {
-    return this._notify("undo", this._history.undo());
+    return this._counted(this._notify("undo", this._history.undo()), undefined);
   }
 
   /** @returns {boolean} false when there is nothing to redo */
   redo() {
-    return this._notify("redo", this._history.redo());
+    return this._counted(this._notify("redo", this._history.redo()), undefined);
   }
 
   // ---- sync -------------------------------------------------------------------------------
@@ -312,10 +322,20 @@ export class AnnotationStore {
   // ---- internals --------------------------------------------------------------------------
 
   /** Runs a new edit through the undo stack; false when `changes` is empty. */
-  _execute(label, changes, gesture) {
+  _execute(label, changes, gesture, automatic = false) {
     if (changes.length === 0) return false;
     const command = new KeyframeEdit(this, label, changes, gesture);
-    return this._notify("edit", this._history.execute(command));
+    const done = this._notify("edit", this._history.execute(command));
+    return automatic ? done : this._counted(done, gesture);
+  }
+
+  /** Counts a worker's action that changed something (a gesture's steps once). */
+  _counted(done, gesture) {
+    if (done && (gesture === undefined || gesture === null || gesture !== this._countedGesture)) {
+      this.actionCount += 1;
+    }
+    if (done) this._countedGesture = gesture ?? undefined;
+    return done;
   }
 
   /**

@@ -129,9 +129,9 @@ export class AutoSaver {
     return this._restored + this.store.editCount - this.store.savedEditCount;
   }
 
-  /** Total edits of the assignment (for pay and QC). */
+  /** The worker's actions on the assignment so far (for pay, QC and cost). */
   get editCount() {
-    return this.baseEditCount + this.store.editCount;
+    return this.baseEditCount + this.store.actionCount;
   }
 
   /** True after a 409 or a refused token: this page must not save again. */
