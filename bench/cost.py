@@ -40,8 +40,14 @@ Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "fr
 over dexycb per labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios":
 {assisted over dexycb, the same}} (each ratio block only when both its protocols ran).
 
+``--publish adaptive`` publishes each target's widest-baseline views first and more only
+while the solve is unsure (backend.crowd.adaptive); the crowd comes back for each view the
+solve asks for, until none is left ("views_published" per target, "publish_rounds"). The
+DexYCB protocol is every view, whatever the setting (its own definition).
+
 Usage: python bench/cost.py [--seed 7717] [--views 8] [--frames 72] [--profile careful]
-           [--protocols dexycb,ours,assisted]
+           [--protocols dexycb,ours,assisted] [--publish every-view|adaptive]
+           [--initial-views N]
 """
 
 from __future__ import annotations
@@ -180,7 +186,8 @@ def _setup(capture: Path) -> tuple[int, list[dict]]:
     return sequence_id, tasks
 
 
-def _publish(sequence_id: int, rewards: dict[str, int]) -> None:
+def _publish(sequence_id: int, rewards: dict[str, int], policy: str,
+             initial_views: int | None = None) -> None:
     from backend.crowd import flows, pricing
     from backend.crowd.providers import get_provider
     from backend.crowd.schemas import PublishOptions
@@ -188,7 +195,8 @@ def _publish(sequence_id: int, rewards: dict[str, int]) -> None:
     marketplace = get_provider("mturk")
     for kind in ("hand", "object"):
         options = PublishOptions(max_assignments=1, provider="mturk", min_approval_rate=None,
-                                 reward=pricing.cents_to_dollars(rewards[kind]))
+                                 reward=pricing.cents_to_dollars(rewards[kind]),
+                                 policy=policy, initial_views=initial_views)
         flows.publish_each(marketplace, options, sequence_id, kind)
 
 
@@ -215,7 +223,28 @@ def _accuracy(sequence_id: int, capture: Path) -> tuple[float | None, list[float
     return (round(float(err.mean()), 3) if err.size else None), add
 
 
-def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]:
+def _published_views(sequence_id: int) -> dict[str, int]:
+    """Per target, the views published to the crowd."""
+    from sqlalchemy import func, select
+
+    from backend.annotation.models import Task
+    from backend.crowd.models import CrowdHit
+    from backend.db import session_scope
+
+    with session_scope() as session:
+        return {key: int(n) for key, n in session.execute(
+            select(Task.target_key, func.count(func.distinct(Task.id)))
+            .join(CrowdHit, CrowdHit.task_id == Task.id)
+            .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))
+            .group_by(Task.target_key))}
+
+
+# Crowd rounds at most under the adaptive policy: the first views, then one per solve.
+MAX_PUBLISH_ROUNDS = 8
+
+
+def one(capture: Path, name: str, profile: str, hourly: float,
+        policy: str = "every-view", initial_views: int | None = None) -> dict[str, Any]:
     """One protocol through the product in a fresh instance (this process); its figures."""
     port = free_port()
     isolated_workdir(f"cost-{name}", DEXLABEL_PUBLIC_URL=f"http://127.0.0.1:{port}",
@@ -231,13 +260,20 @@ def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]
     admin = demo.demo_logins()["admin"]
     server = demo.DemoServer("127.0.0.1", port)
     server.start()
+    rounds = 0
     try:
-        _publish(sequence_id, rewards)
-        demo.demo_crowd(sequence_id, capture, admin, None, server.has_consumer, profile,
-                        protocol)
-        demo.wait_for_jobs()
-        demo.wait_for_solve(sequence_id)
-        demo.wait_for_jobs()
+        _publish(sequence_id, rewards, "every-view" if name == "dexycb" else policy,
+                 initial_views)
+        # Each solve may publish another view (adaptive): the crowd comes back for it.
+        while rounds < MAX_PUBLISH_ROUNDS:
+            rounds += 1
+            demo.demo_crowd(sequence_id, capture, admin, None, server.has_consumer, profile,
+                            protocol)
+            demo.wait_for_jobs()
+            demo.wait_for_solve(sequence_id)
+            demo.wait_for_jobs()
+            if not demo.unaccepted(sequence_id)[0]:
+                break
     finally:
         server.stop()
     with session_scope() as session:
@@ -251,6 +287,7 @@ def one(capture: Path, name: str, profile: str, hourly: float) -> dict[str, Any]
             "rewards_usd": {k: v / 100 for k, v in rewards.items()},
             "first_view_actions": _first_views(views), "view_actions": views,
             "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
+            "views_published": _published_views(sequence_id), "publish_rounds": rounds,
             "seconds": round(time.perf_counter() - started, 1)}
 
 
@@ -260,7 +297,8 @@ def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     done = subprocess.run(
         [sys.executable, __file__, "--one", name, "--capture", str(capture), "--profile",
-         args.profile, "--hourly", str(args.hourly)],
+         args.profile, "--hourly", str(args.hourly), "--publish", args.publish,
+         *(["--initial-views", str(args.initial_views)] if args.initial_views else [])],
         cwd=ROOT, env=env, capture_output=True, text=True)
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
     if done.returncode != 0 or not lines:
@@ -302,13 +340,23 @@ def main() -> None:
     parser.add_argument("--protocols", default="dexycb,ours",
                         help="comma-separated, of dexycb, ours and assisted (ratios need"
                              " dexycb)")
+    parser.add_argument("--publish", choices=["every-view", "adaptive"], default="every-view",
+                        help="how views are published for ours and assisted (DexYCB's: every"
+                             " view)")
+    parser.add_argument("--initial-views", type=int, default=None,
+                        help="adaptive: the views published first per target (default: the"
+                             " setting's, 3)")
     parser.add_argument("--one", choices=sorted(PROTOCOLS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     chosen = [p.strip() for p in args.protocols.split(",") if p.strip()]
     if not chosen or set(chosen) - set(PROTOCOLS):
         parser.error(f"--protocols {args.protocols!r}: name some of {', '.join(PROTOCOLS)}")
+    if args.initial_views is not None and not 2 <= args.initial_views <= args.views:
+        parser.error(f"--initial-views {args.initial_views}: between 2 and --views"
+                     f" ({args.views})")
     if args.one:
-        print(json.dumps(one(args.capture.resolve(), args.one, args.profile, args.hourly)))
+        print(json.dumps(one(args.capture.resolve(), args.one, args.profile, args.hourly,
+                             args.publish, args.initial_views)))
         return
     capture = args.capture
     if capture is None:
@@ -319,6 +367,7 @@ def main() -> None:
                          objects=1, workers=1)
     result: dict[str, Any] = {"capture": str(capture), "seed": args.seed, "views": args.views,
                               "frames": args.frames, "profile": args.profile,
+                              "publish": args.publish, "initial_views": args.initial_views,
                               "hourly_usd": args.hourly, "protocols": {}}
     for name in chosen:
         result["protocols"][name] = got = _child(capture.resolve(), name, args)
