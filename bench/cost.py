@@ -29,7 +29,8 @@ click, a key for an occluded one), with assistance what the page's edit counter 
 time modelled as a minute of reading plus 3 s per action (backend.crowd.simulate; no person is
 timed). "first_view_actions": per target, the edit actions of its first accepted view (the
 accepted assignment submitted first), the view worked with the least help; "view_actions": per
-target, each submitted assignment's actions, kept suggestions and status. Money is real
+target, each submitted assignment's actions, kept suggestions, status, profile and QC outcome;
+"qc_by_profile": per simulated profile, units submitted and flagged by QC. Money is real
 ledger money for rewards priced per task at ``--hourly`` dollars an hour of that protocol's
 expected working time (the mean over the tasks of a kind, from the same simulated workers on
 the truth), plus the marketplace's fee; rejected work is done but not paid.
@@ -131,29 +132,49 @@ def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarr
     return int(assisted_annotate(xy, visible, setting, "careful", rng).actions["edits"])
 
 
-def _views(sequence_id: int) -> dict[str, list[dict[str, Any]]]:
+def _views(sequence_id: int, profiles: dict[str, str]) -> dict[str, list[dict[str, Any]]]:
     """Per target, each submitted assignment in submission order: its edit actions, how many
-    of its keyframes are suggestions kept unchanged (source "prefilled") and its status."""
+    of its keyframes are suggestions kept unchanged (source "prefilled"), its status, the
+    simulated worker's profile and what QC said (approve, review or reject; before any
+    admin's decision)."""
     from sqlalchemy import select
     from sqlalchemy.orm import selectinload
 
     from backend.annotation.models import Assignment, Task
     from backend.db import session_scope
+    from backend.quality.models import QCReport
 
     out: dict[str, list[dict[str, Any]]] = {}
     with session_scope() as session:
         rows = session.execute(
-            select(Task.target_key, Assignment)
+            select(Task.target_key, Assignment, QCReport.outcome, QCReport.reasons)
             .join(Task, Task.id == Assignment.task_id)
+            .outerjoin(QCReport, QCReport.assignment_id == Assignment.id)
             .where(Task.sequence_id == sequence_id, Assignment.submitted_at.is_not(None))
             .options(selectinload(Assignment.tracks))
             .order_by(Assignment.submitted_at, Assignment.id)).all()
-        for target, work in rows:
+        for target, work, qc, reasons in rows:
             suggested = sum(len(r) > 4 and r[4] == "prefilled"
                             for t in work.tracks for r in t.keyframes)
             out.setdefault(target, []).append({"actions": int(work.edit_count),
                                                "suggested": suggested,
-                                               "status": work.status})
+                                               "status": work.status, "qc": qc,
+                                               "qc_reasons": reasons or [],
+                                               "profile": profiles.get(work.external_id)})
+    return out
+
+
+def _qc_by_profile(views: dict[str, list[dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """Per simulated profile: submitted units, how many QC flagged (review or reject), and
+    that rate."""
+    out: dict[str, dict[str, Any]] = {}
+    for rows in views.values():
+        for row in rows:
+            line = out.setdefault(row["profile"] or "unknown", {"units": 0, "flagged": 0})
+            line["units"] += 1
+            line["flagged"] += int(row["qc"] in ("review", "reject"))
+    for line in out.values():
+        line["flagged_rate"] = round(line["flagged"] / line["units"], 4)
     return out
 
 
@@ -261,14 +282,15 @@ def one(capture: Path, name: str, profile: str, hourly: float,
     server = demo.DemoServer("127.0.0.1", port)
     server.start()
     rounds = 0
+    outcomes: list[Any] = []
     try:
         _publish(sequence_id, rewards, "every-view" if name == "dexycb" else policy,
                  initial_views)
         # Each solve may publish another view (adaptive): the crowd comes back for it.
         while rounds < MAX_PUBLISH_ROUNDS:
             rounds += 1
-            demo.demo_crowd(sequence_id, capture, admin, None, server.has_consumer, profile,
-                            protocol)
+            outcomes += demo.demo_crowd(sequence_id, capture, admin, None,
+                                        server.has_consumer, profile, protocol)
             demo.wait_for_jobs()
             demo.wait_for_solve(sequence_id)
             demo.wait_for_jobs()
@@ -279,13 +301,15 @@ def one(capture: Path, name: str, profile: str, hourly: float,
     with session_scope() as session:
         found = frame_costs(session, [sequence_id])[0]
     mpjpe, add = _accuracy(sequence_id, capture)
-    views = _views(sequence_id)
+    views = _views(sequence_id, {o.assignment_id: o.profile for o in outcomes
+                                 if o.assignment_id is not None})
     lines = {t.target_key: t.model_dump() for t in found.targets}
     return {"hand": lines.get("hand:0"),
             "objects": [v for k, v in lines.items() if k.startswith("object:")],
             "total": found.total.model_dump(), "mpjpe_mm": mpjpe, "add_mm": add,
             "rewards_usd": {k: v / 100 for k, v in rewards.items()},
             "first_view_actions": _first_views(views), "view_actions": views,
+            "qc_by_profile": _qc_by_profile(views),
             "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
             "views_published": _published_views(sequence_id), "publish_rounds": rounds,
             "seconds": round(time.perf_counter() - started, 1)}

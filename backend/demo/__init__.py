@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     import uvicorn
     from huey.consumer import Consumer
 
-    from backend.crowd.simulate import Protocol
+    from backend.crowd.simulate import Protocol, WorkerOutcome
 
 DEMO_ADMIN_EMAIL = "demo@dexlabel.local"
 DEMO_WORKER_EMAIL = "demo-worker@dexlabel.local"
@@ -196,19 +196,22 @@ def demo_publish(sequence_id: int, assignments: int) -> None:
 
 
 def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | None,
-               can_wait: bool, profile: str = "mixed", protocol: Protocol = "keyframes") -> None:
+               can_wait: bool, profile: str = "mixed",
+               protocol: Protocol = "keyframes") -> list[WorkerOutcome]:
     """Rounds of simulated workers (``profile``: mixed by default; labelling as ``protocol``
     asks, backend.crowd.simulate), one per open assignment, until every
     task has accepted work or MAX_ROUNDS passed. After each round the submissions are synced
     and the quality checks waited for: they approve, or reject and re-open the HIT with one
-    more assignment; a task whose work was left for an admin's review gets one more too."""
+    more assignment; a task whose work was left for an admin's review gets one more too.
+    Returns what each simulated worker did (its profile, its assignment), every round's."""
     from backend.crowd.simulate import simulate
 
+    done: list[WorkerOutcome] = []
     for round_ in range(1, MAX_ROUNDS + 1):
         missing, _ = unaccepted(sequence_id)
         slots = _open_slots(sequence_id, extend=round_ > 1)
         if not missing or not slots:
-            return
+            return done
         count = min(workers or slots, slots)
         typer.echo(f"round {round_}: {count} simulated workers for {missing} tasks without "
                    "accepted work ...")
@@ -216,16 +219,18 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
         outcomes = simulate(get_settings().public_url, capture, count, profile, admin.email,
                             admin.password, seed=7 + round_,
                             first_index=_simulated_accounts() + 1, protocol=protocol)
+        done.extend(outcomes)
         submitted = sum(o.status == "submitted" for o in outcomes)
         _sync()
         typer.echo(f"round {round_}: {submitted} submitted in "
                    f"{time.perf_counter() - started:.0f} s; quality checks running ...")
         if not can_wait or not wait_for_jobs():
-            return
+            return done
         if approve_reviewed(sequence_id):
             wait_for_jobs()
         if not submitted:
-            return
+            return done
+    return done
 
 
 def approve_reviewed(sequence_id: int) -> int:
