@@ -11,12 +11,9 @@ import pytest
 from sqlalchemy import select
 
 from backend.config import get_settings
-from backend.crowd.client import make_client
-from backend.crowd.publish import publish_task
-from backend.crowd.schemas import PublishOptions
 from backend.crowd.simulate import simulate
 from backend.db import session_scope
-from tests.backend.crowd.helpers import ADMIN_EMAIL, ADMIN_PASSWORD
+from tests.backend.quality.helpers import ADMIN_EMAIL, ADMIN_PASSWORD, publish_hand_tasks
 from worker.assist.checks import check_cells, check_key
 from worker.synth.assisted import TOLERANCE_PX, plain_rows
 from worker.tracks.interpolate import dense_points
@@ -36,25 +33,14 @@ def assist_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _publish_hands(capture: Path) -> tuple[int, list[int], list[str]]:
-    """Import the capture, create its tasks, publish one HIT per hand task; (sequence id, hand
-    task ids, HIT ids)."""
-    from backend.accounts.service import create_admin
+    """One HIT per hand task of the capture (tests.backend.quality.helpers); (sequence id,
+    hand task ids, HIT ids)."""
     from backend.annotation.models import Task
-    from backend.annotation.service import create_tasks
-    from backend.captures.flows import import_path
-    from backend.storage import get_storage
 
-    sequence_id = import_path(capture)[0].sequence_id
+    sequence_id, hit_ids = publish_hand_tasks(capture, max_assignments=1)
     with session_scope() as session:
-        create_admin(session, ADMIN_EMAIL, ADMIN_PASSWORD)
-        task_ids = [t.id for t in create_tasks(session, get_storage(), sequence_id)
-                    if t.kind == "hand"]
-    client, hit_ids = make_client(get_settings()), []
-    for task_id in task_ids:
-        with session_scope() as session, session.no_autoflush:
-            task = session.get_one(Task, task_id)
-            hit_ids.append(publish_task(session, client, task,
-                                        PublishOptions(min_approval_rate=None), [])[0])
+        task_ids = list(session.scalars(select(Task.id).where(
+            Task.sequence_id == sequence_id, Task.kind == "hand").order_by(Task.id)))
     return sequence_id, task_ids, hit_ids
 
 
