@@ -34,6 +34,7 @@ from backend.crowd.models import CrowdHit, PublishPlan
 from backend.crowd.schemas import PublishOptions
 from worker.geometry.cameras import CameraModel
 from worker.geometry.view_choice import initial_views, next_view, rig_centre, seen
+from worker.tracks.spans import format_spans, frame_spans
 
 EVERY_VIEW, ADAPTIVE = "every-view", "adaptive"
 INITIAL_REASON = "initial: widest baselines"
@@ -115,11 +116,11 @@ def _published_ids(session: Session, task_ids: list[int]) -> set[int]:
 
 def _target_tasks(session: Session, sequence_id: int) -> dict[str, list[Task]]:
     """The sequence's tasks per target key, each list in view order."""
-    rows = session.execute(select(Task, Camera.view_index).join(Camera, Camera.id == Task.camera_id)
+    rows = session.scalars(select(Task).join(Camera, Camera.id == Task.camera_id)
                            .where(Task.sequence_id == sequence_id)
-                           .order_by(Task.target_key, Camera.view_index)).all()
+                           .order_by(Task.target_key, Camera.view_index))
     out: dict[str, list[Task]] = defaultdict(list)
-    for task, _ in rows:
+    for task in rows:
         out[task.target_key].append(task)
     return dict(out)
 
@@ -145,10 +146,9 @@ def _views(tasks: list[Task]) -> str:
     return ", ".join(task.camera.serial for task in tasks)
 
 
-def initial_choice(session: Session, sequence_id: int, target: str, count: int
-                   ) -> dict[int, str]:
-    """The target's initial tasks (widest baselines) and their reason."""
-    tasks = _target_tasks(session, sequence_id).get(target, [])
+def initial_choice(session: Session, tasks: list[Task], count: int) -> dict[int, str]:
+    """The initial tasks of one target (its tasks in view order: the widest baselines) and
+    their reason."""
     if len(tasks) <= count:
         return {task.id: f"{INITIAL_REASON} (all {len(tasks)} views)" for task in tasks}
     models = calibrated_models(session, [task.camera for task in tasks])
@@ -162,37 +162,33 @@ def select_due(session: Session, task_ids: list[int], policy: Policy) -> dict[in
     (None: every view at once, or a task already published in an earlier round)."""
     if policy.name == EVERY_VIEW or not task_ids:
         return dict.fromkeys(task_ids)
-    tasks = [session.get_one(Task, task_id) for task_id in task_ids]
-    published = _published_ids(session, [
-        t.id for s in {t.sequence_id for t in tasks}
-        for group in _target_tasks(session, s).values() for t in group])
+    due = set(task_ids)
     out: dict[int, str | None] = {}
-    targets = sorted({(t.sequence_id, t.target_key) for t in tasks})
-    for sequence_id, target in targets:
-        # The initial views (again, where a publish stopped half way), and, in later rounds,
-        # the views published before; the views the solves add are published after them.
-        chosen = initial_choice(session, sequence_id, target, policy.initial_views)
-        for t in tasks:
-            if (t.sequence_id, t.target_key) != (sequence_id, target):
+    for sequence_id in sorted(set(session.scalars(
+            select(Task.sequence_id).where(Task.id.in_(task_ids))))):
+        by_target = _target_tasks(session, sequence_id)
+        published = _published_ids(session, [t.id for g in by_target.values() for t in g])
+        for tasks in by_target.values():
+            if due.isdisjoint(t.id for t in tasks):
                 continue
-            if t.id in chosen and t.id not in published:
-                out[t.id] = chosen[t.id]
-            elif t.id in published:
-                out[t.id] = None
+            # The initial views (again, where a publish stopped half way), and, in later
+            # rounds, the views published before; the views the solves add follow them.
+            chosen = initial_choice(session, tasks, policy.initial_views)
+            for t in tasks:
+                if t.id in due and t.id in published:
+                    out[t.id] = None
+                elif t.id in due and t.id in chosen:
+                    out[t.id] = chosen[t.id]
     return {task_id: out[task_id] for task_id in task_ids if task_id in out}
 
 
-def frame_ranges(frames: np.ndarray) -> str:
-    """"12-30, 40" of sorted frame indices (the first REASON_RANGES ranges, then a count)."""
-    ranges: list[tuple[int, int]] = []
-    for f in (int(x) for x in frames):
-        if ranges and f == ranges[-1][1] + 1:
-            ranges[-1] = (ranges[-1][0], f)
-        else:
-            ranges.append((f, f))
-    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in ranges[:REASON_RANGES])
-    if len(ranges) > REASON_RANGES:
-        text += f" and {len(ranges) - REASON_RANGES} more stretches"
+def frame_ranges(flags: np.ndarray) -> str:
+    """"frames 12-30, 40" where ``flags`` (F,) is true (the first REASON_RANGES spans, then a
+    count), named as every message names frames (worker.tracks.spans)."""
+    spans = frame_spans(flags)
+    text = format_spans(spans[:REASON_RANGES])
+    if len(spans) > REASON_RANGES:
+        text += f" and {len(spans) - REASON_RANGES} more stretches"
     return text
 
 
@@ -229,7 +225,7 @@ def needed_views(session: Session, sequence_id: int, trust: dict[str, TargetTrus
             points = _anchor(session, tasks, models).reshape(1, 1, 3)
         view, _score = next_view(models, done, held, points)
         out[tasks[view].id] = (
-            f"frames {frame_ranges(np.flatnonzero(weak))} below confidence "
+            f"{frame_ranges(weak)} below confidence "
             f"{policy.confidence:g} or flagged after views "
             f"{_views([tasks[i] for i in done])}")[:REASON_CHARS]
     return out
