@@ -86,11 +86,18 @@ def record_plans(session: Session, options: PublishOptions, sequence_id: int | N
 def plan(session: Session, options: PublishOptions, sequence_id: int | None,
          kind: str | None = None, provider: str | None = None) -> PublishResult:
     """What a publish would do: the unit count and cost, nothing sent."""
+    return _planned(session, options, sequence_id, kind, provider)[0]
+
+
+def _planned(session: Session, options: PublishOptions, sequence_id: int | None,
+             kind: str | None, provider: str | None
+             ) -> tuple[PublishResult, dict[int, str | None]]:
+    """:func:`plan`, and the tasks it counted with their reasons (:func:`chosen_tasks`)."""
     name = provider or options.provider or get_settings().crowd_provider
     check_assignments(options.max_assignments, options.allow_large_hits, fees_of(name))
     due = chosen_tasks(session, options, sequence_id, kind)
     check_due(session, _due(options.round, sequence_id, kind), options, name)
-    return PublishResult(cost=cost_read(len(due), options, name))
+    return PublishResult(cost=cost_read(len(due), options, name)), due
 
 
 def check_due(session: Session, due: Select[int], options: PublishOptions,
@@ -119,9 +126,8 @@ def publish(
     write transaction is held open across HTTP calls.
     """
     provider = _provider(crowd, options)
-    result = plan(session, options, sequence_id, provider=provider.name)
+    result, reasons = _planned(session, options, sequence_id, None, provider.name)
     with session.no_autoflush:
-        reasons = chosen_tasks(session, options, sequence_id)
         if reasons:
             reqs = requirements(session, provider, options)
             tasks = [session.get_one(Task, task_id) for task_id in reasons]
@@ -142,9 +148,8 @@ def publish_each(
     (``publish_chunk``), else all in one."""
     provider = _provider(crowd, options)
     with session_scope() as session:
-        result = plan(session, options, sequence_id, kind, provider.name)
+        result, reasons = _planned(session, options, sequence_id, kind, provider.name)
         with session.no_autoflush:
-            reasons = chosen_tasks(session, options, sequence_id, kind)
             reqs = requirements(session, provider, options) if reasons else None
         record_plans(session, options, sequence_id, list(reasons))
     _publish_in_chunks(provider, options, reqs, reasons, result)
