@@ -20,20 +20,18 @@ def target_trust(session: Session, sequence_id: int, arrays: dict[str, np.ndarra
     (F,) and points (F, N, 3): the solved hand joints, or the solved object's origin."""
     out: dict[str, TargetTrust] = {}
     names = [str(n) for n in arrays.get("object_names", np.zeros(0, str))]
-    rows = session.execute(select(Task.target_key, Task.kind, Task.object_id).where(
-        Task.sequence_id == sequence_id).distinct()).all()
-    for target, kind, object_id in rows:
-        if target in out:
-            continue
+    object_confidence, object_flags = object_trust(arrays)
+    origins = np.asarray(arrays["object_poses"], np.float64)[:, :, :3, 3]
+    rows = session.execute(
+        select(Task.target_key, Task.kind, SceneObject.name)
+        .outerjoin(SceneObject, SceneObject.id == Task.object_id)
+        .where(Task.sequence_id == sequence_id).distinct()).all()
+    for target, kind, name in rows:
         if kind == "hand":
             confidence, flags = hand_trust(arrays)
             out[target] = TargetTrust(confidence, flags, np.asarray(arrays["hand_joints"]))
-            continue
-        name = session.scalar(select(SceneObject.name).where(SceneObject.id == object_id))
-        if name not in names:
-            continue
-        o = names.index(name)
-        confidence, flags = object_trust(arrays)
-        origins = np.asarray(arrays["object_poses"], np.float64)[o][:, :3, 3]
-        out[target] = TargetTrust(confidence[o], flags[o], origins[:, None, :])
+        elif name in names:
+            o = names.index(name)
+            out[target] = TargetTrust(object_confidence[o], object_flags[o],
+                                      origins[o][:, None, :])
     return out
