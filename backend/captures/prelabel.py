@@ -15,8 +15,8 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 
+from backend.captures.layout import read_sequence
 from backend.captures.truth import CaptureTruth
 from backend.errors import DexlabelError
 from worker.assist.prelabel import HAND_SIDES, HandSide, Prelabeler, PrelabelScore, score_proposals
@@ -49,17 +49,17 @@ def _rate(found: int, of: int) -> float | None:
 
 
 def _sequence(root: Path) -> tuple[Path, list[str], int, HandSide]:
-    """The capture's one sequence folder, its serials, frame count and first hand's side."""
+    """The capture's one sequence folder (read and checked as an import reads it), its
+    serials, frame count and first hand's side."""
     metas = sorted(root.glob(dexycb.META_GLOB))
     if len(metas) != 1:
         raise DexlabelError(f"{root} holds {len(metas)} sequences ({dexycb.META_GLOB}); "
                          "give a capture with exactly one")
-    meta = yaml.safe_load(metas[0].read_text())
-    serials = [str(s) for s in meta[dexycb.META_SERIALS]]
-    side = str((meta.get(dexycb.META_MANO_SIDES) or ["right"])[0])
+    plan = read_sequence(metas[0].parent)
+    side = plan.hands[0].side if plan.hands else "right"
     if side not in HAND_SIDES:
         raise DexlabelError(f"{metas[0]}: mano_sides names {side!r}, not one of {HAND_SIDES}")
-    return metas[0].parent, serials, int(meta[dexycb.META_NUM_FRAMES]), side
+    return plan.seq_dir, [c.serial for c in plan.cameras], plan.num_frames, side
 
 
 def prelabel_capture(root: Path, prelabeler: Prelabeler, *,
