@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from worker.geometry.cameras import CameraModel, project_points
+from worker.geometry.cameras import CameraModel, project_points, world_to_camera
 
 
 def rig_centre(cameras: Sequence[CameraModel]) -> np.ndarray:
@@ -55,8 +55,7 @@ def seen(cameras: Sequence[CameraModel], points: np.ndarray) -> np.ndarray:
     for v, camera in enumerate(cameras):
         if not finite.any():
             break
-        T = np.asarray(camera.T_cam_to_world, np.float64)
-        depth = (points[finite] - T[:, 3]) @ T[:, 2]
+        depth = world_to_camera(points[finite], camera.T_cam_to_world)[:, 2]
         px = project_points(points[finite], camera.K, camera.T_cam_to_world, camera.dist)
         inside = ((px[:, 0] >= 0) & (px[:, 0] <= camera.width - 1)
                   & (px[:, 1] >= 0) & (px[:, 1] <= camera.height - 1))
