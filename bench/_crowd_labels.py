@@ -23,6 +23,15 @@ from worker.tracks.interpolate import dense_points
 LABEL_MODES = ("noise", "crowd", "every4", "every4-unchecked")
 
 
+def grey_view(view_dir: Path, frames: int) -> np.ndarray:
+    """(F, H, W) uint8: a view's first ``frames`` colour frames in grey, as the proposals
+    route tracks on them."""
+    from worker.formats import dexycb
+
+    return np.stack([cv2.imread(str(view_dir / dexycb.color_file(f)), cv2.IMREAD_GRAYSCALE)
+                     for f in range(frames)])
+
+
 def write_grey(capture: Path, cache: Path, serials: list[str]) -> None:
     """grey.npy (V, F, H, W) uint8 of a capture's colour frames, in the cache."""
     seq_dir = next(p for p in capture.glob("*/*") if (p / "meta.yml").is_file())

@@ -56,6 +56,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from _crowd_labels import grey_view
 
 from _server import isolated_workdir, median_ms
 
@@ -96,13 +97,6 @@ def _accepted(tracks: list[list[list[Any]]], xy: np.ndarray, ok: np.ndarray
     return out
 
 
-def _grey(view_dir: Path, frames: int) -> np.ndarray:
-    from worker.formats import dexycb
-
-    return np.stack([cv2.imread(str(view_dir / dexycb.color_file(f)), cv2.IMREAD_GRAYSCALE)
-                     for f in range(frames)])
-
-
 def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, Any]:
     from backend.captures.truth import CaptureTruth
     from worker.assist.lk import propose
@@ -121,7 +115,7 @@ def _accuracy(capture: Path, frames: int, every: int, seed: int) -> dict[str, An
         truth = np.where((joint_2d == dexycb.NO_LABEL).all(axis=2, keepdims=True), np.nan,
                          joint_2d)
         visible = hand_visibility(joint_2d, seg)
-        grey = _grey(seq_dir / serial, frames)
+        grey = grey_view(seq_dir / serial, frames)
         size = (grey.shape[2], grey.shape[1])
         work = annotate(truth, visible, size, "careful", rng, key_step=every,
                         follow_motion=False)
@@ -182,7 +176,7 @@ def _timing(capture: Path, frames: int, every: int, runs: int) -> dict[str, Any]
         token = assignment_token(task, create_assignment(session, task, "bench"))
         serial = task.camera.serial
     joint_2d, seg = CaptureTruth(capture).view(serial, frames)
-    grey = _grey(next(capture.glob(dexycb.META_GLOB)).parent / serial, frames)
+    grey = grey_view(next(capture.glob(dexycb.META_GLOB)).parent / serial, frames)
     work = annotate(joint_2d, hand_visibility(joint_2d, seg), (grey.shape[2], grey.shape[1]),
                     "careful", np.random.default_rng(0), key_step=every, follow_motion=False)
     body = {"tracks": [{"point": p, "keyframes": rows} for p, rows in enumerate(work.tracks)]}
@@ -246,7 +240,7 @@ def _load(capture: Path) -> _Capture:
             serial=cam.serial, visible=hand_visibility(joint_2d, seg),
             truth=np.where((joint_2d == dexycb.NO_LABEL).all(axis=2, keepdims=True), np.nan,
                            joint_2d),
-            grey=_grey(seq_dir / cam.serial, frames), depth=depth,
+            grey=grey_view(seq_dir / cam.serial, frames), depth=depth,
             camera=CameraModel(intrinsics_matrix(cam.fx, cam.fy, cam.ppx, cam.ppy),
                                np.asarray(cam.distortion), np.asarray(cam.extrinsics),
                                cam.width, cam.height)))

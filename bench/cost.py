@@ -25,15 +25,16 @@ Protocols (backend.crowd.simulate.PROTOCOLS and ASSISTED):
 
 Effort is what the simulated worker earns on the page's counters: an action per keyframe (a
 click, a key for an occluded one), with assistance what the page's edit counter records
-(clicks, drags, occlusion keys, accepts, the page's own re-tracks after a correction), working
-time modelled as a minute of reading plus 3 s per action (backend.crowd.simulate; no person is
-timed). "first_view_actions": per target, the edit actions of its first accepted view (the
-accepted assignment submitted first), the view worked with the least help; "view_actions": per
-target, each submitted assignment's actions, kept suggestions, status, profile and QC outcome;
-"qc_by_profile": per simulated profile, units submitted and flagged by QC. Money is real
-ledger money for rewards priced per task at ``--hourly`` dollars an hour of that protocol's
-expected working time (the mean over the tasks of a kind, from the same simulated workers on
-the truth), plus the marketplace's fee; rejected work is done but not paid.
+(the worker's clicks, drags, occlusion keys and accepts; not the re-tracks the page writes by
+itself after a correction), working time modelled as a minute of reading plus 3 s per action
+(backend.crowd.simulate; no person is timed). "first_view_actions": per target, the edit
+actions of its first accepted view (the accepted assignment submitted first), the view worked
+with the least help; "view_actions": per target, each submitted assignment's actions, kept
+suggestions, status, profile and QC outcome; "qc_by_profile": per simulated profile, units
+submitted and flagged by QC. Money is real ledger money for rewards priced per task at
+``--hourly`` dollars an hour of that protocol's expected working time (the mean over the tasks
+of a kind, from the same simulated workers on the truth), plus the marketplace's fee; rejected
+work is done but not paid.
 
 Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
 "profile", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
@@ -118,15 +119,14 @@ def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarr
                     rng: np.random.Generator) -> int:
     """The page's edit count of a careful assisted worker on the task's view, the proposals
     computed in process (as the route computes them), no suggestions."""
-    import cv2
+    from _crowd_labels import grey_view
 
     from worker.assist.checks import check_key
     from worker.formats import dexycb
     from worker.synth.assisted import AssistSetting, assisted_annotate
 
     view = next(capture.glob(dexycb.META_GLOB)).parent / task["serial"]
-    grey = np.stack([cv2.imread(str(view / dexycb.color_file(f)), cv2.IMREAD_GRAYSCALE)
-                     for f in range(task["num_frames"])])
+    grey = grey_view(view, task["num_frames"])
     setting = AssistSetting(grey, check_key("rewards"), task["id"], follows=True,
                             retracks=True)
     return int(assisted_annotate(xy, visible, setting, "careful", rng).actions["edits"])
