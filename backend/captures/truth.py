@@ -85,11 +85,13 @@ class CaptureTruth:
             self._plans[folder] = read_sequence(folder)
         return self._plans[folder]
 
-    def object_points(self, serial: str, index: int, frames: int,
-                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def object_points(self, serial: str, index: int, frames: int, rng: np.random.Generator,
+                      suggested: tuple[np.ndarray, np.ndarray] | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """Two landmarks on object ``index`` in one view: surface points visible where it first
         shows, followed through its true poses as the view's images show them; (F, 2, 2) px
-        and (F, 2) visibility."""
+        and (F, 2) visibility. suggested: the landmarks the page suggests ((F, 2, 2) px, (F, 2)
+        shown visible), whose spots a person takes (worker.synth.annotators.mesh_landmarks)."""
         plan = self._plan(self._folder(serial).parent)
         cam = next(c for c in plan.cameras if c.serial == serial)
         # The view's own camera frame as the world: the labels' pose_y are object-to-camera.
@@ -102,7 +104,7 @@ class CaptureTruth:
         vertices, faces = surface_points(np.asarray(mesh.vertices, float),
                                          np.asarray(mesh.faces, int))
         xy, visible, _ = mesh_landmarks(camera, seg, int(plan.objects[index].ycb_id), vertices,
-                                        faces, poses[:, index], rng)
+                                        faces, poses[:, index], rng, shown=suggested)
         return xy, visible
 
     def object_poses(self) -> np.ndarray:
@@ -117,10 +119,13 @@ class CaptureTruth:
         trans = np.einsum("ij,foj->ofi", to_world[:, :3], in_cam[..., 3]) + to_world[:, 3]
         return np.concatenate([rot, trans[..., None]], axis=-1)
 
-    def points(self, task: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """The task's true points (F, P, 2) px and visibility (F, P)."""
+    def points(self, task: dict, rng: np.random.Generator,
+               suggested: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The task's true points (F, P, 2) px and visibility (F, P); suggested: an object task's
+        suggested landmarks, as object_points takes them."""
         if task["kind"] == "hand":
             joint_2d, seg = self.view(task["serial"], task["num_frames"])
             return joint_2d, hand_visibility(joint_2d, seg)
         return self.object_points(task["serial"], int(task["target_key"].split(":")[1]),
-                                  task["num_frames"], rng)
+                                  task["num_frames"], rng, suggested)

@@ -195,6 +195,7 @@ class PageAssistance:
         self.frames = int(task["num_frames"])
         self.size = (int(task["width"]), int(task["height"]))
         self.poll_s, self.poll_limit_s = poll_s, poll_limit_s
+        self._suggested: tuple[Prefill | None] | None = None
 
     def proposals(self, anchors: list[list[list[Any]]], forward: list[int]
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -220,6 +221,12 @@ class PageAssistance:
         return xy, ok
 
     def suggestions(self) -> Prefill | None:
+        """The view's suggestions as the page shows them (asked once: the page keeps them)."""
+        if self._suggested is None:
+            self._suggested = (self._ask_suggestions(),)
+        return self._suggested[0]
+
+    def _ask_suggestions(self) -> Prefill | None:
         started = time.monotonic()
         while True:
             reply = _checked(self.client.http.get(f"{self.client.base}/api/annotate/suggestions",
@@ -262,9 +269,13 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
         return outcome
     params, page_token, reply = client.open_page(accepted["work_url"])
     task = reply["task"]
-    xy, visible = truth.points(task, rng)
-    if protocol == ASSISTED:
-        page = PageAssistance(client, page_token, task)
+    page = PageAssistance(client, page_token, task) if protocol == ASSISTED else None
+    # An object's landmarks are the worker's to pick, unless the page already suggests some:
+    # a person then follows the spots they mark.
+    suggested = page.suggestions() if page is not None and task["kind"] != "hand" else None
+    xy, visible = truth.points(task, rng, None if suggested is None
+                               else (suggested.xy, suggested.shown()))
+    if page is not None:
         done = assisted_annotate(xy, visible, page, profile, rng)
         tracks, edits = done.tracks, done.actions["edits"]
     else:

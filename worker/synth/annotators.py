@@ -32,6 +32,7 @@ Pure numpy; every random choice comes from the ``rng`` passed in.
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal, get_args
@@ -63,6 +64,10 @@ LANDMARK_SEPARATION_M = 0.03
 # degrees from the camera (cosine 0.5); a point seen edge-on slides off its spot with the
 # slightest turn of the object.
 PLAIN_VIEW_COS = 0.5
+# A suggested landmark marks the spot whose projection lies within this many px of it (the
+# suggestion's own error from the views it comes from, a few px; worker.synth.annotators
+# suggested_landmarks): further off, a person sees no spot it marks and picks its own.
+SUGGESTED_SPOT_PX = 8.0
 # A keyframe added between two others (where the path bends) is placed by dragging the
 # interpolated point onto the joint: it keeps the neighbouring keyframes' error (where the
 # worker sees the joint's centre) plus a small click error of its own, px per axis. So keys
@@ -185,12 +190,17 @@ def distinct_points(points: np.ndarray, candidates: np.ndarray, count: int,
 
 def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
                    faces: np.ndarray, poses: np.ndarray, rng: np.random.Generator,
-                   count: int = 2, separation_m: float = LANDMARK_SEPARATION_M
+                   count: int = 2, separation_m: float = LANDMARK_SEPARATION_M,
+                   shown: tuple[np.ndarray, np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` landmarks a person would pick on an object in one view: distinct mesh
     vertices (distinct_points, ``separation_m`` apart where the view allows) visible where the
     object first shows, in plain view there (PLAIN_VIEW_COS) where enough are, followed
     through the object's true motion.
+
+    shown: the landmarks the page already suggests, (F, count, 2) px (NaN where none) and
+        (F, count) shown visible: a person takes the spots they mark (suggested_landmarks)
+        instead of picking its own, where the suggestions mark one.
 
     seg: (F, H, W) labels; vertices (N, 3) object frame, metres; poses (F, 3, 4) object to the
     camera's world frame. Returns (F, count, 2) px (NaN before the object shows), (F, count)
@@ -199,6 +209,8 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
     frames = seg.shape[0]
     normals = vertex_normals(vertices, faces)
     ids = np.full(count, -1)
+    if shown is not None and np.shape(shown[0])[1:] == (count, 2):
+        ids = suggested_landmarks(camera, seg, value, vertices, normals, poses, *shown)
     xy = np.full((frames, count, 2), np.nan)
     visible = np.zeros((frames, count), dtype=bool)
     centre = camera.T_cam_to_world[:, 3]
@@ -216,6 +228,37 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
             xy[f] = camera.project(world[ids])
             visible[f] = ok[ids]
     return xy, visible, ids
+
+
+def suggested_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
+                        normals: np.ndarray, poses: np.ndarray, xy: np.ndarray,
+                        shown: np.ndarray) -> np.ndarray:
+    """(count,) the vertex ids of the spots suggested landmarks mark, as a person reads them
+    off the page: for each landmark the vertex whose projection lies nearest the suggested
+    positions over the frames both show (the median distance, so a check cell planted off
+    the spot in a frame or two does not move it), among those within SUGGESTED_SPOT_PX;
+    all -1 (the person picks its own) unless every landmark marks a spot.
+    xy: (F, count, 2) px, NaN where nothing is suggested; shown: (F, count) bool."""
+    count = xy.shape[1]
+    frames = [f for f in range(len(seg)) if (shown[f] & np.isfinite(xy[f]).all(-1)).any()]
+    if not frames:
+        return np.full(count, -1)
+    dist = np.full((len(frames), count, len(vertices)), np.nan)
+    for i, f in enumerate(frames):
+        world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
+        ok = visible_vertices(camera, seg[f], value, world, normals @ poses[f, :, :3].T)
+        at = camera.project(world)
+        for p in np.flatnonzero(shown[f] & np.isfinite(xy[f]).all(-1)):
+            dist[i, p, ok] = np.linalg.norm(at[ok] - xy[f, p], axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a vertex never shown: all NaN
+        typical = np.nanmedian(dist, axis=0)  # (count, N)
+    typical = np.where(np.isfinite(typical), typical, np.inf)
+    ids = typical.argmin(axis=1)
+    if not (typical[np.arange(count), ids] <= SUGGESTED_SPOT_PX).all() \
+            or len(set(ids.tolist())) < count:
+        return np.full(count, -1)
+    return ids
 
 
 def swap_window(frames: int) -> tuple[int, int]:

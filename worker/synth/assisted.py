@@ -48,8 +48,9 @@ Workers:
               interpolation where LK found nothing) is more than TOLERANCE_PX from where it
               sees the point, it corrects the worst such frame of the span (a drag; a click
               where there was no proposal) and asks again for the two halves, until every
-              frame is within tolerance or keyed. With a pre-fill it first accepts it, drags
-              what is beyond tolerance, fixes wrong visibility, and tracks only the gaps.
+              frame is within tolerance or keyed. With a pre-fill that mostly sits on the
+              points (TAKE_SHARE) it first accepts it, drags what is beyond tolerance, fixes
+              wrong visibility, and tracks only the gaps; one that mostly does not, it leaves.
     blind     keys by hand what the careful worker keys (the first and last frame and the
               visibility changes, with the same care; the last frame even where points are
               followed), accepts every proposal and the whole pre-fill, corrects nothing: the
@@ -83,6 +84,9 @@ TOLERANCE_PX = 3.0 * CAREFUL_SIGMA_PX
 # taken as half the click noise. An assumption, not a measurement: bench/assist.py
 # --judge-sigma 2 gives the cost of judging as noisily as clicking (more needless drags).
 JUDGE_SIGMA_PX = 0.5 * CAREFUL_SIGMA_PX
+# Share of the suggestions on points it sees that must sit within tolerance for the careful
+# worker to take them (U) rather than label the view without them (_worth_taking).
+TAKE_SHARE = 0.8
 # Rounds of asking for proposals after which the careful worker stops (each round halves or
 # settles every open span; a 72-frame clip needs at most about log2(72) + a few).
 MAX_ROUNDS = 20
@@ -438,6 +442,19 @@ def _take_prefill(state: _State, shown: Prefill, seen: np.ndarray, judged: np.nd
             state.actions.drags += 1
 
 
+def _worth_taking(shown: Prefill, judged: np.ndarray, visible: np.ndarray,
+                  tolerance: float) -> bool:
+    """Whether the careful worker takes the suggestions: at least TAKE_SHARE of those on points
+    it sees lie within ``tolerance`` of where it sees them (a glance through the clip shows
+    whether the markers sit on the points; suggestions for other spots, or mostly off, are
+    more work to drag one by one than to label from the start)."""
+    checked = shown.shown() & np.isfinite(shown.xy).all(axis=2) & visible
+    if not checked.any():
+        return True
+    off = np.linalg.norm(shown.xy - judged, axis=2)[checked]
+    return bool(np.mean(off <= tolerance) >= TAKE_SHARE)
+
+
 def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistance,
                       profile: str, rng: np.random.Generator,
                       tolerance: float = TOLERANCE_PX,
@@ -463,7 +480,7 @@ def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistanc
     state = _State(rows=[{} for _ in range(truth.shape[1])])
     limit = tolerance if profile == "careful" else None
     shown = setting.suggestions()
-    if shown is not None:
+    if shown is not None and (limit is None or _worth_taking(shown, judged, visible, limit)):
         _take_prefill(state, shown, seen, judged, visible, limit)
     for p in range(truth.shape[1]):
         free = np.array([f not in state.rows[p] for f in range(frames)])

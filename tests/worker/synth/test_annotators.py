@@ -166,6 +166,27 @@ def test_mesh_landmarks_are_visible_vertices_carried_by_the_true_motion() -> Non
     assert np.allclose(xy, truth)
 
 
+def test_mesh_landmarks_take_the_spots_the_suggestions_mark() -> None:
+    camera, poses, seg = _cube_view(4)
+    v, faces = _box()
+    _, _, own = mesh_landmarks(camera, seg, 4, v, faces, poses, np.random.default_rng(0))
+    # The page suggests two other corners of the face the camera sees, one frame's suggestion
+    # 15 px off (a check cell): the worker follows those corners, not its own pick.
+    other = [i for i in range(len(v)) if v[i, 2] < 0 and i not in own.tolist()][:2]
+    suggested = np.stack([camera.project(v[other] + poses[f, :, 3]) for f in range(4)])
+    suggested[2, 0] += [15.0, 0.0]
+    xy, visible, ids = mesh_landmarks(camera, seg, 4, v, faces, poses,
+                                      np.random.default_rng(0),
+                                      shown=(suggested, np.ones((4, 2), bool)))
+    assert ids.tolist() == other and visible.all()
+    assert np.allclose(xy, np.stack([camera.project(v[other] + poses[f, :, 3])
+                                     for f in range(4)]))
+    # Suggestions that mark no spot (far from every corner) leave the worker its own pick.
+    _, _, ids = mesh_landmarks(camera, seg, 4, v, faces, poses, np.random.default_rng(0),
+                               shown=(suggested + 40.0, np.ones((4, 2), bool)))
+    assert ids.tolist() == own.tolist()
+
+
 def test_object_never_shown_is_marked_occluded_without_positions() -> None:
     camera, poses, _ = _cube_view(5)
     v, faces = _box()

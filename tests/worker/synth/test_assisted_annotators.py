@@ -223,6 +223,20 @@ class TestPrefill:
         assert sum(row_source(r) == "prefilled" for t in work.tracks for r in t) > (
             0.8 * (POINTS - 1) * FRAMES)
 
+    def test_careful_leaves_suggestions_that_mostly_miss_the_points(self, clip) -> None:
+        # Suggestions of other spots (20 px off every point): dragging each back would cost a
+        # drag per frame and point; the careful worker labels the view as if none were shown.
+        # The blind acceptor takes them all the same.
+        _, truth, visible = clip
+        elsewhere = Prefill(xy=truth + 20.0, visible=visible.copy())
+        work = _work(clip, "careful", elsewhere)
+        alone = _work(clip, "careful", None)
+        assert not any(row_source(r) == "prefilled" for t in work.tracks for r in t)
+        assert work.actions == alone.actions
+        blind = _work(clip, "blind", elsewhere)
+        assert sum(row_source(r) == "prefilled" for t in blind.tracks for r in t) > (
+            0.8 * POINTS * FRAMES)
+
     def test_blind_keeps_wrong_visibility_and_prefilled_check_cells(self, clip) -> None:
         _, truth, visible = clip
         work = _work(clip, "blind", self._prefill(truth, visible))
