@@ -99,10 +99,13 @@ def request_landmark_qc(session: Session, sequence_id: int) -> list[Job]:
     return [request_qc(session, task) for task in firsts.values()]
 
 
-def thresholds_bounds() -> QCThresholds:
+def thresholds_bounds(kind: str = "hand") -> QCThresholds:
+    """The settings' QC threshold factors with the metric bounds of the target ``kind``
+    (worker.quality.bounds.kind_bounds)."""
+    from worker.quality.bounds import kind_bounds
     from worker.quality.decide import QCThresholds
 
-    return QCThresholds(**get_settings().qc_thresholds)
+    return QCThresholds(**{"bounds": kind_bounds(kind), **get_settings().qc_thresholds})
 
 
 def px_lists(values: np.ndarray) -> list[Any]:
@@ -277,7 +280,8 @@ def score_target(session: Session, sequence_id: int, target_key: str,
         qc.metrics["checks_accepted"], qc.metrics["checks_corrected"] = inputs.who[key].checks
         qc.kept_checks = [list(cell) for cell in inputs.who[key].kept]
     fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
-    thresholds = learn_thresholds(_population(session, inputs.kind, fresh), thresholds_bounds())
+    thresholds = learn_thresholds(_population(session, inputs.kind, fresh),
+                                  thresholds_bounds(inputs.kind))
     names = point_names(inputs.kind)
     views = len({lab.view for lab in inputs.labels})
     counts = {"approve": 0, "review": 0, "reject": 0, "provisional": 0}

@@ -78,3 +78,19 @@ METRIC_BOUNDS: dict[str, MetricBound] = {
     # motion 70-80%.
     "unfollowed_stretches": MetricBound("above", (0.2, 0.25), (0.45, 0.55)),
 }
+
+# Object landmarks are judged on their own shake (against the solved object's point,
+# worker.quality.anchored, or beyond the other views' tracks, worker.quality.landmarks) where
+# hands compare with a consensus. A careful worker who places a landmark on every frame
+# (DexYCB's protocol, or dragging suggestions one by one) shakes with its click noise alone:
+# 2 px per axis, i.i.d., gives sqrt(12) x 2 = 6.9 px/frame^2 RMS, above the hands' bounds.
+# Random clicks shake tens of px, a swap or a slip leaps (jump_fraction).
+OBJECT_BOUNDS: dict[str, MetricBound] = {
+    "jitter_px": MetricBound("above", (8.0, 10.0)),
+}
+
+
+def kind_bounds(kind: str) -> dict[str, MetricBound]:
+    """The metric bounds of a target kind ("hand" or "object"): METRIC_BOUNDS, with
+    OBJECT_BOUNDS in place for objects."""
+    return {**METRIC_BOUNDS, **OBJECT_BOUNDS} if kind == "object" else dict(METRIC_BOUNDS)

@@ -114,10 +114,13 @@ def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
     return {lab.key: motion.get(lab.key) for lab in labels}
 
 
-def moved_with_object(xy: np.ndarray, motion: ObjectMotion) -> float | None:
+def moved_with_object(xy: np.ndarray, motion: ObjectMotion, shown: np.ndarray | None = None
+                      ) -> float | None:
     """How far the label's landmarks travel compared with the other labels' (1 = as far or
-    farther), when the object clearly moves; None for an object that stays put."""
-    return moved_with(xy, motion, OBJECT_MOVES_PX)
+    farther), when the object clearly moves; None for an object that stays put or that the
+    label's landmarks are hidden through (worker.quality.motion.moved_with; shown: (F, P)
+    where the label shows them)."""
+    return moved_with(xy, motion, OBJECT_MOVES_PX, shown)
 
 
 def _mask_motion_ratio(xy: np.ndarray, masks: dict[int, np.ndarray]) -> float | None:
@@ -208,14 +211,14 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     metrics["outlier_fraction"] = num((dist[judged] > SILHOUETTE_TOLERANCE_PX).mean()) \
         if judged.any() else None
     metrics["motion_ratio"] = _mask_motion_ratio(own_xy, masks)
-    metrics["moved_with_object"] = moved_with_object(own_xy, motion) \
+    sent = visible & np.isfinite(xy).all(axis=-1)
+    metrics["moved_with_object"] = moved_with_object(own_xy, motion, sent) \
         if motion is not None else None
     jump, step, track = _track_metrics(xy, motion)
     metrics.update(track)
     metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())
     metrics["working_time_s"] = num(label.working_time_s, 1)
-    sent = visible & np.isfinite(xy).all(axis=-1)
     own = sent & decided
     metrics["decided_fraction"] = num(own.sum() / sent.sum()) if sent.any() else None
     per_joint, per_frame = per_point_and_frame(dist)

@@ -49,6 +49,10 @@ class TargetMotion:
 WITNESS_JITTER_PX = 15.0
 # One that shakes less is frozen (one frame copied to all): it witnesses no motion either.
 FROZEN_JITTER_PX = 0.05
+# A label is compared with the target's motion only where it shows its points over at least
+# this share of the target's travel (the other labels' per-frame steps summed): a one-frame
+# copy shows them throughout, a careful label of hidden points only where they show.
+SEEN_TRAVEL_SHARE = 0.5
 
 
 def others_motion(tracks: dict[str, np.ndarray], silent: frozenset[str] = frozenset()
@@ -77,11 +81,20 @@ def others_motion(tracks: dict[str, np.ndarray], silent: frozenset[str] = frozen
     return out
 
 
-def moved_with(xy: np.ndarray, motion: TargetMotion, moves_px: float) -> float | None:
+def moved_with(xy: np.ndarray, motion: TargetMotion, moves_px: float,
+               shown: np.ndarray | None = None) -> float | None:
     """How far the label's points (F, P, 2) px travel compared with the other labels' (1 = as
     far or farther), when the target clearly moves (the others reach ``moves_px``); None
-    for a target that stays put."""
+    for a target that stays put, and for a label that shows its points over less than
+    SEEN_TRAVEL_SHARE of the target's travel (hidden while it moves: a careful label of
+    points the hand covers through the lift shows them only at rest). shown: (F, P) where
+    the label shows its points (default: where xy has positions)."""
     if motion.reach < moves_px:
+        return None
+    where = np.isfinite(xy).all(axis=-1) if shown is None else np.asarray(shown, bool)
+    seen = (where[1:] & where[:-1]).any(axis=1)
+    travel = np.nan_to_num(motion.step)
+    if travel.sum() > 0 and travel[seen].sum() < SEEN_TRAVEL_SHARE * travel.sum():
         return None
     _, reach = track_motion(xy)
     return num(min(reach / motion.reach, 1.0))

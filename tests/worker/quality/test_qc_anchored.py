@@ -12,6 +12,8 @@ import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.quality.anchored import anchor, merge_anchored, score_anchored
+from worker.quality.bounds import kind_bounds
+from worker.quality.decide import QCThresholds, decide, learn_thresholds
 from worker.quality.metrics import AssignmentQC
 from worker.quality.object_views import ray_hits
 from worker.quality.solved_scene import SolvedObjects
@@ -97,6 +99,27 @@ class TestScoreAnchored:
         assert qc.metrics["anchored_median_px"] < 3.0 and qc.metrics["anchored_p90_px"] < 6.0
         assert qc.metrics["anchored_visible_occluded"] == 0.0
         assert qc.metrics["anchored_fraction"] == 1.0 and not qc.provisional
+
+    def test_a_landmark_clicked_on_every_frame_is_not_reviewed_for_its_click_noise(
+            self, scene):
+        # Careful clicks on every frame (2 px per axis, i.i.d.) shake about 6.9 px/frame^2
+        # against the anchored points from the clicks alone: the objects' bounds let that
+        # through, the hands' would not.
+        camera, solved, points = scene
+        truth = truth_track(camera, solved, points)
+        reports = []
+        for seed in range(8):
+            xy = truth + np.random.default_rng(seed).normal(0.0, 2.0, truth.shape)
+            reports.append(score_anchored(camera, ViewLabels(f"c{seed}", 0, xy, np.ones(
+                xy.shape[:2], bool), 90.0), solved, 0))
+        shake = [qc.metrics["jitter_px"] for qc in reports]
+        assert all(5.5 < s < 8.0 for s in shake), shake
+        rows = [qc.metrics for qc in reports]
+        names = ["a", "b"]
+        objects = learn_thresholds(rows, QCThresholds(bounds=kind_bounds("object")))
+        assert all(decide(qc, objects, names).outcome == "approve" for qc in reports)
+        hands = learn_thresholds(rows, QCThresholds(bounds=kind_bounds("hand")))
+        assert any(decide(qc, hands, names).outcome == "review" for qc in reports)
 
     def test_sloppy_work_is_several_pixels_off(self, scene):
         camera, solved, points = scene

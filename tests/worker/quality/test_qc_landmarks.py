@@ -144,6 +144,21 @@ class TestScoreObject:
         assert "as far as the object does" in decision.feedback
         assert decide(scored["v1"], thresholds, ["a", "b"]).outcome == "approve"
 
+    def test_landmarks_hidden_while_the_object_moves_are_not_called_frozen(self, camera):
+        # A careful label whose landmarks the hand covers from the lift on: it shows them at
+        # rest only, so it cannot show the motion; it is not judged by it (the frozen copy,
+        # which shows them throughout, still is).
+        hidden = _lifted(7)
+        visible = np.ones((FRAMES, 2), bool)
+        visible[12:] = False
+        hidden[12:] = np.nan
+        covered = ViewLabels(key="covered", view=0, xy=hidden, visible=visible,
+                             working_time_s=40.0)
+        scored = score_object([camera], self._views(camera, covered))
+        assert scored["covered"].metrics["moved_with_object"] is None
+        thresholds = learn_thresholds([qc.metrics for qc in scored.values()])
+        assert decide(scored["covered"], thresholds, ["a", "b"]).outcome != "reject"
+
     def test_the_object_s_own_motion_is_not_a_jump(self, camera):
         labels = self._views(camera, _label(_lifted(5, 2.0), key="fast"))
         scored = score_object([camera], labels)
