@@ -105,19 +105,21 @@ def accepted_ids_by_task(session: Session, task_ids: Iterable[int]) -> list[tupl
     return [(int(task_id), int(assignment_id)) for task_id, assignment_id in rows]
 
 
-def accepted_digest(session: Session, sequence_id: int) -> tuple[str | None, int]:
+def accepted_digest(session: Session, sequence_id: int, excused: Iterable[int] = ()
+                    ) -> tuple[str | None, int]:
     """(digest of the accepted assignments, tasks still without one); the digest is None
     while any task of the sequence lacks accepted work. Tasks the adaptive publishing policy
-    holds back (backend.crowd.adaptive) are not waited for."""
-    return accepted_digests(session, [sequence_id])[sequence_id]
+    holds back (backend.crowd.adaptive) are not waited for, nor the ``excused`` task ids."""
+    return accepted_digests(session, [sequence_id], excused)[sequence_id]
 
 
-def accepted_digests(session: Session, sequence_ids: list[int]
+def accepted_digests(session: Session, sequence_ids: list[int], excused: Iterable[int] = ()
                      ) -> dict[int, tuple[str | None, int]]:
     """:func:`accepted_digest` of each sequence, in two statements whatever their number."""
-    task_sequence = dict(session.execute(
+    skip = set(excused)
+    task_sequence = {task_id: seq_id for task_id, seq_id in session.execute(
         select(Task.id, Task.sequence_id).where(Task.sequence_id.in_(sequence_ids), ~held()))
-        .all())
+        if task_id not in skip}
     tasks: dict[int, set[int]] = {i: set() for i in sequence_ids}
     for task_id, seq_id in task_sequence.items():
         tasks[seq_id].add(task_id)

@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 from sqlalchemy import select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, aliased
 
 from backend.annotation import service as annotation
 from backend.annotation.models import Assignment, Task
@@ -35,7 +35,7 @@ from backend.errors import DexlabelError
 from backend.jobs.models import Job
 from backend.jobs.runner import ACTIVE
 from backend.jobs.service import enqueue_job, mark_waiting
-from backend.labels import accepted_digest
+from backend.labels import ACCEPTED, accepted_digest
 from backend.labels.suggestions import queue_fits
 from backend.quality import flows as quality_flows
 from backend.quality.models import QCReport
@@ -175,10 +175,31 @@ def _qc_message(target_key: str, result: dict[str, Any]) -> str:
     return f"{line}; {result['solve']}"
 
 
+def judged_after_solve(session: Session, sequence_id: int) -> set[int]:
+    """Object tasks of the sequence without accepted work whose submitted work QC left
+    provisional (nothing could judge it before the object is solved: its landmarks hidden
+    while the object moves, say): the landmark QC after a solve judges it
+    (request_landmark_qc), so the solve does not wait for it."""
+    other = aliased(Assignment)
+    accepted = select(other.id).where(other.task_id == Task.id,
+                                      other.status == ACCEPTED).exists()
+    rows = session.execute(
+        select(Task.id).join(Assignment, Assignment.task_id == Task.id)
+        .join(QCReport, QCReport.assignment_id == Assignment.id)
+        .where(Task.sequence_id == sequence_id, Task.kind == "object", ~accepted,
+               Assignment.status == "submitted", QCReport.provisional.is_(True),
+               QCReport.outcome != "reject")).scalars()
+    return set(rows)
+
+
 def solve_if_ready(session: Session, sequence_id: int) -> str:
-    """Queue one solve per set of accepted labels once every task has accepted work; say
-    why not otherwise (the QC job's result shows it)."""
+    """Queue one solve per set of accepted labels once every task has accepted work, or
+    work only a solve can judge (judged_after_solve); say why not otherwise (the QC job's
+    result shows it)."""
     digest, missing = accepted_digest(session, sequence_id)
+    if digest is None:
+        digest, missing = accepted_digest(session, sequence_id,
+                                          judged_after_solve(session, sequence_id))
     if digest is None:
         total = len(list(session.scalars(select(Task.id).where(
             Task.sequence_id == sequence_id))))
