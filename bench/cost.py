@@ -260,10 +260,6 @@ def _published_views(sequence_id: int) -> dict[str, int]:
             .group_by(Task.target_key))}
 
 
-# Crowd rounds at most under the adaptive policy: the first views, then one per solve.
-MAX_PUBLISH_ROUNDS = 8
-
-
 def one(capture: Path, name: str, profile: str, hourly: float,
         policy: str = "every-view", initial_views: int | None = None) -> dict[str, Any]:
     """One protocol through the product in a fresh instance (this process); its figures."""
@@ -281,21 +277,12 @@ def one(capture: Path, name: str, profile: str, hourly: float,
     admin = demo.demo_logins()["admin"]
     server = demo.DemoServer("127.0.0.1", port)
     server.start()
-    rounds = 0
-    outcomes: list[Any] = []
     try:
         _publish(sequence_id, rewards, "every-view" if name == "dexycb" else policy,
                  initial_views)
         # Each solve may publish another view (adaptive): the crowd comes back for it.
-        while rounds < MAX_PUBLISH_ROUNDS:
-            rounds += 1
-            outcomes += demo.demo_crowd(sequence_id, capture, admin, None,
-                                        server.has_consumer, profile, protocol)
-            demo.wait_for_jobs()
-            demo.wait_for_solve(sequence_id)
-            demo.wait_for_jobs()
-            if not demo.unaccepted(sequence_id)[0]:
-                break
+        outcomes, rounds = demo.demo_until_solved(sequence_id, capture, admin, None, profile,
+                                                  protocol)
     finally:
         server.stop()
     with session_scope() as session:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import typer
 from typer.core import TyperGroup
@@ -28,6 +28,9 @@ from backend.instance import (
     require_database,
     serve_at,
 )
+
+if TYPE_CHECKING:
+    from backend.crowd.simulate import Protocol
 
 # Commands that make their own instance (or none) instead of needing one.
 NO_INSTANCE = frozenset({"migrate", "synth", "demo", "prelabel"})
@@ -279,6 +282,10 @@ def demo(
                               "assignment)")] = None,
     simulate_: Annotated[bool, typer.Option(
         "--simulate/--no-simulate", help="fill the demo with simulated submissions")] = True,
+    protocol: Annotated[Literal["keyframes", "assisted", "every-frame"], typer.Option(
+        help="how the simulated crowd labels: keyframes (a keyframe every few frames), "
+             "assisted (with the page's tracking and suggestions) or every-frame "
+             "(DexYCB's: every point on every frame)")] = "keyframes",
 ) -> None:
     """A demo instance: a capture, a simulated crowd, a solve.
 
@@ -305,7 +312,7 @@ def demo(
     try:
         with refusing_bad_input():
             _demo_work(server, seq.sequence_id, capture, logins["admin"], assignments,
-                       workers, simulate_)
+                       workers, simulate_, protocol)
             report.demo_print(seq, settings.public_url, logins, annotate)
             typer.echo(f"{report.demo_summary(seq.sequence_id)} (demo ready in "
                        f"{time.perf_counter() - started:.0f} s)")
@@ -333,17 +340,21 @@ def _demo_capture(capture: Path, database_url: str, frames: int, views: int,
 
 
 def _demo_work(server: Any, sequence_id: int, capture: Path, admin_login: Any,
-               assignments: int, workers: int | None, simulate: bool) -> None:
-    """Start the demo's server, publish, let the simulated crowd work, leave a hand HIT open
-    in the worker portal for the demo worker, wait for the quality checks and the solve (when
-    this process runs a queue consumer)."""
+               assignments: int, workers: int | None, simulate: bool,
+               protocol: Protocol = "keyframes") -> None:
+    """Start the demo's server, publish, let the simulated crowd work (and come back for the
+    views a solve publishes under the adaptive policy), leave a hand HIT open in the worker
+    portal for the demo worker, wait for the quality checks and the solve (when this process
+    runs a queue consumer)."""
     from backend import demo as d
     from backend.demo.portal_hit import leave_hand_hit
 
     server.start()
     d.demo_publish(sequence_id, assignments)
-    if simulate:
-        d.demo_crowd(sequence_id, capture, admin_login, workers, server.has_consumer)
+    if simulate and server.has_consumer:
+        d.demo_until_solved(sequence_id, capture, admin_login, workers, protocol=protocol)
+    elif simulate:
+        d.demo_crowd(sequence_id, capture, admin_login, workers, False, protocol=protocol)
     leave_hand_hit(sequence_id)
     if server.has_consumer:
         d.wait_for_jobs()

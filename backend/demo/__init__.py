@@ -40,6 +40,9 @@ ACTIVE_JOBS = ("queued", "running", "retrying")
 # How long the demo waits for the queue to go idle (QC and the solve), and how often it looks.
 JOBS_TIMEOUT_S = 1800.0
 POLL_S = 0.5
+# Crowd-and-solve passes at most: under the adaptive publishing policy each solve may publish
+# another view per target (backend.crowd.adaptive), and the crowd comes back for it.
+MAX_SOLVE_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -231,6 +234,27 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
         if not submitted:
             return done
     return done
+
+
+def demo_until_solved(sequence_id: int, capture: Path, admin: Login, workers: int | None,
+                      profile: str = "mixed", protocol: Protocol = "keyframes"
+                      ) -> tuple[list[WorkerOutcome], int]:
+    """The crowd (demo_crowd), then the quality checks and the solve waited for, again while
+    a solve published more views (the adaptive policy) that have no accepted work, at most
+    MAX_SOLVE_PASSES times; (every simulated worker's outcome, passes). Needs a queue
+    consumer (the checks and the solve run on it)."""
+    done: list[WorkerOutcome] = []
+    passes = 0
+    while passes < MAX_SOLVE_PASSES:
+        passes += 1
+        done += demo_crowd(sequence_id, capture, admin, workers, True, profile, protocol)
+        wait_for_jobs()
+        wait_for_solve(sequence_id)
+        wait_for_jobs()
+        if not unaccepted(sequence_id)[0]:
+            break
+        typer.echo(f"pass {passes}: the solve asked for more views; the crowd comes back")
+    return done, passes
 
 
 def approve_reviewed(sequence_id: int) -> int:

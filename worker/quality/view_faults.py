@@ -5,6 +5,8 @@ view's labels before anyone is scored and reported on the camera, never charged 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from worker.geometry.cameras import CameraModel
@@ -81,7 +83,9 @@ def view_lags(cameras: list[CameraModel], labels: list[ViewLabels],
     for i, view in enumerate(views):
         own = [np.where((lab.visible & decided_of(lab))[..., None], lab.xy, np.nan)
                for lab in labels if lab.view == view]
-        with np.errstate(all="ignore"):
+        with warnings.catch_warnings():
+            # A cell no label of the view decided stays NaN (nanmedian warns of it).
+            warnings.simplefilter("ignore", RuntimeWarning)
             pixels[i] = np.nanmedian(np.stack(own), axis=0) if len(own) > 1 else own[0]
     found = joint_offsets([cameras[v] for v in views], pixels, MAX_LAG_FRAMES, fixed=(0,),
                           gain=LAG_GAIN)
