@@ -196,10 +196,8 @@ def solve_if_ready(session: Session, sequence_id: int) -> str:
     """Queue one solve per set of accepted labels once every task has accepted work, or
     work only a solve can judge (judged_after_solve); say why not otherwise (the QC job's
     result shows it)."""
-    digest, missing = accepted_digest(session, sequence_id)
-    if digest is None:
-        digest, missing = accepted_digest(session, sequence_id,
-                                          judged_after_solve(session, sequence_id))
+    digest, missing = accepted_digest(session, sequence_id,
+                                      judged_after_solve(session, sequence_id))
     if digest is None:
         total = len(list(session.scalars(select(Task.id).where(
             Task.sequence_id == sequence_id))))
