@@ -37,7 +37,7 @@ of a kind, from the same simulated workers on the truth), plus the marketplace's
 work is done but not paid.
 
 Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
-"profile", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
+"profile", "crowd_seed", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
 "add_mm", "rewards_usd", "first_view_actions", "view_actions", "seconds"}}, "ratios": {ours
 over dexycb per labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios":
 {assisted over dexycb, the same}} (each ratio block only when both its protocols ran).
@@ -49,7 +49,10 @@ DexYCB protocol is every view, whatever the setting (its own definition).
 
 Usage: python bench/cost.py [--seed 7717] [--views 8] [--frames 72] [--profile careful]
            [--protocols dexycb,ours,assisted] [--publish every-view|adaptive]
-           [--initial-views N]
+           [--initial-views N] [--crowd-seed N]
+
+``--crowd-seed`` draws another simulated crowd (which workers are blind acceptors, everyone's
+noise); 0 is the demo's own, the same for every capture.
 """
 
 from __future__ import annotations
@@ -261,7 +264,8 @@ def _published_views(sequence_id: int) -> dict[str, int]:
 
 
 def one(capture: Path, name: str, profile: str, hourly: float,
-        policy: str = "every-view", initial_views: int | None = None) -> dict[str, Any]:
+        policy: str = "every-view", initial_views: int | None = None,
+        crowd_seed: int = 0) -> dict[str, Any]:
     """One protocol through the product in a fresh instance (this process); its figures."""
     port = free_port()
     isolated_workdir(f"cost-{name}", DEXLABEL_PUBLIC_URL=f"http://127.0.0.1:{port}",
@@ -282,7 +286,7 @@ def one(capture: Path, name: str, profile: str, hourly: float,
                  initial_views)
         # Each solve may publish another view (adaptive): the crowd comes back for it.
         outcomes, rounds = demo.demo_until_solved(sequence_id, capture, admin, None, profile,
-                                                  protocol)
+                                                  protocol, crowd_seed)
     finally:
         server.stop()
     with session_scope() as session:
@@ -309,6 +313,7 @@ def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]
     done = subprocess.run(
         [sys.executable, __file__, "--one", name, "--capture", str(capture), "--profile",
          args.profile, "--hourly", str(args.hourly), "--publish", args.publish,
+         "--crowd-seed", str(args.crowd_seed),
          *(["--initial-views", str(args.initial_views)] if args.initial_views else [])],
         cwd=ROOT, env=env, capture_output=True, text=True)
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
@@ -357,6 +362,8 @@ def main() -> None:
     parser.add_argument("--initial-views", type=int, default=None,
                         help="adaptive: the views published first per target (default: the"
                              " setting's, 3)")
+    parser.add_argument("--crowd-seed", type=int, default=0,
+                        help="the simulated crowd's draw (profiles and noise; 0: the demo's)")
     parser.add_argument("--one", choices=sorted(PROTOCOLS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     chosen = [p.strip() for p in args.protocols.split(",") if p.strip()]
@@ -367,7 +374,7 @@ def main() -> None:
                      f" ({args.views})")
     if args.one:
         print(json.dumps(one(args.capture.resolve(), args.one, args.profile, args.hourly,
-                             args.publish, args.initial_views)))
+                             args.publish, args.initial_views, args.crowd_seed)))
         return
     capture = args.capture
     if capture is None:
@@ -378,6 +385,7 @@ def main() -> None:
                          objects=1, workers=1)
     result: dict[str, Any] = {"capture": str(capture), "seed": args.seed, "views": args.views,
                               "frames": args.frames, "profile": args.profile,
+                              "crowd_seed": args.crowd_seed,
                               "publish": args.publish, "initial_views": args.initial_views,
                               "hourly_usd": args.hourly, "protocols": {}}
     for name in chosen:

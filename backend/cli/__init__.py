@@ -286,6 +286,9 @@ def demo(
         help="how the simulated crowd labels: keyframes (a keyframe every few frames), "
              "assisted (with the page's tracking and suggestions) or every-frame "
              "(DexYCB's: every point on every frame)")] = "keyframes",
+    crowd_seed: Annotated[int, typer.Option(
+        min=0, max=1_000_000, help="the simulated crowd's draw (its profiles and noise); "
+                                   "0 is the demo's own")] = 0,
 ) -> None:
     """A demo instance: a capture, a simulated crowd, a solve.
 
@@ -312,7 +315,7 @@ def demo(
     try:
         with refusing_bad_input():
             _demo_work(server, seq.sequence_id, capture, logins["admin"], assignments,
-                       workers, simulate_, protocol)
+                       workers, simulate_, protocol, crowd_seed)
             report.demo_print(seq, settings.public_url, logins, annotate)
             typer.echo(f"{report.demo_summary(seq.sequence_id)} (demo ready in "
                        f"{time.perf_counter() - started:.0f} s)")
@@ -341,7 +344,7 @@ def _demo_capture(capture: Path, database_url: str, frames: int, views: int,
 
 def _demo_work(server: Any, sequence_id: int, capture: Path, admin_login: Any,
                assignments: int, workers: int | None, simulate: bool,
-               protocol: Protocol = "keyframes") -> None:
+               protocol: Protocol = "keyframes", crowd_seed: int = 0) -> None:
     """Start the demo's server, publish, let the simulated crowd work (and come back for the
     views a solve publishes under the adaptive policy), leave a hand HIT open in the worker
     portal for the demo worker, wait for the quality checks and the solve (when this process
@@ -352,9 +355,11 @@ def _demo_work(server: Any, sequence_id: int, capture: Path, admin_login: Any,
     server.start()
     d.demo_publish(sequence_id, assignments)
     if simulate and server.has_consumer:
-        d.demo_until_solved(sequence_id, capture, admin_login, workers, protocol=protocol)
+        d.demo_until_solved(sequence_id, capture, admin_login, workers, protocol=protocol,
+                            crowd_seed=crowd_seed)
     elif simulate:
-        d.demo_crowd(sequence_id, capture, admin_login, workers, False, protocol=protocol)
+        d.demo_crowd(sequence_id, capture, admin_login, workers, False, protocol=protocol,
+                     crowd_seed=crowd_seed)
     leave_hand_hit(sequence_id)
     if server.has_consumer:
         d.wait_for_jobs()

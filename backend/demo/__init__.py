@@ -43,6 +43,8 @@ POLL_S = 0.5
 # Crowd-and-solve passes at most: under the adaptive publishing policy each solve may publish
 # another view per target (backend.crowd.adaptive), and the crowd comes back for it.
 MAX_SOLVE_PASSES = 8
+# Apart far enough that two crowd seeds never share a round's seed (rounds x passes < 1009).
+CROWD_SEED_STRIDE = 1009
 
 
 @dataclass(frozen=True)
@@ -198,11 +200,20 @@ def demo_publish(sequence_id: int, assignments: int) -> None:
                    f"recovered, {_hits(sequence_id, kind)} published in all")
 
 
+def round_seed(crowd_seed: int, round_: int, pass_: int = 1) -> int:
+    """The simulated crowd's seed for one round of one crowd-and-solve pass: crowd 0's first
+    pass is the demo's own (7 + round); a later pass, or another crowd seed, draws other
+    profiles and other noise in every round."""
+    return 7 + round_ + MAX_ROUNDS * (pass_ - 1) + CROWD_SEED_STRIDE * crowd_seed
+
+
 def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | None,
                can_wait: bool, profile: str = "mixed",
-               protocol: Protocol = "keyframes") -> list[WorkerOutcome]:
+               protocol: Protocol = "keyframes", crowd_seed: int = 0, pass_: int = 1
+               ) -> list[WorkerOutcome]:
     """Rounds of simulated workers (``profile``: mixed by default; labelling as ``protocol``
-    asks, backend.crowd.simulate), one per open assignment, until every
+    asks, backend.crowd.simulate; round r draws with round_seed(crowd_seed, r, pass_)), one
+    per open assignment, until every
     task has accepted work or MAX_ROUNDS passed. After each round the submissions are synced
     and the quality checks waited for: they approve, or reject and re-open the HIT with one
     more assignment; a task whose work was left for an admin's review gets one more too.
@@ -220,7 +231,7 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
                    "accepted work ...")
         started = time.perf_counter()
         outcomes = simulate(get_settings().public_url, capture, count, profile, admin.email,
-                            admin.password, seed=7 + round_,
+                            admin.password, seed=round_seed(crowd_seed, round_, pass_),
                             first_index=_simulated_accounts() + 1, protocol=protocol)
         done.extend(outcomes)
         submitted = sum(o.status == "submitted" for o in outcomes)
@@ -237,8 +248,8 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
 
 
 def demo_until_solved(sequence_id: int, capture: Path, admin: Login, workers: int | None,
-                      profile: str = "mixed", protocol: Protocol = "keyframes"
-                      ) -> tuple[list[WorkerOutcome], int]:
+                      profile: str = "mixed", protocol: Protocol = "keyframes",
+                      crowd_seed: int = 0) -> tuple[list[WorkerOutcome], int]:
     """The crowd (demo_crowd), then the quality checks and the solve waited for, again while
     a solve published more views (the adaptive policy) that have no accepted work, at most
     MAX_SOLVE_PASSES times; (every simulated worker's outcome, passes). Needs a queue
@@ -247,7 +258,8 @@ def demo_until_solved(sequence_id: int, capture: Path, admin: Login, workers: in
     passes = 0
     while passes < MAX_SOLVE_PASSES:
         passes += 1
-        done += demo_crowd(sequence_id, capture, admin, workers, True, profile, protocol)
+        done += demo_crowd(sequence_id, capture, admin, workers, True, profile, protocol,
+                           crowd_seed, passes)
         wait_for_jobs()
         wait_for_solve(sequence_id)
         wait_for_jobs()
