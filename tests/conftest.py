@@ -153,6 +153,19 @@ def small_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def visibility_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Seed 5, 6 views x 72 frames at 320x240: a hand grasping one object, with its own
+    rendered depth maps (a shorter clip interpolates careful keyframes too loosely). Made once
+    for the visibility tests of QC and of the backend; read-only."""
+    from worker.synth import generate_capture
+
+    root = tmp_path_factory.mktemp("visibility-capture")
+    generate_capture(root, seed=5, frames=72, views=6, objects=1, width=320, height=240,
+                     workers=1)
+    return root
+
+
+@pytest.fixture(scope="session")
 def s3_endpoint() -> Iterator[str]:
     """moto's S3 running as a real HTTP server on a free local port."""
     import socket

@@ -2,6 +2,9 @@
 # Installs what the tests need (a virtualenv with the project and its test extras; PostgreSQL
 # and Redis started if they are installed but down), checks lint and types (tests/lint.sh: ruff
 # and strict mypy; any finding stops here) and runs the whole suite.
+# With DEXLABEL_BENCH_SMOKE=1 (CI), the benchmarks' smoke run (bench/smoke.py) runs beside the
+# suite, on the cores the suite leaves idle while it waits on its servers and browsers; the
+# run fails if either does, and the smoke run's report follows the suite's.
 # Usage: bash tests/run.sh [pytest args...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -69,4 +72,21 @@ fi
 if [ "${CI:-}" = "true" ]; then
   export DEXLABEL_TEST_REQUIRE_SERVICES=1
 fi
-exec "$VENV/bin/python" -m pytest "$@"
+if [ "${DEXLABEL_BENCH_SMOKE:-}" != "1" ]; then
+  exec "$VENV/bin/python" -m pytest "$@"
+fi
+smoke_log=$(mktemp "${TMPDIR:-/tmp}/dexlabel-smoke.XXXXXX")
+echo "bench smoke run beside the suite: python bench/smoke.py (report after the suite)"
+DEXLABEL_VENV="$VENV" "$VENV/bin/python" bench/smoke.py > "$smoke_log" 2>&1 &
+smoke_pid=$!
+tests_status=0
+"$VENV/bin/python" -m pytest "$@" || tests_status=$?
+smoke_status=0
+wait "$smoke_pid" || smoke_status=$?
+echo "bench smoke run (exit $smoke_status):"
+cat "$smoke_log"
+rm -f "$smoke_log"
+if [ "$tests_status" != 0 ]; then
+  exit "$tests_status"
+fi
+exit "$smoke_status"

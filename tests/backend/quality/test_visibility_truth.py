@@ -16,18 +16,6 @@ from backend.db import session_scope
 from tests.backend.quality.helpers import submit_direct
 
 
-@pytest.fixture(scope="module")
-def visibility_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Seed 5, 6 views x 72 frames at 320x240: a hand grasping one object, with its own
-    rendered depth maps (a shorter clip interpolates careful keyframes too loosely)."""
-    from worker.synth import generate_capture
-
-    root = tmp_path_factory.mktemp("visibility-capture")
-    generate_capture(root, seed=5, frames=72, views=6, objects=1, width=320, height=240,
-                     workers=1)
-    return root
-
-
 def test_hand_visibility_metrics_follow_the_true_flags(app_env: dict,
                                                        visibility_capture: Path) -> None:
     from backend.annotation.service import create_tasks

@@ -55,13 +55,8 @@ class CaptureTruth:
 
 
 @pytest.fixture(scope="module")
-def truth(tmp_path_factory: pytest.TempPathFactory) -> CaptureTruth:
-    from worker.synth import generate_capture
-
-    root = tmp_path_factory.mktemp("visibility-capture")
-    generate_capture(root, seed=5, frames=72, views=6, objects=1, width=320, height=240,
-                     workers=1)
-    return CaptureTruth(root)
+def truth(visibility_capture: Path) -> CaptureTruth:
+    return CaptureTruth(visibility_capture)
 
 
 def _checks(truth: CaptureTruth) -> list:
