@@ -21,6 +21,13 @@ import threading
 from multiprocessing.connection import wait
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+# How long (s) a served connection may sit idle before the server closes it. uvicorn's 5 s is
+# shorter than the pauses of a worker's page or a requester's boto3 client between calls:
+# each such client then reuses a connection the server is closing at that moment, and the
+# request is lost unanswered (ConnectionClosedError) unless the client retries. Longer than
+# the idle timeout of the proxies and load balancers usually in front (60 s), so a connection
+# is closed by them, never under them.
+KEEP_ALIVE_S = 75
 
 
 def exit_with_parent() -> bool:

@@ -218,6 +218,7 @@ def serve(
     import uvicorn
 
     from backend.jobs.consumer import start_inprocess_consumer
+    from backend.server_process import KEEP_ALIVE_S
     from worker.tasks import register_handlers
 
     settings = serve_at(host, port)
@@ -240,6 +241,7 @@ def serve(
         uvicorn.run("backend.app:create_served_app", factory=True, host=host, port=port,
                     workers=workers, timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
                     timeout_worker_healthcheck=WORKER_HEALTH_TIMEOUT_S,
+                    timeout_keep_alive=KEEP_ALIVE_S,
                     # The client address behind a proxy is DEXLABEL_TRUSTED_PROXIES' business
                     # (backend.accounts.limits.client_address), not uvicorn's loopback default.
                     proxy_headers=False)

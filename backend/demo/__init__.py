@@ -72,6 +72,7 @@ class DemoServer:
 
         from backend.app import create_app
         from backend.jobs.consumer import start_inprocess_consumer
+        from backend.server_process import KEEP_ALIVE_S
         from worker.tasks import register_handlers
 
         settings = get_settings()
@@ -81,7 +82,8 @@ class DemoServer:
             register_handlers()
             self.consumer = start_inprocess_consumer(settings.worker_threads)
         config = uvicorn.Config(create_app(), host=self.host, port=self.port,
-                                log_level="warning", proxy_headers=False)
+                                log_level="warning", proxy_headers=False,
+                                timeout_keep_alive=KEEP_ALIVE_S)
         self.server = server = uvicorn.Server(config)
         self.thread = thread = threading.Thread(target=server.run, daemon=True)
         thread.start()

@@ -4,6 +4,7 @@ process use; a marketplace that does not answer is named with its setting."""
 
 from __future__ import annotations
 
+import http.client
 import json
 import os
 import sqlite3
@@ -135,6 +136,25 @@ def test_an_unreachable_endpoint_setting_is_named(
 
 
 @pytest.mark.slow
+def _idle_connection_is_kept(port: int) -> None:
+    """A client that pauses between calls (a worker's page, a requester's boto3 client) reuses
+    its connection: the server must not have closed it a few seconds into the pause, or the
+    next request is lost unanswered (uvicorn's own default closes it after 5 s)."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+    try:
+        conn.request("GET", "/healthz")
+        first = conn.getresponse()
+        first.read()
+        assert first.status == 200
+        time.sleep(6.5)
+        conn.request("GET", "/healthz")
+        again = conn.getresponse()
+        again.read()
+        assert again.status == 200
+    finally:
+        conn.close()
+
+
 def test_commands_in_another_terminal_reach_the_server_on_its_port(
     tmp_path: Path, instance: Path, cli: CliRunner, small_capture: Path,
 ) -> None:
@@ -156,6 +176,7 @@ def test_commands_in_another_terminal_reach_the_server_on_its_port(
                 time.sleep(0.2)
         record = json.loads((instance / "server.json").read_text())
         assert record["url"] == f"http://127.0.0.1:{port}"
+        _idle_connection_is_kept(port)
         done = _run(["publish", "--sequence", "synth-subject-01/synth_000003",
                      "--min-approval-rate", "0"], tmp_path, **settings)
         assert done.returncode == 0, done.stderr
