@@ -194,9 +194,10 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
                    shown: tuple[np.ndarray, np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` landmarks a person would pick on an object in one view: distinct mesh
-    vertices (distinct_points, ``separation_m`` apart where the view allows) visible where the
-    object first shows, in plain view there (PLAIN_VIEW_COS) where enough are, followed
-    through the object's true motion.
+    vertices (distinct_points), visible and in plain view (PLAIN_VIEW_COS, where enough are)
+    on the first frame where the object shows that offers them ``separation_m`` apart (the
+    page asks for points far apart: a person looks into the clip for them), else the first
+    such frame's pick; followed through the object's true motion from where it first shows.
 
     shown: the landmarks the page already suggests, (F, count, 2) px (NaN where none) and
         (F, count) shown visible: a person takes the spots they mark (suggested_landmarks)
@@ -211,23 +212,52 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
     ids = np.full(count, -1)
     if shown is not None and np.shape(shown[0])[1:] == (count, 2):
         ids = suggested_landmarks(camera, seg, value, vertices, normals, poses, *shown)
+    suggested = bool(ids[0] >= 0)
     xy = np.full((frames, count, 2), np.nan)
     visible = np.zeros((frames, count), dtype=bool)
     centre = camera.T_cam_to_world[:, 3]
+    seen: list[tuple[np.ndarray, np.ndarray]] = []  # (world, visible vertices) per frame
+    first = None  # the first frame where the object shows enough
+    fallback = None
     for f in range(frames):
         world = vertices @ poses[f, :, :3].T + poses[f, :, 3]
         turned = normals @ poses[f, :, :3].T
         ok = visible_vertices(camera, seg[f], value, world, turned)
-        if ids[0] < 0 and ok.sum() >= count:
-            towards = centre - world
-            cosine = np.einsum("ni,ni->n", turned, towards) / np.linalg.norm(towards, axis=1)
-            plain = ok & (cosine >= PLAIN_VIEW_COS)
-            ids = distinct_points(vertices, np.flatnonzero(plain if plain.sum() >= count else ok),
-                                  count, separation_m, rng)
+        seen.append((world, ok))
+        if ok.sum() < count:
+            continue
+        first = f if first is None else first
         if ids[0] >= 0:
+            continue
+        towards = centre - world
+        cosine = np.einsum("ni,ni->n", turned, towards) / np.linalg.norm(towards, axis=1)
+        plain = ok & (cosine >= PLAIN_VIEW_COS)
+        pick = distinct_points(vertices, np.flatnonzero(plain if plain.sum() >= count else ok),
+                               count, separation_m, rng)
+        fallback = pick if fallback is None else fallback
+        # The page asks for points far apart: a person who sees none such on this frame
+        # looks further into the clip (and labels back to where the object first shows).
+        if _least_gap(vertices[pick]) >= separation_m:
+            ids = pick
+    if ids[0] < 0 and fallback is not None:
+        ids = fallback
+    # Suggested spots are followed through the whole clip; one's own from where the object
+    # first shows enough.
+    start = 0 if suggested else first
+    if ids[0] >= 0 and start is not None:
+        for f in range(start, frames):
+            world, ok = seen[f]
             xy[f] = camera.project(world[ids])
             visible[f] = ok[ids]
     return xy, visible, ids
+
+
+def _least_gap(points: np.ndarray) -> float:
+    """Least distance between any two of points (K, 3); inf for fewer than two."""
+    if len(points) < 2:
+        return float("inf")
+    gaps = np.linalg.norm(points[:, None] - points[None], axis=2)
+    return float(gaps[np.triu_indices(len(points), 1)].min())
 
 
 def suggested_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,

@@ -166,6 +166,25 @@ def test_mesh_landmarks_are_visible_vertices_carried_by_the_true_motion() -> Non
     assert np.allclose(xy, truth)
 
 
+def test_mesh_landmarks_wait_for_a_frame_that_shows_points_far_apart() -> None:
+    # Frame 0 shows only the cube's left edge (two front corners 10 cm apart); from frame 1 on
+    # the whole front face, whose diagonal corners are 14 cm apart. Asked for 12 cm, the worker
+    # picks a diagonal pair on frame 1 and labels it back to frame 0, where one of the two is
+    # hidden; on frame 0 alone it would have taken the 10 cm pair.
+    camera, poses, seg = _cube_view(4)
+    seg[0, :, 81:] = 0
+    v, faces = _box()
+    xy, visible, ids = mesh_landmarks(camera, seg, 4, v, faces, poses, np.random.default_rng(0),
+                                      separation_m=0.12)
+    assert np.linalg.norm(v[ids[0]] - v[ids[1]]) > 0.12
+    assert (v[ids][:, 2] < 0).all()
+    assert np.isfinite(xy).all()
+    assert visible[1:].all() and visible[0].sum() == 1
+    _, _, first_ids = mesh_landmarks(camera, seg[:1], 4, v, faces, poses[:1],
+                                     np.random.default_rng(0), separation_m=0.12)
+    assert np.linalg.norm(v[first_ids[0]] - v[first_ids[1]]) == pytest.approx(0.1)
+
+
 def test_mesh_landmarks_take_the_spots_the_suggestions_mark() -> None:
     camera, poses, seg = _cube_view(4)
     v, faces = _box()
