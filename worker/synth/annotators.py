@@ -41,6 +41,7 @@ import numpy as np
 
 from worker.formats.dexycb import HAND_SEG_VALUE
 from worker.geometry.cameras import CameraModel
+from worker.quality.landmark_points import separation_mm
 
 Profile = Literal["careful", "sloppy", "swapper", "lazy", "spammer", "occluder", "same_spot"]
 # Every profile; PROFILES are those of hand work (same_spot is an object worker's mistake).
@@ -237,7 +238,8 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
         fallback = pick if fallback is None else fallback
         # The page asks for points far apart: a person who sees none such on this frame
         # looks further into the clip (and labels back to where the object first shows).
-        if _least_gap(vertices[pick]) >= separation_m:
+        gap_mm = separation_mm(list(vertices[pick]))
+        if gap_mm is None or gap_mm >= 1000.0 * separation_m:
             ids = pick
     if ids[0] < 0 and fallback is not None:
         ids = fallback
@@ -250,14 +252,6 @@ def mesh_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: n
             xy[f] = camera.project(world[ids])
             visible[f] = ok[ids]
     return xy, visible, ids
-
-
-def _least_gap(points: np.ndarray) -> float:
-    """Least distance between any two of points (K, 3); inf for fewer than two."""
-    if len(points) < 2:
-        return float("inf")
-    gaps = np.linalg.norm(points[:, None] - points[None], axis=2)
-    return float(gaps[np.triu_indices(len(points), 1)].min())
 
 
 def suggested_landmarks(camera: CameraModel, seg: np.ndarray, value: int, vertices: np.ndarray,
