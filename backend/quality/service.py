@@ -53,6 +53,7 @@ from backend.quality.inputs import (
     target_inputs,
 )
 from backend.quality.models import QCReport
+from worker.tracks.sources import own_keyframes
 
 if TYPE_CHECKING:
     from worker.quality.decide import QCThresholds
@@ -278,6 +279,8 @@ def score_target(session: Session, sequence_id: int, target_key: str,
     results, methods, provisional, replays = _score(session, inputs, timings)
     for key, qc in results.items():  # check suggestions kept or corrected (decide.py)
         qc.metrics["checks_accepted"], qc.metrics["checks_corrected"] = inputs.who[key].checks
+        # Whether the worker decided anything at all, hidden frames included (decide.py).
+        qc.metrics["own_keyframes"] = own_keyframes(inputs.keyframes[key])
         qc.kept_checks = [list(cell) for cell in inputs.who[key].kept]
     fresh = {k: qc.metrics for k, qc in results.items() if methods[k] == "consensus"}
     thresholds = learn_thresholds(_population(session, inputs.kind, fresh),

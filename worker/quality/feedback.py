@@ -164,10 +164,13 @@ def kept_checks_sentence(cells: list[list[int]], names: list[str]) -> str:
 
 
 def decided_nothing(metrics: dict[str, float | None]) -> bool:
-    """Every shown position is a pre-filled suggestion left unchanged: nothing of the worker's
-    own to judge. Reviewed, not rejected: the suggestions may well be right (a worker who
-    kept check suggestions is rejected by those)."""
-    return metrics.get("decided_fraction") == 0.0
+    """Every shown position is a pre-filled suggestion left unchanged, and the worker changed
+    nothing else either (``own_keyframes``: no point marked hidden, moved or placed): nothing
+    of the worker's own to judge. Reviewed, not rejected: the suggestions may well be right (a
+    worker who kept check suggestions is rejected by those). A worker who marked hidden the
+    suggestions it saw covered decided those frames, though none of its visible positions is
+    its own."""
+    return metrics.get("decided_fraction") == 0.0 and not metrics.get("own_keyframes")
 
 
 def feedback(qc: AssignmentQC, swaps: list[dict], worst: dict[str, tuple],

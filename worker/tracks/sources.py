@@ -76,3 +76,15 @@ def decided_mask(keyframes: Iterable[Any], num_frames: int) -> np.ndarray:
     """
     sources = keyframe_sources(keyframes, num_frames)
     return (sources != SOURCE_NONE) & (sources != SOURCE_PREFILLED)
+
+
+def own_keyframes(tracks: Iterable[Iterable[Any]]) -> int:
+    """How many of a label's keyframes the worker made or changed (placed, tracked from its
+    own keyframes, or edited: a suggestion moved, or its visibility set), visible or hidden;
+    0 when every keyframe is a pre-filled suggestion kept unchanged.
+
+    Args:
+        tracks: per point, keyframes as :func:`parse_keyframe` accepts them.
+    """
+    return sum(k.source != SOURCE_NAMES[SOURCE_PREFILLED]
+               for track in tracks for k in as_keyframes(track))

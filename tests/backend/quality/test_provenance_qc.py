@@ -159,6 +159,7 @@ def test_qc_job_rejects_a_blind_acceptor_by_its_check_suggestions(market_env: di
     assert "placed wrong on purpose that you kept" not in careful.feedback
     # Every position a suggestion kept: not judged on position, and its kept checks reject it.
     assert prefilled.metrics["decided_fraction"] == 0.0
+    assert prefilled.metrics["own_keyframes"] == 0 and careful.metrics["own_keyframes"] > 4
     assert prefilled.metrics["median_error_px"] is None
     assert prefilled.outcome == "reject"
     assert prefilled.reasons == [BLIND_REASON, DECIDED_NOTHING]

@@ -107,6 +107,24 @@ def test_a_view_of_unchanged_suggestions_is_not_judged_on_position(ring4) -> Non
     assert decide(own.assignments["own-3"], thresholds, NAMES).outcome == "reject"
 
 
+def test_marking_covered_suggestions_hidden_is_a_decision(ring4) -> None:
+    cams, truth, careful = ring4
+    # Every visible position kept as suggested, but the worker hid the ones it saw covered
+    # (its own keyframes, "edited"): not a label that decided nothing.
+    kept = _prefilled("prefilled-3", 3, truth[3])
+    report = score_hand(cams, [*careful, kept])
+    qc = report.assignments["prefilled-3"]
+    assert qc.metrics["decided_fraction"] == 0.0
+    thresholds = learn_thresholds([a.metrics for a in report.assignments.values()])
+    qc.metrics["own_keyframes"] = 0
+    assert decide(qc, thresholds, NAMES).reasons[0].startswith("decided nothing")
+    qc.metrics["own_keyframes"] = 6
+    decision = decide(qc, thresholds, NAMES)
+    assert not any(r.startswith("decided nothing") for r in decision.reasons)
+    assert "suggestion left unchanged" not in decision.feedback
+    assert decision.outcome == "approve", decision.reasons
+
+
 def test_the_consensus_reads_only_the_decided_positions_of_a_label(ring4) -> None:
     cams, truth, careful = ring4
     worker = make_label("mixed-3", 3, truth, "careful", 13)

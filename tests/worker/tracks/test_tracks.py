@@ -19,7 +19,7 @@ from worker.tracks.interpolate import (
 )
 from worker.tracks.keyframes import Keyframe, parse_keyframe
 from worker.tracks.readiness import completeness, suspicious
-from worker.tracks.sources import SOURCE_NAMES, decided_mask, keyframe_sources
+from worker.tracks.sources import SOURCE_NAMES, decided_mask, keyframe_sources, own_keyframes
 from worker.tracks.validate import checked_rows, validate_keyframes
 
 GOLDEN_PATH = Path(__file__).resolve().parents[2] / "fixtures" / "interpolation_golden.json"
@@ -287,3 +287,12 @@ class TestKeyframeSources:
         only_prefilled = [[0, 1, 1, 1, "prefilled"], [6, 2, 2, 1, "prefilled"]]
         assert not decided_mask(only_prefilled, 8).any()
         assert decided_mask([[0, 1, 1, 1]], 8).all()
+
+
+def test_own_keyframes_counts_every_change_the_worker_made():
+    kept = [[0, 10.0, 10.0, 1, "prefilled"], [5, 12.0, 10.0, 1, "prefilled"]]
+    assert own_keyframes([kept, kept]) == 0
+    hidden = [[0, 10.0, 10.0, 1, "prefilled"], [5, 12.0, 10.0, 0, "edited"]]
+    placed = [[0, 10.0, 10.0, 1], [3, 11.0, 10.0, 1, "tracked"]]
+    assert own_keyframes([kept, hidden]) == 1
+    assert own_keyframes([placed, hidden, []]) == 3
