@@ -57,7 +57,14 @@ METRIC_BOUNDS: dict[str, MetricBound] = {
     # Near the hand's edge the depth camera and a careful eye part ways: careful tracks
     # keep up to 0.78 of their few hidden frames visible; this only asks for a look.
     "anchored_hidden_visible": MetricBound("above", (0.85, 0.9)),
-    "anchored_drift_px": MetricBound("above", (5.0, 8.0)),
+    # Drift (the track's error over the last third of the clip less that over the first):
+    # a careful worker takes a tracked position it judges within 3 sigma of its click noise
+    # (6 px, worker.synth.assisted.TOLERANCE_PX) and corrects beyond, so its track slides
+    # up to that far before a correction, and the solved point adds a px or so: careful
+    # assisted tracks drift 5-7.2 px (bench/cost.py, 24-frame crowds), keyframed ones up
+    # to 6.8. A slide beyond a careful track's 90th percentile (anchored_p90_px) asks for a
+    # look; a frozen or unchecked track drifts tens of px.
+    "anchored_drift_px": MetricBound("above", (8.0, 10.0)),
     "anchored_fraction": MetricBound("below", (0.75, 0.75), (0.4, 0.4)),
     # Hands, from the label's own track (they hold where too few views agree to compare).
     # Random clicks shake ~70 px/frame^2 at 30 fps, any real track a few. Against the other

@@ -121,6 +121,28 @@ class TestScoreAnchored:
         hands = learn_thresholds(rows, QCThresholds(bounds=kind_bounds("hand")))
         assert any(decide(qc, hands, names).outcome == "review" for qc in reports)
 
+    def test_a_track_taken_from_tracking_within_a_careful_tolerance_is_not_reviewed(
+            self, scene):
+        # A careful worker takes a tracked position it judges within 6 px of the point and
+        # corrects beyond: its track, on the point where it was keyed, slides up to that far
+        # towards the end of the clip. A slide twice as far (an unchecked tracker) asks for a
+        # look.
+        camera, solved, points = scene
+        truth = truth_track(camera, solved, points)
+        slide = np.clip((np.arange(FRAMES) - 0.6 * FRAMES) / (0.1 * FRAMES), 0.0, 1.0)
+        names = ["a", "b"]
+        outcomes = {}
+        for reach in (6.0, 12.0):
+            xy = truth + reach * slide[:, None, None] * np.array([0.6, 0.8])
+            qc = score_anchored(camera, ViewLabels(f"s{reach}", 0, xy, np.ones(
+                xy.shape[:2], bool), 90.0), solved, 0)
+            thresholds = learn_thresholds([qc.metrics], QCThresholds(
+                bounds=kind_bounds("object")))
+            outcomes[reach] = (qc.metrics["anchored_drift_px"],
+                               decide(qc, thresholds, names).outcome)
+        assert outcomes[6.0][0] > 5.0 and outcomes[6.0][1] == "approve", outcomes
+        assert outcomes[12.0][0] > 10.0 and outcomes[12.0][1] == "review", outcomes
+
     def test_sloppy_work_is_several_pixels_off(self, scene):
         camera, solved, points = scene
         careful = score_anchored(camera, label(camera, solved, points, "careful"), solved, 0)
