@@ -36,11 +36,13 @@ submitted and flagged by QC. Money is real ledger money for rewards priced per t
 of a kind, from the same simulated workers on the truth), plus the marketplace's fee; rejected
 work is done but not paid.
 
-Prints a line per protocol, then one JSON line: {"capture", "seed", "views", "frames",
-"profile", "crowd_seed", "hourly_usd", "protocols": {name: {"hand", "objects", "total", "mpjpe_mm",
-"add_mm", "rewards_usd", "first_view_actions", "view_actions", "seconds"}}, "ratios": {ours
-over dexycb per labelled hand frame: "actions", "seconds", "money"}, "assisted_ratios":
-{assisted over dexycb, the same}} (each ratio block only when both its protocols ran).
+Prints a line per protocol (each instance's own progress on stderr), then one JSON line:
+{"capture", "seed", "views", "frames", "profile", "crowd_seed", "hourly_usd", "protocols":
+{name: {"hand", "objects", "total", "mpjpe_mm", "add_mm", "rewards_usd",
+"first_view_actions", "view_actions", "failed_jobs" (key and last error line of each job
+that failed), "seconds"}}, "ratios": {ours over dexycb per labelled hand frame: "actions",
+"seconds", "money"}, "assisted_ratios": {assisted over dexycb, the same}} (each ratio block
+only when both its protocols ran).
 
 ``--publish adaptive`` publishes each target's widest-baseline views first and more only
 while the solve is unsure (backend.crowd.adaptive); the crowd comes back for each view the
@@ -303,7 +305,25 @@ def one(capture: Path, name: str, profile: str, hourly: float,
             "qc_by_profile": _qc_by_profile(views),
             "unaccepted_tasks": demo.unaccepted(sequence_id)[0],
             "views_published": _published_views(sequence_id), "publish_rounds": rounds,
-            "seconds": round(time.perf_counter() - started, 1)}
+            "failed_jobs": _failed_jobs(), "seconds": round(time.perf_counter() - started, 1)}
+
+
+def _failed_jobs() -> list[dict[str, str]]:
+    """The instance's jobs that failed (their key and error's last line): a run whose work
+    was never checked or solved says why."""
+    from sqlalchemy import select
+
+    from backend.db import session_scope
+    from backend.jobs.models import Job
+
+    with session_scope() as session:
+        rows = session.execute(select(Job.key, Job.error).where(Job.status == "failed")
+                               .order_by(Job.id)).all()
+    out = []
+    for key, error in rows:
+        lines = (error or "").strip().splitlines()
+        out.append({"key": key, "error": lines[-1] if lines else ""})
+    return out
 
 
 def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -317,6 +337,9 @@ def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]
          *(["--initial-views", str(args.initial_views)] if args.initial_views else [])],
         cwd=ROOT, env=env, capture_output=True, text=True)
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+    # The instance's own progress (rounds, the admin's decisions, warnings), for the record.
+    sys.stderr.write("".join(f"  {name}: {ln}\n" for ln in done.stdout.splitlines()
+                             if not ln.startswith("{")) + done.stderr)
     if done.returncode != 0 or not lines:
         sys.exit(f"{name}: exit {done.returncode}\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}")
     result: dict[str, Any] = json.loads(lines[-1])
