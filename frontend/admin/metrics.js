@@ -142,6 +142,9 @@ const METRICS = {
   decided_fraction: { label: "Worker's own positions", unit: "%", explain:
     "Share of the shown points the worker placed, edited or tracked; the rest are "
     + "suggestions from the other views kept unchanged, which are never judged." },
+  own_keyframes: { label: "Worker's own keyframes", unit: "", explain:
+    "Keyframes the worker placed, tracked from its own, moved or marked hidden; none means "
+    + "every value sent is a suggestion from the other views kept unchanged." },
   checks_accepted: { label: "Check suggestions kept", unit: "", explain:
     "Suggestions shown 15 px off the point on purpose that the worker accepted unchanged: "
     + "a worker who looks drags each one back." },

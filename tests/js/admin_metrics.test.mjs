@@ -16,6 +16,7 @@ const EMITTED = [
   "anchored_median_px", "anchored_p90_px", "anchored_visible_occluded",
   "anchored_hidden_visible", "anchored_drift_px", "anchored_fraction", "solve_run",
   "landmark_separation_mm", "anchored_facing", "anchored_shown_fraction",
+  "decided_fraction", "checks_accepted", "checks_corrected", "own_keyframes",
 ];
 
 const HAND_REPORT = {
