@@ -135,7 +135,6 @@ def test_an_unreachable_endpoint_setting_is_named(
         "cannot be reached (no connection); check DEXLABEL_MTURK_ENDPOINT_URL")
 
 
-@pytest.mark.slow
 def _idle_connection_is_kept(port: int) -> None:
     """A client that pauses between calls (a worker's page, a requester's boto3 client) reuses
     its connection: the server must not have closed it a few seconds into the pause, or the
@@ -155,6 +154,7 @@ def _idle_connection_is_kept(port: int) -> None:
         conn.close()
 
 
+@pytest.mark.slow
 def test_commands_in_another_terminal_reach_the_server_on_its_port(
     tmp_path: Path, instance: Path, cli: CliRunner, small_capture: Path,
 ) -> None:
