@@ -46,7 +46,11 @@ def solve_run(args: dict[str, Any]) -> dict[str, Any]:
 
 def publish_views(args: dict[str, Any]) -> dict[str, Any]:
     """After a solve of an adaptively published sequence: publish the views its weak frames
-    need, with the reason (backend.crowd.adaptive)."""
+    need, with the reason (backend.crowd.adaptive); after a QC that could not decide for want
+    of views (``sequence_id`` and ``target_key`` instead of ``run_id``): one more view."""
+    if "run_id" not in args:
+        return pipeline.publish_views_to_compare(int(args["sequence_id"]),
+                                                 str(args["target_key"]))
     return pipeline.publish_views(int(args["run_id"]))
 
 

@@ -11,6 +11,12 @@ least ``confidence``, no flag) on fewer than ``confident_share`` of its frames, 
 view that best covers the weak frames; it is published with the reason, and the next solve
 judges again, until the target is confident or every view is published.
 
+QC compares each label with the other views' (at least worker.quality.support.MIN_VIEWS in
+all): with fewer views in, it leaves the work provisional and nothing is accepted, so no solve
+runs. When every published view of a target has submitted work and some of it waits for
+views to compare with, :func:`views_to_compare` names one held view to publish (the one that
+best widens the baselines at the target), until QC can decide.
+
 Occlusion is judged by whether the target lies in front of a camera and inside its image (the
 object's initial pose, the hand's grasped object); depth is not read to publish.
 """
@@ -26,7 +32,7 @@ import numpy as np
 from sqlalchemy import ColumnElement, and_, select
 from sqlalchemy.orm import Session
 
-from backend.annotation.models import Task
+from backend.annotation.models import Assignment, Task
 from backend.captures.calibration import calibrated_models
 from backend.captures.models import Camera, SceneObject
 from backend.config import get_settings
@@ -34,6 +40,7 @@ from backend.crowd.models import CrowdHit, PublishPlan
 from backend.crowd.schemas import PublishOptions
 from worker.geometry.cameras import CameraModel
 from worker.geometry.view_choice import initial_views, next_view, rig_centre, seen
+from worker.quality.support import MIN_VIEWS as QC_MIN_VIEWS
 from worker.tracks.spans import format_spans, frame_spans
 
 EVERY_VIEW, ADAPTIVE = "every-view", "adaptive"
@@ -229,6 +236,34 @@ def needed_views(session: Session, sequence_id: int, trust: dict[str, TargetTrus
             f"{policy.confidence:g} or flagged after views "
             f"{_views([tasks[i] for i in done])}")[:REASON_CHARS]
     return out
+
+
+def views_to_compare(session: Session, sequence_id: int, target_key: str,
+                     waiting: set[int]) -> dict[int, str]:
+    """For a target of an adaptive sequence whose tasks ``waiting`` hold work that QC left
+    provisional (too few views to compare it with), the held task to publish next, with the
+    reason; empty while a published view of the target has no submitted work yet (its work
+    may let QC decide), when nothing waits, or when no view is held."""
+    plan = plan_of(session, sequence_id)
+    if plan is None or plan.policy != ADAPTIVE or not waiting:
+        return {}
+    tasks = _target_tasks(session, sequence_id).get(target_key, [])
+    published = _published_ids(session, [t.id for t in tasks])
+    held = [i for i, t in enumerate(tasks) if t.id not in published]
+    done = [i for i, t in enumerate(tasks) if t.id in published]
+    if not held or not done:
+        return {}
+    submitted = set(session.scalars(select(Assignment.task_id).where(
+        Assignment.task_id.in_(published), Assignment.status.in_(("submitted", "approved")))))
+    if not published <= submitted:
+        return {}
+    models = calibrated_models(session, [task.camera for task in tasks])
+    view, _score = next_view(models, done, held,
+                             _anchor(session, tasks, models).reshape(1, 1, 3))
+    named = [t for t in tasks if t.id in waiting]
+    return {tasks[view].id: (
+        f"QC compares each label with at least {QC_MIN_VIEWS} views: the work in "
+        f"{_views(named)} waits for another view")[:REASON_CHARS]}
 
 
 def _added_since(session: Session, tasks: list[Task], since: datetime | None) -> bool:

@@ -218,7 +218,7 @@ def demo_crowd(sequence_id: int, capture: Path, admin: Login, workers: int | Non
     per open assignment, until every
     task has accepted work or MAX_ROUNDS passed. After each round the submissions are synced
     and the quality checks waited for: they approve, or reject and re-open the HIT with one
-    more assignment; a task whose work was left for an admin's review gets one more too.
+    more assignment; the demo's admin approves the best work left for review.
     Returns what each simulated worker did (its profile, its assignment), every round's."""
     from backend.crowd.simulate import simulate
 
@@ -376,7 +376,8 @@ def unaccepted(sequence_id: int) -> tuple[int, int]:
 
 def _open_slots(sequence_id: int, extend: bool) -> int:
     """Assignments the marketplace still offers on the sequence's HITs; with ``extend``,
-    first one more on each HIT whose task has no accepted work and nothing left on offer."""
+    first one more on each HIT whose task has neither accepted nor submitted work and nothing
+    left on offer."""
     from backend.annotation.models import Assignment, Task
     from backend.crowd.actions import add_assignments
     from backend.crowd.models import CrowdHit
@@ -388,8 +389,11 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
         hits = dict(session.execute(
             select(CrowdHit.hit_id, CrowdHit.task_id).join(Task, Task.id == CrowdHit.task_id)
             .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))).all())
+        # Tasks with accepted work, or with submitted work QC has not decided yet (it waits
+        # for more views to compare with): another assignment would not help them.
         accepted = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.task_id.in_(hits.values()), Assignment.status == ACCEPTED)))
+            Assignment.task_id.in_(hits.values()),
+            Assignment.status.in_((ACCEPTED, "submitted")))))
     offered: dict[str, int] = {}
     for hit_id in hits:
         unit = marketplace.unit(hit_id) if hit_id is not None else None

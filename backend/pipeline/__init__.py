@@ -27,7 +27,7 @@ from backend.crowd import confirm as crowd_confirm
 from backend.crowd import decisions
 from backend.crowd import flows as crowd_flows
 from backend.crowd import sync as crowd_sync
-from backend.crowd.adaptive import needed_views, plan_options
+from backend.crowd.adaptive import needed_views, plan_options, views_to_compare
 from backend.crowd.provider import CrowdProvider
 from backend.crowd.schemas import PaymentRead, SyncResult
 from backend.db import session_scope
@@ -153,6 +153,12 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
     result = quality_flows.run_qc(sequence_id, target_key)
     with session_scope() as session:
         result["solve"] = solve_if_ready(session, sequence_id)
+        # An adaptive sequence whose published views are too few for QC to decide: one more.
+        if plan_options(session, sequence_id) is not None \
+                and waiting_for_views(session, sequence_id, target_key):
+            enqueue_job(session, PUBLISH_VIEWS, qc_views_key(sequence_id, target_key),
+                        {"sequence_id": sequence_id, "target_key": target_key})
+            result["publish_views"] = "queued"
         # Views whose suggestions are fitted from the work now accepted: prepared ahead.
         result["suggestions_preparing"] = queue_fits(session, get_storage(), sequence_id,
                                                      target_key)
@@ -190,6 +196,21 @@ def judged_after_solve(session: Session, sequence_id: int) -> set[int]:
                Assignment.status == "submitted", QCReport.provisional.is_(True),
                QCReport.outcome != "reject")).scalars()
     return set(rows)
+
+
+def waiting_for_views(session: Session, sequence_id: int, target_key: str) -> set[int]:
+    """Tasks of one target without accepted work whose submitted work QC left provisional
+    for want of views to compare it with, and that no solve will judge (judged_after_solve)."""
+    other = aliased(Assignment)
+    accepted = select(other.id).where(other.task_id == Task.id,
+                                      other.status == ACCEPTED).exists()
+    rows = set(session.execute(
+        select(Task.id).join(Assignment, Assignment.task_id == Task.id)
+        .join(QCReport, QCReport.assignment_id == Assignment.id)
+        .where(Task.sequence_id == sequence_id, Task.target_key == target_key, ~accepted,
+               Assignment.status == "submitted", QCReport.provisional.is_(True),
+               QCReport.outcome != "reject")).scalars())
+    return rows - judged_after_solve(session, sequence_id)
 
 
 def solve_if_ready(session: Session, sequence_id: int) -> str:
@@ -262,6 +283,25 @@ def publish_views(run_id: int) -> dict[str, Any]:
     result = crowd_flows.publish_needed(None, sequence_id, reasons)
     return {"published": result.created + result.recovered, "reasons": reasons,
             "message": f"solve run {run_id}: {len(reasons)} more views published"}
+
+
+def qc_views_key(sequence_id: int, target_key: str) -> str:
+    return f"{PUBLISH_VIEWS}:qc:{sequence_id}:{target_key}"
+
+
+def publish_views_to_compare(sequence_id: int, target_key: str) -> dict[str, Any]:
+    """The job after a QC of an adaptively published target that left work provisional for
+    want of views to compare it with: publish one more view of it, saying why
+    (backend.crowd.adaptive.views_to_compare). Nothing once QC can decide, or while a
+    published view's work is still to come."""
+    with session_scope() as session:
+        reasons = views_to_compare(session, sequence_id, target_key,
+                                   waiting_for_views(session, sequence_id, target_key))
+    if not reasons:
+        return {"published": 0, "message": f"{target_key}: no view needed for QC"}
+    result = crowd_flows.publish_needed(None, sequence_id, reasons)
+    return {"published": result.created + result.recovered, "reasons": reasons,
+            "message": f"{target_key}: one more view published for QC to compare"}
 
 
 # --- calibration -> solve ----------------------------------------------------------------

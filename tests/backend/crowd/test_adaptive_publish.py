@@ -245,3 +245,54 @@ def test_a_bad_policy_setting_is_named_when_the_settings_load(
     lines = caught.value.detail.splitlines()
     assert "DEXLABEL_PUBLISH_POLICY: Input should be 'every-view' or 'adaptive'" in lines
     assert "DEXLABEL_PUBLISH_CONFIDENT_SHARE: Input should be greater than 0" in lines
+
+
+def submit_provisional(sequence_id: int, serials: list[str], target: str = "hand:0") -> None:
+    """Submitted work on the target's tasks in ``serials``, each left provisional by QC."""
+    from backend.annotation.models import Assignment, Task
+    from backend.captures.models import Camera
+    from backend.quality.models import QCReport
+
+    with session_scope() as session:
+        tasks = session.scalars(select(Task).join(Camera, Camera.id == Task.camera_id).where(
+            Task.sequence_id == sequence_id, Task.target_key == target,
+            Camera.serial.in_(serials))).all()
+        for task in tasks:
+            worker = f"W{uuid.uuid4().hex[:10].upper()}"
+            assignment = Assignment(task_id=task.id, worker_id=worker,
+                                    external_id=uuid.uuid4().hex, status="submitted",
+                                    submitted_at=datetime.now(UTC))
+            session.add(assignment)
+            session.flush()
+            session.add(QCReport(assignment_id=assignment.id, task_id=task.id,
+                                 sequence_id=sequence_id, target_key=target, worker_id=worker,
+                                 metrics={}, outcome="approve", provisional=True, views=2,
+                                 reasons=["provisional: too few views"]))
+
+
+def test_work_qc_cannot_judge_for_want_of_views_gets_one_more_view(crowd_url: str) -> None:
+    """Published 2 views first: once both are submitted and QC could not compare them with a
+    third, the next view goes out saying why; not before, and not twice."""
+    from backend import pipeline
+
+    sequence_id = make_rig_sequence()
+    with session_scope() as session:
+        flows.publish(session, make_client(get_settings()),
+                      ADAPTIVE.model_copy(update={"initial_views": 2}), sequence_id)
+    first = sorted(published(sequence_id)["hand:0"])
+    assert len(first) == 2
+    submit_provisional(sequence_id, first[:1])
+    # One published view is still being worked: its work may let QC decide.
+    assert pipeline.publish_views_to_compare(sequence_id, "hand:0")["published"] == 0
+    submit_provisional(sequence_id, first[1:])
+    done = pipeline.publish_views_to_compare(sequence_id, "hand:0")
+    assert done["published"] == 1, done
+    units = published(sequence_id)
+    (added,) = set(units["hand:0"]) - set(first)
+    assert units["hand:0"][added] == (
+        f"QC compares each label with at least 3 views: the work in {', '.join(first)} "
+        "waits for another view")
+    assert sorted(units["object:0"]) == first  # the object's views wait for their own need
+    # The third view is published and not yet submitted: nothing more.
+    assert pipeline.publish_views_to_compare(sequence_id, "hand:0")["published"] == 0
+    assert len(published(sequence_id)["hand:0"]) == 3
