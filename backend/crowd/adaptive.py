@@ -32,7 +32,7 @@ import numpy as np
 from sqlalchemy import ColumnElement, and_, select
 from sqlalchemy.orm import Session
 
-from backend.annotation.models import Assignment, Task
+from backend.annotation.models import Task
 from backend.captures.calibration import calibrated_models
 from backend.captures.models import Camera, SceneObject
 from backend.config import get_settings
@@ -239,11 +239,12 @@ def needed_views(session: Session, sequence_id: int, trust: dict[str, TargetTrus
 
 
 def views_to_compare(session: Session, sequence_id: int, target_key: str,
-                     waiting: set[int]) -> dict[int, str]:
+                     waiting: set[int], covered: set[int]) -> dict[int, str]:
     """For a target of an adaptive sequence whose tasks ``waiting`` hold work that QC left
     provisional (too few views to compare it with), the held task to publish next, with the
-    reason; empty while a published view of the target has no submitted work yet (its work
-    may let QC decide), when nothing waits, or when no view is held."""
+    reason. Empty when nothing waits, when no view is held, or while a published view of the
+    target is not in ``covered`` (tasks with work QC kept): its work is still to come (being
+    done, or re-opened after a rejection) and may let QC decide."""
     plan = plan_of(session, sequence_id)
     if plan is None or plan.policy != ADAPTIVE or not waiting:
         return {}
@@ -251,11 +252,7 @@ def views_to_compare(session: Session, sequence_id: int, target_key: str,
     published = _published_ids(session, [t.id for t in tasks])
     held = [i for i, t in enumerate(tasks) if t.id not in published]
     done = [i for i, t in enumerate(tasks) if t.id in published]
-    if not held or not done:
-        return {}
-    submitted = set(session.scalars(select(Assignment.task_id).where(
-        Assignment.task_id.in_(published), Assignment.status.in_(("submitted", "approved")))))
-    if not published <= submitted:
+    if not held or not done or not published <= covered:
         return {}
     models = calibrated_models(session, [task.camera for task in tasks])
     view, _score = next_view(models, done, held,

@@ -155,7 +155,7 @@ def run_qc(sequence_id: int, target_key: str) -> dict[str, Any]:
         result["solve"] = solve_if_ready(session, sequence_id)
         # An adaptive sequence whose published views are too few for QC to decide: one more.
         if plan_options(session, sequence_id) is not None \
-                and waiting_for_views(session, sequence_id, target_key):
+                and waiting_for_views(session, sequence_id, target_key)[0]:
             enqueue_job(session, PUBLISH_VIEWS, qc_views_key(sequence_id, target_key),
                         {"sequence_id": sequence_id, "target_key": target_key})
             result["publish_views"] = "queued"
@@ -198,19 +198,27 @@ def judged_after_solve(session: Session, sequence_id: int) -> set[int]:
     return set(rows)
 
 
-def waiting_for_views(session: Session, sequence_id: int, target_key: str) -> set[int]:
-    """Tasks of one target without accepted work whose submitted work QC left provisional
-    for want of views to compare it with, and that no solve will judge (judged_after_solve)."""
-    other = aliased(Assignment)
-    accepted = select(other.id).where(other.task_id == Task.id,
-                                      other.status == ACCEPTED).exists()
-    rows = set(session.execute(
-        select(Task.id).join(Assignment, Assignment.task_id == Task.id)
-        .join(QCReport, QCReport.assignment_id == Assignment.id)
-        .where(Task.sequence_id == sequence_id, Task.target_key == target_key, ~accepted,
-               Assignment.status == "submitted", QCReport.provisional.is_(True),
-               QCReport.outcome != "reject")).scalars())
-    return rows - judged_after_solve(session, sequence_id)
+def waiting_for_views(session: Session, sequence_id: int, target_key: str
+                      ) -> tuple[set[int], set[int]]:
+    """(waiting, covered) for one target: the tasks without accepted work whose submitted
+    work QC left provisional for want of views to compare it with (leaving out the work only
+    a solve can judge: judged_after_solve), and the tasks with work QC kept (accepted, or
+    scored and not rejected). Both empty while any submitted work has not been scored yet
+    (its QC is still to run, and may decide)."""
+    rows = session.execute(
+        select(Task.id, Assignment.status, QCReport.provisional, QCReport.outcome)
+        .join(Assignment, Assignment.task_id == Task.id)
+        .outerjoin(QCReport, QCReport.assignment_id == Assignment.id)
+        .where(Task.sequence_id == sequence_id, Task.target_key == target_key,
+               Assignment.status.in_(("submitted", ACCEPTED)))).all()
+    if any(status == "submitted" and outcome is None for _, status, _, outcome in rows):
+        return set(), set()
+    accepted = {task for task, status, _, _ in rows if status == ACCEPTED}
+    covered = accepted | {task for task, _, _, outcome in rows
+                          if outcome not in (None, "reject")}
+    waiting = {task for task, status, provisional, outcome in rows
+               if status == "submitted" and provisional and outcome != "reject"} - accepted
+    return waiting - judged_after_solve(session, sequence_id), covered
 
 
 def solve_if_ready(session: Session, sequence_id: int) -> str:
@@ -296,7 +304,7 @@ def publish_views_to_compare(sequence_id: int, target_key: str) -> dict[str, Any
     published view's work is still to come."""
     with session_scope() as session:
         reasons = views_to_compare(session, sequence_id, target_key,
-                                   waiting_for_views(session, sequence_id, target_key))
+                                   *waiting_for_views(session, sequence_id, target_key))
     if not reasons:
         return {"published": 0, "message": f"{target_key}: no view needed for QC"}
     result = crowd_flows.publish_needed(None, sequence_id, reasons)

@@ -247,26 +247,44 @@ def test_a_bad_policy_setting_is_named_when_the_settings_load(
     assert "DEXLABEL_PUBLISH_CONFIDENT_SHARE: Input should be greater than 0" in lines
 
 
-def submit_provisional(sequence_id: int, serials: list[str], target: str = "hand:0") -> None:
-    """Submitted work on the target's tasks in ``serials``, each left provisional by QC."""
+def submit_provisional(sequence_id: int, serials: list[str], target: str = "hand:0",
+                       outcome: str | None = "approve") -> list[int]:
+    """Submitted work on the target's tasks in ``serials``, each left provisional by QC with
+    ``outcome`` (None: not scored yet; "reject": rejected); the assignment ids."""
     from backend.annotation.models import Assignment, Task
     from backend.captures.models import Camera
-    from backend.quality.models import QCReport
 
+    ids = []
     with session_scope() as session:
         tasks = session.scalars(select(Task).join(Camera, Camera.id == Task.camera_id).where(
             Task.sequence_id == sequence_id, Task.target_key == target,
             Camera.serial.in_(serials))).all()
         for task in tasks:
-            worker = f"W{uuid.uuid4().hex[:10].upper()}"
-            assignment = Assignment(task_id=task.id, worker_id=worker,
-                                    external_id=uuid.uuid4().hex, status="submitted",
-                                    submitted_at=datetime.now(UTC))
+            assignment = Assignment(
+                task_id=task.id, worker_id=f"W{uuid.uuid4().hex[:10].upper()}",
+                external_id=uuid.uuid4().hex,
+                status="rejected" if outcome == "reject" else "submitted",
+                submitted_at=datetime.now(UTC))
             session.add(assignment)
             session.flush()
-            session.add(QCReport(assignment_id=assignment.id, task_id=task.id,
-                                 sequence_id=sequence_id, target_key=target, worker_id=worker,
-                                 metrics={}, outcome="approve", provisional=True, views=2,
+            ids.append(assignment.id)
+    if outcome is not None:
+        score_provisional(ids, outcome)
+    return ids
+
+
+def score_provisional(assignment_ids: list[int], outcome: str = "approve") -> None:
+    """QC's provisional report on each assignment: too few views to compare it with."""
+    from backend.annotation.models import Assignment
+    from backend.quality.models import QCReport
+
+    with session_scope() as session:
+        for assignment_id in assignment_ids:
+            a = session.get_one(Assignment, assignment_id)
+            session.add(QCReport(assignment_id=a.id, task_id=a.task_id,
+                                 sequence_id=a.task.sequence_id, target_key=a.task.target_key,
+                                 worker_id=a.worker_id, metrics={}, outcome=outcome,
+                                 provisional=True, views=2,
                                  reasons=["provisional: too few views"]))
 
 
@@ -284,7 +302,13 @@ def test_work_qc_cannot_judge_for_want_of_views_gets_one_more_view(crowd_url: st
     submit_provisional(sequence_id, first[:1])
     # One published view is still being worked: its work may let QC decide.
     assert pipeline.publish_views_to_compare(sequence_id, "hand:0")["published"] == 0
-    submit_provisional(sequence_id, first[1:])
+    # Its work rejected (the task re-opened): still to come.
+    submit_provisional(sequence_id, first[1:], outcome="reject")
+    assert pipeline.publish_views_to_compare(sequence_id, "hand:0")["published"] == 0
+    # Submitted again, not scored yet (its QC is still to run): nothing either.
+    unscored = submit_provisional(sequence_id, first[1:], outcome=None)
+    assert pipeline.publish_views_to_compare(sequence_id, "hand:0")["published"] == 0
+    score_provisional(unscored)
     done = pipeline.publish_views_to_compare(sequence_id, "hand:0")
     assert done["published"] == 1, done
     units = published(sequence_id)
