@@ -26,7 +26,9 @@ for _name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_U
 POSTGRES_URL = os.environ.get(
     "DEXLABEL_TEST_POSTGRES_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
 )
-REDIS_URL = os.environ.get("DEXLABEL_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
+# One Redis database per test process: 15, and 15 - N for parallel worker gwN (pytest -n).
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)
+REDIS_URL = os.environ.get("DEXLABEL_TEST_REDIS_URL", f"redis://127.0.0.1:6379/{15 - _WORKER}")
 REQUIRE_SERVICES = os.environ.get("DEXLABEL_TEST_REQUIRE_SERVICES") == "1"
 
 
@@ -82,6 +84,8 @@ def redis_url() -> str:
         client = redis.Redis.from_url(REDIS_URL)
         client.ping()
         client.flushdb()
+        # Taken: the multi-host tests look for an empty database of their own.
+        client.set("dexlabel-test-session", str(os.getpid()))
     except Exception as exc:
         _unavailable("Redis", exc)
     return REDIS_URL

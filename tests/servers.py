@@ -8,6 +8,7 @@ server runs as the ``postgres`` user, which initdb requires.
 
 from __future__ import annotations
 
+import asyncio
 import glob
 import os
 import shutil
@@ -15,13 +16,28 @@ import socket
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 
 class Unavailable(RuntimeError):
     """The server's binaries are not installed here."""
+
+
+def run_async(main: Callable[[], Awaitable[T]]) -> T:
+    """``asyncio.run(main())`` in a thread of its own: a test's thread may run an event loop
+    already (Playwright's sync API keeps one running for the rest of a process that ran a
+    browser test), where asyncio.run refuses."""
+
+    async def _main() -> T:
+        return await main()
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, _main()).result()
 
 
 def free_port() -> int:

@@ -17,6 +17,7 @@ from fastapi.testclient import TestClient
 from backend.accounts import limits
 from backend.db import session_scope
 from tests.backend.conftest import ADMIN_EMAIL, ADMIN_PASSWORD
+from tests.servers import run_async
 
 WORKER_EMAIL = "worker@example.org"
 WORKER_PASSWORD = "worker password 1"
@@ -142,7 +143,7 @@ def test_password_checks_run_on_their_own_few_threads(monkeypatch: pytest.Monkey
         await watcher
         return list(results), busy
 
-    results, busy = asyncio.run(main())
+    results, busy = run_async(main)
     assert results == [True] + [False] * 19
     assert peak <= security.SCRYPT_SLOTS
     assert busy == 0, "waiting password checks held threads of the request pool"

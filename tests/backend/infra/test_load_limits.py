@@ -20,6 +20,7 @@ import httpx
 import pytest
 
 from tests.conftest import reset_caches
+from tests.servers import run_async
 
 BURST = 60
 
@@ -125,7 +126,7 @@ def test_a_burst_on_a_small_pool_is_answered_in_full(serve: Callable[..., Served
     # thread waited for a connection, until a 30 s timeout answered 500.
     served = serve(db_pool_size="2", db_max_overflow="0", http_threads="3", db_wait_s="20")
     t0 = time.monotonic()
-    answers = asyncio.run(_burst(served, timeout_s=25))
+    answers = run_async(lambda: _burst(served, timeout_s=25))
     took = time.monotonic() - t0
     failures = [a if isinstance(a, Exception) else f"{a.status_code} {a.text[:200]}"
                 for a in answers if isinstance(a, Exception) or a.status_code != 200]
@@ -160,7 +161,7 @@ def test_a_request_that_gets_no_connection_in_time_is_answered_503_with_retry_af
                     client.put("/api/annotate/tracks", json=_save_body(served.num_frames),
                                headers=headers)))
 
-        answers = asyncio.run(two())
+        answers = run_async(two)
         took = time.monotonic() - t0
     finally:
         held.close()
@@ -233,5 +234,5 @@ def test_reads_get_a_free_session_slot_before_waiting_writes() -> None:
         assert await slots.acquire(0, read=False)
         assert not await slots.acquire(0.05, read=True)
 
-    anyio.run(main)
+    run_async(main)
     assert order == ["read", "write"]
