@@ -195,3 +195,17 @@ def s3_bucket(s3_endpoint: str, monkeypatch: pytest.MonkeyPatch) -> str:
     name = f"frames-{uuid.uuid4().hex[:8]}"
     boto3.client("s3", endpoint_url=s3_endpoint, region_name="us-east-1").create_bucket(Bucket=name)
     return name
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (tests/run.sh, ``--dist loadgroup``) each test file runs whole in one
+    process, and the browser tests, which share one live server per process, all in the same
+    one, in their file order, as in a single process."""
+    here = Path(__file__).resolve().parent
+    for item in items:
+        path = Path(str(item.path)).resolve()
+        if not path.is_relative_to(here):
+            continue
+        parts = path.relative_to(here).parts
+        item.add_marker(pytest.mark.xdist_group("browser" if parts[0] == "browser"
+                                                else "/".join(parts)))
