@@ -26,9 +26,7 @@ for _name in ("DEXLABEL_DATABASE_URL", "DEXLABEL_REDIS_URL", "DEXLABEL_STORAGE_U
 POSTGRES_URL = os.environ.get(
     "DEXLABEL_TEST_POSTGRES_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
 )
-# One Redis database per test process: 15, and 15 - N for parallel worker gwN (pytest -n).
-_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)
-REDIS_URL = os.environ.get("DEXLABEL_TEST_REDIS_URL", f"redis://127.0.0.1:6379/{15 - _WORKER}")
+REDIS_URL = os.environ.get("DEXLABEL_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
 REQUIRE_SERVICES = os.environ.get("DEXLABEL_TEST_REQUIRE_SERVICES") == "1"
 
 
@@ -84,8 +82,6 @@ def redis_url() -> str:
         client = redis.Redis.from_url(REDIS_URL)
         client.ping()
         client.flushdb()
-        # Taken: the multi-host tests look for an empty database of their own.
-        client.set("dexlabel-test-session", str(os.getpid()))
     except Exception as exc:
         _unavailable("Redis", exc)
     return REDIS_URL
@@ -195,17 +191,3 @@ def s3_bucket(s3_endpoint: str, monkeypatch: pytest.MonkeyPatch) -> str:
     name = f"frames-{uuid.uuid4().hex[:8]}"
     boto3.client("s3", endpoint_url=s3_endpoint, region_name="us-east-1").create_bucket(Bucket=name)
     return name
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under pytest-xdist (tests/run.sh, ``--dist loadgroup``) each test file runs whole in one
-    process, and the browser tests, which share one live server per process, all in the same
-    one, in their file order, as in a single process."""
-    here = Path(__file__).resolve().parent
-    for item in items:
-        path = Path(str(item.path)).resolve()
-        if not path.is_relative_to(here):
-            continue
-        parts = path.relative_to(here).parts
-        item.add_marker(pytest.mark.xdist_group("browser" if parts[0] == "browser"
-                                                else "/".join(parts)))

@@ -72,17 +72,6 @@ fi
 if [ "${CI:-}" = "true" ]; then
   export DEXLABEL_TEST_REQUIRE_SERVICES=1
 fi
-# The suite runs in DEXLABEL_TEST_PROCESSES pytest processes (2 by default; 1: one process,
-# no pytest-xdist), each test file whole in one of them: much of its time is spent waiting on
-# the servers and browsers it starts. The browser tests all run in one process (tests/conftest.py).
-PROCESSES=${DEXLABEL_TEST_PROCESSES:-2}
-case "$PROCESSES" in
-  ''|*[!0-9]*|0) echo "DEXLABEL_TEST_PROCESSES must be a whole number of 1 or more, got '$PROCESSES'" >&2
-     exit 2 ;;
-esac
-if [ "$PROCESSES" -gt 1 ]; then
-  set -- -n "$PROCESSES" --dist loadgroup "$@"
-fi
 if [ "${DEXLABEL_BENCH_SMOKE:-}" != "1" ]; then
   exec "$VENV/bin/python" -m pytest "$@"
 fi
