@@ -96,8 +96,11 @@ def test_an_unknown_email_takes_as_long_as_a_known_one(
         return elapsed
 
     timed(known), timed("warm-up@example.org")
-    known_s = [timed(known) for _ in range(10)]
-    unknown_s = [timed(f"nobody{i}@example.org") for i in range(10)]
+    # Taken in turn, so that both see the same load of a shared machine.
+    known_s, unknown_s = [], []
+    for i in range(12):
+        known_s.append(timed(known))
+        unknown_s.append(timed(f"nobody{i}@example.org"))
     ratio = statistics.median(known_s) / statistics.median(unknown_s)
     assert 0.5 < ratio < 2, (known_s, unknown_s)
 
