@@ -382,7 +382,7 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
     from backend.crowd.actions import add_assignments
     from backend.crowd.models import CrowdHit
     from backend.crowd.providers import get_provider
-    from backend.labels import ACCEPTED
+    from backend.labels import SCORED_STATUSES
 
     marketplace = get_provider("mturk")
     with session_scope() as session:
@@ -391,16 +391,15 @@ def _open_slots(sequence_id: int, extend: bool) -> int:
             .where(Task.sequence_id == sequence_id, CrowdHit.hit_id.is_not(None))).all())
         # Tasks with accepted work, or with submitted work QC has not decided yet (it waits
         # for more views to compare with): another assignment would not help them.
-        accepted = set(session.scalars(select(Assignment.task_id).where(
-            Assignment.task_id.in_(hits.values()),
-            Assignment.status.in_((ACCEPTED, "submitted")))))
+        scored = set(session.scalars(select(Assignment.task_id).where(
+            Assignment.task_id.in_(hits.values()), Assignment.status.in_(SCORED_STATUSES))))
     offered: dict[str, int] = {}
     for hit_id in hits:
         unit = marketplace.unit(hit_id) if hit_id is not None else None
         if unit is not None:  # the places no worker holds or has submitted
             offered[unit.unit_id] = max(unit.places - unit.held - unit.submitted, 0)
     for hit_id, available in offered.items():
-        if extend and not available and hits[hit_id] not in accepted:
+        if extend and not available and hits[hit_id] not in scored:
             with session_scope() as session, session.no_autoflush:
                 row = session.scalar(select(CrowdHit).where(CrowdHit.hit_id == hit_id))
                 if row is not None and \

@@ -35,7 +35,7 @@ from backend.errors import DexlabelError
 from backend.jobs.models import Job
 from backend.jobs.runner import ACTIVE
 from backend.jobs.service import enqueue_job, mark_waiting
-from backend.labels import ACCEPTED, accepted_digest
+from backend.labels import ACCEPTED, SCORED_STATUSES, accepted_digest
 from backend.labels.suggestions import queue_fits
 from backend.quality import flows as quality_flows
 from backend.quality.models import QCReport
@@ -210,7 +210,7 @@ def waiting_for_views(session: Session, sequence_id: int, target_key: str
         .join(Assignment, Assignment.task_id == Task.id)
         .outerjoin(QCReport, QCReport.assignment_id == Assignment.id)
         .where(Task.sequence_id == sequence_id, Task.target_key == target_key,
-               Assignment.status.in_(("submitted", ACCEPTED)))).all()
+               Assignment.status.in_(SCORED_STATUSES))).all()
     if any(status == "submitted" and outcome is None for _, status, _, outcome in rows):
         return set(), set()
     accepted = {task for task, status, _, _ in rows if status == ACCEPTED}
