@@ -81,6 +81,8 @@ QUICK: dict[str, Run] = {
     "export_truth": Run("export_truth", ("--demo", "12,3,1", "--seed", "7"),
                         ("summary.hand_mm_mean", "summary.labelled_share_min",
                          "summary.labelled_frames_over_max", "summary.cross_camera_spread_mm")),
+    "follow": Run("follow", ("--capture", "{capture}", "--max-views", "1"),
+                  ("mean.lk_edits", "mean.model_edits", "mean.follow_proposed", "seconds")),
     "import": Run("import", ("--frames", "6", "--views", "2", "--rounds", "1"),
                   ("synth_s", "import_s", "bundle_cold_fps", "bundle_warm_fps",
                    "single_frame_fps")),

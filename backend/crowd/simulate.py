@@ -220,6 +220,12 @@ class PageAssistance:
                     xy[first + i, point["point"]], ok[first + i, point["point"]] = at, True
         return xy, ok
 
+    def model_follow(self, anchors: list[list[list[Any]]]
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The page offers no hand-model follow yet (worker.solver.follow runs in process
+        only: bench/follow.py)."""
+        return None
+
     def suggestions(self) -> Prefill | None:
         """The view's suggestions as the page shows them (asked once: the page keeps them)."""
         if self._suggested is None:

@@ -63,7 +63,7 @@ Pure numpy (and OpenCV through worker.assist.lk); every random choice comes from
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -87,6 +87,11 @@ JUDGE_SIGMA_PX = 0.5 * CAREFUL_SIGMA_PX
 # Share of the suggestions on points it sees that must sit within tolerance for the careful
 # worker to take them (U) rather than label the view without them (_worth_taking).
 TAKE_SHARE = 0.8
+# The model follow (worker.solver.follow) starts from a frame keyed with this many visible
+# joints (its MIN_START_JOINTS); the careful worker takes its ghosts up to the first frame
+# where this many are off.
+MODEL_START_JOINTS = 6
+MODEL_OFF_JOINTS = 3
 # Rounds of asking for proposals after which the careful worker stops (each round halves or
 # settles every open span; a 72-frame clip needs at most about log2(72) + a few).
 MAX_ROUNDS = 20
@@ -147,6 +152,14 @@ class Assistance(Protocol):
         """The view's suggestions as shown (check cells moved off), None when there are none."""
         ...
 
+    def model_follow(self, anchors: list[list[list[Any]]]
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The hand model carried through the view's depth from the keyframes given (P lists
+        of [frame, x, y, visible01] rows, worker.solver.follow): (F, P, 2) px as shown (check
+        cells moved off) and (F, P) where a proposal is given; None where the page offers no
+        such follow."""
+        ...
+
 
 @dataclass(frozen=True)
 class AssistSetting:
@@ -159,6 +172,8 @@ class AssistSetting:
     prefill: the view's pre-fill suggestions, None before worker.assist.prefill's
         MIN_ACCEPTED_VIEWS other views are done.
     follows, retracks: as Assistance (off: the worker of bench/assist.py).
+    model: the model follow (keyframe rows per point -> (F, P, 2) px, (F, P) ok, before the
+        check cells), None: not offered.
     """
 
     grey: np.ndarray
@@ -167,6 +182,7 @@ class AssistSetting:
     prefill: Prefill | None = None
     follows: bool = False
     retracks: bool = False
+    model: Callable[[list[list[list[Any]]]], tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def frames(self) -> int:
@@ -188,6 +204,16 @@ class AssistSetting:
                 after = np.arange(self.frames) > starts[i][0]
                 held = followed.ok[:, i] & after
                 xy[held, p], ok[after, p] = followed.xy[held, i], held[after]
+        frames, points = ok.shape
+        shown = checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), ok.T, 0,
+                             frames, points, self.size[0], self.size[1])
+        return shown.transpose(1, 0, 2), ok
+
+    def model_follow(self, anchors: list[list[list[Any]]]
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.model is None:
+            return None
+        xy, ok = self.model(anchors)
         frames, points = ok.shape
         shown = checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), ok.T, 0,
                              frames, points, self.size[0], self.size[1])
@@ -418,6 +444,56 @@ def _track(state: _State, setting: Assistance, seen: np.ndarray, judged: np.ndar
                     groups.append((point, halves))
 
 
+def _take_model(state: _State, setting: Assistance, seen: np.ndarray, judged: np.ndarray,
+                tolerance: float | None) -> None:
+    """Ask for the hand model's follow from the keyframes placed (a key, not an edit) and
+    accept it (Enter) where it proposes a point the keyframes have visible; the careful worker
+    then drags each accepted position beyond tolerance. The accepted rows bound the tracking
+    that follows (LK starts where the model stopped)."""
+    points, frames = len(state.rows), setting.frames
+    found = setting.model_follow([state.plain(p) for p in range(points)])
+    if found is None:
+        return
+    xy, ok = found
+    state.rounds += 1
+    state.actions.keys += 1
+    state.actions.requests += 1
+    shown_visible = np.stack([dense_track(state.plain(p), frames).visible
+                              for p in range(points)], axis=1)
+    offered = ok & shown_visible & ~np.array(
+        [[f in state.rows[p] for p in range(points)] for f in range(frames)], bool)
+    if tolerance is not None and offered.any():
+        # The careful worker steps through the ghosts outward from the frame it keyed whole,
+        # and stops where the hand has come off (Enter takes only the frames it stepped
+        # through): at the first frame with MODEL_OFF_JOINTS shown beyond tolerance.
+        off = np.linalg.norm(xy - judged, axis=-1) > tolerance
+        bad = (offered & off).sum(axis=1) >= MODEL_OFF_JOINTS
+        keyed = np.array([sum(1 for r in state.rows[p].values() if r[0] == f and r[3])
+                          for f in range(frames) for p in range(points)]).reshape(frames, points)
+        whole = np.flatnonzero(keyed.sum(axis=1) >= MODEL_START_JOINTS)
+        start = int(whole[0]) if len(whole) else 0
+        stepped = np.zeros(frames, bool)
+        for walk in (range(start, frames), range(start - 1, -1, -1)):
+            for f in walk:
+                if bad[f]:
+                    break
+                stepped[f] = True
+        offered &= stepped[:, None]
+    taken = False
+    for f, p in zip(*np.nonzero(offered), strict=True):
+        state.rows[p][int(f)] = [int(f), *_position(xy[f, p]), 1, "model"]
+        taken = True
+    state.actions.keys += int(taken)
+    if tolerance is None:
+        return
+    for p in range(points):
+        for f, row in state.rows[p].items():
+            if row[4] == "model" and np.hypot(row[1] - judged[f, p, 0],
+                                              row[2] - judged[f, p, 1]) > tolerance:
+                state.rows[p][f] = [f, *_position(seen[f, p]), 1, "edited"]
+                state.actions.drags += 1
+
+
 def _take_prefill(state: _State, shown: Prefill, seen: np.ndarray, judged: np.ndarray,
                   visible: np.ndarray, tolerance: float | None) -> None:
     """Accept the suggestions as shown (one key, U for every point); the careful worker then
@@ -489,6 +565,8 @@ def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistanc
         for f in _must_frames(visible[:, p], free,
                               last=not setting.follows or profile == "blind"):
             _place(state, p, f, seen, visible)
+    if shown is None:
+        _take_model(state, setting, seen, judged, limit)
     _track(state, setting, seen, judged, limit)
     return AssistedWork(profile=profile, tracks=stored_tracks(state.rows),
                         actions=state.actions.as_dict(), seen=seen, judged=judged,
@@ -496,9 +574,10 @@ def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistanc
 
 
 def stored_tracks(rows: Sequence[dict[int, list[Any]]]) -> list[list[list[Any]]]:
-    """Keyframe rows as saved: sorted by frame, the source written only when not "placed"."""
-    return [[r if r[4] != "placed" else r[:4] for _, r in sorted(point.items())]
-            for point in rows]
+    """Keyframe rows as saved: sorted by frame, the source written only when not "placed" (an
+    accepted model follow is saved as tracked, as the page saves every accepted proposal)."""
+    return [[r[:4] if r[4] == "placed" else [*r[:4], "tracked"] if r[4] == "model" else r
+             for _, r in sorted(point.items())] for point in rows]
 
 
 def plain_rows(track: Sequence[Sequence[Any]]) -> list[list[Any]]:

@@ -178,6 +178,75 @@ class TestFollowedOnThePage:
         assert work.actions["drags"] == 0 and work.actions["requests"] == 1
 
 
+class TestModelFollow:
+    """A model follow offered on the page (worker.solver.follow's place, here a stand-in that
+    sits on the truth until frame OFF_FROM and 20 px off after it): the careful worker takes it
+    only up to where it comes off and tracks the rest; the blind acceptor takes it all."""
+
+    OFF_FROM = 12
+
+    @classmethod
+    def _setting(cls, clip, asked: list) -> AssistSetting:
+        grey, truth, visible = clip
+
+        def model(anchors):
+            asked.append(anchors)
+            xy = truth.copy()
+            xy[cls.OFF_FROM:] += 20.0
+            return xy, np.ones(visible.shape, bool)
+
+        return AssistSetting(grey, KEY, ASSIGNMENT, None, follows=True, retracks=True,
+                             model=model)
+
+    def test_the_careful_worker_takes_the_model_where_it_sits_and_tracks_the_rest(
+            self, clip) -> None:
+        _, truth, visible = clip
+        asked: list = []
+        work = assisted_annotate(truth, visible, self._setting(clip, asked), "careful",
+                                 np.random.default_rng(0))
+        without = TestFollowedOnThePage._page_work(clip, "careful")
+        # Asked once, with the keyframes placed by hand (the first frame of every point).
+        assert len(asked) == 1 and all(rows and rows[0][0] == 0 for rows in asked[0])
+        on_model = before = 0
+        for p, track in enumerate(work.tracks):
+            sources = {row[0]: row_source(row) for row in track}
+            rows = {row[0]: row for row in track}
+            for f in range(1, self.OFF_FROM):
+                if visible[f, p] and (p, f) not in _inner_cells():
+                    before += 1
+                    row = rows.get(f)
+                    # The stand-in's own positions (rounded as saved), not LK's.
+                    on_model += row is not None and row_source(row) == "tracked" and np.hypot(
+                        row[1] - truth[f, p, 0], row[2] - truth[f, p, 1]) < 0.01
+            dense = dense_track(plain_rows(track), FRAMES).xy
+            seen = visible[:, p]
+            err = np.linalg.norm(dense[seen] - work.judged[seen, p], axis=1)
+            by_hand = np.array([sources.get(f) in ("placed", "edited")
+                                for f in np.flatnonzero(seen)])
+            assert (err[~by_hand] <= TOLERANCE_PX).all(), p
+        assert on_model >= 0.9 * before, (on_model, before)
+        # Every check cell in the frames taken is corrected, as every check cell.
+        for point, frame in _inner_cells():
+            row = _row_at(work.tracks[point], frame)
+            if frame < self.OFF_FROM and row is not None:
+                assert row_source(row) != "tracked"
+        assert work.actions["requests"] == 2  # the model's and one T
+        assert work.actions["edits"] < without.actions["edits"]
+
+    def test_the_blind_acceptor_takes_the_whole_model_follow(self, clip) -> None:
+        _, truth, visible = clip
+        work = assisted_annotate(truth, visible, self._setting(clip, []), "blind",
+                                 np.random.default_rng(0))
+        off = 0
+        for p, track in enumerate(work.tracks):
+            for row in track:
+                if row[0] >= self.OFF_FROM and row_source(row) == "tracked":
+                    off += np.hypot(row[1] - truth[row[0], p, 0],
+                                    row[2] - truth[row[0], p, 1]) > 15.0
+        assert off > 0.5 * visible[self.OFF_FROM:].sum()
+        assert work.actions["drags"] == 0
+
+
 class TestBlindAcceptor:
     def test_keeps_the_check_cells_offsets(self, clip) -> None:
         _, truth, _ = clip

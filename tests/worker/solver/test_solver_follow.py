@@ -1,0 +1,93 @@
+"""worker.solver.follow: the hand model carried through one view's depth from a worker's
+keyframes, for a view no other view can suggest for.
+
+On a rendered synthetic capture (seed 5, 2 views x 72 frames at 640x480, the pace of the
+default clips; depth with sensor noise and dropouts), the first FRAMES frames of view 1: a
+careful worker's keyframes of one frame (2 px noise) start the follow, and its proposals are
+compared with the view's true joints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.worker.solver.test_solver_suggest import Scene
+from worker.solver.follow import STOP_DEPTH, follow_hand
+
+VIEW = 1
+# Frames followed: each takes about a second of CPU.
+FRAMES = 8
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    from worker.synth import generate_capture
+
+    root = tmp_path_factory.mktemp("follow-capture")
+    generate_capture(root, seed=5, frames=72, views=2, objects=1, workers=1)
+    return Scene(root)
+
+
+def _first_frame_keys(scene: Scene, frame: int = 0, shift: tuple[float, float] = (0.0, 0.0),
+                      seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A careful worker's keyframes of one frame of VIEW: (F, 21, 2) px and (F, 21) keyed."""
+    truth, visible = scene.xy[VIEW][:FRAMES], scene.visible[VIEW][:FRAMES]
+    keypoints = np.full(truth.shape, np.nan)
+    keyed = np.zeros(visible.shape, bool)
+    noise = np.random.default_rng(seed).normal(0.0, 2.0, truth[frame].shape)
+    keypoints[frame] = truth[frame] + noise + np.asarray(shift)
+    keyed[frame] = visible[frame]
+    return keypoints, keyed
+
+
+def _follow(scene: Scene, keypoints: np.ndarray, keyed: np.ndarray, **kw):
+    return follow_hand(scene.cameras[VIEW], scene.depth[VIEW][:FRAMES], keypoints, keyed,
+                       scene.side, scene.betas, **kw)
+
+
+def test_a_hand_keyed_once_is_followed_through_the_clip_close_to_the_truth(
+        scene: Scene) -> None:
+    keypoints, keyed = _first_frame_keys(scene)
+    found = _follow(scene, keypoints, keyed)
+    truth, visible = scene.xy[VIEW][:FRAMES], scene.visible[VIEW][:FRAMES]
+    later = np.zeros(visible.shape, bool)
+    later[1:] = visible[1:]
+    # Proposed on most of the later frames' visible joints, where tracking image patches of
+    # skin loses most of them.
+    assert (found.ok & later).sum() >= 0.8 * later.sum(), found.stops
+    err = np.linalg.norm(found.xy - truth, axis=-1)[found.ok & later]
+    assert np.median(err) < 2.0, np.median(err)
+    assert np.percentile(err, 90) < 5.0, np.percentile(err, 90)
+    assert found.start == 0
+    assert np.isfinite(found.depth_rms_mm[found.ok.any(axis=1)]).all()
+
+
+def test_keyframes_off_the_hand_give_no_proposals(scene: Scene) -> None:
+    # Every joint keyed 40 px beside the hand: the fitted hand does not sit on the depth.
+    keypoints, keyed = _first_frame_keys(scene, shift=(40.0, 40.0))
+    found = _follow(scene, keypoints, keyed)
+    assert not found.ok.any()
+    assert found.stops["forward"] == (0, STOP_DEPTH)
+
+
+def test_a_correction_follows_forward_from_its_frame_only(scene: Scene) -> None:
+    keypoints, keyed = _first_frame_keys(scene)
+    later_keys, later_keyed = _first_frame_keys(scene, frame=4, seed=1)
+    keypoints[4], keyed[4] = later_keys[4], later_keyed[4]
+    found = _follow(scene, keypoints, keyed, begin=3)
+    assert found.start == 4
+    assert not found.ok[:4].any()
+    assert found.ok[5:].all()
+    assert "backward" not in found.stops
+
+
+def test_too_few_keyed_joints_or_wrong_shapes_are_refused(scene: Scene) -> None:
+    keypoints, keyed = _first_frame_keys(scene)
+    keyed[0, 5:] = False  # 5 joints: the model cannot start
+    assert _follow(scene, keypoints, keyed).start == -1
+    with pytest.raises(ValueError, match="expected keypoints"):
+        _follow(scene, keypoints[:, :20], keyed[:, :20])
+    with pytest.raises(ValueError, match="depth has"):
+        follow_hand(scene.cameras[VIEW], scene.depth[VIEW][:5], keypoints, keyed,
+                    scene.side, scene.betas)

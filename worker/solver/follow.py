@@ -1,0 +1,178 @@
+"""Follow a hand through one view's depth from a worker's keyframes: proposals for a first view.
+
+Tracking image patches (worker.assist.lk) loses most hand joints within a clip: skin has little
+texture, and a joint drifts along a finger without failing any check. One view's depth sees
+the hand's surface in every frame, though, and the hand model (bone lengths, joint limits, pose
+prior) ties the 21 joints together. So the hand model is fitted to the worker's keyframes of
+the first frame it keyed (at least MIN_START_JOINTS visible joints), lifted onto the view's
+depth, and then carried frame by frame forward to the end of the clip and backward to its
+start: each frame starts from the previous frame's pose (with half its velocity added) and is
+fitted to that frame's depth (ICP rounds: the depth points near the hand matched to its
+surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever the
+worker keyed at that frame (the keypoint term, robust). A frame keyed by the worker again
+pulls the hand back where it had drifted, so a correction mends what follows it.
+
+The follow stops (in that direction) at the first frame whose fit the depth does not support:
+fewer than MIN_MATCHED depth points near the fitted surface, or their robust RMS distance over
+MAX_DEPTH_RMS_MM. The proposals are the fitted joints projected into the view where they fall
+inside the image; the worker's own keyframes stay as they are (the proposals fill between).
+
+What it cannot do: a hand that moves further between frames than the depth matches reach
+(about 15 px a frame at 640x480 and half a metre: the 24-frame clips) is lost within a few
+frames, and a hand that slides or turns along its own surface can fit the depth well while
+its joints drift, so the stop comes late; the worker looks at the ghosts before taking them.
+bench/follow.py measures both.
+
+Conventions as in worker.geometry.cameras: pixels x right, y down; world metres; depth (F, H,
+W) uint16 millimetres along the camera's z axis, 0 = no reading. F frames of the clip given.
+Pure: arrays in, arrays out (PyTorch through the solver).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from worker.assist.prefill import ViewWork
+from worker.geometry.cameras import CameraModel
+from worker.hand.joints import NUM_JOINTS
+from worker.hand.params import HandModel
+from worker.solver.default import fit_hand
+from worker.solver.init import hand_from_joints
+from worker.solver.problem import Problem
+from worker.solver.state import SolveState, hand_vertices_world
+from worker.solver.suggest import START_ITERATIONS, lift_labels
+from worker.solver.types import HandTarget, SolveInputs, SolveSettings
+
+# Visible keyed joints a frame needs before the hand model can start from it (as the solve's
+# min_joints: fewer leave the pose under-determined).
+MIN_START_JOINTS = 6
+# ICP rounds per frame (matches renewed, then LM); a frame stops early once the pose moves less
+# than CONVERGED_M at any joint between rounds.
+ROUNDS = 8
+LM_ITERATIONS = 4
+CONVERGED_M = 0.0003
+# Share of the previous frame's velocity added to the start of the next frame's fit.
+VELOCITY = 0.5
+# Where the depth no longer supports the fit: too few depth points within the match margin of
+# the fitted surface, or their robust RMS distance too large.
+MIN_MATCHED = 40
+MAX_DEPTH_RMS_MM = 2.5
+SETTINGS = SolveSettings(min_views=1, min_joints=0, icp_rounds=1)
+
+STOP_END = "end"
+STOP_DEPTH = "depth"
+
+
+@dataclass(frozen=True)
+class Followed:
+    """xy: (F, 21, 2) image px of the followed joints, NaN where not followed; ok: (F, 21) bool
+    where a proposal is given (followed, inside the image); start: the keyed frame the follow
+    started from (-1: none had MIN_START_JOINTS visible joints); stops: {"forward",
+    "backward"} -> (frame where the follow stopped or -1, reason STOP_END/STOP_DEPTH);
+    depth_rms_mm: (F,) per frame, NaN where not fitted."""
+
+    xy: np.ndarray
+    ok: np.ndarray
+    start: int
+    stops: dict[str, tuple[int, str]]
+    depth_rms_mm: np.ndarray
+
+
+def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int
+               ) -> tuple[int, float]:
+    """Fit one frame's pose in place (keypoints where keyed, depth); (depth points matched,
+    their robust RMS distance in mm) after the last round."""
+    state.hand_frames = np.array([frame])
+    robust_mm = problem.settings.depth_robust_mm
+    before = None
+    for _ in range(rounds):
+        vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
+        matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
+        data = problem.depth_data(0, [matches], problem.hand_faces, robust_mm)
+        fit_hand(problem, state, data, LM_ITERATIONS, 1)
+        joints = state.joints(problem)[0]
+        if before is not None and np.abs(joints - before).max() < CONVERGED_M:
+            break
+        before = joints
+    vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
+    matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
+    if matches is None or not len(matches.dist):
+        return 0, float("inf")
+    dist_mm = matches.dist * 1000.0
+    weight = 1.0 / (1.0 + (dist_mm / robust_mm) ** 2)
+    rms = float(np.sqrt(np.sum(weight * dist_mm ** 2) / max(np.sum(weight), 1e-9)))
+    return len(dist_mm), rms
+
+
+def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
+                visible: np.ndarray, side: str, betas: np.ndarray,
+                hand_model: HandModel | None = None, rounds: int = ROUNDS,
+                begin: int | None = None) -> Followed:
+    """The hand model carried through one view's depth from the worker's keyframes.
+
+    keypoints: (F, 21, 2) px of the worker's keyed visible joints (NaN elsewhere); visible:
+    (F, 21) bool, those keyed visible; depth: (F, H, W) uint16 mm of the same frames.
+    begin: follow forward only, from the first frame at or after ``begin`` with
+    MIN_START_JOINTS keyed joints (a correction: what comes before it stays as it was);
+    None: from the first such frame, forward and backward.
+    """
+    keypoints = np.asarray(keypoints, np.float64)
+    visible = np.asarray(visible, bool) & np.isfinite(keypoints).all(axis=-1)
+    frames = keypoints.shape[0]
+    if keypoints.shape != (frames, NUM_JOINTS, 2) or visible.shape != (frames, NUM_JOINTS):
+        raise ValueError(f"expected keypoints (F, {NUM_JOINTS}, 2) and visible (F, "
+                         f"{NUM_JOINTS}), got {keypoints.shape} and {visible.shape}")
+    if np.shape(depth)[0] != frames:
+        raise ValueError(f"depth has {np.shape(depth)[0]} frames, the keyframes {frames}")
+    xy = np.full((frames, NUM_JOINTS, 2), np.nan)
+    rms = np.full(frames, np.nan)
+    keyed = np.flatnonzero(visible.sum(axis=1) >= MIN_START_JOINTS)
+    if begin is not None:
+        keyed = keyed[keyed >= begin]
+    if not len(keyed):
+        return Followed(xy, np.zeros((frames, NUM_JOINTS), bool), -1, {}, rms)
+    start = int(keyed[0])
+    inputs = SolveInputs(
+        cameras=[camera], num_frames=frames,
+        hand=HandTarget(side=side, betas=np.asarray(betas, np.float64),
+                        keypoints=keypoints[None], visible=visible[None]),
+        objects=[], depth=[np.asarray(depth)], hand_model=hand_model)
+    problem = Problem(inputs, SETTINGS)
+    state = SolveState.empty(problem)
+    work = ViewWork(view=0, xy=keypoints, visible=visible, decided=visible)
+    lifted, lifted_ok = lift_labels([camera], [work], {0: np.asarray(depth)})
+    state.hand_pose[[start]] = hand_from_joints(problem, lifted[[start]], lifted_ok[[start]],
+                                                START_ITERATIONS)
+    state.hand_frames = np.array([start])
+    fit_hand(problem, state, None, LM_ITERATIONS, 2)
+    fitted = np.zeros(frames, bool)
+    count, rms[start] = _fit_frame(problem, state, start, rounds)
+    stops: dict[str, tuple[int, str]] = {}
+    if count < MIN_MATCHED or rms[start] > MAX_DEPTH_RMS_MM:
+        # The keyed hand does not sit on the depth: nothing to carry.
+        return Followed(xy, np.zeros((frames, NUM_JOINTS), bool), start,
+                        {"forward": (start, STOP_DEPTH), "backward": (start, STOP_DEPTH)}, rms)
+    fitted[start] = True
+    for name, step in (("forward", 1), ("backward", -1))[:1 if begin is not None else 2]:
+        stops[name] = (-1, STOP_END)
+        for f in range(start + step, frames if step > 0 else -1, step):
+            prev = state.hand_pose[f - step]
+            back = f - 2 * step
+            older = state.hand_pose[back] if 0 <= back < frames and fitted[back] else prev
+            state.hand_pose[f] = prev + VELOCITY * (prev - older)
+            count, rms[f] = _fit_frame(problem, state, f, rounds)
+            if count < MIN_MATCHED or rms[f] > MAX_DEPTH_RMS_MM:
+                stops[name] = (f, STOP_DEPTH)
+                break
+            fitted[f] = True
+    state.hand_frames = np.flatnonzero(fitted)
+    joints = state.joints(problem)
+    projected = camera.project(joints)
+    inside = ((projected[..., 0] >= 0) & (projected[..., 0] < camera.width)
+              & (projected[..., 1] >= 0) & (projected[..., 1] < camera.height)
+              & np.isfinite(projected).all(axis=-1))
+    xy[state.hand_frames] = np.where(inside[..., None], projected, np.nan)
+    ok = np.isfinite(xy).all(axis=-1)
+    return Followed(xy, ok, start, stops, rms)
