@@ -10,11 +10,15 @@ start: each frame starts from the previous frame's pose (with half its velocity 
 fitted to that frame's depth (ICP rounds: the depth points near the hand matched to its
 surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever the
 worker keyed at that frame (the keypoint term, robust). A frame keyed by the worker again
-pulls the hand back where it had drifted, so a correction mends what follows it.
+pulls the hand back where it had drifted, so a correction mends what follows it. Depth readings
+that have not changed since the keyed frame (the table, an object still at rest) are left out
+of the matches, outside the hand's own pixels there.
 
 The follow stops (in that direction) at the first frame whose fit the depth does not support:
 fewer than MIN_MATCHED depth points near the fitted surface, or their robust RMS distance over
-MAX_DEPTH_RMS_MM. The proposals are the fitted joints projected into the view where they fall
+both MAX_DEPTH_RMS_MM and STOP_RATIO times the view's usual. It does not start at all where the
+keyed frame's fit fails those (MAX_START_RMS_MM there) or lies more than MAX_START_PX from the
+worker's keyframes. The proposals are the fitted joints projected into the view where they fall
 inside the image; the worker's own keyframes stay as they are (the proposals fill between).
 
 What it cannot do: a hand that moves further between frames than the depth matches reach
@@ -32,6 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from worker.assist.prefill import ViewWork
@@ -39,6 +44,7 @@ from worker.geometry.cameras import CameraModel
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import HandModel
 from worker.solver.default import fit_hand
+from worker.solver.depth import DepthClouds
 from worker.solver.init import hand_from_joints
 from worker.solver.problem import Problem
 from worker.solver.state import SolveState, hand_vertices_world
@@ -59,10 +65,29 @@ VELOCITY = 0.5
 # the fitted surface, or their robust RMS distance too large.
 MIN_MATCHED = 40
 MAX_DEPTH_RMS_MM = 2.5
+# How well the depth fits differs by view (grazing angles, the sensor's noise at range): a frame
+# also passes while its RMS is within STOP_RATIO times the median of the frames followed so far
+# in that direction (the keyed frame's where there are none yet).
+STOP_RATIO = 2.0
+# At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
+# start is refused only where the keyed hand is clearly off the depth (keyframes on another
+# hand, or beside it).
+MAX_START_RMS_MM = 5.0
+# Nor does the model start where it cannot sit on the worker's own keyframes: the median of the
+# keyed joints' distances (px) to the fitted ones over this (a hand the model cannot pose so,
+# or keyframes that are not one hand).
+MAX_START_PX = 8.0
 SETTINGS = SolveSettings(min_views=1, min_joints=0, icp_rounds=1)
+
+# The scene that does not move: a depth reading within STATIC_MM of the keyed frame's at the
+# same pixel is the table or an object at rest, not the hand (outside the hand's own pixels at
+# the keyed frame, grown by HAND_MASK_PX). Beside a finger such points would pull the hand.
+STATIC_MM = 8
+HAND_MASK_PX = 15
 
 STOP_END = "end"
 STOP_DEPTH = "depth"
+STOP_KEYS = "keyframes"
 
 
 @dataclass(frozen=True)
@@ -104,6 +129,26 @@ def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int
     weight = 1.0 / (1.0 + (dist_mm / robust_mm) ** 2)
     rms = float(np.sqrt(np.sum(weight * dist_mm ** 2) / max(np.sum(weight), 1e-9)))
     return len(dist_mm), rms
+
+
+def _moving_depth(camera: CameraModel, depth: np.ndarray, start: int,
+                  vertices: np.ndarray) -> np.ndarray:
+    """(F, H, W) the depth without the static scene (STATIC_MM of the keyed frame ``start``'s
+    reading), outside the hand's pixels at ``start`` (its vertices (N, 3) world) grown by
+    HAND_MASK_PX; the keyed frame itself as it is."""
+    depth = np.asarray(depth)
+    height, width = depth.shape[1:]
+    hand = np.zeros((height, width), np.uint8)
+    pix = np.rint(camera.project(vertices)).astype(int)
+    inside = (pix[:, 0] >= 0) & (pix[:, 0] < width) & (pix[:, 1] >= 0) & (pix[:, 1] < height)
+    hand[pix[inside, 1], pix[inside, 0]] = 1
+    size = 2 * HAND_MASK_PX + 1
+    hand = cv2.dilate(hand, np.ones((size, size), np.uint8)).astype(bool)
+    base = depth[start].astype(np.int32)
+    static = (np.abs(depth.astype(np.int32) - base[None]) < STATIC_MM) & (base[None] > 0) \
+        & ~hand[None]
+    static[start] = False
+    return np.where(static, 0, depth).astype(depth.dtype)
 
 
 def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
@@ -149,23 +194,34 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
     fit_hand(problem, state, None, LM_ITERATIONS, 2)
     fitted = np.zeros(frames, bool)
     count, rms[start] = _fit_frame(problem, state, start, rounds)
-    stops: dict[str, tuple[int, str]] = {}
-    if count < MIN_MATCHED or rms[start] > MAX_DEPTH_RMS_MM:
-        # The keyed hand does not sit on the depth: nothing to carry.
+    fitted_px = camera.project(state.joints(problem)[0])
+    off_px = float(np.median(np.linalg.norm(fitted_px - keypoints[start], axis=-1)
+                             [visible[start]]))
+    refused = STOP_DEPTH if count < MIN_MATCHED or rms[start] > MAX_START_RMS_MM else \
+        STOP_KEYS if not off_px <= MAX_START_PX else None
+    if refused is not None:
+        # The keyed hand does not sit on the depth, or the model not on the keyframes.
         return Followed(xy, np.zeros((frames, NUM_JOINTS), bool), start,
-                        {"forward": (start, STOP_DEPTH), "backward": (start, STOP_DEPTH)}, rms)
+                        {"forward": (start, refused), "backward": (start, refused)}, rms)
+    stops: dict[str, tuple[int, str]] = {}
     fitted[start] = True
+    problem.clouds = DepthClouds([camera], [_moving_depth(
+        camera, depth, start, hand_vertices_world(problem, state.hand_pose[[start]])[0])],
+        SETTINGS.depth_stride)
     for name, step in (("forward", 1), ("backward", -1))[:1 if begin is not None else 2]:
         stops[name] = (-1, STOP_END)
+        history: list[float] = []
         for f in range(start + step, frames if step > 0 else -1, step):
             prev = state.hand_pose[f - step]
             back = f - 2 * step
             older = state.hand_pose[back] if 0 <= back < frames and fitted[back] else prev
             state.hand_pose[f] = prev + VELOCITY * (prev - older)
             count, rms[f] = _fit_frame(problem, state, f, rounds)
-            if count < MIN_MATCHED or rms[f] > MAX_DEPTH_RMS_MM:
+            usual = float(np.median(history)) if history else float(rms[start])
+            if count < MIN_MATCHED or rms[f] > max(MAX_DEPTH_RMS_MM, STOP_RATIO * usual):
                 stops[name] = (f, STOP_DEPTH)
                 break
+            history.append(float(rms[f]))
             fitted[f] = True
     state.hand_frames = np.flatnonzero(fitted)
     joints = state.joints(problem)

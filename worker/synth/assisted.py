@@ -31,7 +31,11 @@ kept apart). ``Actions.edits`` is that count: clicks, drags and keys less the re
 
 Assistance (the ``Assistance`` the worker is given): ``AssistSetting`` computes what the routes
 show in process (worker.assist.lk, the check cells planted here); backend.crowd.simulate asks
-the routes themselves over HTTP. With ``follows`` the worker keys no clip's last frame: it
+the routes themselves over HTTP. Where a model follow is offered (``model_follow``:
+worker.solver.follow, in process only) and there are no suggestions, the worker asks for it
+after its first keyframes, takes it up to the first frame where MODEL_OFF_JOINTS of its ghosts
+are off (the careful worker; the blind acceptor takes it all), drags the rest of what is off,
+and tracks from where it stopped. With ``follows`` the worker keys no clip's last frame: it
 follows each point forward from its last keyframe (the proposals route's ``follow``) and
 corrects where the follow stopped or strayed. With ``retracks`` the page re-tracks around each
 correction by itself (one write, no T and no Enter), as the annotation page does; without it
@@ -468,8 +472,8 @@ def _take_model(state: _State, setting: Assistance, seen: np.ndarray, judged: np
         # through): at the first frame with MODEL_OFF_JOINTS shown beyond tolerance.
         off = np.linalg.norm(xy - judged, axis=-1) > tolerance
         bad = (offered & off).sum(axis=1) >= MODEL_OFF_JOINTS
-        keyed = np.array([sum(1 for r in state.rows[p].values() if r[0] == f and r[3])
-                          for f in range(frames) for p in range(points)]).reshape(frames, points)
+        keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
+                           for p in range(points)] for f in range(frames)])
         whole = np.flatnonzero(keyed.sum(axis=1) >= MODEL_START_JOINTS)
         start = int(whole[0]) if len(whole) else 0
         stepped = np.zeros(frames, bool)

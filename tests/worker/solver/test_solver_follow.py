@@ -63,10 +63,12 @@ def test_a_hand_keyed_once_is_followed_through_the_clip_close_to_the_truth(
     assert np.isfinite(found.depth_rms_mm[found.ok.any(axis=1)]).all()
 
 
-def test_keyframes_off_the_hand_give_no_proposals(scene: Scene) -> None:
-    # Every joint keyed 40 px beside the hand: the fitted hand does not sit on the depth.
-    keypoints, keyed = _first_frame_keys(scene, shift=(40.0, 40.0))
-    found = _follow(scene, keypoints, keyed)
+def test_a_keyed_frame_without_depth_gives_no_proposals(scene: Scene) -> None:
+    # The sensor read nothing at the keyed frame: there is no surface to put the hand on.
+    keypoints, keyed = _first_frame_keys(scene)
+    depth = scene.depth[VIEW][:FRAMES].copy()
+    depth[0] = 0
+    found = follow_hand(scene.cameras[VIEW], depth, keypoints, keyed, scene.side, scene.betas)
     assert not found.ok.any()
     assert found.stops["forward"] == (0, STOP_DEPTH)
 
