@@ -93,10 +93,9 @@ JUDGE_SIGMA_PX = 0.5 * CAREFUL_SIGMA_PX
 TAKE_SHARE = 0.8
 # The model follow (worker.solver.follow) starts from a frame keyed with this many visible
 # joints (its MIN_START_JOINTS); the careful worker takes its ghosts up to the first frame
-# where the hand has come off, a third of its joints beyond tolerance (where fewer are off, a
-# drag each costs less than tracking them again).
+# where this many are off.
 MODEL_START_JOINTS = 6
-MODEL_OFF_JOINTS = 7
+MODEL_OFF_JOINTS = 3
 # Rounds of asking for proposals after which the careful worker stops (each round halves or
 # settles every open span; a 72-frame clip needs at most about log2(72) + a few).
 MAX_ROUNDS = 20
