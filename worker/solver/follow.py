@@ -95,7 +95,8 @@ class Followed:
     """xy: (F, 21, 2) image px of the followed joints, NaN where not followed; ok: (F, 21) bool
     where a proposal is given (followed, inside the image); start: the keyed frame the follow
     started from (-1: none had MIN_START_JOINTS visible joints); stops: {"forward",
-    "backward"} -> (frame where the follow stopped or -1, reason STOP_END/STOP_DEPTH);
+    "backward"} -> (frame where the follow stopped or -1, reason STOP_END/STOP_DEPTH, or
+    STOP_KEYS where the model could not sit on the keyframes and nothing was followed);
     depth_rms_mm: (F,) per frame, NaN where not fitted."""
 
     xy: np.ndarray

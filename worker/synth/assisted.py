@@ -208,29 +208,27 @@ class AssistSetting:
                 after = np.arange(self.frames) > starts[i][0]
                 held = followed.ok[:, i] & after
                 xy[held, p], ok[after, p] = followed.xy[held, i], held[after]
-        frames, points = ok.shape
-        shown = checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), ok.T, 0,
-                             frames, points, self.size[0], self.size[1])
-        return shown.transpose(1, 0, 2), ok
+        return self._planted(xy, ok), ok
 
     def model_follow(self, anchors: list[list[list[Any]]]
                      ) -> tuple[np.ndarray, np.ndarray] | None:
         if self.model is None:
             return None
         xy, ok = self.model(anchors)
-        frames, points = ok.shape
-        shown = checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), ok.T, 0,
-                             frames, points, self.size[0], self.size[1])
-        return shown.transpose(1, 0, 2), ok
+        return self._planted(xy, ok), ok
 
     def suggestions(self) -> Prefill | None:
         if self.prefill is None:
             return None
-        frames, points = self.prefill.visible.shape
-        shown = checks.plant(self.key, self.assignment_id, self.prefill.xy.transpose(1, 0, 2),
-                             self.prefill.shown().T, 0, frames, points, self.size[0],
-                             self.size[1]).transpose(1, 0, 2)
+        shown = self._planted(self.prefill.xy, self.prefill.shown())
         return Prefill(xy=shown, visible=self.prefill.visible, known=self.prefill.known)
+
+    def _planted(self, xy: np.ndarray, shown: np.ndarray) -> np.ndarray:
+        """(F, P, 2) positions with the assignment's check cells moved off where ``shown``
+        (F, P), as the routes plant them."""
+        frames, points = shown.shape
+        return checks.plant(self.key, self.assignment_id, xy.transpose(1, 0, 2), shown.T, 0,
+                            frames, points, self.size[0], self.size[1]).transpose(1, 0, 2)
 
 
 @dataclass
