@@ -17,6 +17,7 @@ from backend.exports.flows import cleanup_job, export_job
 from backend.exports.stored import CLEANUP_KIND
 from backend.jobs.runner import Handler
 from backend.jobs.runner import register_handlers as register
+from backend.labels.model_follow import MODEL_FOLLOW_KIND, compute_model_follow
 from backend.labels.suggestions import FITTED_KIND, compute_fitted
 from backend.rig.flows import run_rig_health
 
@@ -71,6 +72,14 @@ def fitted_suggestions(args: dict[str, Any]) -> dict[str, Any]:
                           int(args["last_frame"]))
 
 
+def model_follow(args: dict[str, Any]) -> dict[str, Any]:
+    """Follow the hand model from a worker's keyframes through one view's depth; store the
+    proposals (backend.labels.model_follow)."""
+    begin = args.get("begin")
+    return compute_model_follow(int(args["task_id"]), args["tracks"],
+                                None if begin is None else int(begin))
+
+
 def clean_up_exports(args: dict[str, Any]) -> dict[str, Any]:
     """Delete export archives past DEXLABEL_EXPORT_RETENTION_DAYS."""
     return cleanup_job(args)
@@ -89,6 +98,7 @@ HANDLERS: dict[str, Handler] = {
     "export": Handler(export_labels, None),
     CLEANUP_KIND: Handler(clean_up_exports, None),
     FITTED_KIND: Handler(fitted_suggestions, None),
+    MODEL_FOLLOW_KIND: Handler(model_follow, None),
 }
 
 

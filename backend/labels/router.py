@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Query
 
-from backend.annotation.deps import WorkerClaims
+from backend.annotation.deps import WorkerClaims, WriterClaims
 from backend.db import SessionDep
-from backend.labels import suggestions
+from backend.labels import model_follow, suggestions
 from backend.storage import get_storage
 from backend.validation import MAX_INT32
 
@@ -29,3 +29,19 @@ def prefill_suggestions(claims: WorkerClaims, session: SessionDep,
     return suggestions.suggestions(session, get_storage(),
                                    suggestions.assignment_of(session, claims), first_frame,
                                    last_frame)
+
+
+@page_router.post("/annotate/model-follow", response_model=model_follow.ModelFollowRead,
+                  responses={422: {"description": "keyframes the page could not save, an "
+                                                  "object task, or begin outside the clip"}})
+def hand_model_follow(body: model_follow.ModelFollowRequest, claims: WriterClaims,
+                      session: SessionDep) -> model_follow.ModelFollowRead:
+    """Proposals for a hand view from the hand model, fitted to the worker's keyframes of the
+    first frame with enough visible joints on this view's depth and carried frame by frame
+    through the clip until the depth no longer fits it. The follow runs on the worker queue:
+    until it has run for these keyframes the answer is ``preparing``, to be asked again in a
+    few seconds with the same body. Check cells are planted as in every proposal; nothing is
+    stored for the assignment (an accepted proposal is saved as a tracked keyframe). Needs an
+    assignment's writing token (it queues work)."""
+    return model_follow.model_follow(session, get_storage(),
+                                     suggestions.assignment_of(session, claims), body)

@@ -164,7 +164,7 @@ def _unavailable_reason(task: Task, serials: list[str]) -> str:
             f"{_target_name(task)}; {have}")
 
 
-def _depth_reader(session: Session, storage: Storage, camera: Camera, first: int, last: int
+def depth_reader(session: Session, storage: Storage, camera: Camera, first: int, last: int
                   ) -> DepthReader | None:
     """A reader ``frame -> (H, W) uint16 mm`` of the camera's depth maps, frame counted from
     ``first``; None when the view has no depth for every frame of the range."""
@@ -272,7 +272,7 @@ def _computed(session: Session, storage: Storage, task: Task, cameras: list[Came
     models, target = [camera_model(c) for c in cameras], view_of[task.camera_id]
     if len(distinct_views(work)) >= MIN_ACCEPTED_VIEWS:
         found = prefill(models, work, target,
-                        _depth_reader(session, storage, task.camera, first, last))
+                        depth_reader(session, storage, task.camera, first, last))
     else:
         digest = _key_digest(key)
         stored = _load_prefill(storage, fitted_storage_key(task.id, digest))
@@ -295,10 +295,10 @@ def _fit(session: Session, storage: Storage, task: Task, cameras: list[Camera],
     BENCHMARKS.md), so the fit job runs it with the session closed."""
     models = [camera_model(c) for c in cameras]
     target = [c.id for c in cameras].index(task.camera_id)
-    reader = _depth_reader(session, storage, task.camera, first, last)
+    reader = depth_reader(session, storage, task.camera, first, last)
     depth = {}
     for view in distinct_views(work):
-        read = _depth_reader(session, storage, cameras[view], first, last)
+        read = depth_reader(session, storage, cameras[view], first, last)
         if read is not None:
             depth[view] = np.stack([read(f) for f in range(last - first + 1)])
     if task.kind == "hand":

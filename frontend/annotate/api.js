@@ -135,6 +135,20 @@ export class AnnotateApi {
   }
 
   /**
+   * The hand model followed through the view's depth from the worker's keyframes (hand
+   * tasks; nothing is stored for the assignment). While the server prepares it the answer
+   * says `preparing`: ask again with the same body.
+   * @param {{tracks: object[], begin?: number}} body  saved rows of the anchors
+   * @returns {Promise<{available: boolean, preparing: boolean, reason: string|null,
+   *   start_frame: number|null, first_frame: number, last_frame: number,
+   *   points: Array<{point: number, xy: Array<number[]|null>, ok: boolean[]}>,
+   *   stops: Array<{direction: string, reached: number, stopped: string}>}>}
+   */
+  modelFollow(body) {
+    return this.request("POST", "/api/annotate/model-follow", body);
+  }
+
+  /**
    * The check before submit: stretches between keyframes the view's images say the track
    * does not follow (nothing is stored).
    * @param {{tracks: object[]}} body  saved rows

@@ -216,6 +216,7 @@ export function drawTimelineMarks(ctx, timeline, marks, stops = []) {
  *                (past the last keyframe: forward from it;        viewed  (Esc: discard)
  *                before the first: backward from it)
  *   U / Shift+U  use suggestions for the active point / all     E      epipolar lines
+ *   M            follow the hand with the hand model (hand tasks)
  * @param {import("./core/assist.js").Assist} assist @param {KeyboardEvent} e
  */
 export function assistKey(assist, e) {
@@ -223,6 +224,10 @@ export function assistKey(assist, e) {
   const key = e.key.length === 1 ? e.key.toLowerCase() : e.key;
   switch (key) {
     case "t": assist.track(e.shiftKey); return true;
+    case "m":
+      if (!assist.handModel) return false;
+      assist.followModel();
+      return true;
     case "Enter": return assist.accept();
     case "u": assist.useSuggestions(e.shiftKey); return true;
     case "e": assist.toggleLines(); return true;
@@ -243,6 +248,7 @@ export function wireAssistPanel(assist, editable) {
   });
   on("assist-track", () => assist.track(false));
   on("assist-track-all", () => assist.track(true));
+  on("assist-model", () => assist.followModel());
   on("assist-accept", () => assist.accept());
   on("assist-discard", () => assist.discard());
   on("assist-use", (e) => assist.useSuggestions(e.shiftKey));
@@ -250,7 +256,8 @@ export function wireAssistPanel(assist, editable) {
   return () => {
     const can = editable();
     $("assist").hidden = !can;
-    for (const id of ["assist-track", "assist-track-all"]) {
+    $("assist-model").hidden = !assist.handModel;
+    for (const id of ["assist-track", "assist-track-all", "assist-model"]) {
       /** @type {HTMLButtonElement} */ ($(id)).disabled = !can || assist.status.kind === "busy";
     }
     for (const id of ["assist-accept", "assist-discard"]) {
@@ -277,7 +284,7 @@ export function startAssist(page) {
   const editable = () => page.data.mode === "edit" && !editor.readOnly && !page.stopped;
   let updatePanel = () => {};
   const assist = new Assist({
-    store: page.store, api: page.api, editable,
+    store: page.store, api: page.api, editable, handModel: task.kind === "hand",
     where: () => ({ frame: editor.frame, active: editor.active }),
     onChange: () => {
       editor.render();

@@ -154,6 +154,14 @@ const SUGGESTIONS_TEXT = "Track (T) proposes the active point's positions betwee
   "labelled view says the point lies (E hides them). Suggestions are often right but not " +
   "always: drag any that is off; correcting a tracked frame tracks the frames around it again.";
 
+/** The hand model's follow (hand tasks only; core/assist.js followModel). */
+const MODEL_TEXT = "Follow hand (M): once you have placed at least 6 joints on one frame " +
+  "(the hidden ones marked occluded), the hand model follows the hand from that frame through " +
+  "the clip in the depth this camera recorded. It takes up to a minute, then shows cyan rings " +
+  "as Track does and says where it lost the hand. Step outward from that frame while the rings " +
+  "sit on the joints, drag any that is off, and press Enter: it accepts the frames you have " +
+  "viewed. Then Track all (Shift+T) fills what is left.";
+
 /**
  * The fair warning about check suggestions (worker.assist.checks): said plainly, in every
  * task's instructions, the training clip's included.
@@ -190,6 +198,7 @@ export function renderInstructions(panel, task) {
     `<h3>Examples</h3><div class="examples">` +
     `${examplesHtml(hand ? handExamples() : objectExamples())}</div>` +
     `<h3>Suggestions</h3><p>${escapeHtml(SUGGESTIONS_TEXT)}</p>` +
+    (hand ? `<p>${escapeHtml(MODEL_TEXT)}</p>` : "") +
     "<p class=\"hint\">Press <kbd>?</kbd> for keyboard shortcuts.</p>";
 }
 
@@ -212,6 +221,8 @@ export const SHORTCUTS = [
   ["H", "hide / show the active point (view only; not saved)"],
   ["T / Shift + T", "track the active point between its keyframes, or onward from its last " +
     "(back from its first) / every point"],
+  ["M", "hand tasks: follow the hand with the hand model from a frame where you placed at " +
+    "least 6 joints"],
   ["Enter / Esc", "accept the proposals on the frames you have viewed / discard them"],
   ["U / Shift + U", "use the suggestions from other views: active point / every point"],
   ["E", "show / hide the epipolar lines from the labelled views"],

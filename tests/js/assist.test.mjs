@@ -6,8 +6,8 @@ import { test } from "node:test";
 import { Assist } from "../../frontend/annotate/core/assist.js";
 import { clipLine, epipolarLines } from "../../frontend/annotate/core/epipolar.js";
 import {
-  acceptViewed, allSpans, anchorRows, countTracked, heldFrames, openSpanAround, openSpans,
-  prefillEntries, proposalEntries, proposalRequest, retrackSpans, spanAround, stopText,
+  acceptViewed, allSpans, anchorRows, countTracked, heldFrames, modelProposals, modelText,
+  openSpanAround, openSpans, prefillEntries, proposalEntries, proposalRequest, retrackSpans, spanAround, stopText,
   trackedText,
 } from "../../frontend/annotate/core/proposals.js";
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
@@ -524,4 +524,118 @@ test("suggestions being prepared: the reason shows, then the page asks again", a
   assert.ok(polls >= 2 && polls < 100, String(polls));
   assert.match(stuck.suggestNote, /taking longer than expected/);
   assert.equal(stuck.suggestions.size, 0);
+});
+
+/** A hand page's assistance whose model-follow route answers `answers` in turn (the last one
+ * again once they run out). */
+function modelAssist(answers, { numFrames = 12 } = {}) {
+  const store = new AnnotationStore({ numPoints: 2, numFrames, width: 640, height: 480 });
+  const calls = [];
+  const api = {
+    async proposals() { throw new Error("not asked"); },
+    async suggestions() { return { available: false, reason: "none", views: [] }; },
+    async modelFollow(body) {
+      calls.push(body);
+      return answers[Math.min(calls.length - 1, answers.length - 1)];
+    },
+  };
+  const where = { frame: 3, active: 0 };
+  const assist = new Assist({ store, api, editable: () => true, where: () => where,
+    onChange: () => {}, handModel: true, suggestPollMs: 1, suggestPollLimitMs: 200 });
+  return { store, assist, calls, where };
+}
+
+/** A follow of 2 points over 12 frames from frame 3, reaching frames 0-8. */
+const FOLLOWED = {
+  available: true, preparing: false, reason: null, start_frame: 3, first_frame: 0,
+  last_frame: 11,
+  points: [0, 1].map((point) => {
+    const xy = Array.from({ length: 12 }, (_, f) => (f <= 8 && f !== 3 ? [10 * f, 20 + point] : null));
+    return { point, xy, ok: xy.map(Boolean) };
+  }),
+  stops: [{ direction: "forward", reached: 8, stopped: "depth" },
+    { direction: "backward", reached: 0, stopped: "end" }],
+};
+
+test("followModel: waits while the server prepares, then shows the follow as proposals", async () => {
+  const preparing = { available: false, preparing: true,
+    reason: "the hand model is following the hand through this view's depth" };
+  const { store, assist, calls } = modelAssist([preparing, preparing, FOLLOWED]);
+  store.placePoint(0, 3, 30, 20);
+  store.placePoint(1, 3, 30, 21);
+  store.placePoint(1, 10, 99, 21);
+  store.setTracks([{ point: 1, entries: [{ frame: 6, x: 1, y: 1, visible: true,
+    source: "tracked" }] }], { label: "t" });
+  assert.equal(await assist.followModel(), true);
+  assert.equal(calls.length, 3);
+  // Every ask carries the anchors only, the same body each time.
+  assert.deepEqual(calls[0], { tracks: [{ point: 0, keyframes: [[3, 30, 20, 1]] },
+    { point: 1, keyframes: [[3, 30, 21, 1], [10, 99, 21, 1]] }] });
+  assert.deepEqual(calls[2], calls[0]);
+  assert.equal(assist.status.kind, "info");
+  assert.equal(assist.status.text, "The hand model followed frames 0-8 from your keyframes on " +
+    "frame 3; it lost the hand after frame 8 (the depth there no longer fits it). Cyan rings: " +
+    "step through them from frame 3; Enter accepts the frames you have viewed, Esc discards. " +
+    "Drag any ring that is off.");
+  assert.deepEqual(assist.layer(5, 0).ghosts[0].xy, [50, 20]);
+  assert.equal(assist.layer(9, 0).ghosts[0].xy, null);
+  assert.deepEqual(assist.timelineMarks()[0].frames, [0, 1, 2, 4, 5, 6, 7, 8]);
+  // The worker steps from frame 3 to frame 6 and accepts: those frames only, nothing removed.
+  for (const f of [4, 5, 6]) assist.noteViewed(f, [0, 1]);
+  assert.equal(assist.accept(), true);
+  assert.deepEqual(store.keyframes(0).map((k) => [k.frame, k.source || "placed"]),
+    [[3, "placed"], [4, "tracked"], [5, "tracked"], [6, "tracked"]]);
+  assert.deepEqual(store.keyframes(1).map((k) => [k.frame, k.x, k.source || "placed"]),
+    [[3, 30, "placed"], [4, 40, "tracked"], [5, 50, "tracked"], [6, 60, "tracked"],
+      [10, 99, "placed"]]);
+  assert.match(assist.status.text, /^Accepted 6 tracked frames you have viewed; 10 not yet viewed/);
+  assert.equal(assist.proposals.points.length, 2, "the unviewed frames stay proposals");
+  // Stepping on and pressing Enter again takes the rest; the tracked keyframe at frame 6 of
+  // point 1 was replaced, frame 10's anchor is untouched.
+  for (let f = 0; f <= 8; f++) assist.noteViewed(f, [0, 1]);
+  assert.equal(assist.accept(), true);
+  assert.equal(assist.proposals, null);
+  assert.deepEqual(store.keyframes(0).map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 7, 8]);
+  assert.deepEqual(store.keyframes(1).map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 7, 8, 10]);
+});
+
+test("followModel: says why nothing is shown, and gives up waiting after the limit", async () => {
+  const refused = { available: false, preparing: false,
+    reason: "place at least 6 visible joints on one frame first: the hand model starts from " +
+      "that frame" };
+  let { assist } = modelAssist([refused]);
+  assert.equal(await assist.followModel(), false);
+  assert.equal(assist.status.kind, "warn");
+  assert.equal(assist.status.text, "Place at least 6 visible joints on one frame first: the " +
+    "hand model starts from that frame.");
+  assert.equal(assist.proposals, null);
+  ({ assist } = modelAssist([{ available: false, preparing: true, reason: "busy" }]));
+  assert.equal(await assist.followModel(), false);
+  assert.match(assist.status.text, /taking longer than expected: press M again/);
+  assert.equal(assist.pending, false);
+  ({ assist } = modelAssist([{ ...FOLLOWED, points: FOLLOWED.points.map((p) => (
+    { ...p, ok: p.ok.map(() => false) })) }]));
+  assert.equal(await assist.followModel(), false);
+  assert.equal(assist.status.text, "The hand model proposes nothing beyond your keyframes here.");
+});
+
+test("followModel: offered on hand pages only", async () => {
+  const store = new AnnotationStore({ numPoints: 2, numFrames: 12, width: 640, height: 480 });
+  const api = { async proposals() {}, async suggestions() {}, async modelFollow() {
+    throw new Error("not asked"); } };
+  const assist = new Assist({ store, api, editable: () => true,
+    where: () => ({ frame: 0, active: 0 }), onChange: () => {} });
+  assert.equal(assist.handModel, false);
+  assert.equal(await assist.followModel(), false);
+});
+
+test("modelText: the whole clip, and a follow stopped both ways", () => {
+  const whole = { ...FOLLOWED, stops: [{ direction: "forward", reached: 11, stopped: "end" },
+    { direction: "backward", reached: 0, stopped: "end" }] };
+  assert.match(modelText(whole, 12), /^The hand model followed frames 0-11 \(the whole clip\) from your keyframes on frame 3\. /);
+  const both = { ...FOLLOWED, stops: [{ direction: "forward", reached: 8, stopped: "depth" },
+    { direction: "backward", reached: 2, stopped: "depth" }] };
+  assert.match(modelText(both, 12), /frames 2-8 from your keyframes on frame 3; it lost the hand after frame 8 and before frame 2 \(/);
+  assert.deepEqual(modelProposals(FOLLOWED, 12).map((p) => [p.point, p.spans, p.partial]),
+    [[0, [[-1, 12]], true], [1, [[-1, 12]], true]]);
 });

@@ -49,11 +49,10 @@ from worker.solver.init import hand_from_joints
 from worker.solver.problem import Problem
 from worker.solver.state import SolveState, hand_vertices_world
 from worker.solver.suggest import START_ITERATIONS, lift_labels
-from worker.solver.types import HandTarget, SolveInputs, SolveSettings
+from worker.solver.types import FOLLOW_START_JOINTS, HandTarget, SolveInputs, SolveSettings
 
-# Visible keyed joints a frame needs before the hand model can start from it (as the solve's
-# min_joints: fewer leave the pose under-determined).
-MIN_START_JOINTS = 6
+# Visible keyed joints a frame needs before the hand model can start from it.
+MIN_START_JOINTS = FOLLOW_START_JOINTS
 # ICP rounds per frame (matches renewed, then LM); a frame stops early once the pose moves less
 # than CONVERGED_M at any joint between rounds.
 ROUNDS = 8

@@ -14,6 +14,11 @@ import numpy as np
 from worker.geometry.cameras import CameraModel
 from worker.hand.params import HandModel
 
+# Visible keyed joints a frame of one view needs before the hand model can be fitted to it and
+# followed through the view's depth (worker.solver.follow; as the solve's min_joints: fewer
+# leave the pose under-determined). Here, without PyTorch, so that the API can say so.
+FOLLOW_START_JOINTS = 6
+
 
 @dataclass
 class HandTarget:

@@ -20,6 +20,10 @@
  *           Points corrected together (a skeleton or finger drag) are re-tracked together.
  *           Toggling occlusion moves nothing, so it re-tracks nothing: what was tracked on
  *           either side of the toggled frame stays.
+ *   Follow hand  (hand tasks) asks POST /api/annotate/model-follow for the hand model carried
+ *           through the view's depth from the worker's keyframes (a job on the server's queue:
+ *           asked again every few seconds while it says it is preparing) and holds the answer
+ *           as ghosts, accepted or discarded as Track's.
  *   Use suggestions  writes GET /api/annotate/suggestions' positions as "prefilled"
  *           keyframes, never over a keyframe the worker set by hand.
  *
@@ -29,9 +33,9 @@
 
 import { epipolarLines } from "./epipolar.js";
 import {
-  HAND_SOURCES, acceptViewed, allSpans, countTracked, heldFrames, heldRuns, openSpanAround,
-  openSpans, prefillEntries, proposalEntries, proposalRequest, proposalsFrom, retrackSpans,
-  sourceOf, spanAround, stopText, trackedText,
+  HAND_SOURCES, acceptViewed, allSpans, anchorRows, countTracked, heldFrames, heldRuns,
+  modelProposals, modelText, openSpanAround, openSpans, prefillEntries, proposalEntries,
+  proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, stopText, trackedText,
 } from "./proposals.js";
 import { ViewedFrames } from "./viewed.js";
 
@@ -56,6 +60,15 @@ function reason(err) {
   return err && err.message ? err.message : err;
 }
 
+/** A server's reason as a sentence: "The hand model is ….". @param {string} text */
+function sentence(text) {
+  const t = String(text || "").trim();
+  return t ? `${t[0].toUpperCase()}${t.slice(1)}${/[.!?]$/.test(t) ? "" : "."}` : "";
+}
+
+/** @param {number} ms */
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
 /**
  * The assistance of one page: proposals shown as ghosts, the task's suggestions, the epipolar
  * lines' toggle, re-tracks after corrections, and a status line for the worker.
@@ -64,16 +77,20 @@ export class Assist {
   /**
    * @param {Object} o
    * @param {import("./store.js").AnnotationStore} o.store
-   * @param {{proposals: (body: object) => Promise<any>, suggestions: () => Promise<any>}} o.api
+   * @param {{proposals: (body: object) => Promise<any>, suggestions: () => Promise<any>,
+   *          modelFollow?: (body: object) => Promise<any>}} o.api
+   * @param {boolean} [o.handModel]  whether the hand model's follow is offered (hand tasks)
    * @param {() => boolean} o.editable  whether the page may write now (edit mode, not locked)
    * @param {() => {frame: number, active: number}} o.where  the editor's frame and point
    * @param {() => void} o.onChange  ghosts, lines or status changed: redraw
    * @param {number} [o.retrackDelayMs]
    * @param {number} [o.suggestPollMs]  @param {number} [o.suggestPollLimitMs]
    */
-  constructor({ store, api, editable, where, onChange, retrackDelayMs = RETRACK_DELAY_MS,
-    suggestPollMs = SUGGEST_POLL_MS, suggestPollLimitMs = SUGGEST_POLL_LIMIT_MS }) {
+  constructor({ store, api, editable, where, onChange, handModel = false,
+    retrackDelayMs = RETRACK_DELAY_MS, suggestPollMs = SUGGEST_POLL_MS,
+    suggestPollLimitMs = SUGGEST_POLL_LIMIT_MS }) {
     this.store = store;
+    this.handModel = handModel && typeof api.modelFollow === "function";
     this.api = api;
     this.editable = editable;
     this.where = where;
@@ -155,6 +172,53 @@ export class Assist {
       return true;
     } catch (err) {
       this._say("error", `Tracking failed: ${reason(err)}`);
+      return false;
+    } finally {
+      this._tracking = false;
+    }
+  }
+
+  /**
+   * Asks for the hand model's follow from every point's keyframes (hand tasks), waiting while
+   * the server prepares it, and shows it as ghosts. Resolves to whether proposals are shown.
+   */
+  async followModel() {
+    if (!this.handModel || !this.editable() || this._tracking) return false;
+    const tracks = [];
+    for (let p = 0; p < this.store.numPoints; p++) {
+      const keyframes = anchorRows(this.store.keyframes(p));
+      if (keyframes.length) tracks.push({ point: p, keyframes });
+    }
+    this._tracking = true;
+    this._say("busy", "Asking the hand model…");
+    try {
+      const started = Date.now();
+      let answer = await this.api.modelFollow({ tracks });
+      while (answer.preparing) {
+        if (Date.now() - started >= this.suggestPollLimitMs) {
+          this._say("warn", "The hand model is taking longer than expected: press M again " +
+            "in a minute.");
+          return false;
+        }
+        this._say("busy", `${sentence(answer.reason)} This takes about a second a frame.`);
+        await sleep(this.suggestPollMs);
+        answer = await this.api.modelFollow({ tracks });
+      }
+      const shown = answer.available ? modelProposals(answer, this.store.numFrames) : [];
+      if (!shown.length) {
+        this._say("warn", answer.available
+          ? "The hand model proposes nothing beyond your keyframes here."
+          : sentence(answer.reason));
+        return false;
+      }
+      this.proposals = { points: shown, counts: countTracked(shown) };
+      this.stops = [];
+      this.viewed.clear();
+      this.noteViewed(this.where().frame, shown.map((p) => p.point));
+      this._say("info", modelText(answer, this.store.numFrames));
+      return true;
+    } catch (err) {
+      this._say("error", `The hand model failed: ${reason(err)}`);
       return false;
     } finally {
       this._tracking = false;

@@ -314,3 +314,49 @@ export function heldFrames(p) {
   }
   return frames;
 }
+
+/**
+ * @typedef {{direction: "forward"|"backward", reached: number, stopped: string}} ModelStop
+ * @typedef {{available: boolean, start_frame: number|null, first_frame: number,
+ *            last_frame: number, points: Array<{point: number, xy: Array<number[]|null>,
+ *            ok: boolean[]}>, stops: ModelStop[]}} ModelAnswer
+ *   POST /api/annotate/model-follow, once available
+ */
+
+/**
+ * The hand model's follow as proposals: each point it proposes at some frame, over one open
+ * span across the whole clip. Partial from the start: Enter writes only the frames it holds
+ * (and the worker viewed), never removes what is at the others.
+ * @param {ModelAnswer} answer @param {number} numFrames
+ * @returns {Array<PointProposal & {partial: boolean}>}
+ */
+export function modelProposals(answer, numFrames) {
+  return answer.points.filter((p) => p.ok.some((o, i) => o && p.xy[i])).map((p) => ({
+    point: p.point, first: answer.first_frame, last: answer.last_frame,
+    spans: [[-1, numFrames]], xy: p.xy, ok: p.ok, partial: true,
+  }));
+}
+
+/**
+ * What the status line says of the hand model's follow: the frames it followed, from which
+ * keyed frame, where and why it stopped, and how to take it.
+ * "The hand model followed frames 0-40 from your keyframes on frame 3; it lost the hand after
+ * frame 40 (the depth there no longer fits it). ..."
+ * @param {ModelAnswer} answer @param {number} numFrames
+ */
+export function modelText(answer, numFrames) {
+  const start = answer.start_frame ?? 0;
+  const reached = (direction) => {
+    const s = answer.stops.find((x) => x.direction === direction);
+    return s ? s.reached : start;
+  };
+  const [from, to] = [reached("backward"), reached("forward")];
+  const lost = answer.stops.filter((s) => s.stopped !== "end")
+    .map((s) => `${s.direction === "forward" ? "after" : "before"} frame ${s.reached}`);
+  const clip = from === 0 && to === numFrames - 1 ? " (the whole clip)" : "";
+  const why = lost.length
+    ? `; it lost the hand ${lost.join(" and ")} (the depth there no longer fits it)` : "";
+  return `The hand model followed frames ${from}-${to}${clip} from your keyframes on frame ` +
+    `${start}${why}. Cyan rings: step through them from frame ${start}; Enter accepts the ` +
+    "frames you have viewed, Esc discards. Drag any ring that is off.";
+}
