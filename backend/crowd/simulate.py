@@ -181,19 +181,23 @@ class WorkerClient:
 class PageAssistance:
     """What the annotation page shows one assignment, asked of its routes (a
     worker.synth.assisted.Assistance): POST /api/annotate/proposals (between anchors, and
-    ``follow`` forward from a point's last keyframe, as the page's Track all asks) and GET
-    /api/annotate/suggestions (polled while ``preparing``, as the page does). The check cells
+    ``follow`` forward from a point's last keyframe, as the page's Track all asks), GET
+    /api/annotate/suggestions and, on hand tasks, POST /api/annotate/model-follow (both
+    polled while ``preparing``, as the page does). The check cells
     are planted by the routes. The page re-tracks around a correction by itself."""
 
     follows = True
     retracks = True
 
     def __init__(self, client: WorkerClient, token: str, task: dict,
-                 poll_s: float = SUGGEST_POLL_S, poll_limit_s: float = SUGGEST_POLL_LIMIT_S
-                 ) -> None:
+                 poll_s: float = SUGGEST_POLL_S, poll_limit_s: float = SUGGEST_POLL_LIMIT_S,
+                 model: bool = True) -> None:
         self.client, self.auth = client, {"Authorization": f"Bearer {token}"}
         self.frames = int(task["num_frames"])
         self.size = (int(task["width"]), int(task["height"]))
+        # Whether the worker presses Follow hand (hand tasks only): the follow is a job, so
+        # an app served without a queue worker would keep it preparing.
+        self.hand = model and task.get("kind") == "hand"
         self.poll_s, self.poll_limit_s = poll_s, poll_limit_s
         self._suggested: tuple[Prefill | None] | None = None
 
@@ -222,9 +226,34 @@ class PageAssistance:
 
     def model_follow(self, anchors: list[list[list[Any]]]
                      ) -> tuple[np.ndarray, np.ndarray] | None:
-        """The page offers no hand-model follow yet (worker.solver.follow runs in process
-        only: bench/follow.py)."""
-        return None
+        """POST /api/annotate/model-follow with every point's anchors, asked again while it
+        answers ``preparing`` (as the page's Follow hand does, for as long); nothing proposed
+        where it says why not. None on an object task (the page offers it on hands only)."""
+        xy = np.full((self.frames, len(anchors), 2), np.nan)
+        ok = np.zeros((self.frames, len(anchors)), dtype=bool)
+        if not self.hand:
+            return None
+        body = {"tracks": [{"point": p, "keyframes": rows}
+                           for p, rows in enumerate(anchors) if rows]}
+        reply = self._polled("POST", "/api/annotate/model-follow", "model follow", json=body)
+        if not reply.get("available"):
+            return xy, ok
+        for point in reply["points"]:
+            for f, (at, held) in enumerate(zip(point["xy"], point["ok"], strict=True)):
+                if held and at is not None:
+                    xy[f, point["point"]], ok[f, point["point"]] = at, True
+        return xy, ok
+
+    def _polled(self, method: str, path: str, step: str, **kwargs: Any) -> dict[str, Any]:
+        """A route's answer, asked again every poll_s while it says ``preparing`` (a job on
+        the worker queue), for poll_limit_s at most."""
+        started = time.monotonic()
+        while True:
+            reply: dict[str, Any] = _checked(self.client.http.request(
+                method, f"{self.client.base}{path}", headers=self.auth, **kwargs), step)
+            if not reply.get("preparing") or time.monotonic() - started >= self.poll_limit_s:
+                return reply
+            time.sleep(self.poll_s)
 
     def suggestions(self) -> Prefill | None:
         """The view's suggestions as the page shows them (asked once: the page keeps them)."""
@@ -233,13 +262,7 @@ class PageAssistance:
         return self._suggested[0]
 
     def _ask_suggestions(self) -> Prefill | None:
-        started = time.monotonic()
-        while True:
-            reply = _checked(self.client.http.get(f"{self.client.base}/api/annotate/suggestions",
-                                                  headers=self.auth), "suggestions")
-            if not reply.get("preparing") or time.monotonic() - started >= self.poll_limit_s:
-                break
-            time.sleep(self.poll_s)
+        reply = self._polled("GET", "/api/annotate/suggestions", "suggestions")
         if not reply.get("available") or not reply.get("points"):
             return None
         points = max(int(p["point"]) for p in reply["points"]) + 1
@@ -265,7 +288,7 @@ def admin_token(http: httpx.Client, base: str, email: str, password: str) -> str
 
 def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth: CaptureTruth,
               rng: np.random.Generator, only: Collection[str] | None = None,
-              protocol: Protocol = "keyframes") -> WorkerOutcome:
+              protocol: Protocol = "keyframes", model_follow: bool = True) -> WorkerOutcome:
     email = WORKER_EMAIL.format(index=index)
     token, worker_id = client.sign_in(admin, email, WORKER_PASSWORD.format(index=index))
     outcome = WorkerOutcome(email=email, worker_id=worker_id, profile=profile,
@@ -275,7 +298,8 @@ def _work_one(client: WorkerClient, admin: str, index: int, profile: str, truth:
         return outcome
     params, page_token, reply = client.open_page(accepted["work_url"])
     task = reply["task"]
-    page = PageAssistance(client, page_token, task) if protocol == ASSISTED else None
+    page = (PageAssistance(client, page_token, task, model=model_follow)
+            if protocol == ASSISTED else None)
     # An object's landmarks are the worker's to pick, unless the page already suggests some:
     # a person then follows the spots they mark.
     suggested = page.suggestions() if page is not None and task["kind"] != "hand" else None
@@ -310,7 +334,8 @@ def draw_assisted(count: int, profile: str, rng: np.random.Generator) -> list[st
 
 def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: str,
              admin_password: str, seed: int = 0, first_index: int = 1,
-             protocol: Protocol = "keyframes") -> list[WorkerOutcome]:
+             protocol: Protocol = "keyframes", model_follow: bool = True
+             ) -> list[WorkerOutcome]:
     """Run ``workers`` simulated workers one after another against the app at ``base``.
 
     Worker i (from ``first_index``) is ``sim-worker-<i>`` with a deterministic password, so a
@@ -318,7 +343,8 @@ def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: 
     HIT available". Hand and object tasks alike are worked (object landmarks are mesh
     vertices followed through the object's true poses). A later round of a crowd starts
     where the last one ended (``first_index``), so HITs re-opened after a rejection go to
-    workers who have not done them yet.
+    workers who have not done them yet. ``model_follow``: assisted workers ask for the hand
+    model's follow on hand views without suggestions (a job: the app needs a queue worker).
     """
     rng = np.random.default_rng(seed)
     profiles = (draw_assisted(workers, profile, rng) if protocol == ASSISTED
@@ -329,6 +355,7 @@ def simulate(base: str, capture: Path, workers: int, profile: str, admin_email: 
             admin = admin_token(http, base, admin_email, admin_password)
             client = WorkerClient(http, base)
             return [_work_one(client, admin, first_index + i, name, truth, rng,
-                              protocol=protocol) for i, name in enumerate(profiles)]
+                              protocol=protocol, model_follow=model_follow)
+                    for i, name in enumerate(profiles)]
     except httpx.HTTPError as exc:
         raise SimulationError(f"could not reach the app at {base}: {exc}") from exc

@@ -1,6 +1,9 @@
 """The assisted simulated crowd against the served app: workers who ask the proposals and
 suggestions routes as the annotation page does spend fewer actions than the keyframe worker on
-the same tasks, with labels near the truth; a blind acceptor's work is flagged by QC."""
+the same tasks, with labels near the truth; a blind acceptor's work is flagged by QC.
+
+The app is served without a queue worker, so the crowd here does not ask for the hand model's
+follow (a job; tests/backend/labels/test_model_follow.py takes that path)."""
 
 from __future__ import annotations
 
@@ -68,7 +71,7 @@ def test_assisted_workers_spend_fewer_actions_with_labels_near_the_truth(
         with session_scope() as session:
             add_assignments(session, None, hit_id, 1)
     helped = simulate(crowd_url, assist_capture, VIEWS, "careful", ADMIN_EMAIL, ADMIN_PASSWORD,
-                      first_index=VIEWS + 1, protocol="assisted")
+                      first_index=VIEWS + 1, protocol="assisted", model_follow=False)
     assert [o.status for o in plain + helped] == ["submitted"] * 2 * VIEWS
     keyed = {w[0]: w[1] for w in _submitted([o.worker_id for o in plain]).values()}
     done = _submitted([o.worker_id for o in helped])
@@ -102,9 +105,9 @@ def test_a_blind_assisted_acceptor_is_flagged_by_qc(crowd_url: str,
 
     sequence_id, task_ids, _ = _publish_hands(assist_capture)
     blind = simulate(crowd_url, assist_capture, 1, "blind", ADMIN_EMAIL, ADMIN_PASSWORD,
-                     protocol="assisted")
+                     protocol="assisted", model_follow=False)
     careful = simulate(crowd_url, assist_capture, VIEWS - 1, "careful", ADMIN_EMAIL,
-                       ADMIN_PASSWORD, first_index=2, protocol="assisted")
+                       ADMIN_PASSWORD, first_index=2, protocol="assisted", model_follow=False)
     assert [o.status for o in careful + blind] == ["submitted"] * VIEWS
     with session_scope() as session:
         target = session.get_one(Task, task_ids[0]).target_key

@@ -229,3 +229,28 @@ def test_bad_requests_are_refused_naming_the_problem(
                          headers=admin_headers).json()["url"].split("#token=")[1]
     assert client.post(URL, json=body, headers=_bearer(review)).status_code == 403
     assert _jobs() == []
+
+
+def test_the_simulated_crowds_page_asks_the_route_as_the_page_does(
+        client: TestClient, admin_headers: dict, view: dict) -> None:
+    """backend.crowd.simulate.PageAssistance.model_follow: the same body, the answer as
+    (F, P, 2) and (F, P); polled while preparing; nothing on an object page."""
+    from backend.crowd.simulate import PageAssistance, WorkerClient
+
+    link, body = view["links"][0], _first_frame_keys(view)
+    anchors = [t["keyframes"] for t in body["tracks"]]
+    task = {"num_frames": FRAMES, "width": 640, "height": 480, "kind": "hand"}
+    page = PageAssistance(WorkerClient(client, ""), link["token"], task, poll_s=0.01,
+                          poll_limit_s=0.05)
+    xy, ok = page.model_follow(anchors)  # still preparing when it gives up: nothing shown
+    assert xy.shape == (FRAMES, 21, 2) and not ok.any()
+    assert _run_jobs() == 1
+    xy, ok = page.model_follow(anchors)
+    answer = _post(client, link["token"], body)
+    np.testing.assert_array_equal(ok, np.array([p["ok"] for p in answer["points"]]).T)
+    np.testing.assert_array_equal(xy[ok], _grid(answer["points"])[ok])
+    assert ok.sum() > 100
+    for kind, model in (("object", True), ("hand", False)):
+        other = PageAssistance(WorkerClient(client, ""), link["token"], {**task, "kind": kind},
+                               model=model)
+        assert other.model_follow(anchors) is None
