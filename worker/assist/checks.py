@@ -7,9 +7,7 @@ checks, a handful of (point, frame) cells of every assignment are check cells: a
 shown there is moved CHECK_OFFSET_PX off (in a direction drawn for the cell), far enough that
 anyone looking at the frame sees it is wrong. A worker who looks drags it back (the keyframe
 becomes "edited"); one who accepts everything keeps it (the keyframe stays "tracked" or
-"prefilled"), which QC counts, unless the kept position lies on the line of the worker's
-keyframes around it: there the suggestion itself was off, the planted position fell on the
-point, and keeping it was right.
+"prefilled"), which QC counts.
 
 The cells and directions are drawn from a key and the assignment id alone (HMAC-SHA256), so
 the suggestion routes, QC and the simulated crowd agree on them without storing anything, and
@@ -36,10 +34,6 @@ CHECK_COUNT = 4
 CHECK_OFFSET_PX = 15.0
 # Keyframe sources whose position the worker took from a suggestion unchanged.
 ACCEPTED_SOURCES = ("tracked", "prefilled")
-# A kept check cell within this distance (px) of the line of the worker's keyframes around it
-# is not counted as accepted (_in_line): half the offset, so that a cell kept by someone who
-# took every suggestion (CHECK_OFFSET_PX off the line of the unmoved ones around it) is.
-IN_LINE_PX = CHECK_OFFSET_PX / 2
 
 
 def check_key(signing_key: str) -> bytes:
@@ -115,26 +109,6 @@ def plant(key: bytes, assignment_id: int, xy: np.ndarray, shown: np.ndarray, fir
     return out
 
 
-def _in_line(track: list[list[Any]], row: list[Any]) -> bool:
-    """Whether a kept check cell's position lies within IN_LINE_PX of the straight line
-    between the track's nearest visible keyframes before and after it (False where one side
-    has none). A suggestion shown off on purpose lies CHECK_OFFSET_PX off the suggestions
-    around it; kept where they were kept, it stays that far off their line. One that lies on
-    the line of the worker's own track was right where it was shown: the suggestion itself was
-    off by about CHECK_OFFSET_PX there, the planted position fell on the point, and a worker
-    who looks keeps it."""
-    frame = row[0]
-    seen = [r for r in track if r[0] != frame and r[3] and r[1] is not None and r[2] is not None]
-    before = max((r for r in seen if r[0] < frame), key=lambda r: r[0], default=None)
-    after = min((r for r in seen if r[0] > frame), key=lambda r: r[0], default=None)
-    if before is None or after is None or row[1] is None or row[2] is None:
-        return False
-    t = (frame - before[0]) / (after[0] - before[0])
-    x = before[1] + t * (after[1] - before[1])
-    y = before[2] + t * (after[2] - before[2])
-    return math.hypot(row[1] - x, row[2] - y) < IN_LINE_PX
-
-
 def _cell_outcomes(key: bytes, assignment_id: int, tracks: list[list[list[Any]]],
                    num_points: int, num_frames: int) -> list[tuple[int, int, str]]:
     """(point, frame, "accepted" | "corrected") of each check cell that is either."""
@@ -146,7 +120,7 @@ def _cell_outcomes(key: bytes, assignment_id: int, tracks: list[list[list[Any]]]
             if row[0] != frame:
                 continue
             source = row[4] if len(row) > 4 else "placed"
-            if source in ACCEPTED_SOURCES and row[3] and not _in_line(tracks[point], row):
+            if source in ACCEPTED_SOURCES and row[3]:
                 out.append((point, frame, "accepted"))
             elif source == "edited":
                 out.append((point, frame, "corrected"))

@@ -15,7 +15,6 @@ from worker.assist.checks import (
     check_cells,
     check_key,
     check_offset,
-    kept_checks,
     plant,
     shift_inside,
 )
@@ -96,29 +95,3 @@ def test_accepted_and_corrected_cells_are_counted_from_sources() -> None:
     # Without keyframes at the cells (keyed by hand elsewhere, interpolated) nothing counts.
     bare: list[list[list[object]]] = [[[0, 10.0, 10.0, 1]] for _ in range(num_points)]
     assert accepted_checks(KEY, 4, bare, num_points, num_frames) == (0, 0)
-
-
-def test_a_kept_cell_on_the_line_of_the_workers_track_is_not_counted() -> None:
-    """A check cell kept where it lies on the line of the worker's keyframes around it was
-    right where it was shown (the suggestion itself was off by about the offset there); kept
-    15 px off that line it is counted, as is one with no keyframe on one side."""
-    num_points, num_frames = 21, 24
-    (point, frame), *_ = check_cells(KEY, 4, num_points, num_frames)
-    path = [[f, 100.0 + 3 * f, 200.0, 1, "tracked"] for f in range(num_frames)]
-    tracks: list[list[list[object]]] = [[] for _ in range(num_points)]
-    tracks[point] = [list(r) for r in path]
-    # On the line (2 px beside it, a careful worker's tolerance): not counted.
-    tracks[point][frame] = [frame, 100.0 + 3 * frame, 202.0, 1, "tracked"]
-    assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (0, 0)
-    # 15 px off the line of the suggestions kept around it: counted, and named.
-    tracks[point][frame] = [frame, 100.0 + 3 * frame + 9.0, 212.0, 1, "tracked"]
-    assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (1, 0)
-    assert kept_checks(KEY, 4, tracks, num_points, num_frames) == [(point, frame)]
-    # The line is that of the worker's keyframes wherever they are, dragged ones included.
-    tracks[point] = [[0, 100.0, 200.0, 1], [frame, 100.0 + 3 * frame, 201.0, 1, "tracked"],
-                     [num_frames - 1, 100.0 + 3 * (num_frames - 1), 200.0, 1, "edited"]]
-    assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (0, 0)
-    # No visible keyframe after it: nothing to judge the line by, counted.
-    tracks[point] = [[0, 100.0, 200.0, 1], [frame, 100.0 + 3 * frame, 201.0, 1, "tracked"],
-                     [num_frames - 1, None, None, 0]]
-    assert accepted_checks(KEY, 4, tracks, num_points, num_frames) == (1, 0)
