@@ -68,13 +68,14 @@ MAX_DEPTH_RMS_MM = 2.5
 # also passes while its RMS is within STOP_RATIO times the median of the frames followed so far
 # in that direction (the keyed frame's where there are none yet).
 STOP_RATIO = 2.0
-# The keyed frame's fit: LM on the keyframes alone (iterations x robust rounds), then the ICP
-# rounds with the keypoint term START_KPT_WEIGHT times its weight on the frames followed. The
-# depth places the hand along the rays and the keyframes hold the fingers where the worker
-# put them. With the ICP at the usual weight straight from the lifted keyframes, the start
-# settled in a wrong pose on some views (s7717's fifth: 2.7 px median from the truth at the
-# keyed frame, 4-5 px on the next five, where a started pose at the truth gives about 1 px);
-# with these, 1.7 px there and about 1.1 px on the next frames.
+# The keyed frame is fitted each of these ways from the lifted keyframes: (LM iterations x
+# robust rounds on the keyframes alone, then the ICP rounds with the keypoint term this many
+# times its weight on the frames followed); the fit with the lowest robust depth RMS starts
+# the follow. The first is the plain fit. In the second the depth places the hand along the
+# rays while the keyframes hold the fingers where the worker put them: on s7717's fifth view
+# the plain fit settled 2.7 px (median) from the truth, the next five frames 4-5 px (about
+# 1 px from the true pose), the second 1.7 px and about 1.1 px; on other views and draws of
+# clicks the plain fit is the better one.
 START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0))
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
 # start is refused only where the keyed hand is clearly off the depth (keyframes on another
