@@ -73,8 +73,8 @@ STOP_RATIO = 2.0
 # times its weight on the frames followed); the fit with the lowest robust depth RMS starts
 # the follow. The first is the plain fit. In the second the depth places the hand along the
 # rays while the keyframes hold the fingers where the worker put them: on s7717's fifth view
-# the plain fit settled 2.7 px (median) from the truth, the next five frames 4-5 px (about
-# 1 px from the true pose), the second 1.7 px and about 1.1 px; on other views and draws of
+# the plain fit settled 2.7 px (median) from the truth, the next five frames 4-5 px (started
+# at the true pose: about 1 px), the second 1.7 px and about 1.1 px; on other views and draws of
 # clicks the plain fit is the better one.
 START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0))
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
