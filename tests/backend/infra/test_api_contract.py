@@ -291,7 +291,8 @@ PUBLIC = {
 # token). Every other route is an admin route (frame routes also take a view token, but in
 # ?token=, never as a bearer).
 WORKER = re.compile(r"^/api/portal/(?!workers$|invites$)")
-PAGE = re.compile(r"^/api/annotate/(task|tracks|submit|proposals|suggestions|stretches|model-follow)$")
+PAGE = re.compile(
+    r"^/api/annotate/(task|tracks|submit|proposals|suggestions|stretches|model-follow)$")
 
 
 def _routes() -> list[tuple[str, str]]:
