@@ -178,6 +178,16 @@ class WorkerClient:
         _checked(self.http.post(url, data=form), "post externalSubmit")
 
 
+def _fill_held(xy: np.ndarray, ok: np.ndarray, reply: dict[str, Any]) -> None:
+    """Writes a proposals answer (per point ``xy`` and ``ok`` over frames ``first_frame``..)
+    into the clip's (F, P, 2) positions and (F, P) flags where it holds."""
+    first = int(reply["first_frame"])
+    for point in reply["points"]:
+        for i, (at, held) in enumerate(zip(point["xy"], point["ok"], strict=True)):
+            if held and at is not None:
+                xy[first + i, point["point"]], ok[first + i, point["point"]] = at, True
+
+
 class PageAssistance:
     """What the annotation page shows one assignment, asked of its routes (a
     worker.synth.assisted.Assistance): POST /api/annotate/proposals (between anchors, and
@@ -217,11 +227,7 @@ class PageAssistance:
             body["follow"] = [{"point": p, "direction": "forward"} for p in forward]
         reply = _checked(self.client.http.post(f"{self.client.base}/api/annotate/proposals",
                                                headers=self.auth, json=body), "proposals")
-        first = int(reply["first_frame"])
-        for point in reply["points"]:
-            for i, (at, held) in enumerate(zip(point["xy"], point["ok"], strict=True)):
-                if held and at is not None:
-                    xy[first + i, point["point"]], ok[first + i, point["point"]] = at, True
+        _fill_held(xy, ok, reply)
         return xy, ok
 
     def model_follow(self, anchors: list[list[list[Any]]]
@@ -229,19 +235,15 @@ class PageAssistance:
         """POST /api/annotate/model-follow with every point's anchors, asked again while it
         answers ``preparing`` (as the page's Follow hand does, for as long); nothing proposed
         where it says why not. None on an object task (the page offers it on hands only)."""
-        xy = np.full((self.frames, len(anchors), 2), np.nan)
-        ok = np.zeros((self.frames, len(anchors)), dtype=bool)
         if not self.hand:
             return None
+        xy = np.full((self.frames, len(anchors), 2), np.nan)
+        ok = np.zeros((self.frames, len(anchors)), dtype=bool)
         body = {"tracks": [{"point": p, "keyframes": rows}
                            for p, rows in enumerate(anchors) if rows]}
         reply = self._polled("POST", "/api/annotate/model-follow", "model follow", json=body)
-        if not reply.get("available"):
-            return xy, ok
-        for point in reply["points"]:
-            for f, (at, held) in enumerate(zip(point["xy"], point["ok"], strict=True)):
-                if held and at is not None:
-                    xy[f, point["point"]], ok[f, point["point"]] = at, True
+        if reply.get("available"):
+            _fill_held(xy, ok, reply)
         return xy, ok
 
     def _polled(self, method: str, path: str, step: str, **kwargs: Any) -> dict[str, Any]:

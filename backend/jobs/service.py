@@ -117,3 +117,10 @@ def retry_job(session: Session, job_id: int) -> Job:
     if job.status in ACTIVE:
         raise Conflict(f"job {job_id} is already {job.status}", state=job.status)
     return enqueue_job(session, job.kind, job.key, job.args)
+
+
+def last_error_line(job: Job) -> str:
+    """The last line of a failed job's error (the exception's message), for a reason shown to
+    a person; "unknown error" when it has none."""
+    lines = (job.error or "").strip().splitlines()
+    return lines[-1] if lines else "unknown error"

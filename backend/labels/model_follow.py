@@ -42,7 +42,7 @@ from backend.db import session_scope
 from backend.errors import DexlabelError, StorageError
 from backend.jobs.models import Job
 from backend.jobs.runner import ACTIVE
-from backend.jobs.service import enqueue_job
+from backend.jobs.service import enqueue_job, last_error_line
 from backend.labels.suggestions import depth_reader
 from backend.storage import Storage, get_storage
 from backend.validation import MAX_INT32
@@ -232,8 +232,7 @@ def _queued(session: Session, task: Task, digest: str, tracks: list[list[list[An
     key = job_key(task.id, digest)
     job = session.scalars(select(Job).where(Job.key == key)).one_or_none()
     if job is not None and job.status == "failed":
-        error = (job.error or "").strip().splitlines()[-1:] or ["unknown error"]
-        return f"the hand model could not follow this view: {error[0]}", False
+        return f"the hand model could not follow this view: {last_error_line(job)}", False
     if job is None or job.status not in ACTIVE:
         other = session.scalars(select(Job.key).where(
             Job.kind == MODEL_FOLLOW_KIND, Job.key.like(f"{MODEL_FOLLOW_KIND}:{task.id}:%"),

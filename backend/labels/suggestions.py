@@ -48,7 +48,7 @@ from backend.db import session_scope
 from backend.errors import DexlabelError, StorageError, Unauthorized
 from backend.jobs.models import Job
 from backend.jobs.runner import ACTIVE
-from backend.jobs.service import enqueue_job
+from backend.jobs.service import enqueue_job, last_error_line
 from backend.labels import labelled_work, sequence_tasks, work_query
 from backend.storage import Storage, get_storage
 from worker.assist.checks import check_key, plant
@@ -374,8 +374,8 @@ def _fit_queued(session: Session, task: Task, first: int, last: int, digest: str
     key = fitted_job_key(task.id, first, last, digest)
     job = session.scalars(select(Job).where(Job.key == key)).one_or_none()
     if job is not None and job.status == "failed":
-        error = (job.error or "").strip().splitlines()[-1:] or ["unknown error"]
-        return f"suggestions from {model} could not be prepared: {error[0]}", False
+        return (f"suggestions from {model} could not be prepared: {last_error_line(job)}",
+                False)
     if job is None or job.status not in ACTIVE:
         enqueue_job(session, FITTED_KIND, key,
                     {"task_id": task.id, "first_frame": first, "last_frame": last})
