@@ -103,14 +103,16 @@ def _view(scene: dict[str, Any], index: int, crowd_seed: int) -> dict[str, Any]:
     depth = np.stack([cv2.imread(str(scene["dir"] / serial / dexycb.depth_file(f)),
                                  cv2.IMREAD_UNCHANGED) for f in range(frames)])
 
-    def model(anchors: list[list[list[Any]]]) -> tuple[np.ndarray, np.ndarray]:
+    def model(anchors: list[list[list[Any]]], begin: int | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
         keypoints = np.full((frames, len(anchors), 2), np.nan)
         keyed = np.zeros((frames, len(anchors)), bool)
         for p, rows in enumerate(anchors):
             for f, x, y, vis in (r[:4] for r in rows):
                 if vis and x is not None:
                     keypoints[f, p], keyed[f, p] = (x, y), True
-        found = follow_hand(cam, depth, keypoints, keyed, scene["side"], scene["betas"])
+        found = follow_hand(cam, depth, keypoints, keyed, scene["side"], scene["betas"],
+                            begin=begin)
         return found.xy, found.ok
 
     # The follow alone, from the careful worker's first keyframes.

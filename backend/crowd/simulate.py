@@ -230,17 +230,20 @@ class PageAssistance:
         _fill_held(xy, ok, reply)
         return xy, ok
 
-    def model_follow(self, anchors: list[list[list[Any]]]
+    def model_follow(self, anchors: list[list[list[Any]]], begin: int | None = None
                      ) -> tuple[np.ndarray, np.ndarray] | None:
-        """POST /api/annotate/model-follow with every point's anchors, asked again while it
-        answers ``preparing`` (as the page's Follow hand does, for as long); nothing proposed
-        where it says why not. None on an object task (the page offers it on hands only)."""
+        """POST /api/annotate/model-follow with every point's anchors (and ``begin``: the
+        frame the page is on when asked again after a start), asked again while it answers
+        ``preparing`` (as the page's Follow hand does, for as long); nothing proposed where it
+        says why not. None on an object task (the page offers it on hands only)."""
         if not self.hand:
             return None
         xy = np.full((self.frames, len(anchors), 2), np.nan)
         ok = np.zeros((self.frames, len(anchors)), dtype=bool)
-        body = {"tracks": [{"point": p, "keyframes": rows}
-                           for p, rows in enumerate(anchors) if rows]}
+        body: dict[str, Any] = {"tracks": [{"point": p, "keyframes": rows}
+                                           for p, rows in enumerate(anchors) if rows]}
+        if begin is not None:
+            body["begin"] = begin
         reply = self._polled("POST", "/api/annotate/model-follow", "model follow", json=body)
         if reply.get("available"):
             _fill_held(xy, ok, reply)

@@ -71,10 +71,11 @@ class InvalidModelFollow(DexlabelError, status_code=422, code="invalid_model_fol
 
 
 class ModelFollowRequest(BaseModel):
-    """The worker's keyframes (as saved: per point ``[frame, x, y, visible01]`` rows; the
-    anchors, not tracked rows) and, optionally, the frame to follow forward from (``begin``:
-    the first frame at or after it with enough keyed joints); without it the follow starts
-    at the first such frame and runs both ways."""
+    """The worker's keyframes (as saved: per point ``[frame, x, y, visible01]`` rows; every
+    keyframe, accepted proposals too: all the worker has checked) and, optionally, the frame
+    to follow forward from (``begin``: the first frame at or after it with enough keyed
+    joints; the page sends the frame it is on once an earlier frame has them, a correction);
+    without it the follow starts at the first such frame and runs both ways."""
 
     model_config = ConfigDict(extra="forbid")
 

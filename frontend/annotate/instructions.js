@@ -160,7 +160,9 @@ const MODEL_TEXT = "Follow hand (M): once you have placed at least 6 joints on o
   "the clip in the depth this camera recorded. It takes up to a minute, then shows cyan rings " +
   "as Track does and says where it lost the hand. Step outward from that frame while the rings " +
   "sit on the joints, drag any that is off, and press Enter: it accepts the frames you have " +
-  "viewed. Then Track all (Shift+T) fills what is left.";
+  "viewed. Where a few rings come off the hand, stay on that frame, press Enter, drag them " +
+  "onto their joints and press M again: the model follows on from there. Where most come off " +
+  "or it lost the hand, Track all (Shift+T) fills what is left.";
 
 /**
  * The fair warning about check suggestions (worker.assist.checks): said plainly, in every

@@ -132,6 +132,22 @@ def test_follow_hand_shows_the_model_near_the_joints_and_enter_takes_the_frames_
     assert page.evaluate("window.__dexlabel.assist.proposals.points.length") == 21
     screens(page, output_dir, "model-follow-accepted", SIZES, VIEWPORT)
 
+    # On the last frame taken, M again (as after a correction there): the page asks from that
+    # frame forward with every keyframe, the accepted rows too, and the rings come after it.
+    bodies: list[dict] = []
+    page.on("request", lambda r: bodies.append(r.post_data_json)
+            if r.url.endswith("/api/annotate/model-follow") else None)
+    goto_frame(page, STEPPED)
+    page.keyboard.press("m")
+    expect(page.locator("#assist-status")).to_contain_text(
+        f"from your keyframes on frame {STEPPED}", timeout=150_000)
+    assert bodies and all(b["begin"] == STEPPED for b in bodies), bodies
+    sent = {t["point"]: [r[0] for r in t["keyframes"]] for t in bodies[0]["tracks"]}
+    assert all(sent[p] == list(range(STEPPED + 1)) for p in range(21)), sent
+    marks = page.evaluate("window.__dexlabel.assist.timelineMarks()")
+    assert all(m["frames"] and min(m["frames"]) > STEPPED for m in marks), marks
+    screens(page, output_dir, "model-follow-again", SIZES, VIEWPORT)
+
 
 def test_an_object_page_offers_no_hand_model(
     live_server: LiveServer, follow_capture: dict[str, Any], page: Page

@@ -6,8 +6,8 @@ import { test } from "node:test";
 import { Assist } from "../../frontend/annotate/core/assist.js";
 import { clipLine, epipolarLines } from "../../frontend/annotate/core/epipolar.js";
 import {
-  acceptViewed, allSpans, anchorRows, countTracked, heldFrames, modelProposals, modelText,
-  openSpanAround, openSpans, prefillEntries, proposalEntries, proposalRequest, retrackSpans, spanAround, stopText,
+  acceptViewed, allSpans, anchorRows, countTracked, handKeyedBefore, heldFrames, modelProposals,
+  modelText, openSpanAround, openSpans, prefillEntries, proposalEntries, proposalRequest, retrackSpans, spanAround, stopText,
   trackedText,
 } from "../../frontend/annotate/core/proposals.js";
 import { AnnotationStore } from "../../frontend/annotate/core/store.js";
@@ -528,8 +528,8 @@ test("suggestions being prepared: the reason shows, then the page asks again", a
 
 /** A hand page's assistance whose model-follow route answers `answers` in turn (the last one
  * again once they run out). */
-function modelAssist(answers, { numFrames = 12 } = {}) {
-  const store = new AnnotationStore({ numPoints: 2, numFrames, width: 640, height: 480 });
+function modelAssist(answers, { numFrames = 12, numPoints = 2 } = {}) {
+  const store = new AnnotationStore({ numPoints, numFrames, width: 640, height: 480 });
   const calls = [];
   const api = {
     async proposals() { throw new Error("not asked"); },
@@ -568,15 +568,17 @@ test("followModel: waits while the server prepares, then shows the follow as pro
     source: "tracked" }] }], { label: "t" });
   assert.equal(await assist.followModel(), true);
   assert.equal(calls.length, 3);
-  // Every ask carries the anchors only, the same body each time.
+  // Every ask carries every keyframe, accepted proposals too, the same body each time; no
+  // begin (no frame before this one has 6 joints keyed).
   assert.deepEqual(calls[0], { tracks: [{ point: 0, keyframes: [[3, 30, 20, 1]] },
-    { point: 1, keyframes: [[3, 30, 21, 1], [10, 99, 21, 1]] }] });
+    { point: 1, keyframes: [[3, 30, 21, 1], [6, 1, 1, 1], [10, 99, 21, 1]] }] });
   assert.deepEqual(calls[2], calls[0]);
   assert.equal(assist.status.kind, "info");
   assert.equal(assist.status.text, "The hand model followed frames 0-8 from your keyframes on " +
     "frame 3; it lost the hand after frame 8 (the depth there no longer fits it). Cyan rings: " +
     "step through them from frame 3; Enter accepts the frames you have viewed, Esc discards. " +
-    "Drag any ring that is off.");
+    "Drag any ring that is off; where a few come off together, accept up to that frame, drag " +
+    "them there and press M again to follow on.");
   assert.deepEqual(assist.layer(5, 0).ghosts[0].xy, [50, 20]);
   assert.equal(assist.layer(9, 0).ghosts[0].xy, null);
   assert.deepEqual(assist.timelineMarks()[0].frames, [0, 1, 2, 4, 5, 6, 7, 8]);
@@ -597,6 +599,31 @@ test("followModel: waits while the server prepares, then shows the follow as pro
   assert.equal(assist.proposals, null);
   assert.deepEqual(store.keyframes(0).map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 7, 8]);
   assert.deepEqual(store.keyframes(1).map((k) => k.frame), [0, 1, 2, 3, 4, 5, 6, 7, 8, 10]);
+});
+
+test("followModel: asked again after a frame keyed whole, it follows on from the frame shown", async () => {
+  const { store, assist, calls, where } = modelAssist([FOLLOWED, FOLLOWED, FOLLOWED],
+    { numPoints: 21 });
+  for (let p = 0; p < 6; p++) store.placePoint(p, 2, 10 + p, 20);
+  where.frame = 2;
+  await assist.followModel();
+  assert.equal(calls[0].begin, undefined, "from the keyed frame itself: both ways");
+  where.frame = 7;
+  await assist.followModel();
+  assert.equal(calls[1].begin, 7, "a correction on frame 7: forward from there");
+  store.toggleVisibility(0, 2);
+  assist.proposals = null;
+  await assist.followModel();
+  assert.equal(calls[2].begin, undefined, "5 visible joints on frame 2 start nothing");
+});
+
+test("handKeyedBefore counts visible placed joints per earlier frame", () => {
+  const rows = (f, visible) => ({ keyframes: [[f, 1, 1, visible]] });
+  const six = Array.from({ length: 6 }, () => rows(4, 1));
+  assert.equal(handKeyedBefore(six, 5), true);
+  assert.equal(handKeyedBefore(six, 4), false);
+  assert.equal(handKeyedBefore([...six.slice(1), rows(4, 0)], 5), false);
+  assert.equal(handKeyedBefore([...six.slice(1), { keyframes: [[4, null, null, 1]] }], 5), false);
 });
 
 test("followModel: says why nothing is shown, and gives up waiting after the limit", async () => {

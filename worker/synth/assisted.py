@@ -35,7 +35,8 @@ the routes themselves over HTTP. Where a model follow is offered (``model_follow
 worker.solver.follow, in process only) and there are no suggestions, the worker asks for it
 after its first keyframes, takes it up to the first frame where MODEL_OFF_JOINTS of its ghosts
 are off (the careful worker; the blind acceptor takes it all), drags the rest of what is off,
-and tracks from where it stopped. With ``follows`` the worker keys no clip's last frame: it
+asks again from that frame where only a few are off there (fixing them first), and tracks
+from where it stopped. With ``follows`` the worker keys no clip's last frame: it
 follows each point forward from its last keyframe (the proposals route's ``follow``) and
 corrects where the follow stopped or strayed. With ``retracks`` the page re-tracks around each
 correction by itself (one write, no T and no Enter), as the annotation page does; without it
@@ -96,6 +97,12 @@ TAKE_SHARE = 0.8
 # where this many are off.
 MODEL_START_JOINTS = 6
 MODEL_OFF_JOINTS = 3
+# Where at most this many are off at that frame, it drags them and asks the model again from
+# there, up to MODEL_ROUNDS times in all while each round carries the hand at least
+# MODEL_PROGRESS frames further; else it tracks on from the last frame taken.
+MODEL_FIX_JOINTS = 8
+MODEL_ROUNDS = 12
+MODEL_PROGRESS = 2
 # Rounds of asking for proposals after which the careful worker stops (each round halves or
 # settles every open span; a 72-frame clip needs at most about log2(72) + a few).
 MAX_ROUNDS = 20
@@ -156,12 +163,12 @@ class Assistance(Protocol):
         """The view's suggestions as shown (check cells moved off), None when there are none."""
         ...
 
-    def model_follow(self, anchors: list[list[list[Any]]]
+    def model_follow(self, anchors: list[list[list[Any]]], begin: int | None = None
                      ) -> tuple[np.ndarray, np.ndarray] | None:
         """The hand model carried through the view's depth from the keyframes given (P lists
-        of [frame, x, y, visible01] rows, worker.solver.follow): (F, P, 2) px as shown (check
-        cells moved off) and (F, P) where a proposal is given; None where the page offers no
-        such follow."""
+        of [frame, x, y, visible01] rows, worker.solver.follow), forward only from ``begin``
+        when given: (F, P, 2) px as shown (check cells moved off) and (F, P) where a proposal
+        is given; None where the page offers no such follow."""
         ...
 
 
@@ -176,8 +183,8 @@ class AssistSetting:
     prefill: the view's pre-fill suggestions, None before worker.assist.prefill's
         MIN_ACCEPTED_VIEWS other views are done.
     follows, retracks: as Assistance (off: the worker of bench/assist.py).
-    model: the model follow (keyframe rows per point -> (F, P, 2) px, (F, P) ok, before the
-        check cells), None: not offered.
+    model: the model follow ((keyframe rows per point, begin) -> (F, P, 2) px, (F, P) ok,
+        before the check cells), None: not offered.
     """
 
     grey: np.ndarray
@@ -186,7 +193,8 @@ class AssistSetting:
     prefill: Prefill | None = None
     follows: bool = False
     retracks: bool = False
-    model: Callable[[list[list[list[Any]]]], tuple[np.ndarray, np.ndarray]] | None = None
+    model: Callable[[list[list[list[Any]]], int | None],
+                    tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def frames(self) -> int:
@@ -210,11 +218,11 @@ class AssistSetting:
                 xy[held, p], ok[after, p] = followed.xy[held, i], held[after]
         return self._planted(xy, ok), ok
 
-    def model_follow(self, anchors: list[list[list[Any]]]
+    def model_follow(self, anchors: list[list[list[Any]]], begin: int | None = None
                      ) -> tuple[np.ndarray, np.ndarray] | None:
         if self.model is None:
             return None
-        xy, ok = self.model(anchors)
+        xy, ok = self.model(anchors, begin)
         return self._planted(xy, ok), ok
 
     def suggestions(self) -> Prefill | None:
@@ -446,38 +454,94 @@ def _track(state: _State, setting: Assistance, seen: np.ndarray, judged: np.ndar
                     groups.append((point, halves))
 
 
+def _key_a_start(state: _State, seen: np.ndarray, visible: np.ndarray) -> bool:
+    """Where no frame has MODEL_START_JOINTS visible joints keyed (the hand mostly hidden on
+    the clip's first frame), click every visible joint of the first frame that shows that
+    many, as the page asks before the model can start; whether it did."""
+    points, frames = len(state.rows), visible.shape[0]
+    keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
+                       for p in range(points)] for f in range(frames)])
+    shown = np.flatnonzero(visible.sum(axis=1) >= MODEL_START_JOINTS)
+    if (keyed.sum(axis=1) >= MODEL_START_JOINTS).any() or not len(shown):
+        return False
+    frame = int(shown[0])
+    for p in np.flatnonzero(visible[frame] & ~keyed[frame]):
+        _place(state, int(p), frame, seen, visible)
+    return True
+
+
 def _take_model(state: _State, setting: Assistance, seen: np.ndarray, judged: np.ndarray,
-                tolerance: float | None) -> None:
+                visible: np.ndarray, tolerance: float | None) -> None:
     """Ask for the hand model's follow from the keyframes placed (a key, not an edit) and
     accept it (Enter) where it proposes a point the keyframes have visible; the careful worker
     then drags each accepted position beyond tolerance. The accepted rows bound the tracking
-    that follows (LK starts where the model stopped)."""
+    that follows (LK starts where the model stopped).
+
+    The careful worker steps through the ghosts outward from the frame it keyed whole and
+    stops where the hand has come off: the first frame with MODEL_OFF_JOINTS ghosts beyond
+    tolerance (Enter takes only the frames it stepped through). Where at most MODEL_FIX_JOINTS
+    are off there, it takes that frame too, drags them onto the hand, and asks again from
+    that frame (the follow's ``begin``), up to MODEL_ROUNDS times while each round carries the
+    hand MODEL_PROGRESS frames further. Where the page says the model has no frame to start
+    from, it keys one (_key_a_start) and asks again."""
     points, frames = len(state.rows), setting.frames
-    found = setting.model_follow([state.plain(p) for p in range(points)])
-    if found is None:
-        return
-    xy, ok = found
-    state.rounds += 1
-    state.actions.keys += 1
-    state.actions.requests += 1
+    begin: int | None = None
+    for _ in range(MODEL_ROUNDS if tolerance is not None else 1):
+        found = setting.model_follow([state.plain(p) for p in range(points)], begin)
+        if found is None:
+            return
+        state.rounds += 1
+        state.actions.keys += 1
+        state.actions.requests += 1
+        if begin is None and not found[1].any() and _key_a_start(state, seen, visible):
+            found = setting.model_follow([state.plain(p) for p in range(points)], begin)
+            state.actions.keys += 1
+            state.actions.requests += 1
+            if found is None:
+                return
+        xy, ok = found
+        taken, refix = _model_round(state, xy, ok, judged, tolerance, begin, frames)
+        state.actions.keys += int(taken)
+        if tolerance is None:
+            return
+        for p in range(points):
+            for f, row in state.rows[p].items():
+                if row[4] == "model" and np.hypot(row[1] - judged[f, p, 0],
+                                                  row[2] - judged[f, p, 1]) > tolerance:
+                    state.rows[p][f] = [f, *_position(seen[f, p]), 1, "edited"]
+                    state.actions.drags += 1
+        if refix is None or (begin is not None and refix - begin < MODEL_PROGRESS):
+            return
+        begin = refix
+
+
+def _model_round(state: _State, xy: np.ndarray, ok: np.ndarray, judged: np.ndarray,
+                 tolerance: float | None, begin: int | None, frames: int
+                 ) -> tuple[bool, int | None]:
+    """Accept one model follow's ghosts (xy (F, P, 2), ok (F, P)) on the frames the worker
+    steps through from its start (``begin``, else the first frame keyed whole), as
+    _take_model; (whether any was taken, the frame to correct and ask again from, or None)."""
+    points = len(state.rows)
     shown_visible = np.stack([dense_track(state.plain(p), frames).visible
                               for p in range(points)], axis=1)
     offered = ok & shown_visible & ~np.array(
         [[f in state.rows[p] for p in range(points)] for f in range(frames)], bool)
+    refix = None
     if tolerance is not None and offered.any():
-        # The careful worker steps through the ghosts outward from the frame it keyed whole,
-        # and stops where the hand has come off (Enter takes only the frames it stepped
-        # through): at the first frame with MODEL_OFF_JOINTS shown beyond tolerance.
-        off = np.linalg.norm(xy - judged, axis=-1) > tolerance
-        bad = (offered & off).sum(axis=1) >= MODEL_OFF_JOINTS
-        keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
-                           for p in range(points)] for f in range(frames)])
-        whole = np.flatnonzero(keyed.sum(axis=1) >= MODEL_START_JOINTS)
-        start = int(whole[0]) if len(whole) else 0
+        off = (offered & (np.linalg.norm(xy - judged, axis=-1) > tolerance)).sum(axis=1)
+        if begin is None:
+            keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
+                               for p in range(points)] for f in range(frames)])
+            whole = np.flatnonzero(keyed.sum(axis=1) >= MODEL_START_JOINTS)
+            start = int(whole[0]) if len(whole) else 0
+        else:
+            start = begin
         stepped = np.zeros(frames, bool)
         for walk in (range(start, frames), range(start - 1, -1, -1)):
             for f in walk:
-                if bad[f]:
+                if off[f] >= MODEL_OFF_JOINTS:
+                    if walk.step > 0 and off[f] <= MODEL_FIX_JOINTS:
+                        stepped[f], refix = True, f
                     break
                 stepped[f] = True
         offered &= stepped[:, None]
@@ -485,15 +549,7 @@ def _take_model(state: _State, setting: Assistance, seen: np.ndarray, judged: np
     for f, p in zip(*np.nonzero(offered), strict=True):
         state.rows[p][int(f)] = [int(f), *_position(xy[f, p]), 1, "model"]
         taken = True
-    state.actions.keys += int(taken)
-    if tolerance is None:
-        return
-    for p in range(points):
-        for f, row in state.rows[p].items():
-            if row[4] == "model" and np.hypot(row[1] - judged[f, p, 0],
-                                              row[2] - judged[f, p, 1]) > tolerance:
-                state.rows[p][f] = [f, *_position(seen[f, p]), 1, "edited"]
-                state.actions.drags += 1
+    return taken, refix
 
 
 def _take_prefill(state: _State, shown: Prefill, seen: np.ndarray, judged: np.ndarray,
@@ -568,7 +624,7 @@ def assisted_annotate(truth: np.ndarray, visible: np.ndarray, setting: Assistanc
                               last=not setting.follows or profile == "blind"):
             _place(state, p, f, seen, visible)
     if shown is None:
-        _take_model(state, setting, seen, judged, limit)
+        _take_model(state, setting, seen, judged, visible, limit)
     _track(state, setting, seen, judged, limit)
     return AssistedWork(profile=profile, tracks=stored_tracks(state.rows),
                         actions=state.actions.as_dict(), seen=seen, judged=judged,

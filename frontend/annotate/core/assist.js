@@ -33,9 +33,9 @@
 
 import { epipolarLines } from "./epipolar.js";
 import {
-  HAND_SOURCES, acceptViewed, allSpans, anchorRows, countTracked, heldFrames, heldRuns,
-  modelProposals, modelText, openSpanAround, openSpans, prefillEntries, proposalEntries,
-  proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, stopText, trackedText,
+  HAND_SOURCES, acceptViewed, allSpans, countTracked, handKeyedBefore, heldFrames, heldRuns,
+  keyframeRows, modelProposals, modelText, openSpanAround, openSpans, prefillEntries,
+  proposalEntries, proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, stopText, trackedText,
 } from "./proposals.js";
 import { ViewedFrames } from "./viewed.js";
 
@@ -186,14 +186,17 @@ export class Assist {
     if (!this.handModel || !this.editable() || this._tracking) return false;
     const tracks = [];
     for (let p = 0; p < this.store.numPoints; p++) {
-      const keyframes = anchorRows(this.store.keyframes(p));
+      const keyframes = keyframeRows(this.store.keyframes(p));
       if (keyframes.length) tracks.push({ point: p, keyframes });
     }
+    const body = { tracks };
+    const here = this.where().frame;
+    if (handKeyedBefore(tracks, here)) body.begin = here;
     this._tracking = true;
     this._say("busy", "Asking the hand model…");
     try {
       const started = Date.now();
-      let answer = await this.api.modelFollow({ tracks });
+      let answer = await this.api.modelFollow(body);
       while (answer.preparing) {
         if (Date.now() - started >= this.suggestPollLimitMs) {
           this._say("warn", "The hand model is taking longer than expected: press M again " +
@@ -202,7 +205,7 @@ export class Assist {
         }
         this._say("busy", `${sentence(answer.reason)} This takes about a second a frame.`);
         await sleep(this.suggestPollMs);
-        answer = await this.api.modelFollow({ tracks });
+        answer = await this.api.modelFollow(body);
       }
       const shown = answer.available ? modelProposals(answer, this.store.numFrames) : [];
       if (!shown.length) {

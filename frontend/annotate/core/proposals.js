@@ -118,7 +118,35 @@ export function allSpans(keyframes) {
  * @param {SourcedKeyframe[]} keyframes @returns {any[][]}
  */
 export function anchorRows(keyframes) {
-  return keyframes.filter(isAnchor).map((k) => [k.frame, k.x, k.y, k.visible ? 1 : 0]);
+  return keyframeRows(keyframes.filter(isAnchor));
+}
+
+/**
+ * Every keyframe as a row, accepted proposals too (the hand model's follow takes all the
+ * worker has checked). @param {SourcedKeyframe[]} keyframes @returns {Array<Array<number|null>>}
+ */
+export function keyframeRows(keyframes) {
+  return keyframes.map((k) => [k.frame, k.x, k.y, k.visible ? 1 : 0]);
+}
+
+/** Visible keyed joints a frame needs before the hand model can start from it (the server's
+ * worker.solver.types.FOLLOW_START_JOINTS). */
+export const MODEL_START_JOINTS = 6;
+
+/**
+ * Whether a frame before `frame` has MODEL_START_JOINTS visible keyframes: the hand model is
+ * then asked again from `frame` forward (a correction), not from the first such frame both
+ * ways. @param {Array<{keyframes: Array<Array<number|null>>}>} tracks  rows per point
+ * @param {number} frame @returns {boolean}
+ */
+export function handKeyedBefore(tracks, frame) {
+  const counts = new Map();
+  for (const { keyframes } of tracks) {
+    for (const [f, x, , visible] of keyframes) {
+      if (f < frame && visible && x !== null) counts.set(f, (counts.get(f) || 0) + 1);
+    }
+  }
+  return [...counts.values()].some((n) => n >= MODEL_START_JOINTS);
 }
 
 /**
@@ -358,5 +386,6 @@ export function modelText(answer, numFrames) {
     ? `; it lost the hand ${lost.join(" and ")} (the depth there no longer fits it)` : "";
   return `The hand model followed frames ${from}-${to}${clip} from your keyframes on frame ` +
     `${start}${why}. Cyan rings: step through them from frame ${start}; Enter accepts the ` +
-    "frames you have viewed, Esc discards. Drag any ring that is off.";
+    "frames you have viewed, Esc discards. Drag any ring that is off; where a few come off " +
+    "together, accept up to that frame, drag them there and press M again to follow on.";
 }

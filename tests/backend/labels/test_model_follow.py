@@ -160,6 +160,37 @@ def test_a_first_view_is_followed_by_one_queued_job_close_to_the_truth(
     assert len(_jobs()) == 1
 
 
+def test_asked_again_from_a_corrected_frame_it_follows_on_forward_from_there(
+        client: TestClient, view: dict) -> None:
+    """The page's second ask (backend.crowd.simulate.PageAssistance, as the page sends it):
+    every keyframe, the first follow's accepted rows too, with frame CORRECTED keyed again
+    where the worker sees the joints, and ``begin`` there: proposals only after it."""
+    from backend.crowd.simulate import PageAssistance, WorkerClient
+
+    corrected = 5
+    link, body = view["links"][0], _first_frame_keys(view)
+    task = {"num_frames": FRAMES, "width": 640, "height": 480, "kind": "hand"}
+    page = PageAssistance(WorkerClient(client, ""), link["token"], task, poll_s=0.01,
+                          poll_limit_s=0.05)
+    anchors = [t["keyframes"] for t in body["tracks"]]
+    page.model_follow(anchors)
+    assert _run_jobs() == 1
+    xy, ok = page.model_follow(anchors)
+    fix = _first_frame_keys(view, seed=3, frame=corrected)["tracks"]
+    accepted = [[*rows, *([f, *[round(float(v), 2) for v in xy[f, p]], 1]
+                          for f in range(1, corrected) if ok[f, p]), *fix[p]["keyframes"]]
+                for p, rows in enumerate(anchors)]
+    assert page.model_follow(accepted, begin=corrected)[1].sum() == 0  # queued
+    assert _run_jobs() == 1
+    again, held = page.model_follow(accepted, begin=corrected)
+    visible = view["visible"]
+    assert not held[:corrected + 1].any()
+    after = visible[corrected + 1:] & visible[corrected]
+    assert held[corrected + 1:][after].mean() >= 0.8
+    err = np.linalg.norm(again - view["truth"], axis=-1)[held]
+    assert np.median(err) < 2.5, np.median(err)
+
+
 def test_other_keyframes_wait_for_the_follow_under_way(client: TestClient, view: dict) -> None:
     token = view["links"][0]["token"]
     assert _post(client, token, _first_frame_keys(view, seed=1))["preparing"] is True

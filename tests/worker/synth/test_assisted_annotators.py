@@ -189,7 +189,7 @@ class TestModelFollow:
     def _setting(cls, clip, asked: list) -> AssistSetting:
         grey, truth, visible = clip
 
-        def model(anchors):
+        def model(anchors, begin=None):
             asked.append(anchors)
             xy = truth.copy()
             xy[cls.OFF_FROM:] += 20.0
@@ -232,6 +232,51 @@ class TestModelFollow:
                 assert row_source(row) != "tracked"
         assert work.actions["requests"] == 2  # the model's and one T
         assert work.actions["edits"] < without.actions["edits"]
+
+    def test_a_few_joints_off_are_dragged_and_the_model_asked_again_from_there(
+            self, clip) -> None:
+        """A stand-in that puts 4 joints 20 px off from frame OFF_FROM on, until it is asked
+        from that frame (begin), when it sits on the truth to the end."""
+        grey, truth, visible = clip
+        asked: list = []
+
+        def model(anchors, begin=None):
+            asked.append((anchors, begin))
+            xy = truth.copy()
+            if begin is None:
+                xy[self.OFF_FROM:, :4] += 20.0
+            return xy, np.ones(visible.shape, bool)
+
+        setting = AssistSetting(grey, KEY, ASSIGNMENT, None, follows=True, retracks=True,
+                                model=model)
+        work = assisted_annotate(truth, visible, setting, "careful", np.random.default_rng(0))
+        assert [begin for _, begin in asked] == [None, self.OFF_FROM]
+        # The second ask carries the first's accepted rows and the corrected frame.
+        again = asked[1][0]
+        for p in range(POINTS):
+            frames = {row[0] for row in again[p]}
+            assert set(np.flatnonzero(visible[:self.OFF_FROM + 1, p])) <= frames, p
+        for p in range(4):
+            if not visible[self.OFF_FROM, p]:
+                continue
+            row = _row_at(work.tracks[p], self.OFF_FROM)
+            assert row is not None and row_source(row) == "edited"
+            assert np.hypot(row[1] - truth[self.OFF_FROM, p, 0],
+                            row[2] - truth[self.OFF_FROM, p, 1]) < 10.0
+        # After it every visible joint is the model's, but the check cells (dragged) and the
+        # frame the occluded point shows again (keyed by hand).
+        cells = set(_inner_cells()) | {(OCCLUDED_POINT, OCCLUDED.stop)}
+        for p in range(POINTS):
+            for f in range(self.OFF_FROM + 1, FRAMES):
+                row = _row_at(work.tracks[p], f)
+                if visible[f, p] and (p, f) not in cells:
+                    assert row is not None and row_source(row) == "tracked", (p, f)
+        # Two model asks, no tracking asked for: Enter twice and the drags.
+        assert work.actions["requests"] == 2
+        dragged = work.actions["drags"]
+        assert work.actions["edits"] == work.actions["clicks"] + work.actions["keys"] - 2 \
+            + dragged
+        assert dragged <= 4 + len(cells)
 
     def test_the_blind_acceptor_takes_the_whole_model_follow(self, clip) -> None:
         _, truth, visible = clip
