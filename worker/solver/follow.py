@@ -75,9 +75,11 @@ STOP_RATIO = 2.0
 # keyframes, the one with the lowest robust depth RMS starts the follow. The first is the plain
 # fit; in the second the depth places the hand along the rays while the keyframes hold the
 # fingers where the worker put them; in the third the depth leads. One draw of 2 px clicks
-# decides which is best: on s7717's sixth view (first frame keyed, crowd seed 3) the plain fit
-# alone started at 5.6 mm RMS and was refused, and with the three ways, three guesses and 3x
-# the rounds it started at 1.4 mm and followed the next 9 frames at 0.9 px median.
+# decides which is best: on s7717's sixth view (first frame keyed, crowd seed 3) the first two
+# ways from the one guess started at 5.6 mm RMS and were refused; with three guesses, three
+# ways and 4x the rounds the start fitted 1.4 mm and the next 9 frames followed at 0.9 px
+# median, and with 3x the follow there runs to frame 53 (63 edits in bench/follow.py's worker
+# against 147 tracking alone).
 START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3))
 START_ROUNDS = 3
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
