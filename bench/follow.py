@@ -15,7 +15,8 @@ view of a synthetic capture (``--capture``, or generated from ``--seed`` with ``
               (follows, re-tracks), no suggestions: the page's edit count and the error of its
               labels (px at visible joints, over all frames);
     model     the same worker asking for the model follow first (accepting it, dragging what
-              is off), then tracking the rest.
+              is off, asking again from a frame where a few joints came off, as the page
+              says), then tracking the rest.
 
 Both workers draw the same noise (``--crowd-seed`` and the view). Effort is the page's edit
 counter (clicks, drags, occlusion keys, Enter), as bench/cost.py reports "first_view_actions".
