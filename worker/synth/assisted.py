@@ -300,6 +300,11 @@ class _State:
         """The point's keyframes as 4-element rows (what interpolation and LK take)."""
         return [r[:4] for _, r in sorted(self.rows[point].items())]
 
+    def keyed_visible(self, frames: int) -> np.ndarray:
+        """(F, P) bool: where a point has a keyframe marked visible."""
+        return np.array([[f in rows and bool(rows[f][3]) for rows in self.rows]
+                         for f in range(frames)], bool).reshape(frames, len(self.rows))
+
 
 def _position(xy: np.ndarray) -> list[float]:
     return [round(float(xy[0]), 2), round(float(xy[1]), 2)]
@@ -458,9 +463,7 @@ def _key_a_start(state: _State, seen: np.ndarray, visible: np.ndarray) -> bool:
     """Where no frame has MODEL_START_JOINTS visible joints keyed (the hand mostly hidden on
     the clip's first frame), click every visible joint of the first frame that shows that
     many, as the page asks before the model can start; whether it did."""
-    points, frames = len(state.rows), visible.shape[0]
-    keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
-                       for p in range(points)] for f in range(frames)])
+    keyed = state.keyed_visible(visible.shape[0])
     shown = np.flatnonzero(visible.sum(axis=1) >= MODEL_START_JOINTS)
     if (keyed.sum(axis=1) >= MODEL_START_JOINTS).any() or not len(shown):
         return False
@@ -485,18 +488,23 @@ def _take_model(state: _State, setting: Assistance, seen: np.ndarray, judged: np
     hand MODEL_PROGRESS frames further. Where the page says the model has no frame to start
     from, it keys one (_key_a_start) and asks again."""
     points, frames = len(state.rows), setting.frames
+
+    def ask(begin: int | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """M pressed: a key and a request, not an edit."""
+        found = setting.model_follow([state.plain(p) for p in range(points)], begin)
+        if found is not None:
+            state.actions.keys += 1
+            state.actions.requests += 1
+        return found
+
     begin: int | None = None
     for _ in range(MODEL_ROUNDS if tolerance is not None else 1):
-        found = setting.model_follow([state.plain(p) for p in range(points)], begin)
+        found = ask(begin)
         if found is None:
             return
         state.rounds += 1
-        state.actions.keys += 1
-        state.actions.requests += 1
         if begin is None and not found[1].any() and _key_a_start(state, seen, visible):
-            found = setting.model_follow([state.plain(p) for p in range(points)], begin)
-            state.actions.keys += 1
-            state.actions.requests += 1
+            found = ask(begin)
             if found is None:
                 return
         xy, ok = found
@@ -530,9 +538,8 @@ def _model_round(state: _State, xy: np.ndarray, ok: np.ndarray, judged: np.ndarr
     if tolerance is not None and offered.any():
         off = (offered & (np.linalg.norm(xy - judged, axis=-1) > tolerance)).sum(axis=1)
         if begin is None:
-            keyed = np.array([[f in state.rows[p] and bool(state.rows[p][f][3])
-                               for p in range(points)] for f in range(frames)])
-            whole = np.flatnonzero(keyed.sum(axis=1) >= MODEL_START_JOINTS)
+            whole = np.flatnonzero(state.keyed_visible(frames).sum(axis=1)
+                                   >= MODEL_START_JOINTS)
             start = int(whole[0]) if len(whole) else 0
         else:
             start = begin

@@ -35,7 +35,8 @@ import { epipolarLines } from "./epipolar.js";
 import {
   HAND_SOURCES, acceptViewed, allSpans, countTracked, handKeyedBefore, heldFrames, heldRuns,
   keyframeRows, modelProposals, modelText, openSpanAround, openSpans, prefillEntries,
-  proposalEntries, proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, stopText, trackedText,
+  proposalEntries, proposalRequest, proposalsFrom, retrackSpans, sourceOf, spanAround, stopText,
+  trackedText,
 } from "./proposals.js";
 import { ViewedFrames } from "./viewed.js";
 
