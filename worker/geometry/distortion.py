@@ -64,15 +64,20 @@ def undistort(xd: Array, yd: Array, dist: Array, iterations: int) -> tuple[Array
     return x, y
 
 
-def distort_jacobian(x: np.ndarray, y: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """d(xd, yd) / d(x, y) of :func:`distort`: (..., 2, 2) for x, y (...) (NumPy)."""
+def distort_partials(x: Array, y: Array, dist: Array
+                     ) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
+    """The partial derivatives ((dxd/dx, dxd/dy), (dyd/dx, dyd/dy)) of :func:`distort`, each
+    (...); arithmetic only, so NumPy arrays and PyTorch tensors alike."""
     k1, k2, p1, p2, k3 = _coefficients(dist)
     r2 = x * x + y * y
     radial = _radial(r2, k1, k2, k3)
     d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-    jd = np.empty(x.shape + (2, 2))
-    jd[..., 0, 0] = radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x
-    jd[..., 0, 1] = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y
-    jd[..., 1, 0] = jd[..., 0, 1]
-    jd[..., 1, 1] = radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x
-    return jd
+    cross = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y
+    return ((radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x, cross),
+            (cross, radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x))
+
+
+def distort_jacobian(x: np.ndarray, y: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """d(xd, yd) / d(x, y) of :func:`distort`: (..., 2, 2) for x, y (...) (NumPy)."""
+    (a, b), (c, d) = distort_partials(x, y, dist)
+    return np.stack((np.stack((a, b), axis=-1), np.stack((c, d), axis=-1)), axis=-2)

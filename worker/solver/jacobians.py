@@ -3,9 +3,9 @@
 Forward-mode autodiff through every residual would push all 51 tangents through the camera
 projection of 21 joints in V views and through every depth match; instead the tangents go
 through MANO's forward kinematics only (joints and the matched vertices), and the rest is
-chained on: each projected joint depends on its own 3D position (a 3-tangent autodiff of the
-projection), each depth residual linearly on its triangle's corners. Rows follow
-`energies.hand_residuals`: keypoints, regulariser, depth, smoothness of joints and pose.
+chained on: each projected joint depends on its own 3D position (the projection's derivative
+in closed form, `Rig.project_derivative`), each depth residual linearly on its triangle's
+corners. Rows follow `energies.hand_residuals`: keypoints, regulariser, depth, smoothness of joints and pose.
 
 For a depth point matched inside a triangle the residual is n . (p - c); its Jacobian here
 keeps the normal n fixed (the usual point-to-plane linearisation). At the matching pose p - c
@@ -16,23 +16,11 @@ residuals, so the approximation costs at most a little convergence speed.
 from __future__ import annotations
 
 import torch
-from torch.func import jvp
 
 from worker.hand.posing import SubjectHand
 from worker.solver.energies import MM_PER_M, DepthData, HandData
-from worker.solver.lm import FORWARD_AD_LOCK, jacobian
+from worker.solver.lm import jacobian
 from worker.solver.projection import Rig
-
-
-def _projection_derivative(rig: Rig, joints: torch.Tensor) -> torch.Tensor:
-    """(B, V, 21, 2, 3) derivative of each joint's pixels in each view w.r.t. its position."""
-    columns = []
-    for axis in range(3):
-        tangent = torch.zeros_like(joints)
-        tangent[..., axis] = 1.0
-        with FORWARD_AD_LOCK:
-            columns.append(jvp(rig.project, (joints,), (tangent,))[1])
-    return torch.stack(columns, dim=-1)
 
 
 def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandData
@@ -51,7 +39,7 @@ def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandD
     fk = jacobian(forward, pose_m)  # (B, 63 + 3K, 51)
     joints = value[:, :63].reshape(batch, 21, 3)
     d_joints = fk[:, :63].reshape(batch, 21, 3, -1)
-    d_pixels = _projection_derivative(rig, joints)  # (B, V, 21, 2, 3)
+    d_pixels = rig.project_derivative(joints)  # (B, V, 21, 2, 3)
     parts = [(data.sqrt_w[..., None, None] * (d_pixels @ d_joints[:, None])).flatten(1, 3)]
     pca = torch.zeros(45, pose_m.shape[1], dtype=pose_m.dtype, device=pose_m.device)
     pca[:, 3:48] = torch.eye(45, dtype=pose_m.dtype, device=pose_m.device)  # d theta_pca

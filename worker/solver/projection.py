@@ -12,7 +12,7 @@ import numpy.typing as npt
 import torch
 
 from worker.geometry.cameras import CameraModel
-from worker.geometry.distortion import distort
+from worker.geometry.distortion import distort, distort_partials
 from worker.hand.lbs import axis_angle_to_matrix
 
 
@@ -41,6 +41,16 @@ class Rig:
         cam = rel @ self.R_wc.transpose(1, 2)
         return _pixels(cam, self.K[:, None], self.dist[:, None])
 
+    def project_derivative(self, points: torch.Tensor) -> torch.Tensor:
+        """(..., V, N, 2, 3) derivative of each world point's pixels (:meth:`project`) in each
+        view with respect to its position, in closed form (the chain through the rotation,
+        the perspective division, the distortion and K); zero along z where the depth is
+        clamped."""
+        rel = points[..., None, :, :] - self.centre[:, None, :]
+        cam = rel @ self.R_wc.transpose(1, 2)
+        return _pixels_derivative(cam, self.K[:, None], self.dist[:, None]) \
+            @ self.R_wc[:, None]
+
     def project_each(self, points: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
         """Points (..., L, 3) -> pixels (..., L, 2), point l in view views[l] only."""
         rel = points - self.centre[views]
@@ -56,6 +66,21 @@ def _pixels(cam: torch.Tensor, K: torch.Tensor, dist: torch.Tensor) -> torch.Ten
     u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
     v = K[..., 1, 1] * yd + K[..., 1, 2]
     return torch.stack((u, v), dim=-1)
+
+
+def _pixels_derivative(cam: torch.Tensor, K: torch.Tensor, dist: torch.Tensor) -> torch.Tensor:
+    """(..., 2, 3) derivative of :func:`_pixels` with respect to the camera-frame point."""
+    raw = cam[..., 2]
+    z = raw.clamp(min=1e-3)
+    x, y = cam[..., 0] / z, cam[..., 1] / z
+    inv_z = 1.0 / z
+    along = torch.where(raw >= 1e-3, inv_z, torch.zeros_like(inv_z))
+    zero = torch.zeros_like(inv_z)
+    normalised = torch.stack((torch.stack((inv_z, zero, -x * along), dim=-1),
+                              torch.stack((zero, inv_z, -y * along), dim=-1)), dim=-2)
+    (a, b), (c, d) = distort_partials(x, y, dist)
+    lens = torch.stack((torch.stack((a, b), dim=-1), torch.stack((c, d), dim=-1)), dim=-2)
+    return K[..., :2, :2] @ lens @ normalised
 
 
 def pose_matrix(delta: torch.Tensor, base: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -191,6 +191,27 @@ class TestLevenbergMarquardt:
         assert cost.max() < 1e-6
 
 
+class TestProjectionDerivative:
+    def test_closed_form_equals_autodiff_of_the_projection(self):
+        """Every view's pixels against each point's position: distortion with all five
+        coefficients, a skewed K, and a point behind one camera (its depth clamped)."""
+        rng = np.random.default_rng(RNG_SEED)
+        cams = cameras(4)
+        cams[1].dist[:] = [0.08, -0.05, 0.004, -0.003, 0.02]
+        cams[2].K[0, 1] = 0.7
+        rig = Rig(cams)
+        points = t64(rng.normal(0, 0.08, (2, 21, 3)))
+        points[1, 0] = t64(cams[0].T_cam_to_world[:, 3] * 1.5)  # behind the first camera
+        got = rig.project_derivative(points)
+        expected = torch.func.jacrev(lambda p: rig.project(p).sum(0))(points)
+        # (V, N, 2) over (B, N, 3): each pixel depends on its own point only.
+        diagonal = torch.stack([expected[:, n, :, :, n, :] for n in range(21)], dim=1)
+        expected = diagonal.permute(3, 0, 1, 2, 4)  # (B, V, N, 2, 3)
+        assert got.shape == (2, 4, 21, 2, 3)
+        assert torch.allclose(got, expected, rtol=1e-10, atol=1e-9)
+        assert got[1, 0, 0, :, :].abs().max() > 0  # clamped: only z's column drops
+
+
 class TestHandJacobian:
     def test_chain_rule_jacobian_equals_autodiff_of_the_residuals(self, subject):
         """Exact where depth matches sit on edges (point-to-point rows) and where a point lies
