@@ -5,7 +5,8 @@ projection of 21 joints in V views and through every depth match; instead the ta
 through MANO's forward kinematics only (joints and the matched vertices), and the rest is
 chained on: each projected joint depends on its own 3D position (the projection's derivative
 in closed form, `Rig.project_derivative`), each depth residual linearly on its triangle's
-corners. Rows follow `energies.hand_residuals`: keypoints, regulariser, depth, smoothness of joints and pose.
+corners. Rows follow `energies.hand_residuals`: keypoints, regulariser, depth, smoothness of
+joints and pose.
 
 For a depth point matched inside a triangle the residual is n . (p - c); its Jacobian here
 keeps the normal n fixed (the usual point-to-plane linearisation). At the matching pose p - c
