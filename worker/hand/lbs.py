@@ -12,6 +12,9 @@ import torch
 # Below this squared angle (rad^2) the Rodrigues coefficients use their Taylor series: at
 # theta^2 = 1e-6 the first dropped term is ~1e-20, far below float64 resolution of the result.
 _SMALL_ANGLE_SQ = 1e-6
+# Below this squared angle the derivative's coefficients use their Taylor series: their closed
+# forms subtract nearly equal terms (at t = 0.01 the series' first dropped term is ~1e-13).
+_SMALL_DERIVATIVE_SQ = 1e-4
 
 
 def skew(vectors: torch.Tensor) -> torch.Tensor:
@@ -47,6 +50,38 @@ def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
     k = skew(axis_angle)
     eye = torch.eye(3, dtype=axis_angle.dtype, device=axis_angle.device)
     return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
+
+
+def axis_angle_to_matrix_derivative(axis_angle: torch.Tensor) -> torch.Tensor:
+    """(..., 3, 3, 3) derivative of :func:`axis_angle_to_matrix`: [..., i] = dR / dr_i.
+
+    With s = t^2 and R = I + a(s) K + b(s) K^2: dR/dr_i = 2 r_i (a'(s) K + b'(s) K^2)
+    + a E_i + b (E_i K + K E_i), E_i = [e_i]x. Below _SMALL_DERIVATIVE_SQ a' and b' come from
+    their Taylor series (the closed forms lose digits to cancellation there).
+    """
+    theta_sq = (axis_angle * axis_angle).sum(-1)
+    small = theta_sq < _SMALL_ANGLE_SQ
+    safe_sq = torch.where(small, torch.ones_like(theta_sq), theta_sq)
+    theta = safe_sq.sqrt()
+    sin, cos = torch.sin(theta), torch.cos(theta)
+    a = torch.where(small, 1.0 - theta_sq / 6.0 + theta_sq**2 / 120.0, sin / theta)
+    b = torch.where(small, 0.5 - theta_sq / 24.0 + theta_sq**2 / 720.0, (1.0 - cos) / safe_sq)
+    series = theta_sq < _SMALL_DERIVATIVE_SQ
+    safe = torch.where(series, torch.ones_like(theta_sq), theta_sq).sqrt()
+    s_sin, s_cos = torch.sin(safe), torch.cos(safe)
+    da = torch.where(series, -1.0 / 6.0 + theta_sq / 60.0,
+                     (safe * s_cos - s_sin) / (2.0 * safe**3))
+    db = torch.where(series, -1.0 / 24.0 + theta_sq / 360.0,
+                     (safe * s_sin - 2.0 * (1.0 - s_cos)) / (2.0 * safe**4))
+    k = skew(axis_angle)[..., None, :, :]  # (..., 1, 3, 3), against E_i (3, 3, 3)
+    basis = skew(torch.eye(3, dtype=axis_angle.dtype, device=axis_angle.device))
+
+    def per_axis(x: torch.Tensor) -> torch.Tensor:
+        return x[..., None, None, None]
+
+    along = (2.0 * axis_angle)[..., None, None] * (per_axis(da) * k + per_axis(db) * (k @ k))
+    d = along + per_axis(a) * basis + per_axis(b) * (basis @ k + k @ basis)
+    return d.movedim(-3, -1)
 
 
 def blend_shapes(betas: torch.Tensor, shapedirs: torch.Tensor) -> torch.Tensor:

@@ -73,12 +73,22 @@ def hand_from_joints(problem: Problem, points: np.ndarray, ok: np.ndarray,
     target = problem.tensor(np.nan_to_num(points))
     mask = problem.tensor(ok.astype(np.float64))[..., None]
 
+    none = torch.zeros(0, dtype=torch.long, device=problem.device)
+    prior = torch.zeros(45, 51, dtype=torch.float64, device=problem.device)
+    prior[:, 3:48] = INIT_PRIOR * torch.eye(45, dtype=torch.float64, device=problem.device)
+
     def residuals(p: torch.Tensor) -> torch.Tensor:
-        joints, _ = subject.pose(p, p.new_zeros(0).long())
+        joints, _ = subject.pose(p, none)
         offsets = ((joints - target) * mask * 1000.0).flatten(1)
         return torch.cat((offsets, p[:, 3:48] * INIT_PRIOR), dim=1)
 
-    fitted, _ = levenberg_marquardt(residuals, problem.tensor(pose), iterations)
+    def jacobian(p: torch.Tensor) -> torch.Tensor:
+        d_joints = subject.pose_jacobian(p, none)[2]  # (B, 21, 3, 51)
+        offsets = (d_joints * mask[..., None] * 1000.0).flatten(1, 2)
+        return torch.cat((offsets, prior.expand(len(p), -1, -1)), dim=1)
+
+    fitted, _ = levenberg_marquardt(residuals, problem.tensor(pose), iterations,
+                                    jacobian_fn=jacobian)
     return fitted.cpu().numpy()
 
 

@@ -1,12 +1,11 @@
 """The hand's Jacobian by the chain rule, for Levenberg-Marquardt.
 
-Forward-mode autodiff through every residual would push all 51 tangents through the camera
-projection of 21 joints in V views and through every depth match; instead the tangents go
-through MANO's forward kinematics only (joints and the matched vertices), and the rest is
-chained on: each projected joint depends on its own 3D position (the projection's derivative
-in closed form, `Rig.project_derivative`), each depth residual linearly on its triangle's
-corners. Rows follow `energies.hand_residuals`: keypoints, regulariser, depth, smoothness of
-joints and pose.
+Every factor is in closed form (forward-mode autodiff through the residuals cost tens of
+times more: each op against a constant took ~0.3 ms under it): MANO's forward kinematics gives
+the joints' and the matched vertices' derivatives (`SubjectHand.pose_jacobian`), each projected
+joint depends on its own 3D position (`Rig.project_derivative`), each depth residual linearly
+on its triangle's corners. Rows follow `energies.hand_residuals`: keypoints, regulariser,
+depth, smoothness of joints and pose.
 
 For a depth point matched inside a triangle the residual is n . (p - c); its Jacobian here
 keeps the normal n fixed (the usual point-to-plane linearisation). At the matching pose p - c
@@ -20,7 +19,6 @@ import torch
 
 from worker.hand.posing import SubjectHand
 from worker.solver.energies import MM_PER_M, DepthData, HandData
-from worker.solver.lm import jacobian
 from worker.solver.projection import Rig
 
 
@@ -30,24 +28,13 @@ def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandD
     batch = pose_m.shape[0]
     depth = data.depth
     ids = depth.vertex_ids if depth is not None else pose_m.new_zeros(0).long()
-
-    def forward(p: torch.Tensor) -> torch.Tensor:
-        joints, vertices = hand.pose(p, ids)
-        return torch.cat((joints.flatten(1), vertices.flatten(1)), dim=1)
-
-    with torch.no_grad():
-        value = forward(pose_m)
-    fk = jacobian(forward, pose_m)  # (B, 63 + 3K, 51)
-    joints = value[:, :63].reshape(batch, 21, 3)
-    d_joints = fk[:, :63].reshape(batch, 21, 3, -1)
+    joints, vertices, d_joints, d_vertices = hand.pose_jacobian(pose_m, ids)
     d_pixels = rig.project_derivative(joints)  # (B, V, 21, 2, 3)
     parts = [(data.sqrt_w[..., None, None] * (d_pixels @ d_joints[:, None])).flatten(1, 3)]
     pca = torch.zeros(45, pose_m.shape[1], dtype=pose_m.dtype, device=pose_m.device)
     pca[:, 3:48] = torch.eye(45, dtype=pose_m.dtype, device=pose_m.device)  # d theta_pca
     parts.append((pca * data.sqrt_reg).expand(batch, -1, -1))
     if depth is not None:
-        vertices = value[:, 63:].reshape(batch, -1, 3)
-        d_vertices = fk[:, 63:].reshape(batch, vertices.shape[1], 3, -1)
         parts.append(_depth_jacobian(vertices, d_vertices, depth))
     if data.smooth_target is not None and data.sqrt_smooth is not None:
         parts.append((d_joints * MM_PER_M * data.sqrt_smooth[:, None, None, None]).flatten(1, 2))

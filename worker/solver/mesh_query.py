@@ -9,7 +9,7 @@ the exact point-triangle distances decide. Lengths are in the mesh's units (metr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -112,6 +112,27 @@ class AABBTree:
                    np.array(fields[2]), np.array(fields[3]), np.array(fields[4]),
                    np.array(fields[5]), order, cKDTree(vertices), _one_rings(len(vertices), faces),
                    tmin, tmax, _unit_normals(tri))
+
+    def refit(self, vertices: np.ndarray) -> AABBTree:
+        """This tree's split of the same faces, over the vertices moved to `vertices` (N, 3):
+        every box recomputed from its triangles, leaves first, so queries stay exact; about a
+        tenth of a new build's time for a hand mesh. The split suits poses near the one it
+        was built for (a hand from frame to frame)."""
+        vertices = np.asarray(vertices, dtype=np.float64)
+        tri = vertices[self.faces]
+        tmin, tmax = tri.min(axis=1), tri.max(axis=1)
+        lo, hi = np.empty_like(self.lo), np.empty_like(self.hi)
+        leaves = np.flatnonzero(self.left < 0)
+        leaves = leaves[np.argsort(self.start[leaves])]  # their slices tile `order`
+        lo[leaves] = np.minimum.reduceat(tmin[self.order], self.start[leaves])
+        hi[leaves] = np.maximum.reduceat(tmax[self.order], self.start[leaves])
+        # Children come after their parent (the build numbers nodes depth first).
+        for node in np.flatnonzero(self.left >= 0)[::-1]:
+            a, b = self.left[node], self.right[node]
+            lo[node] = np.minimum(lo[a], lo[b])
+            hi[node] = np.maximum(hi[a], hi[b])
+        return replace(self, vertices=vertices, lo=lo, hi=hi, vertex_tree=cKDTree(vertices),
+                       tri_lo=tmin, tri_hi=tmax, normals=_unit_normals(tri))
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest surface points of points (P, 3).

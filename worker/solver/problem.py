@@ -98,6 +98,7 @@ class Problem:
     def _setup_hand(self, inputs: SolveInputs) -> None:
         self.subject: SubjectHand | None = None
         self.reasons: list[str | None]
+        self.hand_tree: AABBTree | None = None
         if self.hand is None:
             self.labelled = np.zeros(self.num_frames, dtype=bool)
             self.reasons = ["no hand in this sequence"] * self.num_frames
@@ -171,7 +172,10 @@ class Problem:
         boxes = [_world_box(t, p) for t, p in zip(trees, object_poses, strict=True)]
         poses: list[np.ndarray | None] = list(object_poses)
         if hand_vertices is not None:
-            trees.append(AABBTree.build(hand_vertices, self.hand_faces))
+            # The hand's tree is refitted from the last one built: its topology never changes.
+            self.hand_tree = AABBTree.build(hand_vertices, self.hand_faces) \
+                if self.hand_tree is None else self.hand_tree.refit(hand_vertices)
+            trees.append(self.hand_tree)
             poses.append(None)
             boxes.append((hand_vertices.min(0), hand_vertices.max(0)))
         margin = self.settings.depth_margin

@@ -15,7 +15,8 @@ from worker.hand import (
     save_mano_pickle,
 )
 from worker.hand.builtin import builtin_joint_axes, mirror_axis_angle
-from worker.hand.lbs import axis_angle_to_matrix
+from worker.hand.lbs import axis_angle_to_matrix, axis_angle_to_matrix_derivative
+from worker.hand.posing import SubjectHand
 
 F64 = torch.float64
 MIRROR = np.array([-1.0, 1.0, 1.0])
@@ -70,6 +71,16 @@ class TestAxisAngle:
         for point in ([0.0, 0.0, 0.0], [1e-4, 0.0, -2e-4], [0.3, -1.2, 2.0]):
             x = t([point]).requires_grad_(True)
             assert torch.autograd.gradcheck(axis_angle_to_matrix, (x,))
+
+    def test_closed_form_derivative_equals_autodiff_at_every_scale(self):
+        # Large angles, the closed forms near the series' threshold, the series, and zero.
+        rng = np.random.default_rng(1)
+        for scale in (2.0, 0.3, 0.011, 0.009, 1e-4, 1e-9, 0.0):
+            vectors = t(rng.normal(0.0, 1.0, (12, 3)) * scale)
+            full = torch.func.jacfwd(axis_angle_to_matrix)(vectors)  # (12, 3, 3, 12, 3)
+            expected = torch.stack([full[n, :, :, n, :] for n in range(12)])
+            got = axis_angle_to_matrix_derivative(vectors)
+            assert torch.allclose(got, expected, rtol=0.0, atol=1e-12), scale
 
     def test_rejects_wrong_last_dimension(self):
         with pytest.raises(ValueError, match=r"\(2, 4\)"):
@@ -204,6 +215,36 @@ class TestPoseM:
             right_layer(torch.zeros(2, 3), torch.zeros(2, 44))
         with pytest.raises(ValueError, match=r"betas must have shape \(2, 10\), got \(10,\)"):
             right_layer(torch.zeros(2, 3), torch.zeros(2, 45), torch.zeros(10))
+
+
+class TestPoseJacobian:
+    @pytest.mark.parametrize("side", ["right", "left"])
+    def test_closed_form_equals_autodiff_of_joints_and_vertices(self, side):
+        """SubjectHand.pose_jacobian against forward-mode autodiff of SubjectHand.pose: three
+        frames (one at the zero full pose, where every joint's rotation is the identity), a
+        different set of vertices per frame."""
+        layer = HandLayer(builtin_hand_model(side))
+        rng = np.random.default_rng(2)
+        subject = SubjectHand(layer, t(rng.normal(0.0, 0.8, 10)))
+        pose = t(rng.normal(0.0, 0.4, (3, 51)))
+        pose[1, :3] = 0.0
+        pose[1, 3:48] = -torch.linalg.solve(layer.hands_components.T, layer.pose_mean[3:])
+        ids = torch.as_tensor(rng.integers(0, 778, (3, 40)))
+
+        def forward(p):
+            joints, vertices = subject.pose(p, ids)
+            return torch.cat((joints.flatten(1), vertices.flatten(1)), 1)
+
+        assert layer.full_pose(pose[1:2, :3], pose[1:2, 3:48]).abs().max() < 1e-12
+        from worker.solver.lm import jacobian
+
+        expected = jacobian(forward, pose)  # (3, 63 + 120, 51)
+        joints, vertices, d_joints, d_vertices = subject.pose_jacobian(pose, ids)
+        assert torch.allclose(torch.cat((joints.flatten(1), vertices.flatten(1)), 1),
+                              forward(pose), atol=1e-14)
+        got = torch.cat((d_joints.flatten(1, 2), d_vertices.flatten(1, 2)), 1)
+        assert got.shape == expected.shape
+        assert torch.allclose(got, expected, rtol=0.0, atol=1e-12)
 
 
 class TestLayerPlumbing:

@@ -67,6 +67,29 @@ class TestClosestPoints:
         assert np.allclose(np.linalg.norm(points - near, axis=1), dist)
 
 
+    def test_a_refitted_tree_answers_as_a_new_one(self, subject):
+        """The hand's tree built at one pose and refitted to others: the same distances and
+        closest points as a tree built there (faces may differ only where they tie)."""
+        rng = np.random.default_rng(RNG_SEED)
+        faces = subject.faces.numpy()
+        poses = t64(rng.normal(0, 0.3, (3, 51)))
+        _, verts = subject.pose(poses)
+        first = AABBTree.build(verts[0].numpy(), faces)
+        for k in (1, 2):
+            vertices = verts[k].numpy()
+            points = vertices[rng.integers(0, len(vertices), 400)] \
+                + rng.normal(0, 0.008, (400, 3))
+            moved, new = first.refit(vertices), AABBTree.build(vertices, faces)
+            assert np.allclose(moved.lo[0], vertices.min(0)) and np.allclose(
+                moved.hi[0], vertices.max(0))
+            dist, face, bary = moved.closest(points)
+            want, want_face, want_bary = new.closest(points)
+            assert np.allclose(dist, want, rtol=0.0, atol=1e-15)
+            near = np.einsum("ni,nij->nj", bary, vertices[faces[face]])
+            assert np.allclose(near, np.einsum("ni,nij->nj", want_bary,
+                                               vertices[faces[want_face]]), atol=1e-12)
+
+
 def _depth_data(points: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> DepthData:
     ids = np.unique(corners)
     interior = torch.as_tensor((bary > 1e-6).all(axis=1)[None])
