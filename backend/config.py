@@ -190,6 +190,10 @@ class Settings(BaseSettings):
     db_max_overflow: int = Field(default=10, ge=0, le=1000)
     db_wait_s: float = Field(default=5.0, gt=0, le=300)
     http_threads: int = Field(default=40, ge=2, le=1000)
+    # PyTorch's intra-op threads in a process that solves (worker.torch_threads reads it where
+    # PyTorch loads; unset: 1, or PyTorch's own choice where OMP_NUM_THREADS is set). Declared
+    # here so that a bad value stops the server at start rather than failing its jobs.
+    torch_threads: int | None = Field(default=None, ge=1, le=1024)
     # Reverse proxies in front of the app (addresses or CIDR blocks; a JSON list or separated
     # by commas). Only a request whose direct peer is one of them has its client address taken
     # from X-Forwarded-For (the right-most address there that is not itself a trusted proxy),

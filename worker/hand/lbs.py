@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import torch
 
+from worker import torch_threads
+
+torch_threads.apply(torch)
+
 # Below this squared angle (rad^2) the Rodrigues coefficients use their Taylor series: at
 # theta^2 = 1e-6 the first dropped term is ~1e-20, far below float64 resolution of the result.
 _SMALL_ANGLE_SQ = 1e-6

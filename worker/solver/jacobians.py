@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import torch
 
+from worker.hand.lbs import axis_angle_to_matrix_derivative
 from worker.hand.posing import SubjectHand
-from worker.solver.energies import MM_PER_M, DepthData, HandData
-from worker.solver.projection import Rig
+from worker.solver.energies import MM_PER_M, DepthData, HandData, ObjectData
+from worker.solver.projection import Rig, pose_matrix, transform
 
 
 def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandData
@@ -40,6 +41,39 @@ def hand_jacobian(hand: SubjectHand, rig: Rig, pose_m: torch.Tensor, data: HandD
         parts.append((d_joints * MM_PER_M * data.sqrt_smooth[:, None, None, None]).flatten(1, 2))
     if data.pose_target is not None and data.sqrt_pose_smooth is not None:
         parts.append(pca * data.sqrt_pose_smooth[:, None, None])
+    return torch.cat(parts, dim=1)
+
+
+def rigid_point_derivatives(delta: torch.Tensor, base: torch.Tensor, points: torch.Tensor
+                            ) -> torch.Tensor:
+    """(B, N, 3, 6) derivative of object points posed by `projection.pose_matrix(delta, base)`
+    with respect to delta (B, 6) (axis-angle on the left, then translation); points (N, 3) or
+    (B, N, 3), object frame."""
+    d_rot = axis_angle_to_matrix_derivative(delta[:, :3])  # (B, 3, 3, 3): [..., i] = dR/dw_i
+    local = points @ base[:, :3, :3].transpose(-1, -2)  # R_base m: (B, N, 3)
+    d_omega = torch.einsum("brci,bnc->bnri", d_rot, local)
+    eye = torch.eye(3, dtype=delta.dtype, device=delta.device)
+    return torch.cat((d_omega, eye.expand(*local.shape[:2], 3, 3)), dim=-1)
+
+
+def object_jacobian(delta: torch.Tensor, data: ObjectData) -> torch.Tensor:
+    """(B, M, 6) Jacobian of `energies.object_residuals` w.r.t. delta (B, 6), in closed form
+    (the landmarks' projection, the depth rows as for the hand)."""
+    rot, trans = pose_matrix(delta, data.base)
+    parts = []
+    if data.vertex_ids.numel():
+        model = data.vertices[data.vertex_ids]
+        landmarks = transform(rot, trans, model)
+        d_points = rigid_point_derivatives(delta, data.base, model)  # (B, L, 3, 6)
+        d_pixels = data.rig.project_each_derivative(landmarks, data.views)  # (B, L, 2, 3)
+        parts.append((data.sqrt_w[..., None, None] * (d_pixels @ d_points)).flatten(1, 2))
+    depth = data.depth
+    if depth is not None:
+        model = data.vertices[depth.vertex_ids]  # (B, K, 3)
+        parts.append(_depth_jacobian(transform(rot, trans, model),
+                                     rigid_point_derivatives(delta, data.base, model), depth))
+    if not parts:
+        return delta.new_zeros(delta.shape[0], 0, 6)
     return torch.cat(parts, dim=1)
 
 

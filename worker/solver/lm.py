@@ -16,6 +16,10 @@ import numpy as np
 import torch
 from torch.func import jvp, vmap
 
+from worker import torch_threads
+
+torch_threads.apply(torch)
+
 ResidualFn = Callable[[torch.Tensor], torch.Tensor]
 
 # PyTorch's forward-mode autodiff keeps its levels in process-wide state: two threads inside

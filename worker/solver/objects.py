@@ -20,6 +20,7 @@ from worker.geometry.transforms import compose_poses, invert_pose
 from worker.solver.depth import Matches
 from worker.solver.energies import MM_PER_M, ObjectData, object_residuals
 from worker.solver.init import PALM_JOINTS, initial_object_poses, kabsch
+from worker.solver.jacobians import object_jacobian, rigid_point_derivatives
 from worker.solver.lm import cauchy_weights, levenberg_marquardt
 from worker.solver.problem import MappedLandmarks, Problem
 from worker.solver.projection import pose_matrix, transform
@@ -159,10 +160,19 @@ def fit_poses(problem: Problem, index: int, marks: MappedLandmarks, frames: np.n
             offset = (transform(rot, trans, model.expand(d.shape[0], -1, -1)) - target)
             return torch.cat((out, (offset * MM_PER_M * weight[:, None, None]).flatten(1)), 1)
 
+        def jacobian(d: torch.Tensor, data: ObjectData = data,
+                     weight: torch.Tensor | None = weight) -> torch.Tensor:
+            out = object_jacobian(d, data)
+            if weight is None:
+                return out
+            grip = rigid_point_derivatives(d, data.base, model) * MM_PER_M
+            return torch.cat((out, (grip * weight[:, None, None, None]).flatten(1, 2)), 1)
+
         if data.vertex_ids.numel() == 0 and data.depth is None and target is None:
             return poses
         zero = torch.zeros(len(frames), 6, dtype=torch.float64, device=problem.device)
-        delta, _ = levenberg_marquardt(residuals, zero, settings.lm_iterations)
+        delta, _ = levenberg_marquardt(residuals, zero, settings.lm_iterations,
+                                       jacobian_fn=jacobian)
         rot, trans = pose_matrix(delta, data.base)
         poses = torch.cat((rot, trans[..., None]), -1).cpu().numpy()
     return poses

@@ -57,6 +57,13 @@ class Rig:
         cam = (rel[..., None, :] @ self.R_wc[views].transpose(1, 2))[..., 0, :]
         return _pixels(cam, self.K[views], self.dist[views])
 
+    def project_each_derivative(self, points: torch.Tensor, views: torch.Tensor
+                                ) -> torch.Tensor:
+        """(..., L, 2, 3): the derivative of :meth:`project_each` with respect to each point."""
+        rel = points - self.centre[views]
+        cam = (rel[..., None, :] @ self.R_wc[views].transpose(1, 2))[..., 0, :]
+        return _pixels_derivative(cam, self.K[views], self.dist[views]) @ self.R_wc[views]
+
 
 def _pixels(cam: torch.Tensor, K: torch.Tensor, dist: torch.Tensor) -> torch.Tensor:
     """Camera-frame points (..., 3) -> pixels (..., 2); K (..., 3, 3) and dist (..., 5)
