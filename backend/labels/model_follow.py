@@ -73,9 +73,10 @@ class InvalidModelFollow(DexlabelError, status_code=422, code="invalid_model_fol
 class ModelFollowRequest(BaseModel):
     """The worker's keyframes (as saved: per point ``[frame, x, y, visible01]`` rows; every
     keyframe, accepted proposals too: all the worker has checked) and, optionally, the frame
-    to follow forward from (``begin``: the first frame at or after it with enough keyed
-    joints; the page sends the frame it is on once an earlier frame has them, a correction);
-    without it the follow starts at the first such frame and runs both ways."""
+    to propose forward from (``begin``: the first frame at or after it with enough keyed
+    joints; the page sends the frame it is on once an earlier frame has them, a correction,
+    and the follow is carried there through the keyframes before it); without it the follow
+    starts at the first such frame and runs both ways."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -106,7 +107,10 @@ class ModelFollowRead(BaseModel):
     """``available`` is false (with the ``reason``) where nothing is proposed: the view has no
     depth, no frame has enough keyed joints, the model could not start, or the follow is
     ``preparing`` on the worker queue (ask again in a few seconds with the same keyframes).
-    ``start_frame``: the keyed frame the model started from."""
+    ``start_frame``: the keyed frame the proposals start from: the first with enough keyed
+    joints, at or after ``begin`` where one is given (a correction: the follow is carried
+    there from the first keyed frame through the keyframes before it, or started there where
+    that does not hold, worker.solver.follow.follow_hand)."""
 
     available: bool
     preparing: bool = False
@@ -130,7 +134,7 @@ def _keyed(rows: list[list[list[Any]]], frames: int) -> tuple[np.ndarray, np.nda
 
 
 def _start_frame(visible: np.ndarray, begin: int | None) -> int | None:
-    """The frame the follow starts from: the first (at or after ``begin``) with enough keyed
+    """The frame the proposals start from: the first (at or after ``begin``) with enough keyed
     joints; None when there is none."""
     keyed = np.flatnonzero(visible.sum(axis=1) >= FOLLOW_START_JOINTS)
     if begin is not None:
@@ -296,10 +300,10 @@ def model_follow(session: Session, storage: Storage, assignment: Assignment,
     stored = _load(storage, storage_key(task.id, digest))
     if stored is None:
         return unavailable(*_queued(session, task, digest, rows, body.begin))
-    xy, ok, start, stops = stored
+    xy, ok, started, stops = stored
     if not ok.any():
         why = next((r for _, r in stops.values() if r in _START_REFUSED), "depth")
-        return unavailable(f"the hand model could not start from frame {start}: "
+        return unavailable(f"the hand model could not start from frame {started}: "
                            f"{_START_REFUSED[why]}")
     # Proposals only where the worker's keyframes have the point visible, never at its own
     # keyframes.

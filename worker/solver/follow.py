@@ -11,7 +11,12 @@ backward to its start: each frame starts from the previous frame's pose (with ha
 added) and is fitted to that frame's depth (ICP rounds: the depth points near the hand matched
 to its surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever
 the worker keyed at that frame (the keypoint term, robust). A frame keyed by the worker again
-pulls the hand back where it had drifted, so a correction mends what follows it. Depth readings
+pulls the hand back where it had drifted, so a correction mends what follows it: asked again
+from a corrected frame (``begin``), the follow is both carried from the same first keyed
+frame through every keyframe and accepted proposal before the correction and started afresh
+from the corrected frame's keys, and the one the depth fits better is kept: a start in the
+grasp, where the keys lift onto the object, can be worse than the open hand's carried there,
+and a first start from noisy clicks worse than the worker's corrected frame. Depth readings
 that have not changed since the keyed frame (the table, an object still at rest) are left out of
 the matches, outside the hand's own pixels there.
 
@@ -96,7 +101,14 @@ MAX_START_PX = 8.0
 # A lifted keyed joint this far (metres) from the hand fitted to all of them is left out of
 # one start guess: a joint behind a finger is lifted onto that finger's surface.
 OUTLIER_M = 0.015
-SETTINGS = SolveSettings(min_views=1, min_joints=0, icp_rounds=1)
+# Every depth pixel (DEPTH_STRIDE 1), where the multi-view solve takes every 4th in x and y:
+# one view is all the follow has, and a finger is a few pixels wide at arm's length, so at
+# every 4th the fingertips got few matches or none and slid along their own surface while the
+# depth RMS stayed low. On s7717's second and fifth views (crowd seed 3, first frame keyed)
+# the joint-frames beyond the careful worker's tolerance or not proposed fell from 649 to 37
+# (every 2nd: 507), at about 1.3x the time.
+DEPTH_STRIDE = 1
+SETTINGS = SolveSettings(min_views=1, min_joints=0, icp_rounds=1, depth_stride=DEPTH_STRIDE)
 
 # The scene that does not move: a depth reading within STATIC_MM of the keyed frame's at the
 # same pixel is the table or an object at rest, not the hand (outside the hand's own pixels at
@@ -216,9 +228,14 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
 
     keypoints: (F, 21, 2) px of the worker's keyed visible joints (NaN elsewhere); visible:
     (F, 21) bool, those keyed visible; depth: (F, H, W) uint16 mm of the same frames.
-    begin: follow forward only, from the first frame at or after ``begin`` with
-    MIN_START_JOINTS keyed joints (a correction: what comes before it stays as it was);
-    None: from the first such frame, forward and backward.
+    begin: a correction: proposals only from ``begin`` on, forward (what comes before it stays
+    as it was). The follow still starts where it would without ``begin`` (the first frame with
+    MIN_START_JOINTS keyed joints) and is carried forward through the keyframes before
+    ``begin``, which hold it where the worker placed or accepted the hand; it is also started
+    afresh from the first such frame at or after ``begin`` (the corrected frame), and of the two
+    that reach ``begin`` and sit within MAX_START_PX (median) of the corrected frame's keys, the
+    one the depth fits better from ``begin`` on (mean robust RMS) is kept. None: from the first
+    such frame, forward and backward.
     """
     keypoints = np.asarray(keypoints, np.float64)
     visible = np.asarray(visible, bool) & np.isfinite(keypoints).all(axis=-1)
@@ -228,20 +245,60 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
                          f"{NUM_JOINTS}), got {keypoints.shape} and {visible.shape}")
     if np.shape(depth)[0] != frames:
         raise ValueError(f"depth has {np.shape(depth)[0]} frames, the keyframes {frames}")
-    xy = np.full((frames, NUM_JOINTS, 2), np.nan)
-    rms = np.full(frames, np.nan)
     keyed = np.flatnonzero(visible.sum(axis=1) >= MIN_START_JOINTS)
-    if begin is not None:
-        keyed = keyed[keyed >= begin]
-    if not len(keyed):
-        return Followed(xy, np.zeros((frames, NUM_JOINTS), bool), -1, {}, rms)
-    start = int(keyed[0])
+    if begin is None:
+        starts = [int(k) for k in keyed[:1]]
+    else:
+        starts = list(dict.fromkeys([int(k) for k in (*keyed[:1], *keyed[keyed >= begin][:1])]))
+    if not starts:
+        return Followed(np.full((frames, NUM_JOINTS, 2), np.nan),
+                        np.zeros((frames, NUM_JOINTS), bool), -1, {}, np.full(frames, np.nan))
     inputs = SolveInputs(
         cameras=[camera], num_frames=frames,
         hand=HandTarget(side=side, betas=np.asarray(betas, np.float64),
                         keypoints=keypoints[None], visible=visible[None]),
         objects=[], depth=[np.asarray(depth)], hand_model=hand_model)
     problem = Problem(inputs, SETTINGS)
+    if begin is None:
+        return _follow_from(problem, camera, depth, starts[0], rounds, backward=True)
+    corrected = keyed[keyed >= begin][:1]
+    found: Followed | None = None
+    for start in starts:
+        candidate = _follow_from(problem, camera, depth, start, rounds, backward=False)
+        candidate.xy[:begin] = np.nan
+        candidate.ok[:begin] = False
+        holds = candidate.ok.any() and all(
+            _off_keys_px(candidate.xy[k], keypoints[k], visible[k]) <= MAX_START_PX
+            for k in corrected)
+        if holds and (found is None or _mean_rms(candidate, begin) < _mean_rms(found, begin)):
+            found = candidate
+    # Neither holds: the last one's answer says why (refused, or where it stopped).
+    return candidate if found is None else found
+
+
+def _mean_rms(found: Followed, begin: int) -> float:
+    """The follow's mean robust depth RMS (mm) over the frames it fitted from ``begin`` on."""
+    rms = found.depth_rms_mm[begin:]
+    rms = rms[np.isfinite(rms)]
+    return float(rms.mean()) if len(rms) else np.inf
+
+
+def _off_keys_px(xy: np.ndarray, keypoints: np.ndarray, visible: np.ndarray) -> float:
+    """Median px from one frame's keyed visible joints (keypoints (21, 2), visible (21,)) to
+    the followed ones there (xy (21, 2), NaN where not followed: inf)."""
+    off = np.linalg.norm(xy - keypoints, axis=-1)[visible]
+    return float(np.median(np.where(np.isfinite(off), off, np.inf))) if len(off) else np.inf
+
+
+def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray, start: int,
+                 rounds: int, backward: bool) -> Followed:
+    """follow_hand from the keyed frame ``start`` (problem: the view's, its clouds replaced
+    here), forward and, with ``backward``, backward."""
+    keypoints, visible = problem.keypoints[0], problem.gamma[0]
+    frames = int(keypoints.shape[0])
+    xy: np.ndarray = np.full((frames, NUM_JOINTS, 2), np.nan)
+    rms = np.full(frames, np.nan)
+    problem.clouds = DepthClouds([camera], [np.asarray(depth)], SETTINGS.depth_stride)
     state = SolveState.empty(problem)
     # The keyed frame, fitted from each start guess each way of START_FITS; of the fits that
     # sit on the keyframes (MAX_START_PX), the one the depth fits best is kept.
@@ -255,9 +312,8 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
             problem.settings = replace(SETTINGS, w_kpt=weight * SETTINGS.w_kpt)
             count, fit_rms = _fit_frame(problem, state, start, START_ROUNDS * rounds)
             problem.settings = SETTINGS
-            fitted_px = camera.project(state.joints(problem)[0])
-            off_px = float(np.median(np.linalg.norm(fitted_px - keypoints[start], axis=-1)
-                                     [visible[start]]))
+            off_px = _off_keys_px(camera.project(state.joints(problem)[0]),
+                                  keypoints[start], visible[start])
             found = (count, fit_rms, off_px, state.hand_pose[start].copy())
             if best is None or _start_rank(found) < _start_rank(best):
                 best = found
@@ -276,7 +332,7 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
     problem.clouds = DepthClouds([camera], [_moving_depth(
         camera, depth, start, hand_vertices_world(problem, state.hand_pose[[start]])[0])],
         SETTINGS.depth_stride)
-    for name, step in (("forward", 1), ("backward", -1))[:1 if begin is not None else 2]:
+    for name, step in (("forward", 1), ("backward", -1))[:2 if backward else 1]:
         stops[name] = (-1, STOP_END)
         history: list[float] = []
         for f in range(start + step, frames if step > 0 else -1, step):

@@ -189,6 +189,12 @@ def test_asked_again_from_a_corrected_frame_it_follows_on_forward_from_there(
     assert held[corrected + 1:][after].mean() >= 0.8
     err = np.linalg.norm(again - view["truth"], axis=-1)[held]
     assert np.median(err) < 2.5, np.median(err)
+    # The page's status names the corrected frame as where the rings start, though the
+    # follow was carried there from frame 0.
+    answer = _post(client, link["token"], {"tracks": [
+        {"point": p, "keyframes": rows} for p, rows in enumerate(accepted)],
+        "begin": corrected})
+    assert answer["available"] is True and answer["start_frame"] == corrected
 
 
 def test_other_keyframes_wait_for_the_follow_under_way(client: TestClient, view: dict) -> None:

@@ -73,15 +73,51 @@ def test_a_keyed_frame_without_depth_gives_no_proposals(scene: Scene) -> None:
     assert found.stops["forward"] == (0, STOP_DEPTH)
 
 
-def test_a_correction_follows_forward_from_its_frame_only(scene: Scene) -> None:
+def test_a_correction_proposes_from_its_frame_on_close_to_the_truth(scene: Scene) -> None:
+    # The worker keyed frame 0, then frame 4 again, and asks from frame 3: the follow is
+    # carried from frame 0 through frame 4's keys and started afresh at frame 4, and the one
+    # the depth fits better proposes, from frame 3 on only.
     keypoints, keyed = _first_frame_keys(scene)
     later_keys, later_keyed = _first_frame_keys(scene, frame=4, seed=1)
     keypoints[4], keyed[4] = later_keys[4], later_keyed[4]
     found = _follow(scene, keypoints, keyed, begin=3)
+    assert found.start in (0, 4)
+    assert not found.ok[:3].any()
+    assert found.ok[5:].all()
+    assert "backward" not in found.stops
+    truth, visible = scene.xy[VIEW][:FRAMES], scene.visible[VIEW][:FRAMES]
+    err = np.linalg.norm(found.xy[5:] - truth[5:], axis=-1)[visible[5:]]
+    assert np.median(err) < 2.0, np.median(err)
+
+
+def test_a_correction_starts_at_its_own_frame_where_the_first_start_is_refused(
+        scene: Scene) -> None:
+    # No depth at frame 0: the first start is refused, so the follow starts from the first
+    # frame keyed whole at or after ``begin``.
+    keypoints, keyed = _first_frame_keys(scene)
+    later_keys, later_keyed = _first_frame_keys(scene, frame=4, seed=1)
+    keypoints[4], keyed[4] = later_keys[4], later_keyed[4]
+    depth = scene.depth[VIEW][:FRAMES].copy()
+    depth[0] = 0
+    found = follow_hand(scene.cameras[VIEW], depth, keypoints, keyed, scene.side, scene.betas,
+                        begin=3)
     assert found.start == 4
     assert not found.ok[:4].any()
     assert found.ok[5:].all()
     assert "backward" not in found.stops
+
+
+def test_a_correction_the_carried_follow_does_not_sit_on_starts_at_the_corrected_frame(
+        scene: Scene) -> None:
+    # Frame 4 keyed 20 px off the hand the depth holds: the follow carried from frame 0 does
+    # not sit on those keys (over MAX_START_PX), so only the start from frame 4's keys is
+    # left.
+    keypoints, keyed = _first_frame_keys(scene)
+    later_keys, later_keyed = _first_frame_keys(scene, frame=4, seed=1, shift=(20.0, 0.0))
+    keypoints[4], keyed[4] = later_keys[4], later_keyed[4]
+    found = _follow(scene, keypoints, keyed, begin=3)
+    assert found.start == 4
+    assert not found.ok[:4].any()
 
 
 def test_too_few_keyed_joints_or_wrong_shapes_are_refused(scene: Scene) -> None:
