@@ -246,10 +246,9 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
     if np.shape(depth)[0] != frames:
         raise ValueError(f"depth has {np.shape(depth)[0]} frames, the keyframes {frames}")
     keyed = np.flatnonzero(visible.sum(axis=1) >= MIN_START_JOINTS)
-    if begin is None:
-        starts = [int(k) for k in keyed[:1]]
-    else:
-        starts = list(dict.fromkeys([int(k) for k in (*keyed[:1], *keyed[keyed >= begin][:1])]))
+    # The frame a correction was keyed on: the first keyed whole at or after ``begin``.
+    corrected = keyed[keyed >= begin][:1] if begin is not None else keyed[:0]
+    starts = list(dict.fromkeys(int(k) for k in (*keyed[:1], *corrected)))
     if not starts:
         return Followed(np.full((frames, NUM_JOINTS, 2), np.nan),
                         np.zeros((frames, NUM_JOINTS), bool), -1, {}, np.full(frames, np.nan))
@@ -259,12 +258,13 @@ def follow_hand(camera: CameraModel, depth: np.ndarray, keypoints: np.ndarray,
                         keypoints=keypoints[None], visible=visible[None]),
         objects=[], depth=[np.asarray(depth)], hand_model=hand_model)
     problem = Problem(inputs, SETTINGS)
+    clouds = problem.clouds
+    assert clouds is not None
     if begin is None:
-        return _follow_from(problem, camera, depth, starts[0], rounds, backward=True)
-    corrected = keyed[keyed >= begin][:1]
+        return _follow_from(problem, camera, depth, clouds, starts[0], rounds, backward=True)
     found: Followed | None = None
     for start in starts:
-        candidate = _follow_from(problem, camera, depth, start, rounds, backward=False)
+        candidate = _follow_from(problem, camera, depth, clouds, start, rounds, backward=False)
         candidate.xy[:begin] = np.nan
         candidate.ok[:begin] = False
         holds = candidate.ok.any() and all(
@@ -290,15 +290,16 @@ def _off_keys_px(xy: np.ndarray, keypoints: np.ndarray, visible: np.ndarray) -> 
     return float(np.median(np.where(np.isfinite(off), off, np.inf))) if len(off) else np.inf
 
 
-def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray, start: int,
-                 rounds: int, backward: bool) -> Followed:
-    """follow_hand from the keyed frame ``start`` (problem: the view's, its clouds replaced
-    here), forward and, with ``backward``, backward."""
+def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
+                 clouds: DepthClouds, start: int, rounds: int, backward: bool) -> Followed:
+    """follow_hand from the keyed frame ``start``, forward and, with ``backward``, backward
+    (problem: the view's; its clouds set here: ``clouds``, the whole depth's, for the start,
+    then the moving depth's)."""
     keypoints, visible = problem.keypoints[0], problem.gamma[0]
     frames = int(keypoints.shape[0])
     xy: np.ndarray = np.full((frames, NUM_JOINTS, 2), np.nan)
     rms = np.full(frames, np.nan)
-    problem.clouds = DepthClouds([camera], [np.asarray(depth)], SETTINGS.depth_stride)
+    problem.clouds = clouds
     state = SolveState.empty(problem)
     # The keyed frame, fitted from each start guess each way of START_FITS; of the fits that
     # sit on the keyframes (MAX_START_PX), the one the depth fits best is kept.
