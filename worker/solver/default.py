@@ -32,12 +32,15 @@ ROBUST_ROUNDS = 3
 
 
 def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, iterations: int,
-             rounds: int) -> None:
+             rounds: int, pose_prior: tuple[np.ndarray, float] | None = None) -> None:
     """Refine state.hand_pose on the labelled frames in place.
 
     Each round renews the robust weights and, with settings.w_smooth > 0, the smoothness
     targets (each frame's neighbours' mean joints from the current poses), then runs LM; frames
     are independent within a round, so the smoothness couples them from round to round.
+    pose_prior: (targets (B, 45) PCA pose coefficients, weight) pulling each frame's pose
+    towards its target instead of towards its neighbours' mean (a frame fitted alone, whose
+    neighbour is already known).
     """
     subject = problem.require_subject()
     frames = state.hand_frames
@@ -52,7 +55,10 @@ def fit_hand(problem: Problem, state: SolveState, depth: DepthData | None, itera
             target, inner = neighbour_mean(state.joints(problem), frames)
             data.smooth_target = problem.tensor(target)
             data.sqrt_smooth = problem.tensor(np.sqrt(settings.w_smooth) * inner)
-        if settings.w_smooth_pose > 0:
+        if pose_prior is not None:
+            data.pose_target = problem.tensor(pose_prior[0])
+            data.sqrt_pose_smooth = problem.tensor(np.full(len(frames), np.sqrt(pose_prior[1])))
+        elif settings.w_smooth_pose > 0:
             target, inner = neighbour_mean(state.hand_pose[frames, 3:48], frames)
             data.pose_target = problem.tensor(target)
             data.sqrt_pose_smooth = problem.tensor(np.sqrt(settings.w_smooth_pose) * inner)

@@ -10,15 +10,18 @@ the keyframes starts), and then carried frame by frame forward to the end of the
 backward to its start: each frame starts from the previous frame's pose (with half its velocity
 added) and is fitted to that frame's depth (ICP rounds: the depth points near the hand matched
 to its surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever
-the worker keyed at that frame (the keypoint term, robust). A frame keyed by the worker again
-pulls the hand back where it had drifted, so a correction mends what follows it: asked again
-from a corrected frame (``begin``), the follow is both carried from the same first keyed
-frame through every keyframe and accepted proposal before the correction and started afresh
-from the corrected frame's keys, and the one the depth fits better is kept: a start in the
-grasp, where the keys lift onto the object, can be worse than the open hand's carried there,
-and a first start from noisy clicks worse than the worker's corrected frame. Depth readings
-that have not changed since the keyed frame (the table, an object still at rest) are left out of
-the matches, outside the hand's own pixels there.
+the worker keyed at that frame (the keypoint term, robust), its pose coefficients pulled towards
+the previous frame's (the fingers the view does not see keep their bend). A frame keyed by the
+worker again pulls the hand back where it had drifted, so a correction mends what follows it:
+asked again from a corrected frame (``begin``), the follow is both carried from the same first
+keyed frame through every keyframe and accepted proposal before the correction and started
+afresh from the corrected frame's keys, and the one the depth fits better is kept: a start in
+the grasp, where the keys lift onto the object, can be worse than the open hand's carried there,
+and a first start from noisy clicks worse than the worker's corrected frame. Depth readings that
+have not changed since the keyed frame (the table, an object still at rest) are left out of the
+matches, outside the hand's own pixels there; so are those of what the hand holds once it moves:
+the readings beside the fitted hand are carried to the next frame with the palm's rigid motion,
+and that frame's readings where they land are left out (_Held).
 
 The follow stops (in that direction) at the first frame whose fit the depth does not support:
 fewer than MIN_MATCHED depth points near the fitted surface, or their robust RMS distance over
@@ -50,8 +53,8 @@ from worker.geometry.cameras import CameraModel, pixels_to_rays
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import HandModel
 from worker.solver.default import fit_hand
-from worker.solver.depth import DepthClouds
-from worker.solver.init import hand_from_joints
+from worker.solver.depth import DepthClouds, crop_to_boxes, match_points
+from worker.solver.init import hand_from_joints, kabsch
 from worker.solver.problem import Problem
 from worker.solver.state import SolveState, hand_vertices_world
 from worker.solver.suggest import START_ITERATIONS, lift_labels
@@ -115,6 +118,34 @@ SETTINGS = SolveSettings(min_views=1, min_joints=0, icp_rounds=1, depth_stride=D
 # the keyed frame, grown by HAND_MASK_PX). Beside a finger such points would pull the hand.
 STATIC_MM = 8
 HAND_MASK_PX = 15
+# A frame is fitted alone, so the solve's pull of each frame's pose towards its neighbours'
+# mean has nothing to pull towards, and only the weak prior towards the mean (open) hand acted
+# on the fingers the depth does not see (behind the others from that view): they opened while
+# the hand closed on the object. Each frame's pose coefficients are pulled towards the previous
+# frame's instead, with this weight (the solve's w_smooth_pose). On s5151's first view, keyed
+# on frame 0 without noise, the frames before the lift (0-53) with 3 or more joints 6 px or
+# more off the truth went from 33 to 6 (weight 10: 24; 160: 9).
+HELD_POSE_WEIGHT = 40.0
+
+# What the hand holds moves with it, so the static scene no longer hides an object once lifted,
+# and its surface beside the fingers pulled them onto it (s7717's fourth view, crowd seed 3:
+# 4-9 joints 6 px or more off the truth on every frame from the lift, frame 54, at 2 mm depth
+# RMS). So the readings beside the fitted hand (within the match margin of its surface, more
+# than BESIDE_MM from it) that the static scene holds, or that were left out as held, are
+# carried to the next frame with the hand's rigid motion, and that frame's readings within
+# BESIDE_MM of where they land (along the pixel's ray) are left out of its matches. A reading of
+# the hand's own that the fit left beside it is moving, so it is not carried: a finger fitted
+# off its depth is still pulled back. On that view the follow then held every joint within 6 px
+# of the truth on all 72 frames, and with the pull of HELD_POSE_WEIGHT too the view took 30
+# edits in bench/follow.py's worker against 53.
+BESIDE_MM = 6.0
+# The hand's rigid motion from one frame to the next: that of its wrist and the fingers' roots,
+# which the fingers' bending does not move. A carried point leaves out the readings within
+# CARRY_PX pixels of where it lands.
+PALM_JOINTS = [0, 5, 9, 13, 17]
+CARRY_PX = 2
+# Pixels around the hand's projected box searched for points beside it.
+BESIDE_PAD_PX = 40
 
 STOP_END = "end"
 STOP_DEPTH = "depth"
@@ -137,24 +168,110 @@ class Followed:
     depth_rms_mm: np.ndarray
 
 
-def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int
+class _Held:
+    """What the hand holds, carried with it (BESIDE_MM). ``shown`` (F, H, W) is the depth the
+    follow's clouds read: each frame's moving depth (``moving``) less the readings where the
+    points beside the hand at the frame fitted before land, moved with the hand's palm.
+    depth: (F, H, W) the view's depth as recorded; moving: the same less the static scene
+    (_moving_depth); rays: (H * W, 3) its pixels' rays, in raster order."""
+
+    def __init__(self, camera: CameraModel, depth: np.ndarray, moving: np.ndarray,
+                 rays: np.ndarray) -> None:
+        self.camera = camera
+        self.depth = np.asarray(depth)
+        self.source = moving
+        self.shown = moving.copy()
+        height, width = moving.shape[1:]
+        if rays.shape != (height * width, 3):
+            raise ValueError(f"expected a ray per pixel ({height * width}), got {rays.shape}")
+        self.rays = rays.reshape(height, width, 3)
+        self.left_out = np.zeros((height, width), bool)
+        self.points = np.zeros((0, 3))
+        self.palm: np.ndarray | None = None
+
+    def leave_out(self, frame: int, joints: np.ndarray) -> None:
+        """Before ``frame`` is matched with the hand's joints (21, 3) world as fitted so far."""
+        height, width = self.left_out.shape
+        self.left_out = np.zeros((height, width), bool)
+        if self.palm is not None and len(self.points):
+            rot, shift = kabsch(self.palm[None], joints[PALM_JOINTS][None],
+                                np.ones((1, len(PALM_JOINTS))))
+            carried = self.points @ rot[0].T + shift[0]
+            pix = np.rint(self.camera.project(carried)).astype(int)
+            z_mm = self.camera.depth_of(carried) * 1000.0
+            inside = ((pix[:, 0] >= 0) & (pix[:, 0] < width) & (pix[:, 1] >= 0)
+                      & (pix[:, 1] < height) & (z_mm > 0))
+            pix, z_mm = pix[inside], z_mm[inside]
+            if len(pix):
+                # Within the landing points' box only (grown by CARRY_PX).
+                x0, y0 = np.maximum(pix.min(0) - CARRY_PX, 0)
+                x1, y1 = np.minimum(pix.max(0) + CARRY_PX + 1, (width, height))
+                near = np.full((y1 - y0, x1 - x0), np.inf, np.float32)
+                np.minimum.at(near, (pix[:, 1] - y0, pix[:, 0] - x0), z_mm.astype(np.float32))
+                spread = cv2.erode(near, np.ones((2 * CARRY_PX + 1,) * 2, np.uint8))
+                reading = self.source[frame, y0:y1, x0:x1].astype(np.float32)
+                self.left_out[y0:y1, x0:x1] = (reading > 0) \
+                    & (np.abs(reading - spread) < BESIDE_MM)
+        self.shown[frame] = np.where(self.left_out, 0, self.source[frame])
+
+    def note(self, frame: int, problem: Problem, vertices: np.ndarray, joints: np.ndarray
+             ) -> None:
+        """After ``frame`` is fitted (the hand's vertices (N, 3) and joints (21, 3) world, the
+        problem's hand tree refitted to them): the readings beside the hand there that the
+        static scene holds or that were carried there are what it holds."""
+        height, width = self.left_out.shape
+        pix = self.camera.project(vertices)
+        pix = pix[np.isfinite(pix).all(axis=1)]
+        if not len(pix) or problem.hand_tree is None:
+            self.points, self.palm = np.zeros((0, 3)), None
+            return
+        x0, y0 = np.clip(np.floor(pix.min(0)).astype(int) - BESIDE_PAD_PX, 0, None)
+        x1, y1 = np.ceil(pix.max(0)).astype(int) + BESIDE_PAD_PX
+        x1, y1 = min(int(x1), width), min(int(y1), height)
+        reading = self.depth[frame, y0:y1, x0:x1].astype(np.int32)
+        # The static scene: what the moving depth left out (never the hand's own pixels at the
+        # keyed frame, whose reading there is the hand's).
+        static = self.source[frame, y0:y1, x0:x1] == 0
+        ys, xs = np.nonzero((reading > 0) & (static | self.left_out[y0:y1, x0:x1]))
+        z = reading[ys, xs].astype(np.float64) * 1e-3
+        rays = self.rays[ys + y0, xs + x0]
+        world = (rays * z[:, None]) @ self.camera.T_cam_to_world[:, :3].T \
+            + self.camera.T_cam_to_world[:, 3]
+        margin = problem.settings.depth_margin
+        world = crop_to_boxes(world, [(vertices.min(0), vertices.max(0))], margin)
+        found = match_points(world, [problem.hand_tree], [None], margin)
+        self.points = found.points[found.dist > BESIDE_MM * 1e-3]
+        self.palm = joints[PALM_JOINTS].copy()
+
+
+def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int,
+               prior: np.ndarray | None = None, held: _Held | None = None
                ) -> tuple[int, float]:
     """Fit one frame's pose in place (keypoints where keyed, depth); (depth points matched,
-    their robust RMS distance in mm) after the last round."""
+    their robust RMS distance in mm) after the last round. prior: (45,) pose coefficients the
+    frame's are pulled towards (HELD_POSE_WEIGHT), or None; held: what the hand holds, left
+    out of each round's matches (None: nothing)."""
     state.hand_frames = np.array([frame])
     robust_mm = problem.settings.depth_robust_mm
     before = None
     for _ in range(rounds):
         vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
+        if held is not None:
+            held.leave_out(frame, state.joints(problem)[0])
         matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
         data = problem.depth_data(0, [matches], problem.hand_faces, robust_mm)
-        fit_hand(problem, state, data, LM_ITERATIONS, 1)
+        fit_hand(problem, state, data, LM_ITERATIONS, 1,
+                 None if prior is None else (prior[None], HELD_POSE_WEIGHT))
         joints = state.joints(problem)[0]
         if before is not None and np.abs(joints - before).max() < CONVERGED_M:
             break
         before = joints
     vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
+    if held is not None:
+        held.leave_out(frame, state.joints(problem)[0])
     matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
+    if held is not None:
+        held.note(frame, problem, vertices, state.joints(problem)[0])
     if matches is None or not len(matches.dist):
         return 0, float("inf")
     dist_mm = matches.dist * 1000.0
@@ -330,18 +447,23 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
                         {"forward": (start, refused), "backward": (start, refused)}, rms)
     stops: dict[str, tuple[int, str]] = {}
     fitted[start] = True
-    problem.clouds = DepthClouds([camera], [_moving_depth(
-        camera, depth, start, hand_vertices_world(problem, state.hand_pose[[start]])[0])],
-        SETTINGS.depth_stride)
+    vertices = hand_vertices_world(problem, state.hand_pose[[start]])[0]
+    held = _Held(camera, depth, _moving_depth(camera, depth, start, vertices),
+                 clouds.views[0][3])
+    problem.match_depth(start, vertices, np.zeros((0, 3, 4)))
+    held.note(start, problem, vertices, state.joints(problem)[0])
+    at_start = (held.points, held.palm)
+    problem.clouds = DepthClouds([camera], [held.shown], SETTINGS.depth_stride)
     for name, step in (("forward", 1), ("backward", -1))[:2 if backward else 1]:
         stops[name] = (-1, STOP_END)
+        held.points, held.palm = at_start
         history: list[float] = []
         for f in range(start + step, frames if step > 0 else -1, step):
             prev = state.hand_pose[f - step]
             back = f - 2 * step
             older = state.hand_pose[back] if 0 <= back < frames and fitted[back] else prev
             state.hand_pose[f] = prev + VELOCITY * (prev - older)
-            count, rms[f] = _fit_frame(problem, state, f, rounds)
+            count, rms[f] = _fit_frame(problem, state, f, rounds, prev[3:48].copy(), held)
             usual = float(np.median(history)) if history else float(rms[start])
             if count < MIN_MATCHED or rms[f] > max(MAX_DEPTH_RMS_MM, STOP_RATIO * usual):
                 stops[name] = (f, STOP_DEPTH)

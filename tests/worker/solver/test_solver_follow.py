@@ -129,3 +129,87 @@ def test_too_few_keyed_joints_or_wrong_shapes_are_refused(scene: Scene) -> None:
     with pytest.raises(ValueError, match="depth has"):
         follow_hand(scene.cameras[VIEW], scene.depth[VIEW][:5], keypoints, keyed,
                     scene.side, scene.betas)
+
+
+class TestWhatTheHandHolds:
+    """worker.solver.follow._Held on a rendered hand with a box beside its palm, at rest on one
+    frame and moving with the hand on the next (a held object, lifted): the box's readings near
+    the hand are left out of the next frame's matches, the hand's are kept."""
+
+    def test_a_box_moving_with_the_hand_is_left_out_and_the_hand_kept(self) -> None:
+        from tests.worker.solver.test_solver_scene import (
+            box,
+            hand_pose_m,
+            hand_truth,
+            render_depth,
+        )
+        from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
+        from worker.hand import builtin_hand_model
+        from worker.solver.follow import PALM_JOINTS, SETTINGS, _Held
+        from worker.solver.init import kabsch
+        from worker.solver.problem import Problem
+        from worker.solver.types import HandTarget, SolveInputs
+
+        faces = builtin_hand_model("right").faces
+        betas = np.zeros(10)
+        pose = hand_pose_m(0, 2)
+        pose[1] = pose[0]
+        pose[1, :3] += [0.15, -0.1, 0.05]  # the hand turns and lifts between the frames
+        pose[1, 48:] += [0.01, -0.005, 0.02]
+        joints, verts = hand_truth(pose, betas)
+        # A 640x480 camera half a metre from the hand (a finger a few pixels wide, as recorded).
+        target = verts[0].mean(0)
+        camera = CameraModel(intrinsics_matrix(600.0, 600.0, 320.0, 240.0), None,
+                             look_at(target + np.array([0.3, -0.2, 0.35]), target,
+                                     np.array([0.0, 0.0, 1.0])), 640, 480)
+        # A 3 cm box beside the hand, its nearest corner 8-12 mm from the hand's vertices.
+        cube, cube_faces = box((0.03, 0.03, 0.03), steps=6)
+        right = camera.T_cam_to_world[:, 0]
+        centre = verts[0].mean(0)
+        for step in np.linspace(0.0, 0.2, 201):
+            placed = cube + centre + step * right
+            gap = np.linalg.norm(placed[:, None] - verts[0][None], axis=-1).min()
+            if gap > 0.008:
+                break
+        assert 0.008 < gap < 0.012, gap
+        rot, shift = kabsch(joints[0][PALM_JOINTS][None], joints[1][PALM_JOINTS][None],
+                            np.ones((1, len(PALM_JOINTS))))
+        moved = placed @ rot[0].T + shift[0]
+        depth = np.stack([render_depth(camera, [(verts[0], faces), (placed, cube_faces)]),
+                          render_depth(camera, [(verts[1], faces), (moved, cube_faces)])])
+        hand_only = render_depth(camera, [(verts[1], faces)])
+        cube_only = render_depth(camera, [(moved, cube_faces)])
+        on_hand = (hand_only > 0) & (depth[1] == hand_only)
+        on_cube = (cube_only > 0) & (depth[1] == cube_only)
+        assert on_hand.sum() > 2000 and on_cube.sum() > 500
+
+        keypoints = np.stack([camera.project(joints)])
+        inputs = SolveInputs([camera], 2, HandTarget("right", betas, keypoints,
+                                                     np.ones((1, 2, 21), bool)), [], [depth])
+        problem = Problem(inputs, SETTINGS)
+        assert problem.clouds is not None
+        # The box at rest on the first frame (left out as the static scene), lifted with the
+        # hand on the second (moving: kept by the static test).
+        resting = render_depth(camera, [(placed, cube_faces)])
+        moving = depth.copy()
+        moving[0][(resting > 0) & (depth[0] == resting)] = 0
+        held = _Held(camera, depth, moving, problem.clouds.views[0][3])
+        problem.match_depth(0, verts[0], np.zeros((0, 3, 4)))
+        held.note(0, problem, verts[0], joints[0])
+        assert len(held.points) > 100
+        held.leave_out(1, joints[1])
+        # The box's readings within the match margin of the hand are the ones that could pull
+        # it: most of them are left out; of the hand's own, next to none.
+        ys, xs = np.nonzero(on_cube)
+        rays = problem.clouds.views[0][3].reshape(*depth.shape[1:], 3)[ys, xs]
+        points = (rays * depth[1][ys, xs, None] * 1e-3) @ camera.T_cam_to_world[:, :3].T \
+            + camera.T_cam_to_world[:, 3]
+        near = np.linalg.norm(points[:, None] - verts[1][None], axis=-1).min(-1) \
+            < SETTINGS.depth_margin
+        cube_left = held.left_out[ys[near], xs[near]].mean()
+        hand_left = held.left_out[on_hand].mean()
+        # All of the box's 351 such readings left out, none of the hand's.
+        assert cube_left > 0.8, cube_left
+        assert hand_left < 0.02, hand_left
+        assert (held.shown[1][held.left_out] == 0).all()
+        assert (held.shown[1][on_hand] == depth[1][on_hand]).mean() > 0.98
