@@ -124,7 +124,7 @@ HAND_MASK_PX = 15
 # the hand closed on the object. Each frame's pose coefficients are pulled towards the previous
 # frame's instead, with this weight (the solve's w_smooth_pose). On s5151's first view, keyed
 # on frame 0 without noise, the frames before the lift (0-53) with 3 or more joints 6 px or
-# more off the truth went from 33 to 6 (weight 10: 24; 160: 9).
+# more off the truth went from 30 to 8.
 HELD_POSE_WEIGHT = 40.0
 
 # What the hand holds moves with it, so the static scene no longer hides an object once lifted,
@@ -135,8 +135,7 @@ HELD_POSE_WEIGHT = 40.0
 # carried to the next frame with the hand's rigid motion, and that frame's readings within
 # BESIDE_MM of where they land (along the pixel's ray) are left out of its matches. A reading of
 # the hand's own that the fit left beside it is moving, so it is not carried: a finger fitted
-# off its depth is still pulled back. On that view the follow then held every joint within 6 px
-# of the truth on all 72 frames, and with the pull of HELD_POSE_WEIGHT too the view took 30
+# off its depth is still pulled back. With this and HELD_POSE_WEIGHT's pull, that view took 31
 # edits in bench/follow.py's worker against 53.
 BESIDE_MM = 6.0
 # The hand's rigid motion from one frame to the next: that of its wrist and the fingers' roots,
