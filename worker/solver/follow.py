@@ -188,6 +188,10 @@ class _Held:
         self.points = np.zeros((0, 3))
         self.palm: np.ndarray | None = None
 
+    def forget(self) -> None:
+        """Hold nothing (the follow turns back to its keyed frame)."""
+        self.points, self.palm = np.zeros((0, 3)), None
+
     def leave_out(self, frame: int, joints: np.ndarray) -> None:
         """Before ``frame`` is matched with the hand's joints (21, 3) world as fitted so far."""
         height, width = self.left_out.shape
@@ -222,7 +226,7 @@ class _Held:
         pix = self.camera.project(vertices)
         pix = pix[np.isfinite(pix).all(axis=1)]
         if not len(pix) or problem.hand_tree is None:
-            self.points, self.palm = np.zeros((0, 3)), None
+            self.forget()
             return
         x0, y0 = np.clip(np.floor(pix.min(0)).astype(int) - BESIDE_PAD_PX, 0, None)
         x1, y1 = np.ceil(pix.max(0)).astype(int) + BESIDE_PAD_PX
@@ -252,11 +256,13 @@ def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int,
     out of each round's matches (None: nothing)."""
     state.hand_frames = np.array([frame])
     robust_mm = problem.settings.depth_robust_mm
+    # The joints of the pose as it stands (what the held readings are carried with).
+    joints = state.joints(problem)[0]
     before = None
     for _ in range(rounds):
         vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
         if held is not None:
-            held.leave_out(frame, state.joints(problem)[0])
+            held.leave_out(frame, joints)
         matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
         data = problem.depth_data(0, [matches], problem.hand_faces, robust_mm)
         fit_hand(problem, state, data, LM_ITERATIONS, 1,
@@ -267,10 +273,10 @@ def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int,
         before = joints
     vertices = hand_vertices_world(problem, state.hand_pose[[frame]])[0]
     if held is not None:
-        held.leave_out(frame, state.joints(problem)[0])
+        held.leave_out(frame, joints)
     matches = problem.match_depth(frame, vertices, np.zeros((0, 3, 4)))
     if held is not None:
-        held.note(frame, problem, vertices, state.joints(problem)[0])
+        held.note(frame, problem, vertices, joints)
     if matches is None or not len(matches.dist):
         return 0, float("inf")
     dist_mm = matches.dist * 1000.0
@@ -446,16 +452,14 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
                         {"forward": (start, refused), "backward": (start, refused)}, rms)
     stops: dict[str, tuple[int, str]] = {}
     fitted[start] = True
-    vertices = hand_vertices_world(problem, state.hand_pose[[start]])[0]
-    held = _Held(camera, depth, _moving_depth(camera, depth, start, vertices),
-                 clouds.views[0][3])
-    problem.match_depth(start, vertices, np.zeros((0, 3, 4)))
-    held.note(start, problem, vertices, state.joints(problem)[0])
-    at_start = (held.points, held.palm)
+    held = _Held(camera, depth, _moving_depth(
+        camera, depth, start, hand_vertices_world(problem, state.hand_pose[[start]])[0]),
+        clouds.views[0][3])
     problem.clouds = DepthClouds([camera], [held.shown], SETTINGS.depth_stride)
     for name, step in (("forward", 1), ("backward", -1))[:2 if backward else 1]:
         stops[name] = (-1, STOP_END)
-        held.points, held.palm = at_start
+        # Nothing is held at the keyed frame: its reading is all moving depth (none static).
+        held.forget()
         history: list[float] = []
         for f in range(start + step, frames if step > 0 else -1, step):
             prev = state.hand_pose[f - step]
