@@ -18,7 +18,12 @@ views to compare with, :func:`views_to_compare` names one held view to publish (
 best widens the baselines at the target), until QC can decide.
 
 Occlusion is judged by whether the target lies in front of a camera and inside its image (the
-object's initial pose, the hand's grasped object); depth is not read to publish.
+object's initial pose, the hand's grasped object). A hand's initial views start from the view
+its first worker labels best from nothing (worker.geometry.view_choice.start_view: the moving
+hand whole in the image and far from the camera, read from START_SAMPLES of each view's depth
+maps), then widen the baselines from it; that view is published first, so it leads the crowd's
+list and the other views' workers get the suggestions its work gives. Without depth (or with
+no view that qualifies) the widest pair leads as before.
 """
 
 from __future__ import annotations
@@ -33,18 +38,32 @@ from sqlalchemy import ColumnElement, and_, select
 from sqlalchemy.orm import Session
 
 from backend.annotation.models import Task
+from backend.captures.assets import load_depth
 from backend.captures.calibration import calibrated_models
-from backend.captures.models import Camera, SceneObject
+from backend.captures.models import Camera, Frame, SceneObject
 from backend.config import get_settings
 from backend.crowd.models import CrowdHit, PublishPlan
 from backend.crowd.schemas import PublishOptions
+from backend.errors import StorageError
+from backend.storage import get_storage
 from worker.geometry.cameras import CameraModel
-from worker.geometry.view_choice import initial_views, next_view, rig_centre, seen
+from worker.geometry.view_choice import (
+    HandInView,
+    hand_in_view,
+    initial_views,
+    next_view,
+    rig_centre,
+    seen,
+    start_view,
+)
 from worker.quality.support import MIN_VIEWS as QC_MIN_VIEWS
 from worker.tracks.spans import format_spans, frame_spans
 
 EVERY_VIEW, ADAPTIVE = "every-view", "adaptive"
 INITIAL_REASON = "initial: widest baselines"
+START_REASON = "initial: worked first, the hand whole in view"
+# Depth maps read per view to choose a hand's start view (the clip's first frame among them).
+START_SAMPLES = 18
 # Frame ranges named in a reason before the rest is summed up (the column holds 300 chars).
 REASON_RANGES = 6
 REASON_CHARS = 300
@@ -154,14 +173,38 @@ def _views(tasks: list[Task]) -> str:
 
 
 def initial_choice(session: Session, tasks: list[Task], count: int) -> dict[int, str]:
-    """The initial tasks of one target (its tasks in view order: the widest baselines) and
-    their reason."""
-    if len(tasks) <= count:
-        return {task.id: f"{INITIAL_REASON} (all {len(tasks)} views)" for task in tasks}
+    """The initial tasks of one target (its tasks in view order) and their reason, in the
+    order they are published: a hand's start view first (see the module), then the views
+    of widest baseline in view order."""
     models = calibrated_models(session, [task.camera for task in tasks])
-    chosen = sorted(initial_views(models, _anchor(session, tasks, models), count))
-    reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
-    return {tasks[i].id: reason for i in chosen}
+    first = start_view(_hands_in_view(session, tasks)) if tasks[0].kind == "hand" else None
+    if len(tasks) <= count:
+        chosen, reason = list(range(len(tasks))), f"{INITIAL_REASON} (all {len(tasks)} views)"
+    else:
+        chosen = initial_views(models, _anchor(session, tasks, models), count, first)
+        reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
+    order = sorted(chosen) if first is None else [first, *sorted(set(chosen) - {first})]
+    out = {tasks[i].id: reason for i in order}
+    if first is not None:
+        out[tasks[first].id] = reason.replace(INITIAL_REASON, START_REASON)
+    return out
+
+
+def _hands_in_view(session: Session, tasks: list[Task]) -> list[HandInView | None]:
+    """Per task, what START_SAMPLES of its view's depth maps say of the moving hand (None: the
+    view has no depth, or a map could not be read; the view is then not a start view)."""
+    storage = get_storage()
+    out: list[HandInView | None] = []
+    for task in tasks:
+        frames = list(session.scalars(select(Frame).where(Frame.camera_id == task.camera_id)
+                                      .order_by(Frame.index)))
+        sampled = frames[::max(1, -(-len(frames) // START_SAMPLES))]
+        try:
+            depth = load_depth(storage, task.camera, sampled) if len(sampled) >= 2 else None
+        except (ValueError, StorageError):
+            depth = None
+        out.append(None if depth is None else hand_in_view(depth))
+    return out
 
 
 def select_due(session: Session, task_ids: list[int], policy: Policy) -> dict[int, str | None]:
@@ -180,13 +223,19 @@ def select_due(session: Session, task_ids: list[int], policy: Policy) -> dict[in
                 continue
             # The initial views (again, where a publish stopped half way), and, in later
             # rounds, the views published before; the views the solves add follow them.
-            chosen = initial_choice(session, tasks, policy.initial_views)
             for t in tasks:
                 if t.id in due and t.id in published:
                     out[t.id] = None
-                elif t.id in due and t.id in chosen:
-                    out[t.id] = chosen[t.id]
-    return {task_id: out[task_id] for task_id in task_ids if task_id in out}
+            if not any(t.id in due and t.id not in published for t in tasks):
+                continue
+            chosen = initial_choice(session, tasks, policy.initial_views)
+            out.update({task_id: reason for task_id, reason in chosen.items()
+                        if task_id in due and task_id not in published})
+    # Each target's initial views in the order initial_choice gives (its start view first),
+    # the rest in the order asked.
+    ordered = [task_id for task_id in out if out[task_id] is not None]
+    return {task_id: out[task_id] for task_id in
+            [*ordered, *(t for t in task_ids if t in out and out[t] is None)]}
 
 
 def frame_ranges(flags: np.ndarray) -> str:

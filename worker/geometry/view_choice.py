@@ -8,15 +8,26 @@ line and pin nothing. A view helps only where the point lies in front of the cam
 its image.
 
 ``initial_views`` picks the first views of a target greedily: the pair of views in which the
-target is seen whose rays are closest to right angles, then, one at a time, the view whose
-smallest sine to a chosen ray is largest. ``next_view`` picks one more view for the frames the
-solve could not trust: the view seeing most of those frames' points, weighted by the sine it
-keeps to the nearest view already published there.
+target is seen whose rays are closest to right angles (or a given start view), then, one at a
+time, the view whose smallest sine to a chosen ray is largest. ``next_view`` picks one more view
+for the frames the solve could not trust: the view seeing most of those frames' points, weighted
+by the sine it keeps to the nearest view already published there.
+
+A hand's first view is worked from nothing: the hand model is fitted to the worker's first keys
+and followed through that view's depth (worker.solver.follow). ``hand_in_view`` reads from a
+view's depth alone (a few frames of the clip) whether the moving hand stays whole inside the
+image and how far away it is; ``start_view`` picks the view to work first: the hand whole on the
+first frame and on (nearly) every frame after, and of those the farthest. A hand cut by the
+image's edge on the keyed frame gives the fit too few joints to start from, and one near the
+camera turns the model's millimetres into more pixels to correct (on three synthetic 8-view
+captures the views that were never cut cost 31-60 corrections in the follow, the near or cut
+ones up to 199; BENCHMARKS.md, "The view worked first").
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -68,23 +79,29 @@ def _sine(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.norm(np.cross(a, b), axis=-1))
 
 
-def initial_views(cameras: Sequence[CameraModel], point: np.ndarray, count: int) -> list[int]:
+def initial_views(cameras: Sequence[CameraModel], point: np.ndarray, count: int,
+                  first: int | None = None) -> list[int]:
     """The ``count`` views (indices into ``cameras``) that pin the world ``point`` (3,) best:
-    the pair of rays closest to right angles among the views that see it, then greedily the
-    view whose smallest sine to a chosen ray is largest. Views that do not see the point come
-    last (a target outside every image still gets ``count`` views). Ties go to the lower
-    index."""
+    the pair of rays closest to right angles among the views that see it (or the view
+    ``first``, whatever it sees), then greedily the view whose smallest sine to a chosen ray
+    is largest. Views that do not see the point come last (a target outside every image still
+    gets ``count`` views). Ties go to the lower index. ``first`` leads the list."""
     views = len(cameras)
     if count < 1:
         raise ValueError(f"count must be at least 1, got {count}")
+    if first is not None and not 0 <= first < views:
+        raise ValueError(f"first view {first} is not one of the {views} views")
     if views <= count:
-        return list(range(views))
+        order = list(range(views))
+        return order if first is None else [first] + [v for v in order if v != first]
     r = rays(cameras, np.asarray(point, np.float64).reshape(1, 3))[:, 0]
     visible = seen(cameras, np.asarray(point, np.float64).reshape(1, 3))[:, 0]
     pool = [v for v in range(views) if visible[v]] or list(range(views))
     sines = _sine(r[:, None, :], r[None, :, :])
     chosen: list[int] = []
-    if len(pool) >= 2 and count >= 2:
+    if first is not None:
+        chosen = [first]
+    elif len(pool) >= 2 and count >= 2:
         sub = sines[np.ix_(pool, pool)]
         i, j = np.unravel_index(int(np.argmax(sub)), sub.shape)
         chosen = sorted((pool[int(i)], pool[int(j)]))
@@ -121,3 +138,64 @@ def next_view(cameras: Sequence[CameraModel], published: Sequence[int],
         scores.append(float((visible[v] * gain).mean()))
     best = int(np.argmax(scores))
     return int(candidates[best]), scores[best]
+
+
+# A reading belongs to what moves (the hand, what it holds) where it lies MOVING_MM or more in
+# front of the scene behind it: the BACKGROUND_PERCENTILE of that pixel's readings over the
+# sampled frames (the hand passes, the table stays). The moving region is cut by the image's
+# edge where more than EDGE_READINGS of its readings lie within EDGE_PX of it (a few stray
+# readings are sensor noise), and too small to follow under MIN_MOVING_READINGS (about a
+# 60 x 17 px hand: a palm a metre and a half away, or a hand mostly behind the object).
+MOVING_MM = 20.0
+BACKGROUND_PERCENTILE = 90.0
+EDGE_PX = 4
+EDGE_READINGS = 20
+MIN_MOVING_READINGS = 1000
+# A start view keeps the hand whole on at least this share of the sampled frames after the
+# first (the follow is carried through them; where the hand leaves the image it stops and the
+# worker keys the rest by hand).
+START_WHOLE_SHARE = 0.9
+
+
+@dataclass(frozen=True)
+class HandInView:
+    """What a view's depth says of the moving hand: whether its region is whole (inside the
+    image, big enough) on the first sampled frame, on what share of the sampled frames, and
+    its median distance from the camera (mm, NaN when nothing moves)."""
+
+    whole_first: bool
+    whole_share: float
+    depth_mm: float
+
+
+def hand_in_view(depth: np.ndarray) -> HandInView:
+    """:class:`HandInView` of one view from depth (S, H, W) mm (0 = no reading) of S >= 2
+    frames sampled through the clip, the first of them the clip's first frame."""
+    depth = np.asarray(depth)
+    if depth.ndim != 3 or depth.shape[0] < 2:
+        raise ValueError(f"expected depth (S >= 2, H, W), got {depth.shape}")
+    # The scene behind: each pixel's BACKGROUND_PERCENTILE reading (a missing one, 0, counted
+    # as the nearest), by one partition of the samples rather than a NaN-aware percentile.
+    rank = round(BACKGROUND_PERCENTILE / 100.0 * (len(depth) - 1))
+    behind = np.partition(depth, rank, axis=0)[rank].astype(np.float64)
+    mm = depth.astype(np.float64)
+    moving = (mm > 0) & (mm < behind[None] - MOVING_MM)
+    edge = np.zeros(depth.shape[1:], bool)
+    edge[:EDGE_PX], edge[-EDGE_PX:], edge[:, :EDGE_PX], edge[:, -EDGE_PX:] = True, True, True, True
+    counts = moving.reshape(len(mm), -1).sum(axis=1)
+    cut = (moving & edge[None]).reshape(len(mm), -1).sum(axis=1) > EDGE_READINGS
+    whole = (counts >= MIN_MOVING_READINGS) & ~cut
+    far = float(np.median(mm[moving])) if moving.any() else float("nan")
+    return HandInView(bool(whole[0]), float(whole[1:].mean()), far)
+
+
+def start_view(found: Sequence[HandInView | None]) -> int | None:
+    """The view (index into ``found``; None where a view has no depth) to work a hand's first
+    labels in: of the views whose hand is whole on the first frame and on START_WHOLE_SHARE of
+    the rest, the farthest; None when no view qualifies (the caller keeps its own order)."""
+    fit = [(v, h.depth_mm) for v, h in enumerate(found)
+           if h is not None and h.whole_first and h.whole_share >= START_WHOLE_SHARE
+           and np.isfinite(h.depth_mm)]
+    if not fit:
+        return None
+    return max(fit, key=lambda item: (item[1], -item[0]))[0]

@@ -8,11 +8,14 @@ import uuid
 from datetime import UTC, datetime
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 from sqlalchemy import select
 from typer.testing import CliRunner
 
+from backend.annotation.models import Task
+from backend.captures.models import Camera
 from backend.config import InvalidSettings, get_settings
 from backend.crowd import flows
 from backend.crowd.client import make_client
@@ -134,6 +137,71 @@ def test_adaptive_publishes_first_the_widest_baseline_views_of_each_target(
     assert held == {("cam1", "hand:0"), ("cam1", "object:0")}
     assert all(t.publish_reason and t.publish_reason.startswith("initial: widest baselines")
                for t in progress.tasks if not t.held)
+
+
+def store_depth(sequence_id: int, hand_mm: dict[str, tuple[float, int]]) -> None:
+    """Depth maps (a table at 1.5 m, a 60 px square hand at ``mm`` whose left edge starts at
+    ``x0`` px and moves 8 px a frame) for each camera serial of ``hand_mm``: serial -> (mm,
+    x0), stored as an import stores them (16-bit PNG, one Frame row per frame)."""
+    from backend.captures.models import Camera, Frame
+    from backend.storage import get_storage
+
+    storage = get_storage()
+    with session_scope() as session:
+        for camera in session.scalars(select(Camera).where(Camera.sequence_id == sequence_id)):
+            mm, x0 = hand_mm[camera.serial]
+            for f in range(FRAMES):
+                depth = np.full((camera.height, camera.width), 1500, np.uint16)
+                left = x0 + 8 * f
+                depth[200:260, max(left, 0):max(left + 60, 0)] = mm
+                key = f"test-depth/{sequence_id}/{camera.serial}/{f:06d}.png"
+                storage.put_bytes(key, cv2.imencode(".png", depth)[1].tobytes(), "image/png")
+                session.add(Frame(camera_id=camera.id, index=f, color_key=f"{key}.jpg",
+                                  color_bytes=1, depth_key=key))
+
+
+def test_a_hands_start_view_is_published_first_and_the_rest_widen_from_it(
+    crowd_url: str,
+) -> None:
+    from backend.market.workers import list_available_hits
+
+    sequence_id = make_rig_sequence()
+    # cam1 keeps the hand whole and farthest; cam0 (of the widest pair) cuts it on the first
+    # frame; cam2 and cam3 keep it whole but nearer.
+    store_depth(sequence_id, {"cam0": (1100.0, -30), "cam1": (900.0, 100),
+                              "cam2": (700.0, 100), "cam3": (800.0, 300)})
+    with session_scope() as session:
+        result = flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    assert result.created == 6
+    units = published(sequence_id)
+    # Started from cam1 (15 degrees), the baselines widen to 100 and 175 degrees
+    # (tests/worker/geometry/test_view_choice); the object keeps its widest pair.
+    assert units["hand:0"] == {"cam1": "initial: worked first, the hand whole in view (3 of 4 "
+                                       "views)",
+                               "cam2": "initial: widest baselines (3 of 4 views)",
+                               "cam3": "initial: widest baselines (3 of 4 views)"}
+    assert sorted(units["object:0"]) == INITIAL
+    with session_scope() as session:
+        by_hit = {hit_id: (target, serial) for hit_id, target, serial in session.execute(
+            select(CrowdHit.hit_id, Task.target_key, Camera.serial)
+            .join(Task, Task.id == CrowdHit.task_id).join(Camera, Camera.id == Task.camera_id)
+            .where(Task.sequence_id == sequence_id))}
+        listed = [by_hit[v.hit.hit_id] for v in list_available_hits(
+            session, "A1NEWWORKER", datetime.now(UTC)) if v.hit.hit_id in by_hit]
+    # The crowd's list (oldest first) opens with the hand's start view.
+    assert next(serial for target, serial in listed if target == "hand:0") == "cam1"
+
+
+def test_without_a_view_that_keeps_the_hand_whole_the_widest_pair_leads(
+    crowd_url: str,
+) -> None:
+    sequence_id = make_rig_sequence()
+    store_depth(sequence_id, dict.fromkeys(("cam0", "cam1", "cam2", "cam3"), (900.0, -30)))
+    with session_scope() as session:
+        flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    units = published(sequence_id)
+    assert sorted(units["hand:0"]) == INITIAL
+    assert set(units["hand:0"].values()) == {"initial: widest baselines (3 of 4 views)"}
 
 
 def test_every_view_publishes_every_view_at_once_as_before(crowd_url: str) -> None:

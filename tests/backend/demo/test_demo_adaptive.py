@@ -39,7 +39,10 @@ def test_an_adaptive_demo_publishes_views_where_the_solve_needs_them(tmp_path: P
             "h.task_id = t.id) AND NOT EXISTS (SELECT 1 FROM assignments a WHERE "
             "a.task_id = t.id AND a.status = 'approved')").fetchone()[0]
     assert tasks == 8
-    assert all(r == "initial: widest baselines (3 of 4 views)" for r in reasons[:6]), reasons
+    # Each target's initial views; a hand's may start from the view its depth shows whole.
+    widest = "initial: widest baselines (3 of 4 views)"
+    start = "initial: worked first, the hand whole in view (3 of 4 views)"
+    assert set(reasons[:6]) <= {widest, start} and reasons[:6].count(start) <= 1, reasons
     later = reasons[6:]
     assert later and all("below confidence 1" in r for r in later), (reasons, out)
     # Every view published, the later ones too, has accepted work.

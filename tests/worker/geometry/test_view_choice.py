@@ -8,7 +8,17 @@ import numpy as np
 import pytest
 
 from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
-from worker.geometry.view_choice import initial_views, next_view, rig_centre, seen
+from worker.geometry.view_choice import (
+    EDGE_PX,
+    MIN_MOVING_READINGS,
+    HandInView,
+    hand_in_view,
+    initial_views,
+    next_view,
+    rig_centre,
+    seen,
+    start_view,
+)
 
 K = intrinsics_matrix(600.0, 600.0, 320.0, 240.0)
 
@@ -73,6 +83,77 @@ class TestInitialViews:
     def test_refuses_a_count_below_one(self) -> None:
         with pytest.raises(ValueError, match="count must be at least 1, got 0"):
             initial_views(ring(self.AZIMUTHS), np.zeros(3), 0)
+
+    def test_a_start_view_leads_and_the_rest_widen_the_baselines_from_it(self) -> None:
+        # Started from view 1 (15 degrees), the view furthest from its line is 100 degrees
+        # (sine 0.98 to it), then the one keeping the most to both: 175 (0.73 to 100, where
+        # 0 keeps only 0.23 to view 1).
+        assert initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, first=1) == [1, 2, 3]
+        assert initial_views(ring([0, 90]), np.zeros(3), 3, first=1) == [1, 0]
+
+    def test_refuses_a_start_view_that_is_not_a_view(self) -> None:
+        with pytest.raises(ValueError, match="first view 4 is not one of the 4 views"):
+            initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, first=4)
+
+
+def moving_square(frames: int, at_mm: float, x0: int, step_px: int, side: int = 40,
+                  table_mm: float = 1200.0) -> np.ndarray:
+    """(frames, 120, 160) uint16 mm: a table at ``table_mm`` and a square of ``side`` px at
+    ``at_mm`` whose left edge starts at ``x0`` and moves ``step_px`` a frame (cut by the
+    image's edge where it leaves it)."""
+    depth = np.full((frames, 120, 160), table_mm, np.uint16)
+    for f in range(frames):
+        left = x0 + f * step_px
+        depth[f, 40:40 + side, max(left, 0):max(left + side, 0)] = at_mm
+    return depth
+
+
+class TestHandInView:
+    def test_a_hand_inside_the_image_on_every_frame(self) -> None:
+        found = hand_in_view(moving_square(6, 700.0, 20, 10))
+        assert MIN_MOVING_READINGS <= 40 * 40
+        assert found == HandInView(whole_first=True, whole_share=1.0, depth_mm=700.0)
+
+    def test_a_hand_cut_by_the_edge_on_the_first_frame(self) -> None:
+        # Starts 10 px past the left edge, inside from the second frame on.
+        found = hand_in_view(moving_square(6, 700.0, -10, 20))
+        assert not found.whole_first and found.whole_share == 1.0
+
+    def test_a_hand_that_leaves_the_image(self) -> None:
+        # Its right side reaches the edge (within EDGE_PX) on the last two of six frames.
+        found = hand_in_view(moving_square(6, 700.0, 40, 20))
+        assert 40 + 3 * 20 + 40 < 160 - EDGE_PX <= 40 + 4 * 20 + 40
+        assert found.whole_first and found.whole_share == pytest.approx(3 / 5)
+
+    def test_a_hand_too_small_to_follow(self) -> None:
+        found = hand_in_view(moving_square(6, 700.0, 20, 10, side=20))
+        assert not found.whole_first and found.whole_share == 0.0
+
+    def test_missing_readings_are_not_a_moving_hand(self) -> None:
+        depth = moving_square(6, 700.0, 20, 10)
+        depth[:, :, 120:] = 0
+        depth[::2, 100:, :] = 0
+        found = hand_in_view(depth)
+        assert found.whole_first and found.depth_mm == 700.0
+
+    def test_refuses_a_single_frame(self) -> None:
+        with pytest.raises(ValueError,
+                           match=r"expected depth \(S >= 2, H, W\), got \(1, 120, 160\)"):
+            hand_in_view(moving_square(1, 700.0, 20, 10))
+
+
+class TestStartView:
+    def test_the_farthest_of_the_views_that_keep_the_hand_whole(self) -> None:
+        views = [hand_in_view(moving_square(6, 500.0, -10, 20)),  # cut on the first frame
+                 hand_in_view(moving_square(6, 700.0, 20, 10)),
+                 None,  # no depth
+                 hand_in_view(moving_square(6, 900.0, 40, 20)),  # leaves the image
+                 hand_in_view(moving_square(6, 800.0, 20, 10))]
+        assert start_view(views) == 4
+
+    def test_none_when_no_view_keeps_the_hand_whole(self) -> None:
+        assert start_view([None, hand_in_view(moving_square(6, 500.0, -10, 20))]) is None
+        assert start_view([]) is None
 
 
 class TestNextView:
