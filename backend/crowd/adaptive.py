@@ -19,11 +19,12 @@ best widens the baselines at the target), until QC can decide.
 
 Occlusion is judged by whether the target lies in front of a camera and inside its image (the
 object's initial pose, the hand's grasped object). A hand's initial views start from the view
-its first worker labels best from nothing (worker.geometry.view_choice.start_view: the moving
+its first worker labels best from nothing (worker.geometry.view_choice.start_views: the moving
 hand whole in the image and far from the camera, read from START_SAMPLES of each view's depth
-maps), then widen the baselines from it; that view is published first, so it leads the crowd's
-list and the other views' workers get the suggestions its work gives. Without depth (or with
-no view that qualifies) the widest pair leads as before.
+maps), then widen the baselines from it, among the views that keep the hand whole before the
+others: QC accepts nothing before it can compare 3 views, so every initial view is worked with
+no other view's work to suggest from. The start view is published first, so it heads the
+crowd's list. Without depth (or with no view that qualifies) the widest pair leads as before.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ from worker.geometry.view_choice import (
     next_view,
     rig_centre,
     seen,
-    start_view,
+    start_views,
 )
 from worker.quality.support import MIN_VIEWS as QC_MIN_VIEWS
 from worker.tracks.spans import format_spans, frame_spans
@@ -174,14 +175,15 @@ def _views(tasks: list[Task]) -> str:
 
 def initial_choice(session: Session, tasks: list[Task], count: int) -> dict[int, str]:
     """The initial tasks of one target (its tasks in view order) and their reason, in the
-    order they are published: a hand's start view first (see the module), then the views
-    of widest baseline in view order."""
+    order they are published: a hand's start view first, the other initial views taken from
+    the views that keep the hand whole before the rest (see the module), in view order."""
     models = calibrated_models(session, [task.camera for task in tasks])
-    first = start_view(_hands_in_view(session, tasks)) if tasks[0].kind == "hand" else None
+    whole = start_views(_hands_in_view(session, tasks)) if tasks[0].kind == "hand" else []
+    first = whole[0] if whole else None
     if len(tasks) <= count:
         chosen, reason = list(range(len(tasks))), f"{INITIAL_REASON} (all {len(tasks)} views)"
     else:
-        chosen = initial_views(models, _anchor(session, tasks, models), count, first)
+        chosen = initial_views(models, _anchor(session, tasks, models), count, first, whole)
         reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
     order = sorted(chosen) if first is None else [first, *sorted(set(chosen) - {first})]
     out = {tasks[i].id: reason for i in order}

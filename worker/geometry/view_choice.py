@@ -16,8 +16,9 @@ by the sine it keeps to the nearest view already published there.
 A hand's first view is worked from nothing: the hand model is fitted to the worker's first keys
 and followed through that view's depth (worker.solver.follow). ``hand_in_view`` reads from a
 view's depth alone (a few frames of the clip) whether the moving hand stays whole inside the
-image and how far away it is; ``start_view`` picks the view to work first: the hand whole on the
-first frame and on (nearly) every frame after, and of those the farthest. A hand cut by the
+image and how far away it is; ``start_views`` names the views to work before any other view's
+work can suggest anything: the hand whole on the first frame and on (nearly) every frame after,
+the farthest first. A hand cut by the
 image's edge on the keyed frame gives the fit too few joints to start from, and one near the
 camera turns the model's millimetres into more pixels to correct (on three synthetic 8-view
 captures the views that were never cut cost 31-60 corrections in the follow, the near or cut
@@ -26,7 +27,7 @@ ones up to 199; BENCHMARKS.md, "The view worked first").
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,12 +81,13 @@ def _sine(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def initial_views(cameras: Sequence[CameraModel], point: np.ndarray, count: int,
-                  first: int | None = None) -> list[int]:
+                  first: int | None = None, preferred: Collection[int] = ()) -> list[int]:
     """The ``count`` views (indices into ``cameras``) that pin the world ``point`` (3,) best:
     the pair of rays closest to right angles among the views that see it (or the view
     ``first``, whatever it sees), then greedily the view whose smallest sine to a chosen ray
-    is largest. Views that do not see the point come last (a target outside every image still
-    gets ``count`` views). Ties go to the lower index. ``first`` leads the list."""
+    is largest. The ``preferred`` views that see the point are taken before the other views
+    that do, and views that do not see it come last (a target outside every image still gets
+    ``count`` views). Ties go to the lower index. ``first`` leads the list."""
     views = len(cameras)
     if count < 1:
         raise ValueError(f"count must be at least 1, got {count}")
@@ -96,22 +98,19 @@ def initial_views(cameras: Sequence[CameraModel], point: np.ndarray, count: int,
         return order if first is None else [first] + [v for v in order if v != first]
     r = rays(cameras, np.asarray(point, np.float64).reshape(1, 3))[:, 0]
     visible = seen(cameras, np.asarray(point, np.float64).reshape(1, 3))[:, 0]
-    pool = [v for v in range(views) if visible[v]] or list(range(views))
+    pool = [v for v in range(views) if visible[v]]
+    tiers = [[v for v in pool if v in preferred], pool, list(range(views))]
     sines = _sine(r[:, None, :], r[None, :, :])
-    chosen: list[int] = []
-    if first is not None:
-        chosen = [first]
-    elif len(pool) >= 2 and count >= 2:
-        sub = sines[np.ix_(pool, pool)]
+    chosen: list[int] = [] if first is None else [first]
+    if not chosen and count >= 2 and len(pool) != 1:
+        pair = next(tier for tier in tiers if len(tier) >= 2)
+        sub = sines[np.ix_(pair, pair)]
         i, j = np.unravel_index(int(np.argmax(sub)), sub.shape)
-        chosen = sorted((pool[int(i)], pool[int(j)]))
-    elif pool:
-        chosen = [pool[0]]
+        chosen = sorted((pair[int(i)], pair[int(j)]))
+    elif not chosen:
+        chosen = [(tiers[0] or tiers[1] or tiers[2])[0]]
     while len(chosen) < count:
-        rest = [v for v in pool if v not in chosen]
-        if not rest:
-            pool = list(range(views))
-            rest = [v for v in pool if v not in chosen]
+        rest = next(left for tier in tiers if (left := [v for v in tier if v not in chosen]))
         spread = [float(sines[v, chosen].min()) if chosen else 0.0 for v in rest]
         chosen.append(rest[int(np.argmax(spread))])
     return chosen
@@ -189,13 +188,11 @@ def hand_in_view(depth: np.ndarray) -> HandInView:
     return HandInView(bool(whole[0]), float(whole[1:].mean()), far)
 
 
-def start_view(found: Sequence[HandInView | None]) -> int | None:
-    """The view (index into ``found``; None where a view has no depth) to work a hand's first
-    labels in: of the views whose hand is whole on the first frame and on START_WHOLE_SHARE of
-    the rest, the farthest; None when no view qualifies (the caller keeps its own order)."""
+def start_views(found: Sequence[HandInView | None]) -> list[int]:
+    """The views (indices into ``found``; None where a view has no depth) whose hand is whole
+    on the first frame and on START_WHOLE_SHARE of the rest, farthest first (ties: the lower
+    index): a hand's first view is the first of them; empty when none qualifies."""
     fit = [(v, h.depth_mm) for v, h in enumerate(found)
            if h is not None and h.whole_first and h.whole_share >= START_WHOLE_SHARE
            and np.isfinite(h.depth_mm)]
-    if not fit:
-        return None
-    return max(fit, key=lambda item: (item[1], -item[0]))[0]
+    return [v for v, _ in sorted(fit, key=lambda item: (-item[1], item[0]))]

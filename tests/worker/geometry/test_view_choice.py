@@ -17,7 +17,7 @@ from worker.geometry.view_choice import (
     next_view,
     rig_centre,
     seen,
-    start_view,
+    start_views,
 )
 
 K = intrinsics_matrix(600.0, 600.0, 320.0, 240.0)
@@ -91,6 +91,17 @@ class TestInitialViews:
         assert initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, first=1) == [1, 2, 3]
         assert initial_views(ring([0, 90]), np.zeros(3), 3, first=1) == [1, 0]
 
+    def test_preferred_views_are_taken_before_wider_ones(self) -> None:
+        # Of views 1, 2 and 3 alone, 175 keeps the most to 15 and 100; the widest pair (0,
+        # 100) is passed over for the preferred.
+        chosen = initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, preferred={1, 2, 3})
+        assert chosen == [1, 2, 3]
+        # Too few preferred: the rest widen the baselines from them (from 175 degrees: 100, at
+        # 75 degrees of azimuth, then 15, which keeps more to both than 0 does).
+        assert ray_sine(160) > ray_sine(175)
+        assert initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, first=3, preferred=[3]) \
+            == [3, 2, 1]
+
     def test_refuses_a_start_view_that_is_not_a_view(self) -> None:
         with pytest.raises(ValueError, match="first view 4 is not one of the 4 views"):
             initial_views(ring(self.AZIMUTHS), np.zeros(3), 3, first=4)
@@ -142,18 +153,19 @@ class TestHandInView:
             hand_in_view(moving_square(1, 700.0, 20, 10))
 
 
-class TestStartView:
-    def test_the_farthest_of_the_views_that_keep_the_hand_whole(self) -> None:
+class TestStartViews:
+    def test_the_views_that_keep_the_hand_whole_farthest_first(self) -> None:
         views = [hand_in_view(moving_square(6, 500.0, -10, 20)),  # cut on the first frame
                  hand_in_view(moving_square(6, 700.0, 20, 10)),
                  None,  # no depth
                  hand_in_view(moving_square(6, 900.0, 40, 20)),  # leaves the image
-                 hand_in_view(moving_square(6, 800.0, 20, 10))]
-        assert start_view(views) == 4
+                 hand_in_view(moving_square(6, 800.0, 20, 10)),
+                 hand_in_view(moving_square(6, 700.0, 30, 10))]
+        assert start_views(views) == [4, 1, 5]
 
     def test_none_when_no_view_keeps_the_hand_whole(self) -> None:
-        assert start_view([None, hand_in_view(moving_square(6, 500.0, -10, 20))]) is None
-        assert start_view([]) is None
+        assert start_views([None, hand_in_view(moving_square(6, 500.0, -10, 20))]) == []
+        assert start_views([]) == []
 
 
 class TestNextView:
