@@ -24,6 +24,7 @@ from tests.browser.test_admin_project import OVERFLOW, _hit_ids
 SEED = 23
 NAME = f"synth_{SEED:06d}"
 SIZES = ((1024, 700), (1440, 900))
+START = "initial: worked first, the hand whole in view (3 of 4 views)"
 
 
 @pytest.fixture(scope="module")
@@ -59,10 +60,13 @@ def test_adaptive_publish_shows_why_each_view_was_published_and_which_wait(
 
     held = page.locator("#progress-grid td.cell.held")
     expect(held).to_have_count(2)
-    for target in ("hand:0", "object:0"):
+    # The hand starts from the view its depth shows whole and farthest (published first);
+    # the object from its widest pair.
+    for target, widest, start in (("hand:0", 2, 1), ("object:0", 3, 0)):
         cells = page.locator(f"#progress-grid td.cell[data-target='{target}']")
         expect(cells.locator(".cell-reason", has_text="initial: widest baselines (3 of 4 views)")
-               ).to_have_count(3)
+               ).to_have_count(widest)
+        expect(cells.locator(".cell-reason", has_text=START)).to_have_count(start)
         expect(cells.and_(held)).to_have_count(1)
     expect(held.first.locator(".cell-state")).to_have_text("held back")
     expect(page.locator("#progress-summary")).to_contain_text("2 held back")
@@ -77,7 +81,8 @@ def test_adaptive_publish_shows_why_each_view_was_published_and_which_wait(
     page.goto(f"{live_server.base}/admin/#/crowd/{sequence_id}")
     reasons = page.locator(".unit-reason")
     expect(reasons).to_have_count(6)
-    expect(reasons.first).to_have_text("initial: widest baselines (3 of 4 views)")
+    expect(reasons.filter(has_text="initial: widest baselines (3 of 4 views)")).to_have_count(5)
+    expect(reasons.filter(has_text=START)).to_have_count(1)
     for width, height in SIZES:
         page.set_viewport_size({"width": width, "height": height})
         page.screenshot(path=str(output_dir / f"admin-adaptive-units-{width}x{height}.png"))
