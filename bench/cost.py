@@ -29,7 +29,7 @@ click, a key for an occluded one), with assistance what the page's edit counter 
 itself after a correction), working time modelled as a minute of reading plus 3 s per action
 (backend.crowd.simulate; no person is timed). "first_view_actions": per target, the edit
 actions of its first accepted view (the accepted assignment submitted first), the view worked
-with the least help; "view_actions": per target, each submitted assignment's actions, kept
+with the least help; "view_actions": per target, each submitted assignment's view, actions, kept
 suggestions, status, profile and QC outcome; "qc_by_profile": per simulated profile, units
 submitted and flagged by QC. Money is real ledger money for rewards priced per task at
 ``--hourly`` dollars an hour of that protocol's expected working time (the mean over the tasks
@@ -138,30 +138,33 @@ def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarr
 
 
 def _views(sequence_id: int, profiles: dict[str, str]) -> dict[str, list[dict[str, Any]]]:
-    """Per target, each submitted assignment in submission order: its edit actions, how many
-    of its keyframes are suggestions kept unchanged (source "prefilled"), its status, the
-    simulated worker's profile and what QC said (approve, review or reject; before any
-    admin's decision)."""
+    """Per target, each submitted assignment in submission order: its view (camera serial),
+    edit actions, how many of its keyframes are suggestions kept unchanged (source
+    "prefilled"), its status, the simulated worker's profile and what QC said (approve, review
+    or reject; before any admin's decision)."""
     from sqlalchemy import select
     from sqlalchemy.orm import selectinload
 
     from backend.annotation.models import Assignment, Task
+    from backend.captures.models import Camera
     from backend.db import session_scope
     from backend.quality.models import QCReport
 
     out: dict[str, list[dict[str, Any]]] = {}
     with session_scope() as session:
         rows = session.execute(
-            select(Task.target_key, Assignment, QCReport.outcome, QCReport.reasons)
+            select(Task.target_key, Camera.serial, Assignment, QCReport.outcome,
+                   QCReport.reasons)
             .join(Task, Task.id == Assignment.task_id)
+            .join(Camera, Camera.id == Task.camera_id)
             .outerjoin(QCReport, QCReport.assignment_id == Assignment.id)
             .where(Task.sequence_id == sequence_id, Assignment.submitted_at.is_not(None))
             .options(selectinload(Assignment.tracks))
             .order_by(Assignment.submitted_at, Assignment.id)).all()
-        for target, work, qc, reasons in rows:
+        for target, serial, work, qc, reasons in rows:
             suggested = sum(len(r) > 4 and r[4] == "prefilled"
                             for t in work.tracks for r in t.keyframes)
-            out.setdefault(target, []).append({"actions": int(work.edit_count),
+            out.setdefault(target, []).append({"view": serial, "actions": int(work.edit_count),
                                                "suggested": suggested,
                                                "status": work.status, "qc": qc,
                                                "qc_reasons": reasons or [],

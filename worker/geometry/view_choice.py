@@ -21,8 +21,8 @@ work can suggest anything: the hand whole on the first frame and on (nearly) eve
 the farthest first. A hand cut by the
 image's edge on the keyed frame gives the fit too few joints to start from, and one near the
 camera turns the model's millimetres into more pixels to correct (on three synthetic 8-view
-captures the views that were never cut cost 31-60 corrections in the follow, the near or cut
-ones up to 199; BENCHMARKS.md, "The view worked first").
+captures the views that were never cut and far cost 31-60 corrections in the follow, the near or cut
+ones up to 199; BENCHMARKS.md, "The views worked first").
 """
 
 from __future__ import annotations
@@ -154,6 +154,11 @@ MIN_MOVING_READINGS = 1000
 # first (the follow is carried through them; where the hand leaves the image it stops and the
 # worker keys the rest by hand).
 START_WHOLE_SHARE = 0.9
+# ... and is at least this share as far from the camera as in the farthest such view: the
+# model's millimetres off are pixels to correct in proportion to 1 / distance (in the follow's
+# benchmark on two 8-view captures the views that kept the hand whole cost 31-60 corrections at
+# 787-909 mm and 54-76 at 696-765 mm; BENCHMARKS.md, "The views worked first").
+START_DEPTH_RATIO = 0.85
 
 
 @dataclass(frozen=True)
@@ -190,9 +195,12 @@ def hand_in_view(depth: np.ndarray) -> HandInView:
 
 def start_views(found: Sequence[HandInView | None]) -> list[int]:
     """The views (indices into ``found``; None where a view has no depth) whose hand is whole
-    on the first frame and on START_WHOLE_SHARE of the rest, farthest first (ties: the lower
-    index): a hand's first view is the first of them; empty when none qualifies."""
+    on the first frame and on START_WHOLE_SHARE of the rest, and at least START_DEPTH_RATIO as
+    far as in the farthest of those, farthest first (ties: the lower index): a hand's first
+    view is the first of them; empty when none qualifies."""
     fit = [(v, h.depth_mm) for v, h in enumerate(found)
            if h is not None and h.whole_first and h.whole_share >= START_WHOLE_SHARE
            and np.isfinite(h.depth_mm)]
-    return [v for v, _ in sorted(fit, key=lambda item: (-item[1], item[0]))]
+    far = max((mm for _, mm in fit), default=0.0)
+    return [v for v, mm in sorted(fit, key=lambda item: (-item[1], item[0]))
+            if mm >= START_DEPTH_RATIO * far]
