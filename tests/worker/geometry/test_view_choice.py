@@ -11,7 +11,6 @@ from worker.geometry.cameras import CameraModel, intrinsics_matrix, look_at
 from worker.geometry.view_choice import (
     EDGE_PX,
     MIN_MOVING_READINGS,
-    START_DEPTH_RATIO,
     HandInView,
     hand_in_view,
     initial_views,
@@ -163,11 +162,6 @@ class TestStartViews:
                  hand_in_view(moving_square(6, 800.0, 20, 10)),
                  hand_in_view(moving_square(6, 700.0, 30, 10))]
         assert start_views(views) == [4, 1, 5]
-
-    def test_a_whole_hand_much_nearer_than_the_farthest_is_left_out(self) -> None:
-        # 0.85 of 800 mm is 680 mm: the hand at 700 mm qualifies, the one at 600 mm not.
-        views = [hand_in_view(moving_square(6, mm, 20, 10)) for mm in (600.0, 800.0, 700.0)]
-        assert START_DEPTH_RATIO == 0.85 and start_views(views) == [1, 2]
 
     def test_none_when_no_view_keeps_the_hand_whole(self) -> None:
         assert start_views([None, hand_in_view(moving_square(6, 500.0, -10, 20))]) == []
