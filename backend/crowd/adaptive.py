@@ -45,7 +45,7 @@ from backend.captures.models import Camera, Frame, SceneObject
 from backend.config import get_settings
 from backend.crowd.models import CrowdHit, PublishPlan
 from backend.crowd.schemas import PublishOptions
-from backend.errors import StorageError
+from backend.errors import NotFound, StorageError
 from backend.storage import get_storage
 from worker.geometry.cameras import CameraModel
 from worker.geometry.view_choice import (
@@ -203,7 +203,8 @@ def _hands_in_view(session: Session, tasks: list[Task]) -> list[HandInView | Non
         sampled = frames[::max(1, -(-len(frames) // START_SAMPLES))]
         try:
             depth = load_depth(storage, task.camera, sampled) if len(sampled) >= 2 else None
-        except (ValueError, StorageError):
+        except (ValueError, NotFound, StorageError):
+            # Publishing goes on without this view's depth: it is not a start view.
             depth = None
         out.append(None if depth is None else hand_in_view(depth))
     return out

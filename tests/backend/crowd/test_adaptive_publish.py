@@ -192,6 +192,26 @@ def test_a_hands_start_view_is_published_first_and_the_rest_widen_from_it(
     assert next(serial for target, serial in listed if target == "hand:0") == "cam1"
 
 
+def test_a_view_whose_depth_cannot_be_read_is_not_a_start_view(crowd_url: str) -> None:
+    from backend.captures.models import Frame
+    from backend.storage import get_storage
+
+    sequence_id = make_rig_sequence()
+    store_depth(sequence_id, {"cam0": (1100.0, -30), "cam1": (900.0, 100),
+                              "cam2": (700.0, 100), "cam3": (800.0, 300)})
+    with session_scope() as session:
+        keys = list(session.scalars(select(Frame.depth_key).join(Camera).where(
+            Camera.sequence_id == sequence_id, Camera.serial.in_(("cam1", "cam3")))
+            .order_by(Camera.serial, Frame.index)))
+    get_storage().put_bytes(keys[0], b"not a png", "image/png")  # cam1, frame 0
+    get_storage().delete_prefix(keys[-1])  # cam3, the last frame
+    with session_scope() as session:
+        result = flows.publish(session, make_client(get_settings()), ADAPTIVE, sequence_id)
+    assert result.created == 6
+    hand = published(sequence_id)["hand:0"]
+    assert hand["cam2"] == "initial: worked first, the hand whole in view (3 of 4 views)"
+
+
 def test_without_a_view_that_keeps_the_hand_whole_the_widest_pair_leads(
     crowd_url: str,
 ) -> None:
