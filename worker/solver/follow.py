@@ -49,7 +49,7 @@ import cv2
 import numpy as np
 
 from worker.assist.prefill import ViewWork
-from worker.geometry.cameras import CameraModel, pixels_to_rays
+from worker.geometry.cameras import CameraModel, camera_to_world, pixels_to_rays
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import HandModel
 from worker.solver.default import fit_hand
@@ -238,8 +238,7 @@ class _Held:
         ys, xs = np.nonzero((reading > 0) & (static | self.left_out[y0:y1, x0:x1]))
         z = reading[ys, xs].astype(np.float64) * 1e-3
         rays = self.rays[ys + y0, xs + x0]
-        world = (rays * z[:, None]) @ self.camera.T_cam_to_world[:, :3].T \
-            + self.camera.T_cam_to_world[:, 3]
+        world = camera_to_world(rays * z[:, None], self.camera.T_cam_to_world)
         margin = problem.settings.depth_margin
         world = crop_to_boxes(world, [(vertices.min(0), vertices.max(0))], margin)
         found = match_points(world, [problem.hand_tree], [None], margin)
@@ -309,7 +308,7 @@ def _start_guesses(problem: Problem, camera: CameraModel, depth: np.ndarray,
         z = float(np.median(camera.depth_of(lifted[ok])))
         rays = pixels_to_rays(keypoints[visible], camera.K, camera.dist) * z
         flat = np.full((1, NUM_JOINTS, 3), np.nan)
-        flat[0, visible] = rays @ camera.T_cam_to_world[:, :3].T + camera.T_cam_to_world[:, 3]
+        flat[0, visible] = camera_to_world(rays, camera.T_cam_to_world)
         guesses.append(hand_from_joints(problem, flat, visible[None], START_ITERATIONS))
     return guesses
 
