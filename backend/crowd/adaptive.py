@@ -177,12 +177,12 @@ def initial_choice(session: Session, tasks: list[Task], count: int) -> dict[int,
     """The initial tasks of one target (its tasks in view order) and their reason, in the
     order they are published: a hand's start view first, the other initial views taken from
     the views that keep the hand whole before the rest (see the module), in view order."""
-    models = calibrated_models(session, [task.camera for task in tasks])
     whole = start_views(_hands_in_view(session, tasks)) if tasks[0].kind == "hand" else []
     first = whole[0] if whole else None
     if len(tasks) <= count:
         chosen, reason = list(range(len(tasks))), f"{INITIAL_REASON} (all {len(tasks)} views)"
     else:
+        models = calibrated_models(session, [task.camera for task in tasks])
         chosen = initial_views(models, _anchor(session, tasks, models), count, first, whole)
         reason = f"{INITIAL_REASON} ({count} of {len(tasks)} views)"
     order = sorted(chosen) if first is None else [first, *sorted(set(chosen) - {first})]
