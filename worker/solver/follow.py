@@ -88,7 +88,15 @@ STOP_RATIO = 2.0
 # ways and 4x the rounds the start fitted 1.4 mm and the next 9 frames followed at 0.9 px
 # median, and with 3x the follow there runs to frame 53 (63 edits in bench/follow.py's worker
 # against 147 tracking alone).
-START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3))
+# The fourth goes to the depth straight from the guess. A fit to the keyframes alone places
+# the hand along the rays by its size in the image, and on a hand 50-60 px across 2 px clicks
+# change that size by a few percent: the hand came 13-25 mm too near, where the back of the
+# model's fingers lay on the skin the camera sees, and no ICP round brought it back (s6262's
+# fifth view, 850 mm away, first frame keyed: 3 of 4 click draws started there at 2.5-3.4 mm
+# RMS, a third of the model's surface more than 10 mm in front of the depth, and followed
+# 6.5 px off). From the lifted guess, which the depth holds near the skin, it started at 1.6 mm
+# and 2-5 mm from the true joints in each of them.
+START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3), (0, 0, 1.0))
 START_ROUNDS = 3
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
 # start is refused only where the keyed hand is off the depth (keyframes on another hand, or
@@ -430,7 +438,8 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
         for iterations, key_rounds, weight in START_FITS:
             state.hand_pose[[start]] = initial
             state.hand_frames = np.array([start])
-            fit_hand(problem, state, None, iterations, key_rounds)
+            if key_rounds:
+                fit_hand(problem, state, None, iterations, key_rounds)
             problem.settings = replace(SETTINGS, w_kpt=weight * SETTINGS.w_kpt)
             count, fit_rms = _fit_frame(problem, state, start, START_ROUNDS * rounds)
             problem.settings = SETTINGS
