@@ -94,8 +94,9 @@ STOP_RATIO = 2.0
 # model's fingers lay on the skin the camera sees, and no ICP round brought it back (s6262's
 # fifth view, 850 mm away, first frame keyed: 3 of 4 click draws started there at 2.5-3.4 mm
 # RMS, a third of the model's surface more than 10 mm in front of the depth, and followed
-# 6.5 px off). From the lifted guess, which the depth holds near the skin, it started at 1.6 mm
-# and 2-5 mm from the true joints in each of them.
+# 6.5 px off). Fitted from the lifted guess, which the depth holds near the skin, two of them
+# started at 1.60-1.64 mm and followed frames 0-5 at 0.8-1.2 px median, and the third's fits
+# of this way sat 3-5 mm from the true joints.
 START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3), (0, 0, 1.0))
 START_ROUNDS = 3
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
