@@ -93,17 +93,19 @@ def _check_frames(frames: np.ndarray) -> np.ndarray:
     return frames
 
 
-def tracked_spans(keyframes: Sequence[Sequence[Any]], first_frame: int, num_frames: int
+def tracked_spans(keyframes: Sequence[Sequence[Any]], first_frame: int, num_frames: int,
+                  min_gap: int = 2
                   ) -> list[tuple[int, int, int, tuple[float, float], tuple[float, float]]]:
     """(point, k0, k1, start xy, end xy) of every span worth tracking: consecutive keyframes
-    of a point at least two frames apart, both visible with a position and both within clip
-    frames first_frame .. first_frame + num_frames - 1 (k0, k1 are clip frames)."""
+    of a point at least ``min_gap`` frames apart (2: a frame between them), both visible with
+    a position and both within clip frames first_frame .. first_frame + num_frames - 1 (k0, k1
+    are clip frames)."""
     out = []
     last = first_frame + num_frames - 1
     for point, rows in enumerate(keyframes):
         kfs = as_keyframes(rows)
         for a, b in itertools.pairwise(kfs):
-            if (b.frame - a.frame >= 2 and a.visible and b.visible and a.has_position
+            if (b.frame - a.frame >= min_gap and a.visible and b.visible and a.has_position
                     and b.has_position and first_frame <= a.frame and b.frame <= last):
                 out.append((point, a.frame, b.frame, (float(a.x or 0.0), float(a.y or 0.0)),
                             (float(b.x or 0.0), float(b.y or 0.0))))

@@ -79,8 +79,9 @@ METRIC_BOUNDS: dict[str, MetricBound] = {
     # corrected ones (review); two are suggestions accepted without looking (reject).
     # Fixed, whatever the population does: work without suggestions keeps none.
     "checks_accepted": MetricBound("above", (0.0, 0.0), (1.0, 1.0)),
-    # Share of a hand track's interpolated stretches its own view's images say the point
-    # left (worker.quality.stretch_qc): a careful worker keys where the path bends and
+    # Share of a hand track's steps from keyframe to keyframe whose interpolated stretch its
+    # own view's images say the point left (worker.quality.stretch_qc; a step to the next
+    # frame follows by construction): a careful worker keys where the path bends and
     # leaves 0-12% (the tracker's own slips); one keying every 4th frame through fast
     # motion 70-80%.
     "unfollowed_stretches": MetricBound("above", (0.2, 0.25), (0.45, 0.55)),

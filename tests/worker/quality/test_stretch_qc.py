@@ -57,3 +57,20 @@ def test_keys_where_the_path_bends_pass() -> None:
     assert label.decided is not None and label.decided.all()
     thresholds = learn_thresholds([dict(CLEAN) for _ in range(10)])
     assert decide(qc, thresholds, list(JOINT_NAMES)).outcome == "approve"
+
+
+def test_a_track_keyed_on_nearly_every_frame_with_one_stretch_off_is_not_judged_sparse() -> None:
+    # As a worker leaves a label after accepting a model follow: points 1-4 keyed on every
+    # frame, point 0 on every frame but across the swing (0-8). Its one tracked stretch is
+    # contradicted: named in words, but one step of 68, not a track interpolated through
+    # motion (as a share of its one tracked stretch it read 1.0, a rejection).
+    _, truth = _truth()
+    every = list(range(COUNT))
+    keys = _keys(truth, every)
+    keys[0] = _keys(truth, [0, *range(8, COUNT)])[0]
+    qc, label = _judged(keys)
+    assert [(i["point"], i["frames"]) for i in qc.issues] == [(0, [0, 8])]
+    assert qc.metrics["unfollowed_stretches"] == 1 / 68
+    assert label.decided is not None and not label.decided[1:8, 0].any()
+    thresholds = learn_thresholds([dict(CLEAN) for _ in range(10)])
+    assert decide(qc, thresholds, list(JOINT_NAMES)).outcome == "approve"
