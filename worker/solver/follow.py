@@ -95,9 +95,16 @@ STOP_RATIO = 2.0
 # fifth view, 850 mm away, first frame keyed: 3 of 4 click draws started there at 2.5-3.4 mm
 # RMS, a third of the model's surface more than 10 mm in front of the depth, and followed
 # 6.5 px off). Fitted from the lifted guess, which the depth holds near the skin, two of them
-# started at 1.60-1.64 mm and followed frames 0-5 at 0.8-1.2 px median, and the third's fits
-# of this way sat 3-5 mm from the true joints.
-START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3), (0, 0, 1.0))
+# started at 1.60-1.64 mm and followed frames 0-5 at 0.8-1.2 px median; the third still
+# started at 2.45 mm, 6.6 px off (see PUSH_BACK_M).
+DIRECT_FIT = (0, 0, 1.0)
+START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3), DIRECT_FIT)
+# The lifted guess itself can stand that far in front: the nearest reading around a keyed
+# joint is often a finger before it (s6262's fifth view: wrist and thumb lifted 17-40 mm too
+# near even from exact keys). The first guess is also tried pushed back along its ray by each
+# of these (metres), fitted the direct way only (a fit to the keyframes first would bring it
+# forward again): on that third draw the guess pushed 10-20 mm started at 1.6 mm.
+PUSH_BACK_M = (0.01, 0.02, 0.03)
 START_ROUNDS = 3
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
 # start is refused only where the keyed hand is off the depth (keyframes on another hand, or
@@ -322,6 +329,19 @@ def _start_guesses(problem: Problem, camera: CameraModel, depth: np.ndarray,
     return guesses
 
 
+def _pushed_back(problem: Problem, camera: CameraModel, guess: np.ndarray, start: int,
+                 metres: float) -> np.ndarray:
+    """The guess (pose_m (1, 51)) moved ``metres`` further from the camera along the ray
+    through its joints' centre."""
+    state = SolveState.empty(problem)
+    state.hand_pose[[start]] = guess
+    state.hand_frames = np.array([start])
+    ray = state.joints(problem)[0].mean(axis=0) - np.asarray(camera.T_cam_to_world)[:, 3]
+    out = np.array(guess, np.float64)
+    out[:, 48:] += metres * ray / np.linalg.norm(ray)
+    return out
+
+
 def _start_rank(found: tuple[int, float, float, np.ndarray]) -> tuple[bool, float]:
     """Sort key of a fitted start (depth points matched, their RMS mm, median px from the
     keyframes, pose): first those with enough matches that sit on the keyframes, then the
@@ -434,9 +454,13 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
     # The keyed frame, fitted from each start guess each way of START_FITS; of the fits that
     # sit on the keyframes (MAX_START_PX), the one the depth fits best is kept.
     best: tuple[int, float, float, np.ndarray] | None = None
-    for initial in _start_guesses(problem, camera, np.asarray(depth), keypoints[start],
-                                  visible[start], start):
-        for iterations, key_rounds, weight in START_FITS:
+    guesses = _start_guesses(problem, camera, np.asarray(depth), keypoints[start],
+                             visible[start], start)
+    starts = [(guess, START_FITS) for guess in guesses] + [
+        (_pushed_back(problem, camera, guesses[0], start, metres), (DIRECT_FIT,))
+        for metres in PUSH_BACK_M]
+    for initial, ways in starts:
+        for iterations, key_rounds, weight in ways:
             state.hand_pose[[start]] = initial
             state.hand_frames = np.array([start])
             if key_rounds:
