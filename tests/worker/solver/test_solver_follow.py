@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.worker.solver.test_solver_suggest import Scene
-from worker.solver.follow import STOP_DEPTH, follow_hand
+from worker.solver.follow import STOP_DEPTH, Followed, follow_hand
 
 VIEW = 1
 # Frames followed: each takes about a second of CPU.
@@ -48,19 +48,23 @@ def _follow(scene: Scene, keypoints: np.ndarray, keyed: np.ndarray, **kw):
                        scene.side, scene.betas, **kw)
 
 
-def test_a_hand_keyed_once_is_followed_through_the_clip_close_to_the_truth(
-        scene: Scene) -> None:
-    keypoints, keyed = _first_frame_keys(scene)
-    found = _follow(scene, keypoints, keyed)
+def _assert_close_after_the_keyed_frame(scene: Scene, found: Followed) -> None:
+    """Proposed on most of the later frames' visible joints (where tracking image patches of
+    skin loses most of them), within 2 px median and 5 px p90 of the truth."""
     truth, visible = scene.xy[VIEW][:FRAMES], scene.visible[VIEW][:FRAMES]
     later = np.zeros(visible.shape, bool)
     later[1:] = visible[1:]
-    # Proposed on most of the later frames' visible joints, where tracking image patches of
-    # skin loses most of them.
     assert (found.ok & later).sum() >= 0.8 * later.sum(), found.stops
     err = np.linalg.norm(found.xy - truth, axis=-1)[found.ok & later]
     assert np.median(err) < 2.0, np.median(err)
     assert np.percentile(err, 90) < 5.0, np.percentile(err, 90)
+
+
+def test_a_hand_keyed_once_is_followed_through_the_clip_close_to_the_truth(
+        scene: Scene) -> None:
+    keypoints, keyed = _first_frame_keys(scene)
+    found = _follow(scene, keypoints, keyed)
+    _assert_close_after_the_keyed_frame(scene, found)
     assert found.start == 0
     assert np.isfinite(found.depth_rms_mm[found.ok.any(axis=1)]).all()
 
@@ -71,14 +75,7 @@ def test_a_small_hand_keyed_a_little_large_still_starts_on_the_depth(scene: Scen
     # the camera sees; the follow also starts from the lifted guess straight on the depth, and
     # that fit holds (the keys-first fits alone followed at 4.3 px median, 8.7 px p90).
     keypoints, keyed = _first_frame_keys(scene, seed=1, spread=1.08)
-    found = _follow(scene, keypoints, keyed)
-    truth, visible = scene.xy[VIEW][:FRAMES], scene.visible[VIEW][:FRAMES]
-    later = np.zeros(visible.shape, bool)
-    later[1:] = visible[1:]
-    assert (found.ok & later).sum() >= 0.8 * later.sum(), found.stops
-    err = np.linalg.norm(found.xy - truth, axis=-1)[found.ok & later]
-    assert np.median(err) < 2.0, np.median(err)
-    assert np.percentile(err, 90) < 5.0, np.percentile(err, 90)
+    _assert_close_after_the_keyed_frame(scene, _follow(scene, keypoints, keyed))
 
 
 def test_a_keyed_frame_without_depth_gives_no_proposals(scene: Scene) -> None:
