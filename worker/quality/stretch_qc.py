@@ -62,10 +62,10 @@ def unfollowed_share(check: StretchCheck, keyframes: Sequence[Sequence[Any]]) ->
     frame (a model follow accepted) with one stretch of three contradicted is not a track
     interpolated through motion (a third, reviewed, on s5151's start view, 1,499 keyframes at
     0.59 px median from the other views)."""
-    frames = check.evidence.shape[0]
-    if not tracked_spans(keyframes, 0, frames):
+    steps = tracked_spans(keyframes, 0, check.evidence.shape[0], min_gap=1)
+    if not any(k1 - k0 >= 2 for _, k0, k1, _, _ in steps):
         return None
-    return len(check.issues) / len(tracked_spans(keyframes, 0, frames, min_gap=1))
+    return len(check.issues) / len(steps)
 
 
 def decided_fraction(label: ViewLabels) -> float | None:

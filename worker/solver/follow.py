@@ -329,16 +329,20 @@ def _start_guesses(problem: Problem, camera: CameraModel, depth: np.ndarray,
     return guesses
 
 
-def _pushed_back(problem: Problem, camera: CameraModel, guess: np.ndarray, start: int,
-                 metres: float) -> np.ndarray:
-    """The guess (pose_m (1, 51)) moved ``metres`` further from the camera along the ray
-    through its joints' centre."""
+def _pushed_back(problem: Problem, camera: CameraModel, guess: np.ndarray, start: int
+                 ) -> list[np.ndarray]:
+    """The guess (pose_m (1, 51)) moved each of PUSH_BACK_M further from the camera along the
+    ray through its joints' centre."""
     state = SolveState.empty(problem)
     state.hand_pose[[start]] = guess
     state.hand_frames = np.array([start])
     ray = state.joints(problem)[0].mean(axis=0) - np.asarray(camera.T_cam_to_world)[:, 3]
-    out = np.array(guess, np.float64)
-    out[:, 48:] += metres * ray / np.linalg.norm(ray)
+    ray /= np.linalg.norm(ray)
+    out = []
+    for metres in PUSH_BACK_M:
+        pushed = np.array(guess, np.float64)
+        pushed[:, 48:] += metres * ray
+        out.append(pushed)
     return out
 
 
@@ -457,8 +461,7 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
     guesses = _start_guesses(problem, camera, np.asarray(depth), keypoints[start],
                              visible[start], start)
     starts = [(guess, START_FITS) for guess in guesses] + [
-        (_pushed_back(problem, camera, guesses[0], start, metres), (DIRECT_FIT,))
-        for metres in PUSH_BACK_M]
+        (pushed, (DIRECT_FIT,)) for pushed in _pushed_back(problem, camera, guesses[0], start)]
     for initial, ways in starts:
         for iterations, key_rounds, weight in ways:
             state.hand_pose[[start]] = initial

@@ -28,7 +28,7 @@ from worker.assist.prefill import (
     suggested_visibility,
     triangulate_work,
 )
-from worker.geometry.cameras import CameraModel, pixels_to_rays
+from worker.geometry.cameras import CameraModel, camera_to_world, pixels_to_rays
 from worker.hand.joints import NUM_JOINTS
 from worker.hand.params import HandModel
 from worker.solver.default import fit_hand
@@ -104,7 +104,7 @@ def _lift_view(camera: CameraModel, work: ViewWork, depth: np.ndarray) -> np.nda
     read = np.isfinite(z)
     rays = pixels_to_rays(xy[read], camera.K, camera.dist)  # (N, 3), z = 1
     cam = rays * z[read, None]
-    world = cam @ camera.T_cam_to_world[:, :3].T + camera.T_cam_to_world[:, 3]
+    world = camera_to_world(cam, camera.T_cam_to_world)
     out[f_idx[read], p_idx[read]] = world
     return out
 
