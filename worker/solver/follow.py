@@ -30,9 +30,9 @@ keyed frame's fit fails those (MAX_START_RMS_MM there) or lies more than MAX_STA
 worker's keyframes. The proposals are the fitted joints projected into the view where they fall
 inside the image; the worker's own keyframes stay as they are (the proposals fill between).
 
-What it cannot do: a hand that moves further between frames than the depth matches reach
-(about 15 px a frame at 640x480 and half a metre: the 24-frame clips) is lost within a few
-frames, and a hand that slides or turns along its own surface can fit the depth well while
+What it cannot do: a hand that moves much further from one frame to the next than it went
+from the frame before (the next frame starts where the hand would be had it gone on at its last
+velocity) and further than the depth matches reach from there is lost, and a hand that slides or turns along its own surface can fit the depth well while
 its joints drift, so the stop comes late; the worker looks at the ghosts before taking them.
 bench/follow.py measures both.
 
@@ -64,11 +64,17 @@ from worker.solver.types import FOLLOW_START_JOINTS, HandTarget, SolveInputs, So
 MIN_START_JOINTS = FOLLOW_START_JOINTS
 # ICP rounds per frame (matches renewed, then LM); a frame stops early once the pose moves less
 # than CONVERGED_M at any joint between rounds.
-ROUNDS = 8
+ROUNDS = 16
 LM_ITERATIONS = 4
 CONVERGED_M = 0.0003
-# Share of the previous frame's velocity added to the start of the next frame's fit.
-VELOCITY = 0.5
+# Share of the previous frame's velocity added to the start of the next frame's fit: the hand
+# goes on as it went. A hand that speeds up outran half its velocity with 8 rounds: on s6262's
+# start view (crowd seed 0) the hand moves 6-9 px a frame from frame 32, and the follow settled
+# 3-6.6 px off for the next 30 frames at 1.5-2 mm depth RMS (inside the stop rule); with the
+# whole velocity and up to 16 rounds it stays within 1.3 px there (bench/follow.py's worker: 140
+# edits -> 54). On the test capture's every third frame (up to 26 px a frame) 0.5 against 14 px
+# median.
+VELOCITY = 1.0
 # Where the depth no longer supports the fit: too few depth points within the match margin of
 # the fitted surface, or their robust RMS distance too large.
 MIN_MATCHED = 40
