@@ -31,10 +31,11 @@ worker's keyframes. The proposals are the fitted joints projected into the view 
 inside the image; the worker's own keyframes stay as they are (the proposals fill between).
 
 What it cannot do: a hand that moves much further from one frame to the next than it went
-from the frame before (the next frame starts where the hand would be had it gone on at its last
-velocity) and further than the depth matches reach from there is lost, and a hand that slides or turns along its own surface can fit the depth well while
-its joints drift, so the stop comes late; the worker looks at the ghosts before taking them.
-bench/follow.py measures both.
+from the frame before (the next frame starts where the hand would be had it gone on at its
+last velocity) and further than the depth matches reach from there is lost, and a hand that
+slides or turns along its own surface can fit the depth well while its joints drift, so the
+stop comes late; the worker looks at the ghosts before taking them. bench/follow.py measures
+both.
 
 Conventions as in worker.geometry.cameras: pixels x right, y down; world metres; depth (F, H,
 W) uint16 millimetres along the camera's z axis, 0 = no reading. F frames of the clip given.
