@@ -30,8 +30,8 @@ itself after a correction), working time modelled as a minute of reading plus 3 
 (backend.crowd.simulate; no person is timed). "first_view_actions": per target, the edit
 actions of its first accepted view (the accepted assignment submitted first), the view worked
 with the least help; "view_actions": per target, each submitted assignment's view, actions, kept
-suggestions, status, profile and QC outcome; "qc_by_profile": per simulated profile, units
-submitted and flagged by QC. Money is real ledger money for rewards priced per task at
+suggestions, status, profile, QC outcome and whether an admin decided it; "qc_by_profile": per
+simulated profile, units submitted and flagged by QC (left for review, or rejected). Money is real ledger money for rewards priced per task at
 ``--hourly`` dollars an hour of that protocol's expected working time (the mean over the tasks
 of a kind, from the same simulated workers on the truth), plus the marketplace's fee; rejected
 work is done but not paid.
@@ -140,47 +140,49 @@ def _assisted_edits(capture: Path, task: dict, xy: np.ndarray, visible: np.ndarr
 def _views(sequence_id: int, profiles: dict[str, str]) -> dict[str, list[dict[str, Any]]]:
     """Per target, each submitted assignment in submission order: its view (camera serial),
     edit actions, how many of its keyframes are suggestions kept unchanged (source
-    "prefilled"), its status, the simulated worker's profile and what QC said (approve, review
-    or reject; before any admin's decision)."""
+    "prefilled"), its status, the simulated worker's profile, what QC said when it last scored
+    the target (approve, review or reject) and whether an admin decided it (QC had left it for
+    review; a later scoring may read approve)."""
     from sqlalchemy import select
     from sqlalchemy.orm import selectinload
 
     from backend.annotation.models import Assignment, Task
     from backend.captures.models import Camera
     from backend.db import session_scope
-    from backend.quality.models import QCReport
+    from backend.quality.models import ADMIN_DECIDED, QCReport
 
     out: dict[str, list[dict[str, Any]]] = {}
     with session_scope() as session:
         rows = session.execute(
             select(Task.target_key, Camera.serial, Assignment, QCReport.outcome,
-                   QCReport.reasons)
+                   QCReport.reasons, QCReport.action_detail)
             .join(Task, Task.id == Assignment.task_id)
             .join(Camera, Camera.id == Task.camera_id)
             .outerjoin(QCReport, QCReport.assignment_id == Assignment.id)
             .where(Task.sequence_id == sequence_id, Assignment.submitted_at.is_not(None))
             .options(selectinload(Assignment.tracks))
             .order_by(Assignment.submitted_at, Assignment.id)).all()
-        for target, serial, work, qc, reasons in rows:
+        for target, serial, work, qc, reasons, detail in rows:
             suggested = sum(len(r) > 4 and r[4] == "prefilled"
                             for t in work.tracks for r in t.keyframes)
             out.setdefault(target, []).append({"view": serial, "actions": int(work.edit_count),
                                                "suggested": suggested,
                                                "status": work.status, "qc": qc,
                                                "qc_reasons": reasons or [],
+                                               "admin_decided": detail == ADMIN_DECIDED,
                                                "profile": profiles.get(work.external_id)})
     return out
 
 
 def _qc_by_profile(views: dict[str, list[dict[str, Any]]]) -> dict[str, dict[str, Any]]:
-    """Per simulated profile: submitted units, how many QC flagged (review or reject), and
-    that rate."""
+    """Per simulated profile: submitted units, how many QC flagged (review or reject when it
+    last scored them, or left for the admin who decided them), and that rate."""
     out: dict[str, dict[str, Any]] = {}
     for rows in views.values():
         for row in rows:
             line = out.setdefault(row["profile"] or "unknown", {"units": 0, "flagged": 0})
             line["units"] += 1
-            line["flagged"] += int(row["qc"] in ("review", "reject"))
+            line["flagged"] += int(row["qc"] in ("review", "reject") or row["admin_decided"])
     for line in out.values():
         line["flagged_rate"] = round(line["flagged"] / line["units"], 4)
     return out

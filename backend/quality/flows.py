@@ -26,7 +26,7 @@ from backend.db import session_scope
 from backend.errors import Conflict, DexlabelError
 from backend.jobs.attempts import record_actions, run_actions
 from backend.jobs.runner import RetryLater, check_lease, checkpoint
-from backend.quality.models import QCReport
+from backend.quality.models import ADMIN_DECIDED, QCReport
 from backend.quality.service import hit_of, score_target
 
 log = logging.getLogger(__name__)
@@ -93,7 +93,7 @@ def _act(crowd: CrowdProvider | None, report_id: int, assignment_id: int) -> str
         elif (report.action_detail or "").startswith(REOPEN_PENDING):
             follow_up = _reopen
         elif assignment.status in ("approved", "rejected"):
-            report.action, report.action_detail = assignment.status, "decided by an admin"
+            report.action, report.action_detail = assignment.status, ADMIN_DECIDED
             return None
         elif report.provisional:
             report.action_detail = "waiting for more views before acting"

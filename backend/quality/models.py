@@ -16,6 +16,10 @@ from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.db import Base, TimestampMixin, UTCDateTime, one_of, parent_key, utcnow
 
+# A report's action_detail where an admin approved or rejected the work, not QC: QC left it
+# for review (a later scoring of the target may read approve on the same report).
+ADMIN_DECIDED = "decided by an admin"
+
 
 class QCReport(TimestampMixin, Base):
     __tablename__ = "qc_reports"

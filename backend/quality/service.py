@@ -52,7 +52,7 @@ from backend.quality.inputs import (
     stretch_checks,
     target_inputs,
 )
-from backend.quality.models import QCReport
+from backend.quality.models import ADMIN_DECIDED, QCReport
 from worker.tracks.sources import own_keyframes
 
 if TYPE_CHECKING:
@@ -322,7 +322,7 @@ def record_decision(session: Session, assignment_id: int, decision: str) -> None
     report, if it has one not acted on yet."""
     row = session.scalar(select(QCReport).where(QCReport.assignment_id == assignment_id))
     if row is not None and row.action is None:
-        row.action, row.action_detail = decision, "decided by an admin"
+        row.action, row.action_detail = decision, ADMIN_DECIDED
 
 
 def get_report_or_raise(session: Session, assignment_id: int) -> QCReport:

@@ -7,7 +7,7 @@ prior) ties the 21 joints together. So the hand model is fitted to the worker's 
 first frame it keyed (at least MIN_START_JOINTS visible joints), lifted onto the view's depth
 (from a few start guesses, each fitted a few ways: the fit the depth supports best that sits on
 the keyframes starts), and then carried frame by frame forward to the end of the clip and
-backward to its start: each frame starts from the previous frame's pose (with half its velocity
+backward to its start: each frame starts from the previous frame's pose (with its velocity
 added) and is fitted to that frame's depth (ICP rounds: the depth points near the hand matched
 to its surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever
 the worker keyed at that frame (the keypoint term, robust), its pose coefficients pulled towards
