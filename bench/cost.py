@@ -31,10 +31,10 @@ itself after a correction), working time modelled as a minute of reading plus 3 
 actions of its first accepted view (the accepted assignment submitted first), the view worked
 with the least help; "view_actions": per target, each submitted assignment's view, actions, kept
 suggestions, status, profile, QC outcome and whether an admin decided it; "qc_by_profile": per
-simulated profile, units submitted and flagged by QC (left for review, or rejected). Money is real ledger money for rewards priced per task at
-``--hourly`` dollars an hour of that protocol's expected working time (the mean over the tasks
-of a kind, from the same simulated workers on the truth), plus the marketplace's fee; rejected
-work is done but not paid.
+simulated profile, units submitted and flagged by QC (left for review, or rejected). Money is
+real ledger money for rewards priced per task at ``--hourly`` dollars an hour of that
+protocol's expected working time (the mean over the tasks of a kind, from the same simulated
+workers on the truth), plus the marketplace's fee; rejected work is done but not paid.
 
 Prints a line per protocol (each instance's own progress on stderr), then one JSON line:
 {"capture", "seed", "views", "frames", "profile", "crowd_seed", "hourly_usd", "protocols":
