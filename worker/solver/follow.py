@@ -7,12 +7,13 @@ prior) ties the 21 joints together. So the hand model is fitted to the worker's 
 first frame it keyed (at least MIN_START_JOINTS visible joints), lifted onto the view's depth
 (from a few start guesses, each fitted a few ways: the fit the depth supports best that sits on
 the keyframes starts), and then carried frame by frame forward to the end of the clip and
-backward to its start: each frame starts from the previous frame's pose (with its velocity
-added) and is fitted to that frame's depth (ICP rounds: the depth points near the hand matched
-to its surface, worker.solver.problem.Problem.match_depth, robustly weighted) and to whatever
-the worker keyed at that frame (the keypoint term, robust), its pose coefficients pulled towards
-the previous frame's (the fingers the view does not see keep their bend). A frame keyed by the
-worker again pulls the hand back where it had drifted, so a correction mends what follows it:
+backward to its start: each frame starts from the previous frame's pose with its velocity
+added (and, where the depth fits that worse than usual, from a few other shares of it: a hand
+that stops or turns) and is fitted to that frame's depth (ICP rounds: the depth points near
+the hand matched to its surface, worker.solver.problem.Problem.match_depth, robustly weighted)
+and to whatever the worker keyed at that frame (the keypoint term, robust), its pose
+coefficients pulled towards the previous frame's (the fingers the view does not see keep their
+bend). A frame keyed by the worker again pulls the hand back where it had drifted, so a correction mends what follows it:
 asked again from a corrected frame (``begin``), the follow is both carried from the same first
 keyed frame through every keyframe and accepted proposal before the correction and started
 afresh from the corrected frame's keys, and the one the depth fits better is kept: a start in
@@ -76,6 +77,12 @@ CONVERGED_M = 0.0003
 # edits -> 54). On the test capture's every third frame (up to 26 px a frame) 0.5 against 14 px
 # median.
 VELOCITY = 1.0
+# A hand that stops or turns back is overshot by its velocity: where a frame's fit comes out
+# over RETRY_RATIO times the view's usual depth RMS, it is fitted again from the previous
+# frame's pose plus each of RETRY_VELOCITY times its velocity, and the fit with the lowest RMS
+# is kept.
+RETRY_RATIO = 1.25
+RETRY_VELOCITY = (0.0, 0.5, 1.5)
 # Where the depth no longer supports the fit: too few depth points within the match margin of
 # the fitted surface, or their robust RMS distance too large.
 MIN_MATCHED = 40
@@ -215,6 +222,13 @@ class _Held:
         """Hold nothing (the follow turns back to its keyed frame)."""
         self.points, self.palm = np.zeros((0, 3)), None
 
+    def snapshot(self, frame: int) -> tuple:
+        """What is held and left out at ``frame`` now (restore puts it back)."""
+        return (self.points, self.palm, self.left_out, self.shown[frame].copy())
+
+    def restore(self, frame: int, saved: tuple) -> None:
+        self.points, self.palm, self.left_out, self.shown[frame] = saved
+
     def leave_out(self, frame: int, joints: np.ndarray) -> None:
         """Before ``frame`` is matched with the hand's joints (21, 3) world as fitted so far."""
         height, width = self.left_out.shape
@@ -305,6 +319,31 @@ def _fit_frame(problem: Problem, state: SolveState, frame: int, rounds: int,
     weight = 1.0 / (1.0 + (dist_mm / robust_mm) ** 2)
     rms = float(np.sqrt(np.sum(weight * dist_mm ** 2) / max(np.sum(weight), 1e-9)))
     return len(dist_mm), rms
+
+
+def _fit_moving(problem: Problem, state: SolveState, frame: int, rounds: int,
+                prior: np.ndarray, held: _Held, usual: float, guesses: list[np.ndarray]
+                ) -> tuple[int, float]:
+    """Fit a followed frame (_fit_frame, pulled towards ``prior``) from the first of
+    ``guesses`` (pose_m (51,) each) and, where its depth RMS comes out over RETRY_RATIO times
+    ``usual`` (mm), from the others as well: of those with MIN_MATCHED depth points, the fit
+    with the lowest RMS is kept (its pose in ``state``, what is held as it left it). (depth
+    points matched, their robust RMS mm) of the fit kept."""
+    best: tuple[float, int, float, np.ndarray, tuple] | None = None
+    for guess in guesses:
+        if best is not None and best[0] <= RETRY_RATIO * usual:
+            break
+        before = held.snapshot(frame)
+        state.hand_pose[frame] = guess
+        count, rms = _fit_frame(problem, state, frame, rounds, prior, held)
+        rank = rms if count >= MIN_MATCHED else np.inf
+        if best is None or rank < best[0]:
+            best = (rank, count, rms, state.hand_pose[frame].copy(), held.snapshot(frame))
+        held.restore(frame, before)
+    assert best is not None
+    _, count, rms, state.hand_pose[frame], after = best
+    held.restore(frame, after)
+    return count, rms
 
 
 def _start_guesses(problem: Problem, camera: CameraModel, depth: np.ndarray,
@@ -508,9 +547,10 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
             prev = state.hand_pose[f - step]
             back = f - 2 * step
             older = state.hand_pose[back] if 0 <= back < frames and fitted[back] else prev
-            state.hand_pose[f] = prev + VELOCITY * (prev - older)
-            count, rms[f] = _fit_frame(problem, state, f, rounds, prev[3:48].copy(), held)
             usual = float(np.median(history)) if history else float(rms[start])
+            count, rms[f] = _fit_moving(problem, state, f, rounds, prev[3:48].copy(), held, usual,
+                                        [prev + share * (prev - older)
+                                         for share in (VELOCITY, *RETRY_VELOCITY)])
             if count < MIN_MATCHED or rms[f] > max(MAX_DEPTH_RMS_MM, STOP_RATIO * usual):
                 stops[name] = (f, STOP_DEPTH)
                 break

@@ -48,6 +48,18 @@ def _follow(scene: Scene, keypoints: np.ndarray, keyed: np.ndarray, **kw):
                        scene.side, scene.betas, **kw)
 
 
+def _follow_frames(scene: Scene, frames: np.ndarray) -> Followed:
+    """VIEW's clip as ``frames`` of it (a faster or stopping hand), its first keyed by a
+    careful worker (2 px), followed."""
+    truth, visible = scene.xy[VIEW][frames], scene.visible[VIEW][frames]
+    keypoints = np.full(truth.shape, np.nan)
+    keypoints[0] = truth[0] + np.random.default_rng(0).normal(0.0, 2.0, truth[0].shape)
+    keyed = np.zeros(visible.shape, bool)
+    keyed[0] = visible[0]
+    return follow_hand(scene.cameras[VIEW], scene.depth[VIEW][frames], keypoints, keyed,
+                       scene.side, scene.betas)
+
+
 def _assert_close_after_the_keyed_frame(scene: Scene, found: Followed,
                                         frames: np.ndarray | None = None) -> None:
     """Proposed on most of the later frames' visible joints (where tracking image patches of
@@ -87,16 +99,21 @@ def test_a_hand_that_speeds_up_is_kept(scene: Scene) -> None:
     # fell behind from the third frame and ended 53 px off (14 px median), the depth never
     # refusing it.
     frames = np.arange(0, 3 * FRAMES, 3)
-    truth, visible = scene.xy[VIEW][frames], scene.visible[VIEW][frames]
-    step = np.linalg.norm(np.diff(truth, axis=0), axis=-1)
+    step = np.linalg.norm(np.diff(scene.xy[VIEW][frames], axis=0), axis=-1)
     assert np.nanmedian(step[-3:]) > 20.0
-    keypoints = np.full(truth.shape, np.nan)
-    keypoints[0] = truth[0] + np.random.default_rng(0).normal(0.0, 2.0, truth[0].shape)
-    keyed = np.zeros(visible.shape, bool)
-    keyed[0] = visible[0]
-    found = follow_hand(scene.cameras[VIEW], scene.depth[VIEW][frames], keypoints, keyed,
-                        scene.side, scene.betas)
+    _assert_close_after_the_keyed_frame(scene, _follow_frames(scene, frames), frames)
+
+
+def test_a_hand_that_stops_dead_is_not_carried_on(scene: Scene) -> None:
+    # The same frames to the sixth, then the sixth three more times: the hand moves 26 px and
+    # stops. Started only from where its velocity would take it, the follow went on past the
+    # hand and settled 14-23 px off on the last three frames.
+    frames = np.array([0, 3, 6, 9, 12, 15, 15, 15, 15])
+    found = _follow_frames(scene, frames)
     _assert_close_after_the_keyed_frame(scene, found, frames)
+    truth, visible = scene.xy[VIEW][frames], scene.visible[VIEW][frames]
+    err = np.linalg.norm(found.xy[-3:] - truth[-3:], axis=-1)[visible[-3:]]
+    assert np.median(err) < 2.0, np.median(err)
 
 
 def test_a_keyed_frame_without_depth_gives_no_proposals(scene: Scene) -> None:
