@@ -3,26 +3,27 @@
 Tracking image patches (worker.assist.lk) loses most hand joints within a clip: skin has little
 texture, and a joint drifts along a finger without failing any check. One view's depth sees the
 hand's surface in every frame, though, and the hand model (bone lengths, joint limits, pose
-prior) ties the 21 joints together. So the hand model is fitted to the worker's keyframes of the
-first frame it keyed (at least MIN_START_JOINTS visible joints), lifted onto the view's depth
-(from a few start guesses, each fitted a few ways: the fit the depth supports best that sits on
-the keyframes starts), and then carried frame by frame forward to the end of the clip and
-backward to its start: each frame starts from the previous frame's pose with its velocity
+prior) ties the 21 joints together. So the hand model is fitted to the worker's keyframes of
+the first frame it keyed (at least MIN_START_JOINTS visible joints), lifted onto the view's
+depth (from a few start guesses, each fitted a few ways: the fit the depth supports best that
+sits on the keyframes starts), and then carried frame by frame forward to the end of the clip
+and backward to its start: each frame starts from the previous frame's pose with its velocity
 added (and, where the depth fits that worse than usual, from a few other shares of it: a hand
-that stops or turns) and is fitted to that frame's depth (ICP rounds: the depth points near
-the hand matched to its surface, worker.solver.problem.Problem.match_depth, robustly weighted)
-and to whatever the worker keyed at that frame (the keypoint term, robust), its pose
-coefficients pulled towards the previous frame's (the fingers the view does not see keep their
-bend). A frame keyed by the worker again pulls the hand back where it had drifted, so a correction mends what follows it:
-asked again from a corrected frame (``begin``), the follow is both carried from the same first
-keyed frame through every keyframe and accepted proposal before the correction and started
-afresh from the corrected frame's keys, and the one the depth fits better is kept: a start in
-the grasp, where the keys lift onto the object, can be worse than the open hand's carried there,
-and a first start from noisy clicks worse than the worker's corrected frame. Depth readings that
-have not changed since the keyed frame (the table, an object still at rest) are left out of the
-matches, outside the hand's own pixels there; so are those of what the hand holds once it moves:
-the readings beside the fitted hand are carried to the next frame with the palm's rigid motion,
-and that frame's readings where they land are left out (_Held).
+that stops or turns) and is fitted to that frame's depth (ICP rounds: the depth points near the
+hand matched to its surface, worker.solver.problem.Problem.match_depth, robustly weighted) and
+to whatever the worker keyed at that frame (the keypoint term, robust), its pose coefficients
+pulled towards the previous frame's (the fingers the view does not see keep their bend). A
+frame keyed by the worker again pulls the hand back where it had drifted, so a correction mends
+what follows it: asked again from a corrected frame (``begin``), the follow is both carried
+from the same first keyed frame through every keyframe and accepted proposal before the
+correction and started afresh from the corrected frame's keys, and the one the depth fits
+better is kept: a start in the grasp, where the keys lift onto the object, can be worse than
+the open hand's carried there, and a first start from noisy clicks worse than the worker's
+corrected frame. Depth readings that have not changed since the keyed frame (the table, an
+object still at rest) are left out of the matches, outside the hand's own pixels there; so are
+those of what the hand holds once it moves: the readings beside the fitted hand are carried to
+the next frame with the palm's rigid motion, and that frame's readings where they land are left
+out (_Held).
 
 The follow stops (in that direction) at the first frame whose fit the depth does not support:
 fewer than MIN_MATCHED depth points near the fitted surface, or their robust RMS distance over
