@@ -150,13 +150,17 @@ def _own_shake(xy: np.ndarray, motion: ObjectMotion | None) -> float | None:
     return num(np.sqrt(max(shake ** 2 - expected ** 2, 0.0)))
 
 
-def _track_metrics(xy: np.ndarray, motion: ObjectMotion | None
+def _track_metrics(xy: np.ndarray, visible: np.ndarray, motion: ObjectMotion | None
                    ) -> tuple[np.ndarray, np.ndarray, dict[str, float | None]]:
     """The track as sent, on its own: its jumps (F-1, P) bool beyond what the object's motion
-    explains, its steps (F-1, P) px, and jump_fraction, max_step_ratio, jitter_px and
-    static_fraction."""
-    jump, typical = jumps(xy, motion.step if motion is not None else None)
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    explains, between frames that both show the landmark (visible (F, P); across a hidden
+    stretch the track's positions are in-betweens of where it was last and next shown, and
+    the object may have moved meanwhile), those steps (F-1, P) px (NaN elsewhere), and
+    jump_fraction and max_step_ratio of them, and jitter_px and static_fraction of the track as
+    sent."""
+    shown = np.where(visible[..., None], xy, np.nan)
+    jump, typical = jumps(shown, motion.step if motion is not None else None)
+    step = np.linalg.norm(np.diff(shown, axis=0), axis=-1)
     steps = np.isfinite(step)
     return jump, step, {
         "jump_fraction": num(jump.sum() / steps.sum()) if steps.any() else None,
@@ -214,7 +218,7 @@ def score_landmarks(camera: CameraModel, label: ViewLabels,
     sent = visible & np.isfinite(xy).all(axis=-1)
     metrics["moved_with_object"] = moved_with_object(own_xy, motion, sent) \
         if motion is not None else None
-    jump, step, track = _track_metrics(xy, motion)
+    jump, step, track = _track_metrics(xy, visible, motion)
     metrics.update(track)
     metrics["completeness"] = completeness(xy, visible)
     metrics["visible_fraction"] = num(visible.mean())

@@ -168,6 +168,31 @@ class TestScoreObject:
         labels = self._views(camera, _label(swapped, key="swap"))
         assert score_object([camera], labels)["swap"].metrics["jump_fraction"] > 0.0
 
+    def test_a_landmark_hidden_through_the_lift_does_not_jump_where_it_was_hidden(self, camera):
+        # A fast lift (15 px a frame in this view, 12-18 in the others). The hand covers
+        # landmark 2 from frame 8, before the lift, to frame 18: the track as stored runs
+        # straight from where it was last shown to where it is shown again, 11 px a frame
+        # while the object still rests (frames 8-10). Those in-betweens are no steps the
+        # worker placed.
+        others = [ViewLabels(key=f"v{i}", view=0, xy=_lifted(i, scale),
+                             visible=np.ones((FRAMES, 2), bool))
+                  for i, scale in enumerate((2.0, 2.5, 3.0, 2.2))]
+        xy = _lifted(8, 2.5)
+        visible = np.ones((FRAMES, 2), bool)
+        visible[8:19, 1] = False
+        xy[8:19, 1] = xy[7, 1] + (xy[19, 1] - xy[7, 1]) * (np.arange(8, 19) - 7)[:, None] / 12
+        covered = ViewLabels(key="covered", view=0, xy=xy, visible=visible,
+                             working_time_s=40.0)
+        scored = score_object([camera], [*others, covered])
+        assert scored["covered"].metrics["jump_fraction"] == 0.0
+        assert not [i for i in scored["covered"].issues if i.get("about") == "jump"]
+        # Shown all along, the same track slides 11 px a frame over the resting object: jumps
+        # (as the hidden one read before).
+        visible[8:19, 1] = True
+        shown = ViewLabels(key="shown", view=0, xy=xy, visible=visible, working_time_s=40.0)
+        assert score_object([camera], [*others, shown])["shown"].metrics[
+            "jump_fraction"] > 0.0
+
     def test_a_still_object_is_not_judged_by_motion(self, camera):
         still = [ViewLabels(key=f"s{i}", view=0, xy=np.repeat(_lifted(i)[:1], FRAMES, axis=0),
                             visible=np.ones((FRAMES, 2), bool)) for i in range(4)]
