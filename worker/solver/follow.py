@@ -93,7 +93,7 @@ MAX_DEPTH_RMS_MM = 2.5
 # in that direction (the keyed frame's where there are none yet).
 STOP_RATIO = 2.0
 # The keyed frame is fitted from each start guess (_start_guesses) each of these ways: (LM
-# iterations x robust rounds on the keyframes alone, then START_ROUNDS times the ICP rounds
+# iterations x robust rounds on the keyframes alone, then START_ROUNDS ICP rounds
 # with the keypoint term this many times its weight). Of the fits within MAX_START_PX of the
 # keyframes, the one with the lowest robust depth RMS starts the follow. The first is the plain
 # fit; in the second the depth places the hand along the rays while the keyframes hold the
@@ -120,7 +120,7 @@ START_FITS = ((LM_ITERATIONS, 2, 1.0), (20, 5, 5.0), (LM_ITERATIONS, 2, 0.3), DI
 # of these (metres), fitted the direct way only (a fit to the keyframes first would bring it
 # forward again): on that third draw the guess pushed 10-20 mm started at 1.6 mm.
 PUSH_BACK_M = (0.01, 0.02, 0.03)
-START_ROUNDS = 3
+START_ROUNDS = 24
 # At the keyed frame the worker's 2 px click noise pulls the model against the depth too: the
 # start is refused only where the keyed hand is off the depth (keyframes on another hand, or
 # beside it, or a hand closed on an object that moves with it). Starts that followed well
@@ -516,7 +516,7 @@ def _follow_from(problem: Problem, camera: CameraModel, depth: np.ndarray,
             if key_rounds:
                 fit_hand(problem, state, None, iterations, key_rounds)
             problem.settings = replace(SETTINGS, w_kpt=weight * SETTINGS.w_kpt)
-            count, fit_rms = _fit_frame(problem, state, start, START_ROUNDS * rounds)
+            count, fit_rms = _fit_frame(problem, state, start, START_ROUNDS)
             problem.settings = SETTINGS
             off_px = _off_keys_px(camera.project(state.joints(problem)[0]),
                                   keypoints[start], visible[start])
