@@ -331,10 +331,10 @@ def _fit_moving(problem: Problem, state: SolveState, frame: int, rounds: int,
     with the lowest RMS is kept (its pose in ``state``, what is held as it left it). (depth
     points matched, their robust RMS mm) of the fit kept."""
     best: tuple[float, int, float, np.ndarray, tuple] | None = None
+    before = held.snapshot(frame)
     for guess in guesses:
         if best is not None and best[0] <= RETRY_RATIO * usual:
             break
-        before = held.snapshot(frame)
         state.hand_pose[frame] = guess
         count, rms = _fit_frame(problem, state, frame, rounds, prior, held)
         rank = rms if count >= MIN_MATCHED else np.inf
