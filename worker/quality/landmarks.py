@@ -45,6 +45,9 @@ ObjectMotion = TargetMotion
 # A step is the object's own motion, not a jump, unless it exceeds this multiple of the step
 # the other labels take in the same frame (views see the motion at different scales).
 JUMP_OVER_OTHERS = 3.0
+# With no other label to compare with, a large step is a jump only when it exceeds this
+# multiple of the steps beside it (a lift from rest grows over frames) or comes back (_own_jumps).
+JUMP_OVER_NEIGHBOURS = 3.0
 
 
 def _check(label: ViewLabels, masks: dict[int, np.ndarray] | None,
@@ -84,12 +87,43 @@ def silhouette_distances(xy: np.ndarray, visible: np.ndarray,
     return out
 
 
+def _own_jumps(step: np.ndarray, xy: np.ndarray, typical: float) -> np.ndarray:
+    """(F-1, P) bool: steps that are jumps with no other label to show the object's motion.
+
+    A step is a candidate over JUMP_FACTOR times the label's typical step (and the floor); an
+    object that rests and is then lifted takes such steps too, growing from frame to frame, so
+    a candidate is a jump only where it stands out from its neighbours: over
+    JUMP_OVER_NEIGHBOURS times the larger of the steps before and after it (a landmark moved
+    or swapped in one frame), or where it goes out and comes back (a landmark wrong in one
+    frame). Steps the label does not show (NaN) are no neighbours."""
+    big = np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX)
+    known = np.nan_to_num(step)
+    before = np.vstack([np.zeros((1, step.shape[1])), known[:-1]])
+    after = np.vstack([known[1:], np.zeros((1, step.shape[1]))])
+    lone = known > JUMP_OVER_NEIGHBOURS * np.maximum(before, after)
+    # Out and back: the landmark leaves its path for one frame. Its second difference there
+    # is large and points against those of the frames beside it (each about half of it); a
+    # lift that starts or stops at once bends the path in one frame only.
+    bend = np.nan_to_num(np.diff(xy, n=2, axis=0))
+    size = np.linalg.norm(bend, axis=-1)
+    zero = np.zeros((1, *bend.shape[1:]))
+    before_bend = np.concatenate([zero, bend[:-1]])
+    after_bend = np.concatenate([bend[1:], zero])
+    against = np.minimum(-(before_bend * bend).sum(-1), -(after_bend * bend).sum(-1))
+    pair = (size / 2.0 > JUMP_FLOOR_PX) & (against > size ** 2 / 4.0)
+    returns = np.zeros_like(big)
+    returns[:-1] |= pair
+    returns[1:] |= pair
+    return big & (lone | returns)
+
+
 def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
           ) -> tuple[np.ndarray, float | None]:
     """(F-1, P) bool steps that are jumps, and the label's typical (median) step, px.
 
     others_step: optional (F-1,) px, the step the other labels of the object take in each
     frame; then a step is a jump when it exceeds JUMP_OVER_OTHERS times that (and the floor).
+    Without it, against the label's own steps (_own_jumps).
     """
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
     finite = step[np.isfinite(step)]
@@ -97,7 +131,7 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
         return np.zeros(step.shape, bool), None
     typical = float(np.median(finite))
     if others_step is None:
-        return np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX), typical
+        return _own_jumps(step, xy, typical), typical
     # The other views show when the object moves: a step is judged against that frame's
     # motion, not against the label's own typical step (which the object's motion inflates).
     allowed = np.maximum(JUMP_OVER_OTHERS * np.nan_to_num(np.asarray(others_step, float)),

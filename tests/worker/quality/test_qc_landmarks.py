@@ -193,6 +193,31 @@ class TestScoreObject:
         assert score_object([camera], [*others, shown])["shown"].metrics[
             "jump_fraction"] > 0.0
 
+    def test_a_lift_no_other_view_shows_yet_is_not_a_jump(self, camera):
+        # The first view of an object scored alone: it rests for 20 frames, then is lifted
+        # faster and faster (5 to 30 px a frame). Its own typical step is the resting clicks'
+        # noise, so every step of the lift is over 6 times that; none stands out from the
+        # steps beside it.
+        frames = np.arange(FRAMES)
+        rise = np.cumsum(np.clip(5.0 * (frames - 20), 0, 30))
+        xy = np.repeat(_lifted(3)[:1], FRAMES, axis=0) \
+            + np.random.default_rng(3).normal(0.0, 1.0, (FRAMES, 2, 2))
+        xy[..., 1] -= rise[:, None]
+        alone = score_object([camera], [_label(xy, key="first")])["first"]
+        assert alone.metrics["jump_fraction"] == 0.0, alone.issues
+        # The same track with landmark 1 placed 30 px off in one frame of the lift (25 px a
+        # frame there), and with the two landmarks swapped from frame 15 on, at rest: jumps.
+        wrong = xy.copy()
+        wrong[25, 0] += [30.0, 0.0]
+        issues = score_object([camera], [_label(wrong, key="w")])["w"].issues
+        assert {(i["point"], *i["frames"]) for i in issues if i["about"] == "jump"} \
+            == {(0, 24, 25), (0, 25, 26)}
+        swapped = xy.copy()
+        swapped[15:] = swapped[15:, ::-1]
+        issues = score_object([camera], [_label(swapped, key="s")])["s"].issues
+        assert {(i["point"], *i["frames"]) for i in issues if i["about"] == "jump"} \
+            == {(0, 14, 15), (1, 14, 15)}
+
     def test_a_still_object_is_not_judged_by_motion(self, camera):
         still = [ViewLabels(key=f"s{i}", view=0, xy=np.repeat(_lifted(i)[:1], FRAMES, axis=0),
                             visible=np.ones((FRAMES, 2), bool)) for i in range(4)]
