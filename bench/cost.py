@@ -333,7 +333,8 @@ def _failed_jobs() -> list[dict[str, str]]:
 
 def _child(capture: Path, name: str, args: argparse.Namespace) -> dict[str, Any]:
     """``one`` in a process of its own (each protocol gets a fresh instance and settings)."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DEXLABEL_")}
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("DEXLABEL_") or k == "DEXLABEL_BENCH_KEEP"}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     done = subprocess.run(
         [sys.executable, __file__, "--one", name, "--capture", str(capture), "--profile",

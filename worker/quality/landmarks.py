@@ -1,9 +1,10 @@
 """Quality of one object-landmark label: smooth tracks, on the object, not frozen.
 
 Each view's 2 landmarks are the worker's own choice, so nothing matches them across views; a
-label is judged on its own: temporal smoothness (jumps against the label's own typical motion),
-distance to the object's projected silhouette where a mask is given (the object's pose is known
-for those frames), and how much of the clip it stands still. Pixels x right, y down, one view.
+label is judged on its own: temporal smoothness (jumps against the object's motion as the
+other labels show it, or against the label's own neighbouring steps), distance to the
+object's projected silhouette where a mask is given (the object's pose is known for those
+frames), and how much of the clip it stands still. Pixels x right, y down, one view.
 """
 
 from __future__ import annotations
@@ -33,9 +34,8 @@ from worker.quality.view_labels import ViewLabels, decided_of, decided_xy
 # A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
 # at pixel centres and a careful click lands within ~2 px.
 SILHOUETTE_TOLERANCE_PX = 3.0
-# A frame-to-frame step is a jump when it exceeds this multiple of the label's median step and
-# this floor (px): objects move smoothly, a relabelled or swapped landmark leaps.
-JUMP_FACTOR = 6.0
+# A frame-to-frame step shorter than this (px) is never a jump: objects move smoothly, a
+# relabelled or swapped landmark leaps.
 JUMP_FLOOR_PX = 8.0
 # The object counts as moving in a clip when the other labels' landmarks get this far (median
 # over labels, px) from where they were first placed: ten careful clicks' noise.
@@ -45,9 +45,10 @@ ObjectMotion = TargetMotion
 # A step is the object's own motion, not a jump, unless it exceeds this multiple of the step
 # the other labels take in the same frame (views see the motion at different scales).
 JUMP_OVER_OTHERS = 3.0
-# With no other label to compare with, a large step is a jump only when it exceeds this
-# multiple of the steps beside it (a lift from rest grows over frames) or comes back (_own_jumps).
-JUMP_OVER_NEIGHBOURS = 3.0
+# With nothing else to show the object's motion, a large step is a jump only when it differs
+# from the steps beside it by more than this multiple of them (_own_jumps): a lift from rest
+# grows and turns over frames, a moved or swapped landmark leaps in one.
+JUMP_OVER_NEIGHBOURS = 1.0
 
 
 def _check(label: ViewLabels, masks: dict[int, np.ndarray] | None,
@@ -87,34 +88,26 @@ def silhouette_distances(xy: np.ndarray, visible: np.ndarray,
     return out
 
 
-def _own_jumps(step: np.ndarray, xy: np.ndarray, typical: float) -> np.ndarray:
-    """(F-1, P) bool: steps that are jumps with no other label to show the object's motion.
+def _own_jumps(step: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(F-1, P) bool: steps that are jumps with nothing else to show the object's motion.
 
-    A step is a candidate over JUMP_FACTOR times the label's typical step (and the floor); an
-    object that rests and is then lifted takes such steps too, growing from frame to frame, so
-    a candidate is a jump only where it stands out from its neighbours: over
-    JUMP_OVER_NEIGHBOURS times the larger of the steps before and after it (a landmark moved
-    or swapped in one frame), or where it goes out and comes back (a landmark wrong in one
-    frame). Steps the label does not show (NaN) are no neighbours."""
-    big = np.nan_to_num(step) > max(JUMP_FACTOR * typical, JUMP_FLOOR_PX)
-    known = np.nan_to_num(step)
-    before = np.vstack([np.zeros((1, step.shape[1])), known[:-1]])
-    after = np.vstack([known[1:], np.zeros((1, step.shape[1]))])
-    lone = known > JUMP_OVER_NEIGHBOURS * np.maximum(before, after)
-    # Out and back: the landmark leaves its path for one frame. Its second difference there
-    # is large and points against those of the frames beside it (each about half of it); a
-    # lift that starts or stops at once bends the path in one frame only.
-    bend = np.nan_to_num(np.diff(xy, n=2, axis=0))
-    size = np.linalg.norm(bend, axis=-1)
-    zero = np.zeros((1, *bend.shape[1:]))
-    before_bend = np.concatenate([zero, bend[:-1]])
-    after_bend = np.concatenate([bend[1:], zero])
-    against = np.minimum(-(before_bend * bend).sum(-1), -(after_bend * bend).sum(-1))
-    pair = (size / 2.0 > JUMP_FLOOR_PX) & (against > size ** 2 / 4.0)
-    returns = np.zeros_like(big)
-    returns[:-1] |= pair
-    returns[1:] |= pair
-    return big & (lone | returns)
+    A step over the floor is a jump where it stands out from the steps beside it: it differs
+    (as a vector) from their mean by more than JUMP_OVER_NEIGHBOURS times the larger of them
+    and the floor (a landmark moved, swapped or wrong in one frame). A lift grows and turns
+    from frame to frame, whether it starts from rest or fills the clip, so its steps, however
+    large against the label's typical one, are no jumps. Steps the label does not show (NaN)
+    are no neighbours; a step over the floor with none is a jump."""
+    big = np.nan_to_num(step) > JUMP_FLOOR_PX
+    vec = np.diff(xy, axis=0)
+    pad = np.full((1, *vec.shape[1:]), np.nan)
+    before, after = np.concatenate([pad, vec[:-1]]), np.concatenate([vec[1:], pad])
+    has_before, has_after = np.isfinite(before).all(-1), np.isfinite(after).all(-1)
+    beside = np.where((has_before & has_after)[..., None], (before + after) / 2.0,
+                      np.where(has_before[..., None], before, after))
+    scale = np.maximum(np.maximum(np.nan_to_num(np.linalg.norm(before, axis=-1)),
+                                  np.nan_to_num(np.linalg.norm(after, axis=-1))), JUMP_FLOOR_PX)
+    apart = np.nan_to_num(np.linalg.norm(vec - beside, axis=-1), nan=np.inf)
+    return big & (apart > JUMP_OVER_NEIGHBOURS * scale)
 
 
 def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
@@ -122,21 +115,25 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
     """(F-1, P) bool steps that are jumps, and the label's typical (median) step, px.
 
     others_step: optional (F-1,) px, the step the other labels of the object take in each
-    frame; then a step is a jump when it exceeds JUMP_OVER_OTHERS times that (and the floor).
-    Without it, against the label's own steps (_own_jumps).
+    frame (NaN where none shows it); where known, a step is a jump when it exceeds
+    JUMP_OVER_OTHERS times that (and the floor). Elsewhere, against the label's own steps
+    (_own_jumps): in frames where the others' landmarks are hidden or only suggestions, the
+    object's motion is unknown, not zero.
     """
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
     finite = step[np.isfinite(step)]
     if finite.size == 0:
         return np.zeros(step.shape, bool), None
     typical = float(np.median(finite))
+    own = _own_jumps(step, xy)
     if others_step is None:
-        return _own_jumps(step, xy, typical), typical
+        return own, typical
     # The other views show when the object moves: a step is judged against that frame's
     # motion, not against the label's own typical step (which the object's motion inflates).
-    allowed = np.maximum(JUMP_OVER_OTHERS * np.nan_to_num(np.asarray(others_step, float)),
-                         JUMP_FLOOR_PX)
-    return np.nan_to_num(step) > allowed[:, None], typical
+    others = np.asarray(others_step, float)
+    allowed = np.maximum(JUMP_OVER_OTHERS * np.nan_to_num(others), JUMP_FLOOR_PX)
+    against = np.nan_to_num(step) > allowed[:, None]
+    return np.where(np.isfinite(others)[:, None], against, own), typical
 
 
 def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:

@@ -205,18 +205,36 @@ class TestScoreObject:
         xy[..., 1] -= rise[:, None]
         alone = score_object([camera], [_label(xy, key="first")])["first"]
         assert alone.metrics["jump_fraction"] == 0.0, alone.issues
-        # The same track with landmark 1 placed 30 px off in one frame of the lift (25 px a
+        # The same track with landmark 1 placed 30 px off in one frame of the lift (15 px a
         # frame there), and with the two landmarks swapped from frame 15 on, at rest: jumps.
         wrong = xy.copy()
-        wrong[25, 0] += [30.0, 0.0]
+        wrong[23, 0] += [30.0, 0.0]
         issues = score_object([camera], [_label(wrong, key="w")])["w"].issues
         assert {(i["point"], *i["frames"]) for i in issues if i["about"] == "jump"} \
-            == {(0, 24, 25), (0, 25, 26)}
+            == {(0, 22, 23), (0, 23, 24)}
         swapped = xy.copy()
         swapped[15:] = swapped[15:, ::-1]
         issues = score_object([camera], [_label(swapped, key="s")])["s"].issues
         assert {(i["point"], *i["frames"]) for i in issues if i["about"] == "jump"} \
             == {(0, 14, 15), (1, 14, 15)}
+
+    def test_where_no_other_label_shows_the_lift_it_is_not_a_jump(self, camera):
+        # The other views kept suggestions through the lift (positions that are not their
+        # workers' own): they show the object at rest, then nothing. This view's careful track
+        # of the lift (12 px a frame) is judged against its own steps there, not against a
+        # motion of zero; its landmarks swapped during the lift still jump.
+        decided = np.ones((FRAMES, 2), bool)
+        decided[11:] = False
+        others = [ViewLabels(key=f"v{i}", view=0, xy=_lifted(i, scale),
+                             visible=np.ones((FRAMES, 2), bool), decided=decided)
+                  for i, scale in enumerate((1.0, 0.6, 1.5, 0.8))]
+        scored = score_object([camera], [*others, _label(_lifted(5, 2.0), key="lift")])
+        assert scored["lift"].metrics["jump_fraction"] == 0.0, scored["lift"].issues
+        swapped = _lifted(6, 2.0)
+        swapped[20:] = swapped[20:, ::-1]
+        scored = score_object([camera], [*others, _label(swapped, key="swap")])
+        assert {tuple(i["frames"]) for i in scored["swap"].issues if i["about"] == "jump"} \
+            == {(19, 20)}
 
     def test_a_still_object_is_not_judged_by_motion(self, camera):
         still = [ViewLabels(key=f"s{i}", view=0, xy=np.repeat(_lifted(i)[:1], FRAMES, axis=0),
