@@ -45,6 +45,10 @@ ObjectMotion = TargetMotion
 # A step is the object's own motion, not a jump, unless it exceeds this multiple of the step
 # the other labels take in the same frame (views see the motion at different scales).
 JUMP_OVER_OTHERS = 3.0
+# ... times the scale at which this view sees the motion against the others (_view_scale),
+# within these bounds: never stricter than the others' own motion, and a label that moves far
+# more than all others is no witness of its own scale.
+VIEW_SCALE = (1.0, 4.0)
 # With nothing else to show the object's motion, a large step is a jump only when it differs
 # from the steps beside it by more than this multiple of them (_own_jumps): a lift from rest
 # grows and turns over frames, a moved or swapped landmark leaps in one.
@@ -96,18 +100,35 @@ def _own_jumps(step: np.ndarray, xy: np.ndarray) -> np.ndarray:
     and the floor (a landmark moved, swapped or wrong in one frame). A lift grows and turns
     from frame to frame, whether it starts from rest or fills the clip, so its steps, however
     large against the label's typical one, are no jumps. Steps the label does not show (NaN)
-    are no neighbours; a step over the floor with none is a jump."""
+    are no neighbours; a step with none is not judged here."""
     big = np.nan_to_num(step) > JUMP_FLOOR_PX
     vec = np.diff(xy, axis=0)
     pad = np.full((1, *vec.shape[1:]), np.nan)
     before, after = np.concatenate([pad, vec[:-1]]), np.concatenate([vec[1:], pad])
     has_before, has_after = np.isfinite(before).all(-1), np.isfinite(after).all(-1)
+    # With one step beside it (next to a hidden stretch or the clip's end), the step on the
+    # other side may have been as large as this one: half the difference is what stands out.
+    one = np.where(has_before[..., None], before, after)
     beside = np.where((has_before & has_after)[..., None], (before + after) / 2.0,
-                      np.where(has_before[..., None], before, after))
+                      (one + vec) / 2.0)
     scale = np.maximum(np.maximum(np.nan_to_num(np.linalg.norm(before, axis=-1)),
                                   np.nan_to_num(np.linalg.norm(after, axis=-1))), JUMP_FLOOR_PX)
-    apart = np.nan_to_num(np.linalg.norm(vec - beside, axis=-1), nan=np.inf)
+    apart = np.nan_to_num(np.linalg.norm(vec - beside, axis=-1))
     return big & (apart > JUMP_OVER_NEIGHBOURS * scale)
+
+
+def _view_scale(step: np.ndarray, others: np.ndarray) -> float:
+    """How much larger this view sees the object's motion than the other labels do: the
+    median ratio of the label's steps (F-1, P) px to the others' (F-1,) px over the frames
+    where the others' motion sets the jump allowance (above the floor), within VIEW_SCALE; 1
+    where there are none. A camera near the object, or one that sees the lift across its
+    image rather than along its axis, sees every step of it several times larger."""
+    moving = np.isfinite(others) & (JUMP_OVER_OTHERS * np.nan_to_num(others) > JUMP_FLOOR_PX)
+    ratio = step[moving] / others[moving, None]
+    ratio = ratio[np.isfinite(ratio)]
+    if ratio.size == 0:
+        return 1.0
+    return float(np.clip(np.median(ratio), *VIEW_SCALE))
 
 
 def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
@@ -116,9 +137,11 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
 
     others_step: optional (F-1,) px, the step the other labels of the object take in each
     frame (NaN where none shows it); where known, a step is a jump when it exceeds
-    JUMP_OVER_OTHERS times that (and the floor). Elsewhere, against the label's own steps
-    (_own_jumps): in frames where the others' landmarks are hidden or only suggestions, the
-    object's motion is unknown, not zero.
+    JUMP_OVER_OTHERS times that at the scale this view sees the motion at (_view_scale), and
+    the floor. In every frame, a step that stands out from the label's own steps beside it
+    is a jump too (_own_jumps): where the others' landmarks are hidden or only suggestions,
+    the object's motion is unknown, not zero, and within a fast lift the others' steps leave
+    room for a landmark wrong in one frame.
     """
     step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
     finite = step[np.isfinite(step)]
@@ -131,16 +154,21 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
     # The other views show when the object moves: a step is judged against that frame's
     # motion, not against the label's own typical step (which the object's motion inflates).
     others = np.asarray(others_step, float)
-    allowed = np.maximum(JUMP_OVER_OTHERS * np.nan_to_num(others), JUMP_FLOOR_PX)
-    against = np.nan_to_num(step) > allowed[:, None]
-    return np.where(np.isfinite(others)[:, None], against, own), typical
+    allowed = np.maximum(JUMP_OVER_OTHERS * _view_scale(step, others) * np.nan_to_num(others),
+                         JUMP_FLOOR_PX)
+    against = (np.nan_to_num(step) > allowed[:, None]) & np.isfinite(others)[:, None]
+    return against | own, typical
 
 
 def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
     """For each label, the object's motion as the other labels (other views or other workers)
-    show it through their workers' own decisions (ViewLabels.decided: a pre-filled
-    suggestion kept unchanged witnesses nothing); None with fewer than two other labels."""
-    motion = others_motion({lab.key: decided_xy(lab) for lab in labels
+    show it through their workers' own decisions where they show the landmarks
+    (ViewLabels.decided: a pre-filled suggestion kept unchanged witnesses nothing, nor does a
+    hidden landmark's stored position, which stays or runs straight while the object may
+    lift); None with fewer than two other labels."""
+    motion = others_motion({lab.key: np.where(np.asarray(lab.visible, bool)[..., None],
+                                              decided_xy(lab), np.nan)
+                            for lab in labels
                             if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
     return {lab.key: motion.get(lab.key) for lab in labels}
 

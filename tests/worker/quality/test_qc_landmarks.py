@@ -218,16 +218,22 @@ class TestScoreObject:
         assert {(i["point"], *i["frames"]) for i in issues if i["about"] == "jump"} \
             == {(0, 14, 15), (1, 14, 15)}
 
-    def test_where_no_other_label_shows_the_lift_it_is_not_a_jump(self, camera):
-        # The other views kept suggestions through the lift (positions that are not their
-        # workers' own): they show the object at rest, then nothing. This view's careful track
-        # of the lift (12 px a frame) is judged against its own steps there, not against a
-        # motion of zero; its landmarks swapped during the lift still jump.
-        decided = np.ones((FRAMES, 2), bool)
-        decided[11:] = False
-        others = [ViewLabels(key=f"v{i}", view=0, xy=_lifted(i, scale),
-                             visible=np.ones((FRAMES, 2), bool), decided=decided)
-                  for i, scale in enumerate((1.0, 0.6, 1.5, 0.8))]
+    @pytest.mark.parametrize("how", ["suggested", "hidden"])
+    def test_where_no_other_label_shows_the_lift_it_is_not_a_jump(self, camera, how):
+        # The other views show the object at rest, then nothing: their workers kept
+        # suggestions through the lift (positions that are not their own), or the hand hid
+        # their landmarks (the stored positions stay where they were last shown). This view's
+        # careful track of the lift (12 px a frame) is judged against its own steps there, not
+        # against a motion of zero; its landmarks swapped during the lift still jump.
+        shown, decided = np.ones((FRAMES, 2), bool), np.ones((FRAMES, 2), bool)
+        (decided if how == "suggested" else shown)[11:] = False
+        others = []
+        for i, scale in enumerate((1.0, 0.6, 1.5, 0.8)):
+            xy = _lifted(i, scale)
+            if how == "hidden":
+                xy[11:] = xy[10]
+            others.append(ViewLabels(key=f"v{i}", view=0, xy=xy, visible=shown,
+                                     decided=decided))
         scored = score_object([camera], [*others, _label(_lifted(5, 2.0), key="lift")])
         assert scored["lift"].metrics["jump_fraction"] == 0.0, scored["lift"].issues
         swapped = _lifted(6, 2.0)
@@ -235,6 +241,26 @@ class TestScoreObject:
         scored = score_object([camera], [*others, _label(swapped, key="swap")])
         assert {tuple(i["frames"]) for i in scored["swap"].issues if i["about"] == "jump"} \
             == {(19, 20)}
+
+    def test_a_view_that_sees_the_lift_larger_is_judged_at_its_scale(self, camera):
+        # A camera near the object sees the lift at 3.5 times the others' median step (21 px
+        # a frame against 6): the others' step times 3 would call each of its steps a jump.
+        others = [ViewLabels(key=f"v{i}", view=0, xy=_lifted(i, scale),
+                             visible=np.ones((FRAMES, 2), bool))
+                  for i, scale in enumerate((0.8, 1.0, 1.0, 1.2))]
+        scored = score_object([camera], [*others, _label(_lifted(5, 3.5), key="near")])
+        assert scored["near"].metrics["jump_fraction"] == 0.0, scored["near"].issues
+        # Its landmarks swapped at rest, or moved 40 px in one frame of the lift: jumps.
+        swapped = _lifted(6, 3.5)
+        swapped[5:] = swapped[5:, ::-1]
+        wrong = _lifted(7, 3.5)
+        wrong[20, 1] += [40.0, 0.0]
+        scored = score_object([camera], [*others, _label(swapped, key="swap"),
+                                          _label(wrong, key="wrong")])
+        assert {tuple(i["frames"]) for i in scored["swap"].issues if i["about"] == "jump"} \
+            == {(4, 5)}
+        assert {tuple(i["frames"]) for i in scored["wrong"].issues if i["about"] == "jump"} \
+            == {(19, 20), (20, 21)}
 
     def test_a_still_object_is_not_judged_by_motion(self, camera):
         still = [ViewLabels(key=f"s{i}", view=0, xy=np.repeat(_lifted(i)[:1], FRAMES, axis=0),
