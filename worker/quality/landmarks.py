@@ -29,7 +29,7 @@ from worker.quality.motion import (
     others_motion,
     track_jitter,
 )
-from worker.quality.view_labels import ViewLabels, decided_of, decided_xy
+from worker.quality.view_labels import ViewLabels, decided_of, decided_xy, observed_xy
 
 # A landmark within this distance (px) of the silhouette counts as on it: masks are rasterised
 # at pixel centres and a careful click lands within ~2 px.
@@ -92,8 +92,9 @@ def silhouette_distances(xy: np.ndarray, visible: np.ndarray,
     return out
 
 
-def _own_jumps(step: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(F-1, P) bool: steps that are jumps with nothing else to show the object's motion.
+def _own_jumps(vec: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(F-1, P) bool: of the label's steps (vec (F-1, P, 2) px and their lengths step), those
+    that are jumps with nothing else to show the object's motion.
 
     A step over the floor is a jump where it stands out from the steps beside it: it differs
     (as a vector) from their mean by more than JUMP_OVER_NEIGHBOURS times the larger of them
@@ -102,7 +103,6 @@ def _own_jumps(step: np.ndarray, xy: np.ndarray) -> np.ndarray:
     large against the label's typical one, are no jumps. Steps the label does not show (NaN)
     are no neighbours; a step with none is not judged here."""
     big = np.nan_to_num(step) > JUMP_FLOOR_PX
-    vec = np.diff(xy, axis=0)
     pad = np.full((1, *vec.shape[1:]), np.nan)
     before, after = np.concatenate([pad, vec[:-1]]), np.concatenate([vec[1:], pad])
     has_before, has_after = np.isfinite(before).all(-1), np.isfinite(after).all(-1)
@@ -143,12 +143,13 @@ def jumps(xy: np.ndarray, others_step: np.ndarray | None = None
     the object's motion is unknown, not zero, and within a fast lift the others' steps leave
     room for a landmark wrong in one frame.
     """
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=-1)
+    vec = np.diff(xy, axis=0)
+    step = np.linalg.norm(vec, axis=-1)
     finite = step[np.isfinite(step)]
     if finite.size == 0:
         return np.zeros(step.shape, bool), None
     typical = float(np.median(finite))
-    own = _own_jumps(step, xy)
+    own = _own_jumps(vec, step)
     if others_step is None:
         return own, typical
     # The other views show when the object moves: a step is judged against that frame's
@@ -166,9 +167,7 @@ def object_motion(labels: list[ViewLabels]) -> dict[str, ObjectMotion | None]:
     (ViewLabels.decided: a pre-filled suggestion kept unchanged witnesses nothing, nor does a
     hidden landmark's stored position, which stays or runs straight while the object may
     lift); None with fewer than two other labels."""
-    motion = others_motion({lab.key: np.where(np.asarray(lab.visible, bool)[..., None],
-                                              decided_xy(lab), np.nan)
-                            for lab in labels
+    motion = others_motion({lab.key: observed_xy(lab) for lab in labels
                             if decided_of(lab).any() or not np.isfinite(lab.xy).any()})
     return {lab.key: motion.get(lab.key) for lab in labels}
 

@@ -68,9 +68,14 @@ def decided_xy(lab: ViewLabels) -> np.ndarray:
     return np.where(decided_of(lab)[..., None], np.asarray(lab.xy, dtype=np.float64), np.nan)
 
 
+def observed_xy(lab: ViewLabels) -> np.ndarray:
+    """(F, P, 2) px of the label's visible points that the worker decided, NaN elsewhere
+    (pre-filled suggestions are the other views' consensus, not an observation of this one;
+    a hidden point's stored position is no observation either)."""
+    return np.where(np.asarray(lab.visible, bool)[..., None], decided_xy(lab), np.nan)
+
+
 def observations(labels: list[ViewLabels]) -> np.ndarray:
-    """(F*P, L, 2) px of every label's visible points that the worker decided, NaN elsewhere
-    (pre-filled suggestions are the other views' consensus, not an observation of this one)."""
-    cols = [np.where(np.asarray(lab.visible, bool)[..., None], decided_xy(lab), np.nan)
-            for lab in labels]
+    """(F*P, L, 2) px of every label's observed_xy, one column per label."""
+    cols = [observed_xy(lab) for lab in labels]
     return np.stack(cols, axis=2).reshape(-1, len(labels), 2)
